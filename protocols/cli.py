@@ -1,0 +1,110 @@
+"""The ``navtwin`` console script: one parser, subcommands registered by entry points.
+
+Each package registers its subcommands in the ``navtwin.commands`` entry-point group
+(``pyproject.toml``), so this dispatcher imports none of them by name: ``protocols`` keeps
+importing nothing of navtwin's. A subcommand module provides ``register(subparsers)``,
+which adds its parser and sets ``func(args) -> int``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from importlib.metadata import entry_points
+
+from . import __version__
+
+
+class UsageError(Exception):
+    """A problem with what the user asked for: printed as one line, exit status 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line naming the problem and where to look for the fix
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def _sigterm_as_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = Parser(prog="navtwin", description="Firmware-in-the-loop emulator of a SINS/WSN "
+                    "positioning lab, and the lab computer's fusion service.")
+    parser.add_argument("--version", action="version", version=f"navtwin {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    for ep in sorted(entry_points(group="navtwin.commands"), key=lambda e: e.name):
+        ep.load()(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
+    try:
+        return args.func(args) or 0
+    except UsageError as e:
+        print(f"navtwin {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 0
+    except BrokenPipeError:  # e.g. piped into head
+        sys.stderr.close()
+        return 0
+
+
+# -- navtwin decode ----------------------------------------------------------------------
+
+def register_decode(sub) -> None:
+    p = sub.add_parser("decode", help="decode a byte stream into JSON lines",
+                       description="Decode SINS frames, XBee API frames, the SINS stream inside "
+                       "XBee 0x90 packets, or nanoLOC reports. One JSON object per line per frame "
+                       "and per error, then a summary with counts by kind.")
+    p.add_argument("source", nargs="?", default="-", metavar="SOURCE",
+                   help="a file, - for stdin (default), a recording directory, or a serial port "
+                        "or pyserial URL (socket://, rfc2217://, spy://, loop://)")
+    p.add_argument("--format", required=True, choices=("sins", "nanoloc", "xbee", "xbee-sins"),
+                   help="what the bytes are; xbee-sins rebuilds the SINS stream from 0x90 packets")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--escaped", dest="escaped", action="store_true", default=True,
+                      help="XBee API mode 2, escaped (default)")
+    mode.add_argument("--api1", dest="escaped", action="store_false", help="XBee API mode 1")
+    p.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
+    p.add_argument("--follow", action="store_true",
+                   help="keep reading a port or a growing file until interrupted")
+    p.add_argument("--port", help="which port of a recording directory (default: by format)")
+    p.add_argument("--gyro-range", type=int, choices=(300, 150, 75), default=300,
+                   help="ADIS16350 gyro range in deg/s set by SENS/AVG (default 300)")
+    p.add_argument("--hex", action="store_true", help="add each frame's bytes")
+    p.add_argument("--errors-only", action="store_true", help="print only errors and the summary")
+    p.set_defaults(func=run_decode)
+
+
+def run_decode(args) -> int:
+    from .decode import decode
+    from .recording import RecordingError
+
+    out = sys.stdout
+    try:
+        for rec in decode(args.source, args.format, escaped=args.escaped, with_hex=args.hex,
+                          gyro_range=args.gyro_range, baud=args.baud, follow=args.follow,
+                          port=args.port):
+            if args.errors_only and "format" in rec and "error" not in rec:
+                continue
+            out.write(json.dumps(rec, separators=(",", ":")) + "\n")
+            if args.follow:
+                out.flush()
+    except (FileNotFoundError, IsADirectoryError, PermissionError, RecordingError) as e:
+        raise UsageError(str(e)) from None
+    except OSError as e:  # serial ports: missing device, wrong URL
+        raise UsageError(f"{args.source}: {e}") from None
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,141 @@
+"""The Python API under ``navtwin decode``: sources of bytes, and frames as JSON-able dicts."""
+from __future__ import annotations
+
+import os
+import stat
+import sys
+import time
+from pathlib import Path
+from typing import Iterator
+
+from . import adis16350, nanoloc, xbee
+from .recording import Recording
+from .stream import DecodeError, Frame, decoder_for
+
+FORMATS = ("sins", "nanoloc", "xbee", "xbee-sins")
+#: The port of a recording each format reads by default.
+PORT_OF_FORMAT = {"sins": "sins", "nanoloc": "nanoloc", "xbee": "xbee", "xbee-sins": "xbee"}
+CHUNK = 65536
+
+
+def _hexval(v):
+    if isinstance(v, bytes):
+        return v.hex().upper()
+    if isinstance(v, tuple):
+        return [_hexval(x) for x in v]
+    return v
+
+
+def frame_record(ev: Frame, *, gyro_range: int = 300, with_hex: bool = False) -> dict:
+    """One decoded frame as a JSON-able dict: raw fields plus engineering units."""
+    rec: dict = {"format": ev.format, "offset": ev.offset, "type": ev.type}
+    if ev.source is not None:
+        rec["source"] = f"{ev.source:016X}"
+    f = ev.fields
+    if not ev.known:
+        rec["unknown_type"] = True
+        rec["payload"] = f["payload"].hex().upper()
+    elif ev.format == "sins":
+        s = adis16350.words_to_sample(f["words"], gyro_range)
+        rec.update(seq=f["seq"], words=list(f["words"]), nd=all(s.nd), ea=s.ea,
+                   gyro_dps=list(s.gyro_dps), gyro_rad_s=list(s.gyro_rad_s),
+                   accel_g=list(s.accel_g), accel_m_s2=list(s.accel_m_s2),
+                   temp_c=list(s.temp_c), supply_v=s.supply_v, aux_v=s.aux_v)
+    elif ev.format == "nanoloc":
+        complete = nanoloc.is_complete(f["status"])
+        rec.update({k: f[k] for k in ("seq", "t_us", "anchor", "tag", "status", "rssi")},
+                   complete=complete, tau_ps=list(f["tau"]),
+                   distance_m=nanoloc.distance(*f["tau"]) if complete else None)
+    else:
+        rec["name"] = xbee.FRAME_NAMES.get(ev.type, "unknown")
+        for k, v in f.items():
+            if k in ("src64", "dest64", "remote64"):
+                rec[k] = f"{v:016X}"
+            elif k in ("src16", "dest16", "remote16", "parent16"):
+                rec[k] = f"{v:04X}"
+            elif k == "command":
+                rec[k] = v.decode("ascii", "replace")
+            else:
+                rec[k] = _hexval(v)
+    if with_hex:
+        rec["hex"] = ev.raw.hex().upper()
+    return rec
+
+
+def error_record(ev: DecodeError) -> dict:
+    rec = {"error": ev.kind, "format": ev.format, "offset": ev.offset, "size": ev.size}
+    if ev.source is not None:
+        rec["source"] = f"{ev.source:016X}"
+    return rec
+
+
+def _is_serial(source: str) -> bool:
+    if "://" in source:
+        return True
+    try:
+        return stat.S_ISCHR(os.stat(source).st_mode)
+    except OSError:
+        return False
+
+
+def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud: int = 115200,
+                follow: bool = False, idle: float = 1.0) -> Iterator[bytes]:
+    """Bytes from a file, ``-`` (stdin), a recording directory or a serial port / pyserial URL.
+
+    A serial source without *follow* ends after *idle* seconds with no data; with *follow*
+    it (and a growing file) is read until the caller stops iterating.
+    """
+    if source == "-":
+        stream = sys.stdin.buffer
+        while chunk := stream.read1(CHUNK) if hasattr(stream, "read1") else stream.read(CHUNK):
+            yield chunk
+        return
+    if _is_serial(source):
+        import serial  # pyserial, only needed for live sources
+
+        with serial.serial_for_url(source, baudrate=baud, timeout=0.05) as ser:
+            last = time.monotonic()
+            while True:
+                chunk = ser.read(ser.in_waiting or 1)
+                if chunk:
+                    last = time.monotonic()
+                    yield chunk
+                elif not follow and time.monotonic() - last > idle:
+                    return
+    path = Path(source)
+    if path.is_dir():
+        rec = Recording(path)
+        name = port or PORT_OF_FORMAT[fmt]
+        for c in rec.chunks(name):
+            yield c.data
+        return
+    with open(path, "rb") as f:
+        while True:
+            chunk = f.read(CHUNK)
+            if chunk:
+                yield chunk
+            elif follow:
+                time.sleep(0.05)
+            else:
+                return
+
+
+def decode(source: str, fmt: str, *, escaped: bool = True, with_hex: bool = False,
+           gyro_range: int = 300, **read_kw) -> Iterator[dict]:
+    """Decode *source* as *fmt*: one dict per frame or error, then ``{"summary": {...}}``."""
+    dec = decoder_for(fmt, escaped=escaped)
+
+    def records(events):
+        for ev in events:
+            if isinstance(ev, Frame):
+                yield frame_record(ev, gyro_range=gyro_range, with_hex=with_hex)
+            else:
+                yield error_record(ev)
+
+    try:
+        for chunk in read_chunks(source, fmt=fmt, **read_kw):
+            yield from records(dec.feed(chunk))
+    except KeyboardInterrupt:  # --follow ends on SIGINT/SIGTERM: still flush and summarise
+        pass
+    yield from records(dec.flush())
+    yield {"summary": dec.summary()}

@@ -1,0 +1,68 @@
+"""The nanoLOC gateway ranging report (wire-formats.md section 3).
+
+| offset | size | field          | value                                                    |
+|--------|------|----------------|----------------------------------------------------------|
+| 0      | 2    | sync           | ``4E 4C`` ("NL")                                         |
+| 2      | 1    | type           | ``01`` = ranging report (others reserved, skipped by len)|
+| 3      | 1    | len            | ``1A`` (26) for type 01                                  |
+| 4      | 2    | seq            | gateway report counter, wraps                            |
+| 6      | 4    | t_us           | anchor-network time of the exchange, us, wraps           |
+| 10     | 1    | anchor         | anchor id (1..254)                                       |
+| 11     | 1    | tag            | tag id (1..254)                                          |
+| 12     | 1    | status         | bits 0..3 tau1..tau4 valid; 0x40 timeout; 0x80 value err |
+| 13     | 1    | rssi           | dBm at the anchor, signed                                |
+| 14     | 16   | tau1..tau4     | unsigned durations, ps, each in its measuring node's clock|
+| 30     | 2    | crc            | CRC-16/CCITT-FALSE over bytes 2..29                       |
+
+Distance, exactly as the lab computer computes it: d = c (tau1 - tau2 + tau3 - tau4) / 4.
+"""
+from construct import Array, Int8sb, Int8ub, Int16ub, Int32ub, Struct, Terminated
+
+from .crcframe import crc_framed, encode
+from .fast import packer_for
+
+SYNC = b"\x4e\x4c"
+TYPE_RANGING = 0x01
+FRAME_SIZE = 32
+SPEED_OF_LIGHT = 299_792_458.0  # m/s
+PS = 1e-12
+
+STATUS_COMPLETE = 0x0F  # tau1..tau4 valid
+STATUS_TIMEOUT = 0x40  # no response from the tag
+STATUS_VALUE_ERROR = 0x80
+
+Ranging = Struct(
+    "seq" / Int16ub,
+    "t_us" / Int32ub,
+    "anchor" / Int8ub,
+    "tag" / Int8ub,
+    "status" / Int8ub,
+    "rssi" / Int8sb,
+    "tau" / Array(4, Int32ub),
+    Terminated,
+)
+
+NanolocFrame = crc_framed(SYNC, {TYPE_RANGING: Ranging})
+
+
+def distance(tau1: int, tau2: int, tau3: int, tau4: int) -> float:
+    """Four-timestamp (symmetric double-sided) distance in metres, taus in picoseconds."""
+    return SPEED_OF_LIGHT * (tau1 - tau2 + tau3 - tau4) * PS / 4.0
+
+
+def single_sided_distance(tau1: int, tau2: int) -> float:
+    """One-leg distance c (tau1 - tau2) / 2: keeps the crystal-offset bias the exchange cancels."""
+    return SPEED_OF_LIGHT * (tau1 - tau2) * PS / 2.0
+
+
+def is_complete(status: int) -> bool:
+    return status & 0xCF == STATUS_COMPLETE
+
+
+_pack_ranging = packer_for(Ranging)
+
+
+def build_report(*, seq, t_us, anchor, tag, status, rssi, tau) -> bytes:
+    """The 32-byte report (fast path; equal to ``NanolocFrame.build``). Counters wrap."""
+    return encode(SYNC, TYPE_RANGING, _pack_ranging(seq & 0xFFFF, t_us & 0xFFFFFFFF, anchor, tag,
+                                                    status, rssi, *tau))

@@ -1,0 +1,400 @@
+"""Streaming decoders: bytes in any chunking -> frames and errors, in stream order.
+
+A decoder never raises on its input. Everything it cannot use is reported as a
+:class:`DecodeError` of one of these kinds and counted:
+
+=============  ===============================================================
+kind           meaning
+=============  ===============================================================
+garbage        a run of bytes that belongs to no frame (size = bytes in the run)
+bad_crc        a SINS / nanoLOC candidate whose CRC-16 does not match
+bad_checksum   an XBee candidate whose checksum does not match
+bad_length     a length field no frame of that kind can have
+bad_escape     API mode 2: ``7D`` not followed by an escaped byte
+truncated      a candidate cut short by the next start delimiter (API 2) or by
+               the end of the stream
+malformed      integrity check passed, but the body does not fit its type's layout
+=============  ===============================================================
+
+Resync rule. A candidate starts at a sync pattern (``A5 5A``, ``4E 4C``, ``7E``). When it
+fails, the decoder resumes the search one byte after the failed start (API mode 2: at the
+next bare ``7E``, which can only be a frame start), so every byte after a false start is
+looked at again and every intact frame after garbage is found. The bytes of failed
+candidates end up in garbage runs; ``bytes == frame bytes + garbage bytes + buffered``.
+
+Worst case loss. An intact frame is lost only when a false candidate that starts in the
+garbage before it passes the integrity check and claims bytes of the intact frame:
+probability 2^-16 per false candidate with a plausible type and length (CRC-16), 2^-8 for
+API mode 1 (8-bit checksum). In API mode 2 a candidate ends at the next bare ``7E``, so
+garbage can never swallow an intact frame. Memory is bounded: the buffer never holds more
+than one maximal candidate plus the last chunk fed, whatever a length field claims.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+from . import nanoloc, sins, xbee
+from .crc import crc16
+from .crcframe import HEADER, TRAILER
+from .fast import parser_for, plain
+
+GARBAGE = "garbage"
+BAD_CRC = "bad_crc"
+BAD_CHECKSUM = "bad_checksum"
+BAD_LENGTH = "bad_length"
+BAD_ESCAPE = "bad_escape"
+TRUNCATED = "truncated"
+MALFORMED = "malformed"
+ERROR_KINDS = (GARBAGE, BAD_CRC, BAD_CHECKSUM, BAD_LENGTH, BAD_ESCAPE, TRUNCATED, MALFORMED)
+
+
+@dataclass(slots=True)
+class Frame:
+    """A decoded frame. ``fields`` holds the type's layout as plain Python values;
+    a type the format does not declare has ``fields == {"payload": bytes}``."""
+
+    format: str  # "sins", "nanoloc" or "xbee"
+    offset: int  # of the first byte, in the decoder's input stream
+    raw: bytes  # the frame as it was on the wire (escaped in API mode 2)
+    type: int
+    fields: dict[str, Any]
+    known: bool = True  # False for a type this format does not declare
+    source: int | None = None  # xbee-sins chain: 64-bit address of the sending radio
+
+
+@dataclass(slots=True)
+class DecodeError:
+    kind: str
+    offset: int
+    size: int = 0  # bytes skipped (garbage runs); candidates report their claimed size
+    format: str = ""
+    source: int | None = None
+
+
+class Decoder:
+    """Base of the framed decoders: buffer, offsets, counts, garbage runs."""
+
+    format = ""
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self._base = 0  # stream offset of _buf[0]
+        self._garbage_at = -1  # stream offset where the open garbage run began
+        self._out: list = []
+        self.frames = 0
+        self.bytes = 0
+        self.errors: Counter[str] = Counter()
+        self.error_bytes: Counter[str] = Counter()
+
+    # -- public --------------------------------------------------------------------------
+    def feed(self, data: bytes) -> list:
+        """Decode *data* after all that was fed before; frames and errors in stream order."""
+        self.bytes += len(data)
+        self._buf += data
+        consumed = self._scan()
+        if consumed:
+            del self._buf[:consumed]
+            self._base += consumed
+        out, self._out = self._out, []
+        return out
+
+    def flush(self) -> list:
+        """End of stream: what is left is a truncated candidate or garbage."""
+        if self._buf:
+            self._error(TRUNCATED, self._base, len(self._buf))
+            self._garbage(self._base, len(self._buf))
+            self._base += len(self._buf)
+            self._buf.clear()
+        self._close_garbage(self._base)
+        out, self._out = self._out, []
+        return out
+
+    def decode(self, data: bytes) -> list:
+        """Feed all of *data* and flush."""
+        return self.feed(data) + self.flush()
+
+    @property
+    def buffered(self) -> int:
+        return len(self._buf)
+
+    def summary(self) -> dict:
+        return {"format": self.format, "frames": self.frames, "bytes": self.bytes,
+                "errors": dict(self.errors), "error_bytes": dict(self.error_bytes),
+                "buffered": self.buffered}
+
+    # -- for subclasses ------------------------------------------------------------------
+    def _scan(self) -> int:
+        """Consume from ``self._buf``; return how many leading bytes are done with."""
+        raise NotImplementedError
+
+    def _frame(self, frame: Frame) -> None:
+        self._close_garbage(frame.offset)
+        self.frames += 1
+        self._out.append(frame)
+
+    def _garbage(self, offset: int, size: int) -> None:
+        """Bytes [offset, offset+size) belong to no frame."""
+        if size and self._garbage_at < 0:
+            self._garbage_at = offset
+
+    def _close_garbage(self, end: int) -> None:
+        if self._garbage_at >= 0:
+            size = end - self._garbage_at
+            self.errors[GARBAGE] += 1
+            self.error_bytes[GARBAGE] += size
+            self._out.append(DecodeError(GARBAGE, self._garbage_at, size, self.format))
+            self._garbage_at = -1
+
+    def _error(self, kind: str, offset: int, size: int) -> None:
+        """A failed candidate at *offset*; its bytes are accounted to garbage later."""
+        self._close_garbage(offset)
+        self.errors[kind] += 1
+        self._out.append(DecodeError(kind, offset, size, self.format))
+
+
+class CrcFramedDecoder(Decoder):
+    """SINS frames and nanoLOC reports: sync(2) type len payload crc16."""
+
+    def __init__(self, fmt: str, sync: bytes, layouts: dict) -> None:
+        super().__init__()
+        self.format = fmt
+        self._sync = sync
+        self._parsers = {t: parser_for(st) for t, st in layouts.items()}
+
+    def _scan(self) -> int:
+        buf, base, sync = self._buf, self._base, self._sync
+        n = len(buf)
+        i = 0
+        while True:
+            j = buf.find(sync, i)
+            if j < 0:
+                # keep a possible first sync byte at the very end for the next chunk
+                keep = n - 1 if n > i and buf[-1] == sync[0] else n
+                self._garbage(base + i, keep - i)
+                return keep
+            self._garbage(base + i, j - i)
+            if n - j < HEADER:
+                return j
+            ftype, length = buf[j + 2], buf[j + 3]
+            parser = self._parsers.get(ftype)
+            if parser is not None and parser[1] is not None and length != parser[1]:
+                self._error(BAD_LENGTH, base + j, HEADER + length + TRAILER)
+                self._garbage(base + j, 1)
+                i = j + 1
+                continue
+            end = j + HEADER + length + TRAILER
+            if end > n:
+                return j
+            if crc16(buf[j + 2:end - 2]) != (buf[end - 2] << 8 | buf[end - 1]):
+                self._error(BAD_CRC, base + j, end - j)
+                self._garbage(base + j, 1)
+                i = j + 1
+                continue
+            if parser is None:
+                fields, known = {"payload": bytes(buf[j + HEADER:end - TRAILER])}, False
+            else:
+                fields, known = parser[0](buf, j + HEADER, length), True
+                if fields is None:
+                    self._error(MALFORMED, base + j, end - j)
+                    self._garbage(base + j, end - j)
+                    i = end
+                    continue
+            self._frame(Frame(self.format, base + j, bytes(buf[j:end]), ftype, fields, known))
+            i = end
+
+
+def sins_decoder() -> CrcFramedDecoder:
+    return CrcFramedDecoder("sins", sins.SYNC, {sins.TYPE_SAMPLE: sins.Sample})
+
+
+def nanoloc_decoder() -> CrcFramedDecoder:
+    return CrcFramedDecoder("nanoloc", nanoloc.SYNC, {nanoloc.TYPE_RANGING: nanoloc.Ranging})
+
+
+_XBEE_PARSERS = {t: parser_for(st) for t, st in xbee.FRAME_BODIES.items()}
+_ESCAPED = tuple(bytes((b,)) for b in sorted(xbee.ESCAPED_BYTES))
+
+
+class XBeeDecoder(Decoder):
+    """XBee API frames in API mode 1 (``escaped=False``) or 2 (``escaped=True``)."""
+
+    format = "xbee"
+
+    def __init__(self, escaped: bool = True, max_frame_data: int = 1024) -> None:
+        super().__init__()
+        self.escaped = escaped
+        self.max_frame_data = max_frame_data
+        self._scan = self._scan_escaped if escaped else self._scan_plain
+
+    def _emit(self, offset: int, raw: bytes, data: bytes) -> None:
+        ftype = data[0]
+        parser = _XBEE_PARSERS.get(ftype)
+        if parser is None:
+            self._frame(Frame("xbee", offset, raw, ftype, {"payload": bytes(data[1:])}, False))
+            return
+        fields = parser[0](data, 1, len(data) - 1)
+        if fields is None:
+            self._error(MALFORMED, offset, len(raw))
+            self._garbage(offset, len(raw))
+            return
+        self._frame(Frame("xbee", offset, raw, ftype, fields))
+
+    def _scan_plain(self) -> int:
+        buf, base = self._buf, self._base
+        n = len(buf)
+        i = 0
+        while True:
+            j = buf.find(0x7E, i)
+            if j < 0:
+                self._garbage(base + i, n - i)
+                return n
+            self._garbage(base + i, j - i)
+            if n - j < 3:
+                return j
+            length = buf[j + 1] << 8 | buf[j + 2]
+            if length == 0 or length > self.max_frame_data:
+                self._error(BAD_LENGTH, base + j, length + 4)
+                self._garbage(base + j, 1)
+                i = j + 1
+                continue
+            end = j + 4 + length
+            if end > n:
+                return j
+            if sum(buf[j + 3:end]) & 0xFF != 0xFF:
+                self._error(BAD_CHECKSUM, base + j, end - j)
+                self._garbage(base + j, 1)
+                i = j + 1
+                continue
+            raw = bytes(buf[j:end])
+            self._emit(base + j, raw, raw[3:-1])
+            i = end
+
+    def _scan_escaped(self) -> int:
+        buf, base = self._buf, self._base
+        n = len(buf)
+        i = 0
+        while True:
+            j = buf.find(0x7E, i)
+            if j < 0:
+                self._garbage(base + i, n - i)
+                return n
+            self._garbage(base + i, j - i)
+            k = buf.find(0x7E, j + 1)
+            stop = n if k < 0 else k
+            seg = bytes(buf[j + 1:stop])
+            if k < 0 and seg.endswith(b"\x7d"):
+                seg = seg[:-1]  # an escape whose escaped byte has not arrived yet
+            try:
+                u = xbee.unescape(seg)
+            except ValueError:
+                self._error(BAD_ESCAPE, base + j, stop - j)
+                self._garbage(base + j, stop - j)
+                if k < 0:
+                    return n
+                i = k
+                continue
+            if len(u) < 2:
+                if k < 0:
+                    return j
+                self._error(TRUNCATED, base + j, stop - j)
+                self._garbage(base + j, stop - j)
+                i = k
+                continue
+            length = u[0] << 8 | u[1]
+            if length == 0 or length > self.max_frame_data:
+                self._error(BAD_LENGTH, base + j, length + 4)
+                self._garbage(base + j, stop - j)
+                if k < 0:
+                    i = j + 1  # the rest may hold the next start; nothing else can
+                    continue
+                i = k
+                continue
+            need = length + 3
+            if len(u) < need:
+                if k < 0:
+                    return j
+                self._error(TRUNCATED, base + j, stop - j)
+                self._garbage(base + j, stop - j)
+                i = k
+                continue
+            body = u[:need]
+            if sum(body[2:]) & 0xFF != 0xFF:
+                self._error(BAD_CHECKSUM, base + j, stop - j)
+                self._garbage(base + j, stop - j)
+                if k < 0:
+                    i = j + 1
+                    continue
+                i = k
+                continue
+            raw_len = 1 + need + sum(body.count(e) for e in _ESCAPED)
+            end = j + raw_len
+            self._emit(base + j, bytes(buf[j:end]), body[2:-1])
+            i = end
+
+
+class XBeeSinsChain:
+    """What the lab computer does with the coordinator's port: XBee API frames -> the
+    payloads of 0x90 packets -> the SINS byte stream of each sending radio -> SINS frames.
+
+    A SINS frame may straddle two 0x90 packets. Each source address has its own SINS
+    stream (and offsets within it). Other XBee frames (AT responses, modem status, TX
+    status) are passed through, as are the errors of both layers.
+    """
+
+    format = "xbee-sins"
+
+    def __init__(self, escaped: bool = True, max_frame_data: int = 1024) -> None:
+        self.xbee = XBeeDecoder(escaped, max_frame_data)
+        self.sins: dict[int, CrcFramedDecoder] = {}
+
+    def _route(self, events: list) -> list:
+        out = []
+        for ev in events:
+            if isinstance(ev, Frame) and ev.type == xbee.FrameType.RECEIVE_PACKET:
+                src = ev.fields["src64"]
+                dec = self.sins.get(src)
+                if dec is None:
+                    dec = self.sins[src] = sins_decoder()
+                for s in dec.feed(ev.fields["data"]):
+                    s.source = src
+                    out.append(s)
+            else:
+                out.append(ev)
+        return out
+
+    def feed(self, data: bytes) -> list:
+        return self._route(self.xbee.feed(data))
+
+    def flush(self) -> list:
+        out = self._route(self.xbee.flush())
+        for src, dec in self.sins.items():
+            for ev in dec.flush():
+                ev.source = src
+                out.append(ev)
+        return out
+
+    def decode(self, data: bytes) -> list:
+        return self.feed(data) + self.flush()
+
+    def summary(self) -> dict:
+        return {"format": self.format, "xbee": self.xbee.summary(),
+                "sins": {f"{src:016X}": d.summary() for src, d in self.sins.items()}}
+
+
+def decoder_for(fmt: str, *, escaped: bool = True):
+    """The decoder for a ``navtwin decode --format`` name."""
+    if fmt == "sins":
+        return sins_decoder()
+    if fmt == "nanoloc":
+        return nanoloc_decoder()
+    if fmt == "xbee":
+        return XBeeDecoder(escaped)
+    if fmt == "xbee-sins":
+        return XBeeSinsChain(escaped)
+    raise ValueError(f"unknown format {fmt!r}: use sins, nanoloc, xbee or xbee-sins")
+
+
+__all__ = ["Frame", "DecodeError", "Decoder", "CrcFramedDecoder", "XBeeDecoder", "XBeeSinsChain",
+           "sins_decoder", "nanoloc_decoder", "decoder_for", "ERROR_KINDS", "plain"]

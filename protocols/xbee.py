@@ -1,0 +1,271 @@
+"""Digi XBee ZB (S2B) API frames, API mode 1 (plain) and 2 (escaped).
+
+``7E | LEN (2, big-endian) | frame data (LEN bytes: type + fields) | checksum``
+
+checksum = 0xFF - (sum of frame data & 0xFF); length and checksum are computed on the
+unescaped bytes. In API mode 2 every byte after the start delimiter that is one of
+7E 7D 11 13 is sent as ``7D (b ^ 0x20)``, length and checksum included.
+
+Frame layouts (offsets from the frame type, as in Digi's tables minus 3) are declared below,
+one Struct per type, each reading like its table in ``shared/reference/xbee-api-facts.md``.
+A frame type not declared here is kept as raw bytes.
+"""
+from __future__ import annotations
+
+from construct import (Adapter, Bytes, Checksum, Const, CString, GreedyBytes, Int8ub, Int16ub,
+                       Int32ub, Int64ub, Optional, Prefixed, RawCopy, Struct, Switch, Terminated,
+                       this)
+
+START = 0x7E
+ESCAPE = 0x7D
+XON = 0x11
+XOFF = 0x13
+ESCAPED_BYTES = frozenset((START, ESCAPE, XON, XOFF))
+MAX_FRAME_DATA = 0xFFFF  # what the length field can say; decoders bound it lower
+
+BROADCAST64 = 0x000000000000FFFF
+COORDINATOR64 = 0x0000000000000000
+UNKNOWN16 = 0xFFFE
+
+
+class FrameType:
+    AT_COMMAND = 0x08
+    AT_COMMAND_QUEUE = 0x09
+    TRANSMIT_REQUEST = 0x10
+    EXPLICIT_ADDRESSING = 0x11
+    REMOTE_AT_REQUEST = 0x17
+    AT_RESPONSE = 0x88
+    MODEM_STATUS = 0x8A
+    TRANSMIT_STATUS = 0x8B
+    RECEIVE_PACKET = 0x90
+    EXPLICIT_RX = 0x91
+    NODE_IDENTIFICATION = 0x95
+    REMOTE_AT_RESPONSE = 0x97
+
+
+FRAME_NAMES = {v: k.lower() for k, v in vars(FrameType).items() if not k.startswith("_")}
+
+
+class AtStatus:
+    OK = 0
+    ERROR = 1
+    INVALID_COMMAND = 2
+    INVALID_PARAMETER = 3
+    TX_FAILURE = 4
+
+
+class ModemStatus:
+    HARDWARE_RESET = 0x00
+    WATCHDOG_RESET = 0x01
+    JOINED = 0x02
+    DISASSOCIATED = 0x03
+    COORDINATOR_STARTED = 0x06
+
+
+class DeliveryStatus:
+    SUCCESS = 0x00
+    MAC_ACK_FAILURE = 0x01
+    CCA_FAILURE = 0x02
+    NETWORK_ACK_FAILURE = 0x21
+    NOT_JOINED = 0x22
+    SELF_ADDRESSED = 0x23
+    ADDRESS_NOT_FOUND = 0x24
+    ROUTE_NOT_FOUND = 0x25
+    PAYLOAD_TOO_LARGE = 0x74
+
+
+AtCommand = Struct(  # 0x08 and 0x09
+    "frame_id" / Int8ub,
+    "command" / Bytes(2),
+    "parameter" / GreedyBytes,  # absent = query
+)
+TransmitRequest = Struct(  # 0x10
+    "frame_id" / Int8ub,
+    "dest64" / Int64ub,
+    "dest16" / Int16ub,
+    "radius" / Int8ub,
+    "options" / Int8ub,
+    "data" / GreedyBytes,
+)
+ExplicitAddressing = Struct(  # 0x11
+    "frame_id" / Int8ub,
+    "dest64" / Int64ub,
+    "dest16" / Int16ub,
+    "src_endpoint" / Int8ub,
+    "dest_endpoint" / Int8ub,
+    "cluster" / Int16ub,
+    "profile" / Int16ub,
+    "radius" / Int8ub,
+    "options" / Int8ub,
+    "data" / GreedyBytes,
+)
+RemoteAtRequest = Struct(  # 0x17
+    "frame_id" / Int8ub,
+    "dest64" / Int64ub,
+    "dest16" / Int16ub,
+    "options" / Int8ub,
+    "command" / Bytes(2),
+    "parameter" / GreedyBytes,
+)
+AtResponse = Struct(  # 0x88
+    "frame_id" / Int8ub,
+    "command" / Bytes(2),
+    "status" / Int8ub,
+    "value" / GreedyBytes,  # omitted for a set
+)
+ModemStatusFrame = Struct(  # 0x8A
+    "status" / Int8ub,
+    Terminated,
+)
+TransmitStatus = Struct(  # 0x8B, always 7 bytes of frame data
+    "frame_id" / Int8ub,
+    "dest16" / Int16ub,
+    "retries" / Int8ub,
+    "delivery" / Int8ub,
+    "discovery" / Int8ub,
+    Terminated,
+)
+ReceivePacket = Struct(  # 0x90
+    "src64" / Int64ub,
+    "src16" / Int16ub,
+    "options" / Int8ub,  # 0x01 acked, 0x02 broadcast, 0x20 encrypted, 0x40 from end device
+    "data" / GreedyBytes,
+)
+ExplicitRx = Struct(  # 0x91
+    "src64" / Int64ub,
+    "src16" / Int16ub,
+    "src_endpoint" / Int8ub,
+    "dest_endpoint" / Int8ub,
+    "cluster" / Int16ub,
+    "profile" / Int16ub,
+    "options" / Int8ub,
+    "data" / GreedyBytes,
+)
+NodeIdentification = Struct(  # 0x95, ZB layout
+    "src64" / Int64ub,
+    "src16" / Int16ub,
+    "options" / Int8ub,
+    "remote16" / Int16ub,
+    "remote64" / Int64ub,
+    "ni" / CString("ascii"),
+    "parent16" / Int16ub,
+    "device_type" / Int8ub,  # 0 coordinator, 1 router, 2 end device
+    "source_event" / Int8ub,
+    "profile" / Int16ub,
+    "manufacturer" / Int16ub,
+    "device_type_id" / Optional(Int32ub),  # DD, only when NO bit 0 is set
+    Terminated,
+)
+RemoteAtResponse = Struct(  # 0x97
+    "frame_id" / Int8ub,
+    "src64" / Int64ub,
+    "src16" / Int16ub,
+    "command" / Bytes(2),
+    "status" / Int8ub,
+    "value" / GreedyBytes,
+)
+
+FRAME_BODIES = {
+    FrameType.AT_COMMAND: AtCommand,
+    FrameType.AT_COMMAND_QUEUE: AtCommand,
+    FrameType.TRANSMIT_REQUEST: TransmitRequest,
+    FrameType.EXPLICIT_ADDRESSING: ExplicitAddressing,
+    FrameType.REMOTE_AT_REQUEST: RemoteAtRequest,
+    FrameType.AT_RESPONSE: AtResponse,
+    FrameType.MODEM_STATUS: ModemStatusFrame,
+    FrameType.TRANSMIT_STATUS: TransmitStatus,
+    FrameType.RECEIVE_PACKET: ReceivePacket,
+    FrameType.EXPLICIT_RX: ExplicitRx,
+    FrameType.NODE_IDENTIFICATION: NodeIdentification,
+    FrameType.REMOTE_AT_RESPONSE: RemoteAtResponse,
+}
+
+#: Frame data: the type byte, then its layout (raw bytes for a type not declared).
+FrameData = Struct(
+    "type" / Int8ub,
+    "body" / Switch(this.type, FRAME_BODIES, default=GreedyBytes),
+)
+
+
+def checksum(frame_data: bytes) -> int:
+    return 0xFF - (sum(frame_data) & 0xFF)
+
+
+#: One API mode 1 frame.
+ApiFrame = Struct(
+    "start" / Const(bytes([START])),
+    "frame" / RawCopy(Prefixed(Int16ub, FrameData)),
+    "checksum" / Checksum(Int8ub, lambda raw: checksum(raw[2:]), this.frame.data),
+)
+
+
+def escape(data: bytes) -> bytes:
+    """API mode 2 escaping of the bytes after the start delimiter."""
+    if not any(b in ESCAPED_BYTES for b in data):
+        return bytes(data)
+    out = bytearray()
+    for b in data:
+        if b in ESCAPED_BYTES:
+            out += bytes((ESCAPE, b ^ 0x20))
+        else:
+            out.append(b)
+    return bytes(out)
+
+
+def unescape(data: bytes) -> bytes:
+    """Inverse of :func:`escape`. Raises ValueError on a dangling or invalid escape."""
+    if ESCAPE not in data:
+        return bytes(data)
+    parts = bytes(data).split(b"\x7d")
+    out = bytearray(parts[0])
+    for part in parts[1:]:
+        if not part or (part[0] ^ 0x20) not in ESCAPED_BYTES:
+            raise ValueError("bad escape")
+        out.append(part[0] ^ 0x20)
+        out += part[1:]
+    return bytes(out)
+
+
+class _Escaped(Adapter):
+    """API mode 2: the escaped image of an API mode 1 frame minus its start byte."""
+
+    def _decode(self, obj, context, path):
+        return ApiFrameBody.parse(unescape(obj))
+
+    def _encode(self, obj, context, path):
+        return escape(ApiFrameBody.build(obj))
+
+
+ApiFrameBody = Struct(
+    "frame" / RawCopy(Prefixed(Int16ub, FrameData)),
+    "checksum" / Checksum(Int8ub, lambda raw: checksum(raw[2:]), this.frame.data),
+)
+
+#: One API mode 2 (escaped) frame.
+ApiFrameEscaped = Struct(
+    "start" / Const(bytes([START])),
+    "escaped" / _Escaped(GreedyBytes),
+)
+
+
+def frame_data(frame_type: int, **fields) -> bytes:
+    """Frame data (type + fields) for a declared type, or raw ``body=`` bytes."""
+    return FrameData.build({"type": frame_type, "body": fields.get("body", fields)})
+
+
+def wrap(data: bytes, escaped: bool) -> bytes:
+    """A whole API frame around *data* (frame type + fields)."""
+    if len(data) > MAX_FRAME_DATA or not data:
+        raise ValueError(f"frame data of {len(data)} bytes cannot be framed")
+    body = len(data).to_bytes(2, "big") + data + bytes((checksum(data),))
+    return bytes((START,)) + (escape(body) if escaped else body)
+
+
+def build(frame_type: int, escaped: bool = True, **fields) -> bytes:
+    """A whole API frame of *frame_type* with *fields* (see the Structs above)."""
+    return wrap(frame_data(frame_type, **fields), escaped)
+
+
+def parse_frame_data(data: bytes):
+    """Parse frame data (type + fields) into a construct Container ``{type, body}``."""
+    return FrameData.parse(data)
