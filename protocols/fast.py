@@ -31,7 +31,7 @@ def _flat_layout(st: c.Struct):
     exact = False
     for sub in st.subcons:
         name, inner = (sub.name, sub.subcon) if isinstance(sub, c.Renamed) else (None, sub)
-        if greedy is not None and not isinstance(inner, c.Terminated):
+        if greedy is not None and inner is not c.Terminated:
             raise TypeError("GreedyBytes must be the last field")
         if isinstance(inner, c.FormatField):
             fmt += inner.fmtstr[1:]
@@ -43,9 +43,9 @@ def _flat_layout(st: c.Struct):
         elif isinstance(inner, c.Bytes) and isinstance(inner.length, int):
             fmt += f"{inner.length}s"
             names.append((name, 1))
-        elif isinstance(inner, c.GreedyBytes):
+        elif inner is c.GreedyBytes:
             greedy = name
-        elif isinstance(inner, c.Terminated):
+        elif inner is c.Terminated:
             exact = True
         else:
             raise TypeError(f"field {name!r} ({type(inner).__name__}) has no fast form")
