@@ -1,0 +1,5 @@
+"""`navtwin emulate`."""
+
+
+def register(sub) -> None:
+    """Filled in by the emulator runtime."""

@@ -1,0 +1,1 @@
+"""pytest plugin: fixtures that start an emulated lab (registered via pytest11)."""

@@ -1,0 +1,5 @@
+"""`navtwin host` and `navtwin replay`."""
+
+
+def register(sub) -> None:
+    """Filled in by the host service."""
