@@ -93,7 +93,7 @@ class Decoder:
         """Decode *data* after all that was fed before; frames and errors in stream order."""
         self.bytes += len(data)
         self._buf += data
-        consumed = self._scan()
+        consumed = self._scan(final=False)
         if consumed:
             del self._buf[:consumed]
             self._base += consumed
@@ -101,12 +101,11 @@ class Decoder:
         return out
 
     def flush(self) -> list:
-        """End of stream: what is left is a truncated candidate or garbage."""
-        if self._buf:
-            self._error(TRUNCATED, self._base, len(self._buf))
-            self._garbage(self._base, len(self._buf))
-            self._base += len(self._buf)
-            self._buf.clear()
+        """End of stream: a candidate still waiting for bytes is truncated, and the search
+        goes on one byte after it, so no intact frame behind a false start is lost."""
+        self._scan(final=True)
+        self._base += len(self._buf)
+        self._buf.clear()
         self._close_garbage(self._base)
         out, self._out = self._out, []
         return out
@@ -125,9 +124,15 @@ class Decoder:
                 "buffered": self.buffered}
 
     # -- for subclasses ------------------------------------------------------------------
-    def _scan(self) -> int:
-        """Consume from ``self._buf``; return how many leading bytes are done with."""
+    def _scan(self, final: bool) -> int:
+        """Consume from ``self._buf``; return how many leading bytes are done with.
+        With *final* (end of stream) every byte must be consumed."""
         raise NotImplementedError
+
+    def _starved(self, j: int) -> None:
+        """End of stream inside the candidate at buffer index *j*."""
+        self._error(TRUNCATED, self._base + j, len(self._buf) - j)
+        self._garbage(self._base + j, 1)
 
     def _frame(self, frame: Frame) -> None:
         self._close_garbage(frame.offset)
@@ -163,7 +168,7 @@ class CrcFramedDecoder(Decoder):
         self._sync = sync
         self._parsers = {t: parser_for(st) for t, st in layouts.items()}
 
-    def _scan(self) -> int:
+    def _scan(self, final: bool) -> int:
         buf, base, sync = self._buf, self._base, self._sync
         n = len(buf)
         i = 0
@@ -171,12 +176,16 @@ class CrcFramedDecoder(Decoder):
             j = buf.find(sync, i)
             if j < 0:
                 # keep a possible first sync byte at the very end for the next chunk
-                keep = n - 1 if n > i and buf[-1] == sync[0] else n
+                keep = n - 1 if n > i and buf[-1] == sync[0] and not final else n
                 self._garbage(base + i, keep - i)
                 return keep
             self._garbage(base + i, j - i)
             if n - j < HEADER:
-                return j
+                if not final:
+                    return j
+                self._starved(j)
+                i = j + 1
+                continue
             ftype, length = buf[j + 2], buf[j + 3]
             parser = self._parsers.get(ftype)
             if parser is not None and parser[1] is not None and length != parser[1]:
@@ -186,7 +195,11 @@ class CrcFramedDecoder(Decoder):
                 continue
             end = j + HEADER + length + TRAILER
             if end > n:
-                return j
+                if not final:
+                    return j
+                self._starved(j)
+                i = j + 1
+                continue
             if crc16(buf[j + 2:end - 2]) != (buf[end - 2] << 8 | buf[end - 1]):
                 self._error(BAD_CRC, base + j, end - j)
                 self._garbage(base + j, 1)
@@ -241,7 +254,7 @@ class XBeeDecoder(Decoder):
             return
         self._frame(Frame("xbee", offset, raw, ftype, fields))
 
-    def _scan_plain(self) -> int:
+    def _scan_plain(self, final: bool) -> int:
         buf, base = self._buf, self._base
         n = len(buf)
         i = 0
@@ -252,7 +265,11 @@ class XBeeDecoder(Decoder):
                 return n
             self._garbage(base + i, j - i)
             if n - j < 3:
-                return j
+                if not final:
+                    return j
+                self._starved(j)
+                i = j + 1
+                continue
             length = buf[j + 1] << 8 | buf[j + 2]
             if length == 0 or length > self.max_frame_data:
                 self._error(BAD_LENGTH, base + j, length + 4)
@@ -261,7 +278,11 @@ class XBeeDecoder(Decoder):
                 continue
             end = j + 4 + length
             if end > n:
-                return j
+                if not final:
+                    return j
+                self._starved(j)
+                i = j + 1
+                continue
             if sum(buf[j + 3:end]) & 0xFF != 0xFF:
                 self._error(BAD_CHECKSUM, base + j, end - j)
                 self._garbage(base + j, 1)
@@ -271,7 +292,7 @@ class XBeeDecoder(Decoder):
             self._emit(base + j, raw, raw[3:-1])
             i = end
 
-    def _scan_escaped(self) -> int:
+    def _scan_escaped(self, final: bool) -> int:
         buf, base = self._buf, self._base
         n = len(buf)
         i = 0
@@ -282,56 +303,32 @@ class XBeeDecoder(Decoder):
                 return n
             self._garbage(base + i, j - i)
             k = buf.find(0x7E, j + 1)
+            # a bare 7E only ever starts a frame: the candidate cannot reach past it
             stop = n if k < 0 else k
-            seg = bytes(buf[j + 1:stop])
-            if k < 0 and seg.endswith(b"\x7d"):
-                seg = seg[:-1]  # an escape whose escaped byte has not arrived yet
-            try:
-                u = xbee.unescape(seg)
-            except ValueError:
-                self._error(BAD_ESCAPE, base + j, stop - j)
-                self._garbage(base + j, stop - j)
-                if k < 0:
-                    return n
-                i = k
-                continue
-            if len(u) < 2:
-                if k < 0:
-                    return j
-                self._error(TRUNCATED, base + j, stop - j)
-                self._garbage(base + j, stop - j)
-                i = k
-                continue
-            length = u[0] << 8 | u[1]
-            if length == 0 or length > self.max_frame_data:
-                self._error(BAD_LENGTH, base + j, length + 4)
-                self._garbage(base + j, stop - j)
-                if k < 0:
-                    i = j + 1  # the rest may hold the next start; nothing else can
-                    continue
-                i = k
-                continue
+            more = k < 0 and not final  # the candidate may still grow
+            seg = buf[j + 1:stop]
+            u, used = xbee.unescape_partial(seg)
+            length = u[0] << 8 | u[1] if len(u) >= 2 else -1
             need = length + 3
-            if len(u) < need:
-                if k < 0:
+            if length == 0 or length > self.max_frame_data:
+                kind = BAD_LENGTH  # judged before waiting, so a false length cannot grow the buffer
+            elif length < 0 or len(u) < need:
+                if used < len(seg) and not (more and used == len(seg) - 1):
+                    kind = BAD_ESCAPE  # (a 7D that is merely the last byte so far may complete)
+                elif more:
                     return j
-                self._error(TRUNCATED, base + j, stop - j)
-                self._garbage(base + j, stop - j)
-                i = k
+                else:
+                    kind = TRUNCATED
+            elif sum(u[2:need]) & 0xFF != 0xFF:
+                kind = BAD_CHECKSUM
+            else:
+                end = j + 1 + need + sum(u.count(e, 0, need) for e in _ESCAPED)
+                self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
+                i = end
                 continue
-            body = u[:need]
-            if sum(body[2:]) & 0xFF != 0xFF:
-                self._error(BAD_CHECKSUM, base + j, stop - j)
-                self._garbage(base + j, stop - j)
-                if k < 0:
-                    i = j + 1
-                    continue
-                i = k
-                continue
-            raw_len = 1 + need + sum(body.count(e) for e in _ESCAPED)
-            end = j + raw_len
-            self._emit(base + j, bytes(buf[j:end]), body[2:-1])
-            i = end
+            self._error(kind, base + j, stop - j)
+            self._garbage(base + j, stop - j)
+            i = stop
 
 
 class XBeeSinsChain:

@@ -212,18 +212,32 @@ def escape(data: bytes) -> bytes:
     return bytes(out)
 
 
-def unescape(data: bytes) -> bytes:
-    """Inverse of :func:`escape`. Raises ValueError on a dangling or invalid escape."""
+def unescape_partial(data: bytes) -> tuple[bytes, int]:
+    """Unescape the longest valid prefix of *data*: (unescaped bytes, raw bytes used).
+
+    It stops before the first escape that is invalid (``7D`` then a byte that does not XOR
+    to an escaped byte) or incomplete (``7D`` as the last byte).
+    """
     if ESCAPE not in data:
-        return bytes(data)
+        return bytes(data), len(data)
     parts = bytes(data).split(b"\x7d")
     out = bytearray(parts[0])
+    used = len(parts[0])
     for part in parts[1:]:
         if not part or (part[0] ^ 0x20) not in ESCAPED_BYTES:
-            raise ValueError("bad escape")
+            return bytes(out), used
         out.append(part[0] ^ 0x20)
         out += part[1:]
-    return bytes(out)
+        used += 1 + len(part)
+    return bytes(out), used
+
+
+def unescape(data: bytes) -> bytes:
+    """Inverse of :func:`escape`. Raises ValueError on a dangling or invalid escape."""
+    out, used = unescape_partial(data)
+    if used != len(data):
+        raise ValueError(f"bad escape at byte {used}")
+    return out
 
 
 class _Escaped(Adapter):

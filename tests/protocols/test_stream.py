@@ -1,0 +1,146 @@
+"""Streaming decoders: each error kind, resync, straddling, bounded memory."""
+import random
+
+import pytest
+
+from protocols import sins, xbee
+from protocols.stream import (BAD_CHECKSUM, BAD_CRC, BAD_ESCAPE, BAD_LENGTH, GARBAGE, MALFORMED,
+                              TRUNCATED, DecodeError, Frame, XBeeDecoder, XBeeSinsChain,
+                              nanoloc_decoder, sins_decoder)
+
+from .vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP, XBEE_API1
+
+ROUTER = 0x0013A20040A1B2D4
+
+
+def frames(events):
+    return [e for e in events if isinstance(e, Frame)]
+
+
+def kinds(events):
+    return [e.kind for e in events if isinstance(e, DecodeError)]
+
+
+def test_sins_errors_are_counted_and_frames_after_them_recovered():
+    bad_crc = SINS_LEVEL[:-1] + b"\x00"
+    bad_len = SINS_LEVEL[:3] + b"\x17" + SINS_LEVEL[4:]
+    cut = SINS_LEVEL[:17]
+    stream = b"junk" + bad_crc + SINS_LEVEL + bad_len + cut + SINS_SEQ_WRAP + SINS_LEVEL[:20]
+    dec = sins_decoder()
+    ev = dec.decode(stream)
+    got = frames(ev)
+    assert [f.fields["seq"] for f in got] == [1, 65535]
+    assert [f.offset for f in got] == [4 + 30, 4 + 30 + 30 + 30 + 17]
+    # the cut frame is caught by its CRC (bytes follow it); the one the stream ends in is truncated
+    assert dec.errors[BAD_CRC] == 2 and dec.errors[BAD_LENGTH] == 1
+    assert dec.errors[TRUNCATED] == 1
+    assert dec.error_bytes[GARBAGE] == len(stream) - 60
+
+
+def test_sins_unknown_type_is_skipped_by_len_and_kept_raw():
+    from protocols.crcframe import encode
+    other = encode(sins.SYNC, 0x7F, b"\x01\x02\x03")
+    (f1, f2) = frames(sins_decoder().decode(other + SINS_LEVEL))
+    assert (f1.type, f1.known, f1.fields) == (0x7F, False, {"payload": b"\x01\x02\x03"})
+    assert f2.fields["seq"] == 1
+
+
+def test_nanoloc_in_one_byte_chunks():
+    dec = nanoloc_decoder()
+    ev = []
+    for b in NANOLOC_5M * 3:
+        ev += dec.feed(bytes([b]))
+    ev += dec.flush()
+    assert [f.offset for f in frames(ev)] == [0, 32, 64] and not kinds(ev)
+
+
+@pytest.mark.parametrize("escaped", [False, True])
+def test_xbee_error_kinds(escaped):
+    good = xbee.wrap(XBEE_API1["receive_packet"][0][3:-1], escaped)
+    bad_sum = good[:-1] + bytes([good[-1] ^ 1])
+    zero_len = b"\x7e\x00\x00\x00"
+    malformed = xbee.wrap(b"\x8b\x01\x02", escaped)  # a TX status must have 7 bytes
+    stream = bad_sum + good + zero_len + malformed + good[:10]
+    dec = XBeeDecoder(escaped=escaped)
+    ev = dec.decode(stream)
+    assert [f.offset for f in frames(ev)] == [len(bad_sum)]
+    assert dec.errors[BAD_CHECKSUM] >= 1
+    assert dec.errors[BAD_LENGTH] >= 1
+    assert dec.errors[MALFORMED] == 1
+    assert dec.errors[TRUNCATED] >= 1
+
+
+def test_xbee_bad_escape_and_truncation_by_next_start():
+    good = xbee.wrap(b"\x8a\x06", True)
+    stream = b"\x7e\x00\x7d\x02\x8a" + good + b"\x7e\x00\x05\x88" + good
+    dec = XBeeDecoder(escaped=True)
+    ev = dec.decode(stream)
+    assert [f.fields for f in frames(ev)] == [{"status": 6}, {"status": 6}]
+    assert kinds(ev).count(BAD_ESCAPE) == 1 and kinds(ev).count(TRUNCATED) == 1
+
+
+def test_xbee_escape_split_across_chunks():
+    raw = xbee.build(0x90, escaped=True, src64=ROUTER, src16=0x7D84, options=1, data=b"\x7e\x7d\x11\x13")
+    for cut in range(1, len(raw)):
+        dec = XBeeDecoder(escaped=True)
+        ev = dec.feed(raw[:cut]) + dec.feed(raw[cut:]) + dec.flush()
+        (f,) = frames(ev)
+        assert f.fields["data"] == b"\x7e\x7d\x11\x13" and not kinds(ev)
+
+
+def test_unknown_xbee_type_kept_raw():
+    raw = xbee.wrap(b"\xa1\x00\x13\xa2\x00", True)
+    (f,) = frames(XBeeDecoder().decode(raw))
+    assert (f.type, f.known, f.fields) == (0xA1, False, {"payload": b"\x00\x13\xa2\x00"})
+
+
+def test_chain_rebuilds_sins_frames_straddling_packets():
+    rng = random.Random(7)
+    stream = b"".join(sins.build_sample(k, [rng.randrange(65536) for _ in range(11)])
+                      for k in range(50))
+    wire, pos = b"", 0
+    while pos < len(stream):
+        n = rng.randrange(1, 85)  # packets cut anywhere, at most NP = 84 bytes
+        wire += xbee.build(0x90, src64=ROUTER, src16=0x1234, options=1, data=stream[pos:pos + n])
+        pos += n
+    wire += xbee.build(0x8A, status=6)
+    chain = XBeeSinsChain()
+    ev = []
+    for k in range(0, len(wire), 13):
+        ev += chain.feed(wire[k:k + 13])
+    ev += chain.flush()
+    sins_frames = [f for f in frames(ev) if f.format == "sins"]
+    assert [f.fields["seq"] for f in sins_frames] == list(range(50))
+    assert [f.offset for f in sins_frames] == [30 * k for k in range(50)]
+    assert all(f.source == ROUTER for f in sins_frames)
+    assert [f.type for f in frames(ev) if f.format == "xbee"] == [0x8A]
+    assert not kinds(ev)
+
+
+def test_chain_keeps_one_stream_per_source():
+    a, b = sins.build_sample(1, [0] * 11), sins.build_sample(2, [0] * 11)
+    wire = (xbee.build(0x90, src64=1, src16=1, options=1, data=a[:10])
+            + xbee.build(0x90, src64=2, src16=2, options=1, data=b[:20])
+            + xbee.build(0x90, src64=1, src16=1, options=1, data=a[10:])
+            + xbee.build(0x90, src64=2, src16=2, options=1, data=b[20:]))
+    got = frames(XBeeSinsChain().decode(wire))
+    assert [(f.source, f.fields["seq"]) for f in got] == [(1, 1), (2, 2)]
+
+
+@pytest.mark.parametrize("make,limit", [
+    (sins_decoder, 4 + 255 + 2),
+    (nanoloc_decoder, 4 + 255 + 2),
+    (lambda: XBeeDecoder(escaped=False), 1024 + 4),
+    (lambda: XBeeDecoder(escaped=True), 2 * (1024 + 4)),
+])
+def test_memory_is_bounded_whatever_length_fields_claim(make, limit):
+    rng = random.Random(3)
+    dec = make()
+    chunk = 256
+    hostile = [b"\x7e\xff\xff", b"\x7e\x04\x00", b"\xa5\x5a\x7f\xff", b"\x4e\x4c\x7f\xff"]
+    for _ in range(2000):
+        piece = rng.choice(hostile) if rng.random() < 0.2 else rng.randbytes(chunk)
+        dec.feed(piece)
+        assert dec.buffered <= limit + chunk
+    dec.flush()
+    assert dec.buffered == 0
