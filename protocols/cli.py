@@ -85,26 +85,37 @@ def register_decode(sub) -> None:
     p.set_defaults(func=run_decode)
 
 
+def stop_on_signals():
+    """An Event set by SIGINT or SIGTERM: long-running commands stop at their next check
+    and still flush and summarise."""
+    import threading
+
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    return stop
+
+
 def run_decode(args) -> int:
     from .decode import decode
     from .recording import RecordingError
 
     out = sys.stdout
+    stop = stop_on_signals()
     try:
         for rec in decode(args.source, args.format, escaped=args.escaped, with_hex=args.hex,
                           gyro_range=args.gyro_range, baud=args.baud, follow=args.follow,
-                          port=args.port):
+                          port=args.port, stop=stop):
             if args.errors_only and "format" in rec and "error" not in rec:
                 continue
             out.write(json.dumps(rec, separators=(",", ":")) + "\n")
             if args.follow:
                 out.flush()
-    except (FileNotFoundError, IsADirectoryError, PermissionError, RecordingError) as e:
+    except FileNotFoundError:
+        raise UsageError(f"{args.source}: no such file or port; SOURCE is a file, -, a recording "
+                         "directory, a serial port or a pyserial URL") from None
+    except (IsADirectoryError, PermissionError, RecordingError) as e:
         raise UsageError(str(e)) from None
     except OSError as e:  # serial ports: missing device, wrong URL
         raise UsageError(f"{args.source}: {e}") from None
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

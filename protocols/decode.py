@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 import stat
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Iterator
@@ -79,12 +80,14 @@ def _is_serial(source: str) -> bool:
 
 
 def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud: int = 115200,
-                follow: bool = False, idle: float = 1.0) -> Iterator[bytes]:
+                follow: bool = False, idle: float = 1.0,
+                stop: threading.Event | None = None) -> Iterator[bytes]:
     """Bytes from a file, ``-`` (stdin), a recording directory or a serial port / pyserial URL.
 
     A serial source without *follow* ends after *idle* seconds with no data; with *follow*
-    it (and a growing file) is read until the caller stops iterating.
+    it (and a growing file) is read until *stop* is set (checked at least every 50 ms).
     """
+    stop = stop or threading.Event()
     if source == "-":
         stream = sys.stdin.buffer
         while chunk := stream.read1(CHUNK) if hasattr(stream, "read1") else stream.read(CHUNK):
@@ -95,7 +98,7 @@ def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud
 
         with serial.serial_for_url(source, baudrate=baud, timeout=0.05) as ser:
             last = time.monotonic()
-            while True:
+            while not stop.is_set():
                 chunk = ser.read(ser.in_waiting or 1)
                 if chunk:
                     last = time.monotonic()
@@ -110,12 +113,12 @@ def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud
             yield c.data
         return
     with open(path, "rb") as f:
-        while True:
+        while not stop.is_set():
             chunk = f.read(CHUNK)
             if chunk:
                 yield chunk
             elif follow:
-                time.sleep(0.05)
+                stop.wait(0.05)  # a growing file has no readiness to wait on
             else:
                 return
 
@@ -132,10 +135,7 @@ def decode(source: str, fmt: str, *, escaped: bool = True, with_hex: bool = Fals
             else:
                 yield error_record(ev)
 
-    try:
-        for chunk in read_chunks(source, fmt=fmt, **read_kw):
-            yield from records(dec.feed(chunk))
-    except KeyboardInterrupt:  # --follow ends on SIGINT/SIGTERM: still flush and summarise
-        pass
+    for chunk in read_chunks(source, fmt=fmt, **read_kw):
+        yield from records(dec.feed(chunk))
     yield from records(dec.flush())
     yield {"summary": dec.summary()}

@@ -322,7 +322,9 @@ class XBeeDecoder(Decoder):
             elif sum(u[2:need]) & 0xFF != 0xFF:
                 kind = BAD_CHECKSUM
             else:
-                end = j + 1 + need + sum(u.count(e, 0, need) for e in _ESCAPED)
+                # raw extent: all that was unescaped when the frame is all of it, else count
+                end = j + 1 + (used if len(u) == need else
+                               need + sum(u.count(e, 0, need) for e in _ESCAPED))
                 self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
                 i = end
                 continue
@@ -347,19 +349,30 @@ class XBeeSinsChain:
         self.sins: dict[int, CrcFramedDecoder] = {}
 
     def _route(self, events: list) -> list:
-        out = []
+        out: list = []
+        src, pending = None, []  # a run of 0x90 payloads from one source, fed at once
         for ev in events:
             if isinstance(ev, Frame) and ev.type == xbee.FrameType.RECEIVE_PACKET:
-                src = ev.fields["src64"]
-                dec = self.sins.get(src)
-                if dec is None:
-                    dec = self.sins[src] = sins_decoder()
-                for s in dec.feed(ev.fields["data"]):
-                    s.source = src
-                    out.append(s)
+                if ev.fields["src64"] != src:
+                    self._feed_sins(src, pending, out)
+                    src, pending = ev.fields["src64"], []
+                pending.append(ev.fields["data"])
             else:
+                self._feed_sins(src, pending, out)
+                src, pending = None, []
                 out.append(ev)
+        self._feed_sins(src, pending, out)
         return out
+
+    def _feed_sins(self, src: int | None, payloads: list, out: list) -> None:
+        if not payloads:
+            return
+        dec = self.sins.get(src)
+        if dec is None:
+            dec = self.sins[src] = sins_decoder()
+        for s in dec.feed(b"".join(payloads)):
+            s.source = src
+            out.append(s)
 
     def feed(self, data: bytes) -> list:
         return self._route(self.xbee.feed(data))

@@ -218,9 +218,16 @@ def unescape_partial(data: bytes) -> tuple[bytes, int]:
     It stops before the first escape that is invalid (``7D`` then a byte that does not XOR
     to an escaped byte) or incomplete (``7D`` as the last byte).
     """
-    if ESCAPE not in data:
+    escapes = data.count(ESCAPE)
+    if not escapes:
         return bytes(data), len(data)
-    parts = bytes(data).split(b"\x7d")
+    # In valid data every 7D starts a pair and no pair's second byte is 7D, so the pairs
+    # never overlap and four C-level replaces undo them; 7D 5D goes last so its 7D is final.
+    out = (data.replace(b"\x7d\x5e", b"\x7e").replace(b"\x7d\x31", b"\x11")
+           .replace(b"\x7d\x33", b"\x13").replace(b"\x7d\x5d", b"\x7d"))
+    if len(data) - len(out) == escapes:
+        return bytes(out), len(data)
+    parts = bytes(data).split(b"\x7d")  # some escape is bad: find the valid prefix
     out = bytearray(parts[0])
     used = len(parts[0])
     for part in parts[1:]:

@@ -1,0 +1,6 @@
+"""``python -m protocols``: the navtwin command line."""
+import sys
+
+from .cli import main
+
+sys.exit(main())
