@@ -1,0 +1,41 @@
+"""The SINS DSP board (TMS320C6713 + MAX3111E): reads the ADIS16350 every 10 ms of its own
+clock and writes one SINS frame (wire-formats.md section 1) on its RS-232 line.
+
+Frame k is written from true time ``t_k = start + round(k period / (1 + ppm 1e-6))`` (the
+board's crystal; an absolute schedule) with seq = k mod 65536; its registers are read over
+SPI ``spi_read_us`` earlier, so they hold the sensor's latest sample at that moment.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from protocols.sins import FRAME_SIZE, build_sample
+
+from .clock import Clock, char_ns
+
+
+class Board:
+    def __init__(self, spec, ppm: float, imu) -> None:
+        self.clock = Clock(ppm, spec.period_ms * 1e6, round(spec.start_ms * 1e6))
+        self.spi_read_ns = round(spec.spi_read_us * 1e3)
+        self.char_ns = char_ns(spec.baud)
+        self.imu = imu
+
+    def frames(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, list[bytes]]:
+        """Write start times and bytes of the frames with lo_ns <= t_k < hi_ns; the IMU must
+        have generated its samples up to hi_ns."""
+        k = self.clock.ticks_between(lo_ns, hi_ns)
+        t = self.clock.tick(k)
+        words = self.imu.read(t - self.spi_read_ns).tolist()
+        return t, [build_sample(seq, w) for seq, w in zip(k.tolist(), words)]
+
+    def byte_times(self, starts: np.ndarray) -> np.ndarray:
+        """(N, 30) true times at which each byte of frames starting at *starts* has been
+        completely received at the far end of the line."""
+        ends = np.rint(np.arange(1, FRAME_SIZE + 1) * self.char_ns).astype(np.int64)
+        return starts[:, None] + ends[None, :]
+
+    def next_start(self, after_ns: int) -> int:
+        """Start of the first frame at or after *after_ns* (the schedule is known ahead)."""
+        return int(self.clock.tick(int(self.clock.ticks_between(after_ns, after_ns + 2 * round(
+            self.clock.true_period_ns) + 2)[0])))

@@ -1,0 +1,184 @@
+"""ADIS16350 model: true motion -> internal samples -> Bartlett filter -> output registers.
+
+Physics (navigation frame n: x, y of the area, z up; body b: x forward, y left, z up)::
+
+    f_b  = C_bn (a_n + 2 W_ie x v_n - g_n),   g_n = (0, 0, -g_local)     (000 sect. 3.1)
+    w_ib = w_nb + C_bn W_ie,   W_ie = W (cos L north_n + sin L z_n),  W = 7.2916e-5 rad/s
+
+(the transport rate v/R ~ 1e-7 rad/s is below a thousandth of an LSB and is left out).
+Each internal sample j (every SMPL_PRD period of the sensor's own clock, 819.2 SPS by
+default) is measured as::
+
+    y_j = M x_j + b_on + b_gm,j + n_j           then clipped to the selected range
+
+M = I + diag(scale-factor errors) + off-diagonal misalignment (drawn at power-on);
+b_on the turn-on bias (drawn at power-on); b_gm a first-order Gauss-Markov process
+b_{j+1} = phi b_j + sigma sqrt(1 - phi^2) w_j, phi = exp(-Ts / tau), started stationary
+(sigma = the datasheet's in-run bias stability); n_j white with sigma = ARW sqrt(fs) (gyro,
+ARW in rad/sqrt(s)) or VRW sqrt(fs) (accelerometer). Temperature and supply are
+measured with the sample (scenario value plus white noise). The output registers hold the
+Bartlett-window FIR of the last samples: two cascaded N-tap averages (datasheet p. 17,
+H(f) = [sin(pi N f ts) / (N sin(pi f ts))]^2, N = 2^SENS/AVG[2:0]). A read returns the
+registers of the latest sample, quantised to 14 bits (gyro, accelerometer) or 12 bits
+(temperature, supply) with ND = 1 when a sample arrived since the previous read and EA = 1
+while a STATUS flag is set (overrange of the read sample; supply outside 4.75..5.25 V).
+Datasheet figures: shared/reference/adis16350-nanoloc-facts.md section 1.4.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.signal import lfilter, lfilter_zi
+
+from protocols import adis16350 as adis
+
+from .clock import Clock
+
+EARTH_RATE = 7.2916e-5  # rad/s
+MG = 1e-3 * adis.STANDARD_GRAVITY  # m/s^2 per mg
+SUPPLY_LIMITS_V = (4.75, 5.25)  # STATUS bits 0 and 1
+
+
+def bartlett_taps(n: int) -> np.ndarray:
+    """Impulse response of the N-tap Bartlett window filter: two N-tap averages in cascade."""
+    box = np.full(n, 1.0 / n)
+    return np.convolve(box, box)
+
+
+def body_from_nav(roll, pitch, yaw) -> np.ndarray:
+    """(N, 3, 3) C_bn for Z-Y-X angles: C_nb = Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
+    c_nb = np.empty((len(yaw), 3, 3))
+    c_nb[:, 0] = np.column_stack((cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr))
+    c_nb[:, 1] = np.column_stack((sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr))
+    c_nb[:, 2] = np.column_stack((-sp, cp * sr, cp * cr))
+    return c_nb.transpose(0, 2, 1)
+
+
+class _Sensor:
+    """One triad (gyros or accelerometers): power-on errors, bias process, filter state."""
+
+    def __init__(self, rng: np.random.Generator, *, noise: float, bias_sigma: float, corr_s: float,
+                 turn_on: float, scale_ppm: float, misalign_rad: float, full_scale: float,
+                 ts: float, taps: np.ndarray) -> None:
+        self.noise = noise
+        self.phi = math.exp(-ts / corr_s)
+        self.drive = bias_sigma * math.sqrt(1.0 - self.phi ** 2)
+        self.full_scale = full_scale
+        self.taps = taps
+        self.turn_on = rng.normal(0.0, turn_on, 3)
+        m = np.eye(3) + np.diag(rng.normal(0.0, scale_ppm * 1e-6, 3))
+        off = ~np.eye(3, dtype=bool)
+        m[off] = rng.normal(0.0, misalign_rad, 6)
+        self.matrix = m
+        self.gm_state = self.phi * rng.normal(0.0, bias_sigma, 3)  # lfilter state: phi b_{-1}
+        self.fir_state = None
+
+    def measure(self, true: np.ndarray, white: np.ndarray, drive: np.ndarray):
+        """Filtered outputs and per-sample overrange flags for true values (N, 3)."""
+        gm, self.gm_state = lfilter([self.drive], [1.0, -self.phi], drive, axis=0,
+                                    zi=self.gm_state[None, :])
+        self.gm_state = self.gm_state[0]
+        raw = true @ self.matrix.T + self.turn_on + gm + self.noise * white
+        over = np.abs(raw) > self.full_scale
+        raw = np.clip(raw, -self.full_scale, self.full_scale)
+        if self.fir_state is None:  # the sensor ran before t = 0: start from steady state
+            self.fir_state = lfilter_zi(self.taps, [1.0])[:, None] * raw[0]
+        out, self.fir_state = lfilter(self.taps, [1.0], raw, axis=0, zi=self.fir_state)
+        return out, over.any(axis=1)
+
+    def errors(self) -> dict:
+        return {"turn_on_bias": self.turn_on.tolist(), "matrix": self.matrix.tolist()}
+
+
+class Adis16350:
+    """The sensor on the vehicle. ``generate(lo, hi)`` runs the internal samples of a block of
+    true time in order; ``read(t_read)`` returns the register words the DSP reads."""
+
+    def __init__(self, spec, site, area, trajectory, ppm: float, rng: np.random.Generator) -> None:
+        self.spec = spec
+        self.trajectory = trajectory
+        self.rng = rng
+        ts = spec.sample_period_s
+        self.clock = Clock(ppm, ts * 1e9)
+        fs = 1.0 / ts
+        taps = bartlett_taps(spec.filter_taps)
+        self.gyro_range = spec.gyro_range_dps
+        self.gyro = _Sensor(
+            rng, noise=math.radians(spec.arw_deg_rt_hr) / 60.0 * math.sqrt(fs),
+            bias_sigma=math.radians(spec.gyro_bias_instability_dps), corr_s=spec.gyro_bias_corr_s,
+            turn_on=math.radians(spec.gyro_turn_on_bias_dps), scale_ppm=spec.gyro_scale_factor_ppm,
+            misalign_rad=math.radians(spec.gyro_misalignment_deg),
+            full_scale=math.radians(spec.gyro_range_dps), ts=ts, taps=taps)
+        self.accel = _Sensor(
+            rng, noise=spec.vrw_m_s_rt_hr / 60.0 * math.sqrt(fs),
+            bias_sigma=spec.accel_bias_instability_mg * MG, corr_s=spec.accel_bias_corr_s,
+            turn_on=spec.accel_turn_on_bias_mg * MG, scale_ppm=spec.accel_scale_factor_ppm,
+            misalign_rad=math.radians(spec.accel_misalignment_deg),
+            full_scale=spec.accel_range_g * adis.STANDARD_GRAVITY, ts=ts, taps=taps)
+        lat = math.radians(site.latitude_deg)
+        north = math.radians(area.x_azimuth_deg)  # north, counter-clockwise from +x
+        self.earth_rate_n = EARTH_RATE * np.array(
+            [math.cos(lat) * math.cos(north), math.cos(lat) * math.sin(north), math.sin(lat)])
+        self.gravity_n = np.array([0.0, 0.0, -site.local_gravity])
+        # the samples of the previous and the current block (reads may reach back)
+        self._t = np.empty(0, dtype=np.int64)
+        self._j = np.empty(0, dtype=np.int64)
+        self._gyro = np.empty((0, 3))
+        self._accel = np.empty((0, 3))
+        self._supply = np.empty(0)
+        self._temp = np.empty((0, 3))
+        self._alarm = np.empty(0, dtype=bool)  # some STATUS flag set at this sample
+        self._last_read_j = -1
+
+    def true_outputs(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Error-free specific force (m/s^2) and angular rate (rad/s), body axes."""
+        k = self.trajectory.kinematics(t_ns)
+        c_bn = body_from_nav(k.roll, k.pitch, k.yaw)
+        f_n = k.acc + 2.0 * np.cross(self.earth_rate_n, k.vel) - self.gravity_n
+        f_b = np.einsum("nij,nj->ni", c_bn, f_n)
+        w_b = k.rate + c_bn @ self.earth_rate_n
+        return f_b, w_b
+
+    def generate(self, lo_ns: int, hi_ns: int) -> None:
+        """Run the internal samples with lo_ns <= t < hi_ns (blocks must follow each other)."""
+        j = self.clock.ticks_between(lo_ns, hi_ns)
+        t = self.clock.tick(j)
+        f_b, w_b = self.true_outputs(t)
+        z = self.rng.standard_normal((len(j), 16))
+        gyro, gover = self.gyro.measure(w_b, z[:, 0:3], z[:, 3:6])
+        accel, aover = self.accel.measure(f_b, z[:, 6:9], z[:, 9:12])
+        spec = self.spec
+        supply = spec.supply_v + spec.supply_noise_v * z[:, 12]
+        temp = spec.temperature_c + spec.temperature_noise_c * z[:, 13:16]
+        alarm = gover | aover | (supply < SUPPLY_LIMITS_V[0]) | (supply > SUPPLY_LIMITS_V[1])
+        keep = self._t >= lo_ns - 1_000_000_000  # one earlier block is plenty for any read
+        for name, new in (("_t", t), ("_j", j), ("_gyro", gyro), ("_accel", accel),
+                          ("_supply", supply), ("_temp", temp), ("_alarm", alarm)):
+            setattr(self, name, np.concatenate((getattr(self, name)[keep], new)))
+
+    def read(self, t_read_ns: np.ndarray) -> np.ndarray:
+        """(M, 11) uint16 register words SUPPLY_OUT..AUX_ADC read at increasing true times."""
+        i = np.searchsorted(self._t, t_read_ns, side="right") - 1
+        if len(i) and i[0] < 0:
+            raise ValueError("read before the first internal sample")
+        j = self._j[i]
+        nd = np.diff(np.concatenate(([self._last_read_j], j))) > 0
+        if len(j):
+            self._last_read_j = int(j[-1])
+        supply, temp, ea = self._supply[i], self._temp[i], self._alarm[i]
+        q, p = adis.quantise, adis.pack
+        glsb = adis.GYRO_LSB_DPS[self.gyro_range]
+        words = np.empty((len(i), 11), dtype=np.uint16)
+        words[:, 0] = p(q(supply, adis.SUPPLY_LSB_V), 12, nd=False, is_signed=False)
+        words[:, 1:4] = p(q(np.degrees(self._gyro[i]), glsb), 14, nd=False)
+        words[:, 4:7] = p(q(self._accel[i] / adis.STANDARD_GRAVITY, adis.ACCEL_LSB_G), 14, nd=False)
+        words[:, 7:10] = p(q(temp - adis.TEMP_ZERO_C, adis.TEMP_LSB_C), 12, nd=False)
+        words[:, 10] = p(q(np.zeros(len(i)), adis.AUX_LSB_V), 12, nd=False, is_signed=False)
+        flags = np.where(nd, adis.ND, 0) | np.where(ea, adis.EA, 0)
+        return words | flags.astype(np.uint16)[:, None]
+
+    def errors(self) -> dict:
+        """The power-on draws (for evaluation; they never reach the host)."""
+        return {"gyro": self.gyro.errors(), "accel": self.accel.errors()}

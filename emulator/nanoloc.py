@@ -1,0 +1,163 @@
+"""nanoLOC ranging: four anchors, one tag, the four-timestamp exchange, the gateway.
+
+Schedule. The anchors share a wired network clock (ppm ``clocks.network_ppm``). Cycle c
+starts at network time start + c x cycle; the anchor in slot i starts its exchange with the
+tag at cycle start + i x slot. Each exchange is timed from the true geometry at its own
+moments, so the vehicle moves between the slots of a cycle.
+
+Exchange (true times, node clocks running fast by e_A for the anchor, e_T for the tag)::
+
+    leg 1  anchor sends; the tag detects the packet after tof1 + d1 and replies after
+           P_T = tag_reply / (1 + e_T) + jitter; the anchor detects the reply after tof2 + d2
+           tau1 = (tof1 + d1 + P_T + tof2 + d2)(1 + e_A)      tau2 = P_T (1 + e_T)
+    gap    leg_gap / (1 + e_T)
+    leg 2  the tag sends; the anchor replies after P_A = anchor_reply / (1 + e_A) + jitter
+           tau3 = (tof3 + d3 + P_A + tof4 + d4)(1 + e_T)      tau4 = P_A (1 + e_A)
+
+tof_k = |tag(t_k) - anchor| / c (3-D, at the moment of leg k's transmission). The detection
+errors d_k carry 001's range model d~ = f d + c_i + eps_NLOS + D (001 eq. 13)::
+
+    d_k = (f - 1) tof_k + (c_i + eps) / c + n_k,   n_k ~ N(0, (2 sigma(d_k) / c)^2),
+    sigma(d) = sigma0 + sigma_per_m d,   eps ~ Exp(mean bias_m) inside an ``nlos`` fault
+
+so c (tau1 - tau2 + tau3 - tau4) / 4 = f d + c_i + eps + D with D ~ N(0, sigma(d)^2) plus the
+clock terms of wire-formats.md section 3: (1 + (e_A + e_T)/2) on the time of flight and
+(e_A - e_T)(P_T - P_A)/4, which cancel to first order, while the single-sided c (tau1 - tau2)/2
+keeps c (e_A - e_T) P_T / 2. The taus are rounded to whole picoseconds. The emulator never
+computes the distance itself.
+
+An exchange times out (status 0x40, zero taus, RSSI -128 dBm) inside an ``anchor_outage``
+fault or at random with probability timeout_prob; the anchor reports it timeout_ms after it
+started. RSSI at the anchor: RSSI(1 m) - 10 n lg d + N(0, shadowing^2) - NLOS attenuation
+(003 eq. 1), in whole dBm. The anchor has its result result_us after the exchange; the
+gateway receives it latency_us later and writes one 32-byte report per exchange, in order,
+on its serial line (wire-formats.md section 3).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from protocols.nanoloc import FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT, build_report
+
+from .clock import Clock, char_ns, serial_queue
+from .rng import stream
+from .scenario import AnchorOutage, Nlos
+
+PS_PER_S = 1e12
+RSSI_NONE = -128  # dBm reported with a timeout: nothing was received
+U32 = 0xFFFFFFFF
+
+
+class Anchor:
+    """One anchor: its slot schedule, crystal, range bias, faults and random stream."""
+
+    def __init__(self, sc, spec, slot: int, network_ppm: float, seed: int) -> None:
+        r = sc.ranging
+        self.id = spec.id
+        self.position = (spec.x, spec.y, sc.anchor_z(spec))
+        self.e = spec.ppm * 1e-6
+        self.bias = spec.range_bias_m
+        first = r.start_ms * 1e6 + slot * r.slot_ms * 1e6  # network time of its first exchange
+        self.clock = Clock(network_ppm, r.cycle_ms * 1e6, round(first / (1 + network_ppm * 1e-6)))
+        self.network_us0 = first / 1e3
+        self.outages = [f for f in sc.faults if isinstance(f, AnchorOutage) and f.anchor == spec.id]
+        self.nlos = [f for f in sc.faults if isinstance(f, Nlos) and f.anchor == spec.id]
+        self.rng = stream(seed, f"nanoloc.anchor.{spec.id}")
+
+    def draw(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """Cycle numbers of the exchanges starting in [lo_ns, hi_ns) and their random draws
+        (m, 9): jitter T, jitter A, n1..n4, shadowing, uniform (timeout), exponential (NLOS)."""
+        k = self.clock.ticks_between(lo_ns, hi_ns)
+        draws = np.empty((len(k), 9))
+        draws[:, :7] = self.rng.standard_normal((len(k), 7))
+        draws[:, 7] = self.rng.random(len(k))
+        draws[:, 8] = self.rng.standard_exponential(len(k))
+        return k, draws
+
+
+class NanolocNetwork:
+    """All anchors, the tag and the gateway's serial line."""
+
+    def __init__(self, sc, trajectory, seed: int) -> None:
+        by_id = {a.id: a for a in sc.anchors}
+        self.anchors = [Anchor(sc, by_id[a], i, sc.clocks.network_ppm, seed)
+                        for i, a in enumerate(sc.slot_order)]
+        self.r = sc.ranging
+        self.e_t = sc.tag.ppm * 1e-6
+        self.tag = sc.tag.id
+        self.trajectory = trajectory
+        self.cycle_us = sc.ranging.cycle_ms * 1e3
+        self.latency_ns = round(sc.gateway.latency_us * 1e3)
+        self.report_ns = round(FRAME_SIZE * char_ns(sc.gateway.baud))
+        self.busy_until = 0
+        self.seq = 0
+
+    def exchanges(self, lo_ns: int, hi_ns: int) -> dict:
+        """The exchanges starting in [lo_ns, hi_ns), in start order: anchor, start, t_us,
+        status, rssi, taus (ps) and when the gateway has the result."""
+        r, e_t = self.r, self.e_t
+        runs = [a.draw(lo_ns, hi_ns) for a in self.anchors]
+        idx = np.concatenate([np.full(len(k), i) for i, (k, _) in enumerate(runs)])
+        k = np.concatenate([k for k, _ in runs])
+        z = np.concatenate([d for _, d in runs])
+        t0 = np.concatenate([a.clock.tick(k) for a, (k, _) in zip(self.anchors, runs)])
+        m = len(k)
+        e_a = np.array([a.e for a in self.anchors])[idx]
+        p_t = r.tag_reply_us * 1e-6 / (1 + e_t) + r.reply_jitter_ns * 1e-9 * z[:, 0]
+        p_a = r.anchor_reply_us * 1e-6 / (1 + e_a) + r.reply_jitter_ns * 1e-9 * z[:, 1]
+        gap = r.leg_gap_us * 1e-6 / (1 + e_t)
+        # transmission moments of the four legs (the nanoseconds of flight do not matter here)
+        offsets = np.column_stack((np.zeros(m), p_t, p_t + gap, p_t + gap + p_a))
+        when = t0[:, None] + np.rint(offsets * 1e9).astype(np.int64)
+        where = np.array([a.position for a in self.anchors])[idx]
+        tag = self.trajectory.position(when.ravel()).reshape(m, 4, 3)
+        d = np.linalg.norm(tag - where[:, None, :], axis=2)
+        tof = d / SPEED_OF_LIGHT
+        eps = np.zeros(m)
+        attenuation = np.zeros(m)
+        timeout = z[:, 7] < r.timeout_prob
+        for i, a in enumerate(self.anchors):
+            mine = idx == i
+            for f in a.nlos:
+                on = mine & f.active(t0)
+                eps[on] += f.bias_m * z[on, 8]
+                attenuation[on] += f.attenuation_db
+            for f in a.outages:
+                timeout |= mine & f.active(t0)
+        bias = np.array([a.bias for a in self.anchors])[idx] + eps
+        sigma = r.sigma0_m + r.sigma_per_m * d
+        det = (r.scale - 1) * tof + (bias / SPEED_OF_LIGHT)[:, None] + 2 * sigma / SPEED_OF_LIGHT * z[:, 2:6]
+        rt1 = tof[:, 0] + det[:, 0] + p_t + tof[:, 1] + det[:, 1]
+        rt3 = tof[:, 2] + det[:, 2] + p_a + tof[:, 3] + det[:, 3]
+        taus = np.column_stack((rt1 * (1 + e_a), p_t * (1 + e_t), rt3 * (1 + e_t), p_a * (1 + e_a)))
+        taus = np.clip(np.rint(taus * PS_PER_S), 0, U32).astype(np.int64)
+        taus[timeout] = 0
+        rssi = r.rssi_1m_dbm - 10 * r.path_loss_exponent * np.log10(np.maximum(d[:, 0], 0.1)) \
+            + r.shadowing_db * z[:, 6] - attenuation
+        rssi = np.clip(np.rint(rssi), -128, 127).astype(np.int64)
+        done = rt1 + gap + rt3 + r.result_us * 1e-6
+        result = t0 + np.rint(np.where(timeout, r.timeout_ms * 1e-3, done) * 1e9).astype(np.int64)
+        t_us = np.floor(np.array([a.network_us0 for a in self.anchors])[idx] + k * self.cycle_us)
+        order = np.argsort(t0, kind="stable")  # slots never overlap: results come in this order
+        return {
+            "anchor": np.array([a.id for a in self.anchors])[idx][order],
+            "start_ns": t0[order],
+            "t_us": t_us.astype(np.int64)[order],
+            "status": np.where(timeout, STATUS_TIMEOUT, STATUS_COMPLETE)[order],
+            "rssi": np.where(timeout, RSSI_NONE, rssi)[order],
+            "tau": taus[order],
+            "ready_ns": result[order] + self.latency_ns,
+        }
+
+    def reports(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, list[bytes]]:
+        """Write start times and bytes of the reports of the exchanges starting in the block."""
+        x = self.exchanges(lo_ns, hi_ns)
+        start, end = serial_queue(x["ready_ns"], np.full(len(x["ready_ns"]), self.report_ns), self.busy_until)
+        if len(end):
+            self.busy_until = int(end[-1])
+        seq = self.seq
+        self.seq += len(start)
+        return start, [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=self.tag, status=st, rssi=rs, tau=tau)
+                       for n, (t_us, a, st, rs, tau) in enumerate(zip(
+                           x["t_us"].tolist(), x["anchor"].tolist(), x["status"].tolist(),
+                           x["rssi"].tolist(), x["tau"].tolist()))]

@@ -1,0 +1,118 @@
+"""The XBee pair's RF side: the router's packetisation and the 2.4 GHz link.
+
+Router (transparent mode, AP = 0). Bytes from the board arrive on its UART one character
+time apart within a frame. The router sends its buffer as one RF packet when RO character
+times pass with no new byte (the gap to the next byte is longer than RO x 10 bits / baud),
+or at once when NP bytes are buffered. So at 115200 baud with RO = 3 and NP = 84 every
+30-byte SINS frame becomes one packet, sent 3 character times after its last byte.
+
+Link (IEEE 802.15.4 at 250 kbit/s, unicast with MAC acknowledgement). The router sends
+one packet at a time. Each attempt takes a random CSMA backoff (uniform in [0, jitter_ms]),
+the frame's airtime ((payload + 33 bytes of PHY, MAC, NWK and APS overhead + FCS) x 32 us)
+and then the ACK (544 us) or, when the attempt is lost (probability per_attempt_loss, or
+always inside a ``link_loss`` fault), the ACK wait (retry_ms) before the next attempt. After
+max_retries lost retries the packet is gone. A delivered packet reaches the coordinator's
+radio latency_ms after the end of its successful airtime. Sources: Digi ZB manual (NP, RO,
+retries), IEEE 802.15.4-2006 (250 kbit/s, 54-symbol ACK wait), xbee-api-facts.md section 5.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .clock import serial_queue
+
+RF_OVERHEAD_BYTES = 33  # PHY 6 + MAC 9 + NWK 8 + APS 8 + FCS 2
+NS_PER_RF_BYTE = 32_000  # 8 bits at 250 kbit/s
+ACK_NS = 544_000  # 12-symbol turnaround + 11-byte ACK frame
+OPT_ACKNOWLEDGED = 0x01  # 0x90 receive option: unicast, acknowledged
+
+
+class Packets(NamedTuple):
+    ready_ns: np.ndarray  # when the router closed each packet
+    payloads: list[bytes]
+
+
+class Router:
+    """Packetiser of the router's UART input (bytes with their arrival times)."""
+
+    def __init__(self, np_bytes: int, ro_chars: int, char_ns: float) -> None:
+        self.np = np_bytes
+        self.ro_ns = ro_chars * char_ns
+        self._data = b""  # an open packet carried to the next block
+        self._times = np.empty(0, dtype=np.int64)
+
+    def packetise(self, data: bytes, times: np.ndarray, next_byte_ns: int | None) -> Packets:
+        """Packets closed by the bytes *data* that arrive at *times*; *next_byte_ns* is the
+        arrival of the byte after them (None: no more bytes, flush)."""
+        data = self._data + data
+        a = np.concatenate((self._times, times))
+        if not len(a):
+            return Packets(np.empty(0, dtype=np.int64), [])
+        gap_after = np.diff(a, append=np.inf if next_byte_ns is None else next_byte_ns)
+        ends = np.flatnonzero(gap_after > self.ro_ns) + 1  # exclusive ends of silent-gap runs
+        ready, payloads = [], []
+        start = 0
+        for end in ends.tolist():
+            for lo in range(start, end, self.np):
+                hi = min(lo + self.np, end)
+                full = hi - lo == self.np
+                ready.append(int(a[hi - 1]) + (0 if full else round(self.ro_ns)))
+                payloads.append(data[lo:hi])
+            start = end
+        # the open run: full NP chunks go now, the rest waits for more bytes
+        for lo in range(start, len(a) - self.np + 1, self.np):
+            ready.append(int(a[lo + self.np - 1]))
+            payloads.append(data[lo:lo + self.np])
+            start = lo + self.np
+        self._data, self._times = data[start:], a[start:]
+        return Packets(np.array(ready, dtype=np.int64), payloads)
+
+
+class Link:
+    """One direction of the RF link with its own random stream."""
+
+    def __init__(self, spec, outages, rng: np.random.Generator) -> None:
+        self.spec = spec
+        self.outages = tuple(outages)  # faults with .active(t_ns)
+        self.rng = rng
+        self.busy_until = 0
+
+    def _attempts(self, start_ns: np.ndarray, sizes: np.ndarray):
+        """(delivered, retries, delivery offset, service time) for packets whose first
+        attempt starts at *start_ns*; offsets are ns from that start."""
+        s = self.spec
+        n, tries = len(start_ns), s.max_retries + 1
+        u = self.rng.random((n, 2 * tries))
+        lost = u[:, :tries] < s.per_attempt_loss
+        for fault in self.outages:
+            lost |= fault.active(start_ns)[:, None]
+        backoff = np.rint(u[:, tries:] * s.jitter_ms * 1e6).astype(np.int64)
+        air = ((sizes + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE)[:, None]
+        attempt = backoff + air + np.where(lost, round(s.retry_ms * 1e6), ACK_NS)
+        delivered = ~lost.all(axis=1)
+        retries = np.where(delivered, np.argmin(lost, axis=1), s.max_retries)
+        before = np.cumsum(attempt, axis=1) - attempt  # start of each attempt
+        rows = np.arange(n)
+        offset = before[rows, retries] + backoff[rows, retries] + air[:, 0] + round(s.latency_ms * 1e6)
+        service = np.where(delivered, before[rows, retries] + attempt[rows, retries], attempt.sum(axis=1))
+        return delivered, retries, offset, service
+
+    def transmit(self, ready_ns: np.ndarray, sizes: np.ndarray):
+        """Send packets in order, one at a time: (arrival_ns, delivered) per packet."""
+        sizes = np.asarray(sizes, dtype=np.int64)
+        start = np.asarray(ready_ns, dtype=np.int64)
+        delivered, _, offset, service = self._attempts(start, sizes)
+        start, end = serial_queue(start, service, self.busy_until)
+        if len(end):
+            self.busy_until = int(end[-1])
+        return start + offset, delivered
+
+    def unicast(self, t_ns: int, nbytes: int) -> tuple[bool, int, int]:
+        """One packet offered at *t_ns*: (delivered, retries, latency_ns); the latency is to
+        delivery, or to giving up when the packet is lost."""
+        delivered, retries, offset, service = self._attempts(np.array([t_ns], dtype=np.int64),
+                                                             np.array([nbytes], dtype=np.int64))
+        ok = bool(delivered[0])
+        return ok, int(retries[0]), int(offset[0] if ok else service[0])

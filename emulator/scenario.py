@@ -1,0 +1,487 @@
+"""Scenarios: the emulated lab as a TOML file, validated on load.
+
+``load_scenario("office")`` loads a shipped scenario (emulator/scenarios/<name>.toml);
+``load_scenario("path/x.toml")`` loads a file. A file may start from another scenario with
+``base = "office"`` (a shipped name or a path relative to the file) and override any key;
+tables merge key by key, arrays of tables are replaced whole. A bad file raises
+:class:`ScenarioError` with ONE line naming the file, the key, the problem and the fix.
+Every key, its unit and default: docs/scenarios.md (the table there is generated from the
+declarations below by :func:`schema_markdown`).
+
+Frames. Navigation frame n: local level, x and y are the area's coordinates (the +x axis
+points at azimuth ``area.x_azimuth_deg``, 90 = east, so by default x east, y north), z up,
+origin on the floor. Body frame b: x forward, y left, z up. Attitude: yaw, pitch, roll
+(Z-Y-X, right-handed rotations about the body axes); yaw 0 = body x along +x,
+counter-clockwise positive; a level vehicle reads +g on the z accelerometer.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from . import trajectory as geometry
+from .rng import stream
+from .schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
+                     non_negative, one_of, positive)
+
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+SCENARIO_NAMES = tuple(sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")))
+
+#: XBee BD register value -> baud rate.
+BD_RATES = {0: 1200, 1: 2400, 2: 4800, 3: 9600, 4: 19200, 5: 38400, 6: 57600, 7: 115200}
+BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400)
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be used; the message is one line naming the fix."""
+
+
+def _ppm(doc: str):
+    return key(0.0, "ppm", doc, between(-200, 200))
+
+
+@dataclass(frozen=True)
+class Site:
+    latitude_deg: float = key(34.316, "deg", "geodetic latitude: projects the earth rate",
+                              between(-90, 90))
+    local_gravity: float = key(9.80665, "m/s^2", "local gravity magnitude (with centrifugal part)",
+                               between(9.7, 9.9, "use the local gravity, about 9.78 to 9.83"))
+
+
+@dataclass(frozen=True)
+class Area:
+    size: tuple[float, float] = key(REQUIRED, "m", "extent along x and y; anchors and waypoints lie inside",
+                                    each(positive("give a positive width and depth")))
+    origin: tuple[float, float] = key((0.0, 0.0), "m", "the corner with the smallest x and y")
+    x_azimuth_deg: float = key(90.0, "deg", "azimuth (clockwise from north) of +x; 90 = x east, y north",
+                               between(0, 360))
+
+    def contains(self, x: float, y: float) -> bool:
+        return (self.origin[0] <= x <= self.origin[0] + self.size[0]
+                and self.origin[1] <= y <= self.origin[1] + self.size[1])
+
+
+@dataclass(frozen=True)
+class Anchor:
+    id: int = key(REQUIRED, "", "anchor id in the gateway reports", between(1, 254))
+    x: float = key(REQUIRED, "m", "antenna position x")
+    y: float = key(REQUIRED, "m", "antenna position y")
+    z: float | None = key(None, "m", "antenna height; none = the tag's height (a planar layout)")
+    ppm: float = _ppm("crystal offset of this anchor's clock (times tau1, tau4)")
+    range_bias_m: float = key(0.0, "m", "c_i of 001 eq. 13: this anchor's constant range bias",
+                              between(-5, 5))
+
+
+@dataclass(frozen=True)
+class Tag:
+    id: int = key(16, "", "tag id in the gateway reports", between(1, 254))
+    z: float = key(0.3, "m", "tag antenna height above the floor; the vehicle's truth z",
+                   non_negative())
+    ppm: float = _ppm("crystal offset of the tag's clock (times tau2, tau3)")
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    waypoints: tuple[tuple[float, float], ...] = key(
+        REQUIRED, "m", "corners of the taped line; the first is the start, the first leg the start heading")
+    speed_m_s: float = key(REQUIRED, "m/s", "cruising speed along the line", positive("set a positive speed"))
+    closed: bool = key(True, "", "the line is a closed loop (it must run straight through the start)")
+    loops: int = key(1, "", "laps of a closed loop before the vehicle stops", between(1, 1000))
+    alignment_s: float = key(5.0, "s", "stationary alignment period at the start", non_negative())
+    accel_m_s2: float = key(0.2, "m/s^2", "peak acceleration of the smooth start and stop",
+                            positive("set a positive acceleration"))
+    turn_radius_m: float = key(1.0, "m", "radius of the circular part of each turn",
+                               positive("set a positive turn radius"))
+    transition_m: float = key(0.5, "m", "length of the clothoid entering and leaving each turn "
+                              "(continuous curvature)", non_negative())
+
+    def __post_init__(self):
+        n = len(self.waypoints)
+        if n < (3 if self.closed else 2):
+            raise Invalid("waypoints", f"needs at least {3 if self.closed else 2} points for "
+                                       f"{'a closed loop' if self.closed else 'a line'} (got {n}); add waypoints")
+        pts = self.waypoints + ((self.waypoints[0],) if self.closed else ())
+        for i, (a, b) in enumerate(zip(pts, pts[1:])):
+            if math.dist(a, b) < 1e-6:
+                raise Invalid("waypoints", f"{i + 1} and {i + 2} coincide; remove one of them")
+        if not self.closed and self.loops != 1:
+            raise Invalid("loops", f"must be 1 for an open line (got {self.loops}); "
+                                   "set closed = true or loops = 1")
+        if self.closed:
+            (x0, y0), (x1, y1), (xl, yl) = pts[0], pts[1], pts[-2]
+            cross = (x0 - xl) * (y1 - y0) - (y0 - yl) * (x1 - x0)
+            dot = (x0 - xl) * (x1 - x0) + (y0 - yl) * (y1 - y0)
+            if abs(cross) > 1e-9 * math.dist(pts[0], pts[-2]) * math.dist(pts[0], pts[1]) or dot <= 0:
+                raise Invalid("waypoints", "of a closed loop must pass straight through the first "
+                                           "waypoint (the start); put the start on a straight "
+                                           "leg between the last and the second waypoint")
+        path = geometry.Path(self.waypoints, self.closed, self.turn_radius_m, self.transition_m)
+        geometry.SpeedProfile(self.alignment_s, self.speed_m_s, self.accel_m_s2, path.length * self.loops)
+
+
+@dataclass(frozen=True)
+class Imu:
+    gyro_range_dps: int = key(300, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range", one_of(75, 150, 300))
+    filter_taps: int = key(4, "", "SENS/AVG bits 2:0 = log2(N): Bartlett window taps N",
+                           one_of(1, 2, 4, 8, 16, 32, 64))
+    smpl_prd: int = key(1, "", "SMPL_PRD: internal sample period 0.61035 ms x (NS+1) (bit 7 = 18.921 ms "
+                        "time base); 1 = 819.2 SPS", between(1, 255))
+    arw_deg_rt_hr: float = key(4.2, "deg/sqrt(h)", "gyro angle random walk", non_negative())
+    gyro_bias_instability_dps: float = key(0.015, "deg/s", "gyro in-run bias (1 sigma of a Gauss-Markov "
+                                           "process)", non_negative())
+    gyro_bias_corr_s: float = key(100.0, "s", "correlation time of the gyro bias process", positive())
+    gyro_turn_on_bias_dps: float = key(0.1, "deg/s", "1 sigma of the constant bias drawn at power-on",
+                                       non_negative())
+    gyro_scale_factor_ppm: float = key(1000.0, "ppm", "1 sigma of each gyro's scale-factor error",
+                                       non_negative())
+    gyro_misalignment_deg: float = key(0.05, "deg", "1 sigma of each gyro axis' misalignment (per "
+                                       "off-diagonal term)", non_negative())
+    vrw_m_s_rt_hr: float = key(2.0, "m/s/sqrt(h)", "accelerometer velocity random walk", non_negative())
+    accel_bias_instability_mg: float = key(0.7, "mg", "accelerometer in-run bias (1 sigma, Gauss-Markov)",
+                                           non_negative())
+    accel_bias_corr_s: float = key(100.0, "s", "correlation time of the accelerometer bias process",
+                                   positive())
+    accel_turn_on_bias_mg: float = key(2.0, "mg", "1 sigma of the constant bias drawn at power-on",
+                                       non_negative())
+    accel_scale_factor_ppm: float = key(1000.0, "ppm", "1 sigma of each accelerometer's scale-factor error",
+                                        non_negative())
+    accel_misalignment_deg: float = key(0.25, "deg", "1 sigma of each accelerometer axis' misalignment",
+                                        non_negative())
+    accel_range_g: float = key(10.0, "g", "accelerometer measurement range (beyond: saturation, EA)",
+                               between(1, 20))
+    temperature_c: float = key(25.0, "degC", "sensor temperature (X/Y/ZTEMP_OUT)", between(-40, 85))
+    temperature_noise_c: float = key(0.15, "degC", "1 sigma noise of each temperature word", non_negative())
+    supply_v: float = key(5.0, "V", "supply voltage (SUPPLY_OUT; outside 4.75..5.25 V sets EA)",
+                          between(4.0, 6.0))
+    supply_noise_v: float = key(0.002, "V", "1 sigma noise of the supply word", non_negative())
+
+    def __post_init__(self):
+        need = {150: 4, 75: 16}.get(self.gyro_range_dps, 1)
+        if self.filter_taps < need:
+            raise Invalid("filter_taps", f"must be >= {need} at gyro_range_dps = {self.gyro_range_dps} "
+                                         f"(got {self.filter_taps}; datasheet Table 21); "
+                                         f"set filter_taps = {need} or more")
+
+    @property
+    def sample_period_s(self) -> float:
+        base = 18.921e-3 if self.smpl_prd & 0x80 else 1.0 / 1638.4
+        return base * ((self.smpl_prd & 0x7F) + 1)
+
+
+@dataclass(frozen=True)
+class Board:
+    baud: int = key(115200, "bit/s", "the DSP board's RS-232 rate (8N1)", one_of(*BAUDS))
+    period_ms: float = key(10.0, "ms", "frame period in the board's own clock", between(1, 1000))
+    start_ms: float = key(1.0, "ms", "true time of the first frame", non_negative())
+    spi_read_us: float = key(500.0, "us", "the registers are read this long before a frame is written",
+                             between(0, 5000))
+
+
+    def __post_init__(self):
+        if self.spi_read_us > self.start_ms * 1e3:
+            raise Invalid("start_ms", f"{self.start_ms:g} ms is before the first SPI read ends "
+                                      f"(spi_read_us {self.spi_read_us:g}); set start_ms >= "
+                                      f"{self.spi_read_us / 1e3:g}")
+
+
+@dataclass(frozen=True)
+class Clocks:
+    board_ppm: float = _ppm("DSP board crystal: the 10 ms frame schedule")
+    imu_ppm: float = _ppm("ADIS16350 internal sample clock")
+    network_ppm: float = _ppm("the anchors' shared wired clock: TDMA schedule and report t_us")
+
+
+@dataclass(frozen=True)
+class Ranging:
+    cycle_ms: float = key(100.0, "ms", "TDMA cycle: every anchor ranges the tag once per cycle",
+                          between(1, 10000))
+    slot_ms: float = key(25.0, "ms", "slot length; anchor number i of slot_order starts at i x slot",
+                         positive())
+    slot_order: tuple[int, ...] = key((), "", "anchor ids in slot order; empty = the [[anchors]] order")
+    start_ms: float = key(5.0, "ms", "network time of the first cycle", non_negative())
+    scale: float = key(1.0, "", "f of 001 eq. 13: range scale factor", between(0.5, 1.5))
+    sigma0_m: float = key(0.1, "m", "range noise sigma(d) = sigma0_m + sigma_per_m x d", non_negative())
+    sigma_per_m: float = key(0.01, "m/m", "growth of the range noise with distance (001 sect. 3)",
+                             non_negative())
+    tag_reply_us: float = key(100.0, "us", "tag's reply delay, its own clock (tau2 nominal)",
+                              between(1, 4000))
+    anchor_reply_us: float = key(100.0, "us", "anchor's reply delay, its own clock (tau4 nominal)",
+                                 between(1, 4000))
+    reply_jitter_ns: float = key(20.0, "ns", "1 sigma jitter of each reply delay", non_negative())
+    leg_gap_us: float = key(300.0, "us", "from the end of the first round trip to the tag's second "
+                            "packet", non_negative())
+    result_us: float = key(800.0, "us", "from the end of the second round trip to the result at the "
+                           "anchor (tag sends tau2, tau3)", non_negative())
+    timeout_ms: float = key(6.0, "ms", "an anchor gives up on a silent tag after this (status 0x40)",
+                            positive())
+    timeout_prob: float = key(0.0, "", "probability that an exchange times out at random",
+                              between(0, 1))
+    rssi_1m_dbm: float = key(-45.0, "dBm", "RSSI(1 m) of 003 eq. 1", between(-120, 20))
+    path_loss_exponent: float = key(2.0, "", "n of 003 eq. 1", between(1, 6))
+    shadowing_db: float = key(2.0, "dB", "sigma of the log-normal shadowing of 003 eq. 1", non_negative())
+
+    def __post_init__(self):
+        if len(set(self.slot_order)) != len(self.slot_order):
+            raise Invalid("slot_order", "lists an anchor twice; list each anchor id once")
+        exchange_us = max(self.timeout_ms * 1e3, self.tag_reply_us + self.anchor_reply_us
+                          + self.leg_gap_us + self.result_us)
+        if exchange_us >= self.slot_ms * 1e3:
+            raise Invalid("slot_ms", f"{self.slot_ms:g} ms is too short for an exchange "
+                                     f"({exchange_us / 1e3:g} ms with its timeout); lengthen the "
+                                     "slots or shorten timeout_ms")
+
+
+@dataclass(frozen=True)
+class Gateway:
+    baud: int = key(115200, "bit/s", "the gateway's serial line (8N1)", one_of(*BAUDS))
+    latency_us: float = key(200.0, "us", "anchor result to gateway (wired)", non_negative())
+
+
+@dataclass(frozen=True)
+class Link:
+    latency_ms: float = key(3.0, "ms", "fixed part of the one-way delay (radio processing at both ends)",
+                            non_negative())
+    jitter_ms: float = key(2.24, "ms", "random CSMA backoff per attempt, uniform in [0, jitter_ms]",
+                           non_negative())
+    per_attempt_loss: float = key(0.01, "", "probability that one transmission attempt is lost",
+                                  between(0, 1))
+    max_retries: int = key(3, "", "MAC retries after a lost attempt; after them the packet is lost",
+                           between(0, 15))
+    retry_ms: float = key(0.864, "ms", "ACK wait before a retry", non_negative())
+
+
+def _radio(sl: int, ni: str, vr: int, ap: int, extra: dict | None = None):
+    """The fields shared by both radios, with this radio's defaults."""
+    return {
+        "SH": key(0x0013A200, "", "serial number high", between(0, 0xFFFFFFFF), hex=8),
+        "SL": key(sl, "", "serial number low", between(0, 0xFFFFFFFF), hex=8),
+        "NI": key(ni, "", "node identifier", Check(lambda v: len(v) <= 20 and v.isascii() and v.isprintable(),
+                                                    "must be <= 20 printable ASCII characters",
+                                                    "shorten it to printable ASCII")),
+        "HV": key(0x1E46, "", "hardware version (XBee-PRO S2B)", between(0, 0xFFFF), hex=4),
+        "VR": key(vr, "", "firmware version", between(0, 0xFFFF), hex=4),
+        "AP": key(ap, "", "API mode (0 = transparent)",
+                  one_of(1, 2) if ap else one_of(0, fix="the router is transparent: set AP = 0")),
+        "BD": key(7, "", "interface rate code (7 = 115200)", one_of(*BD_RATES)),
+        **(extra or {}),
+    }
+
+
+def _table(name: str, fields: dict):
+    """A frozen table class from ``{name: key(...)}``, fields in the given order."""
+    return dataclasses.make_dataclass(
+        name, [(n, type(f.default), f) for n, f in fields.items()], frozen=True)
+
+
+Coordinator = _table("Coordinator", _radio(0x40A1B2C3, "LAB-COORD", 0x21A7, 2))
+Router = _table("Router", _radio(0x40A1B2D4, "SINS-ROUTER", 0x22A7, 0, {
+    "NP": key(84, "bytes", "maximum RF payload per packet", between(1, 84)),
+    "RO": key(3, "chars", "packetisation timeout: character times of silence that end a packet",
+              between(0, 255)),
+}))
+
+
+@dataclass(frozen=True)
+class XBee:
+    coordinator: Coordinator = Coordinator()
+    router: Router = Router()
+
+
+@dataclass(frozen=True, kw_only=True)
+class Fault:
+    KINDS = {}
+    start_s: float = key(REQUIRED, "s", "start of the episode", non_negative())
+    end_s: float = key(REQUIRED, "s", "end of the episode (exclusive)", non_negative())
+
+    def __post_init__(self):
+        if self.end_s <= self.start_s:
+            raise Invalid("end_s", f"must be after start_s (got {self.end_s:g} <= {self.start_s:g} s); "
+                                   "make end_s > start_s")
+
+    def active(self, t_ns):
+        """Whether true time(s) *t_ns* fall in the episode."""
+        return (t_ns >= self.start_s * 1e9) & (t_ns < self.end_s * 1e9)
+
+
+@dataclass(frozen=True, kw_only=True)
+class AnchorOutage(Fault):
+    """The anchor is silent: its exchanges time out (status 0x40 reports)."""
+    KIND = "anchor_outage"
+    anchor: int = key(REQUIRED, "", "anchor id", between(1, 254))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Nlos(Fault):
+    """Non-line-of-sight: a positive range bias (exponential) and a weaker signal."""
+    KIND = "nlos"
+    anchor: int = key(REQUIRED, "", "anchor id", between(1, 254))
+    bias_m: float = key(0.8, "m", "mean of the exponential NLOS range bias", non_negative())
+    attenuation_db: float = key(6.0, "dB", "extra path loss on the RSSI", non_negative())
+
+
+@dataclass(frozen=True, kw_only=True)
+class LinkLoss(Fault):
+    """The XBee link is down: every RF packet in the window is lost."""
+    KIND = "link_loss"
+
+
+Fault.KINDS.update({c.KIND: c for c in (AnchorOutage, Nlos, LinkLoss)})
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scenario:
+    """A validated scenario. Sections are the TOML tables; see the module docstring."""
+
+    name: str = key(REQUIRED, "", "scenario name")
+    description: str = key("", "", "one line shown by tools")
+    duration_s: float = key(REQUIRED, "s", "length of the run", positive("set a positive duration"))
+    seed: int = key(0, "", "default seed of the run's random streams", between(0, 2**63 - 1))
+    site: Site = Site()
+    area: Area = key(REQUIRED, "", "")
+    anchors: tuple[Anchor, ...] = key(REQUIRED, "", "")
+    tag: Tag = Tag()
+    trajectory: Trajectory = key(REQUIRED, "", "")
+    imu: Imu = Imu()
+    board: Board = Board()
+    clocks: Clocks = Clocks()
+    ranging: Ranging = Ranging()
+    gateway: Gateway = Gateway()
+    link: Link = Link()
+    xbee: XBee = XBee()
+    faults: tuple[Fault, ...] = ()
+
+    def __post_init__(self):
+        ids = [a.id for a in self.anchors]
+        if not ids:
+            raise Invalid("anchors", "is empty; add at least one [[anchors]] table")
+        for i, a in enumerate(ids):
+            if a in ids[:i]:
+                raise Invalid(f"[[anchors]] #{i + 1} id", f"{a} is used by another anchor; give every "
+                                                          "anchor its own id")
+        if self.tag.id in ids:
+            raise Invalid("[tag] id", f"{self.tag.id} is also an anchor id; give the tag its own id")
+        for i, a in enumerate(self.anchors):
+            if not self.area.contains(a.x, a.y):
+                raise Invalid(f"[[anchors]] #{i + 1} x", f"({a.x:g}, {a.y:g}) m is outside the area; "
+                                                          "move the anchor or enlarge [area]")
+        for i, (x, y) in enumerate(self.trajectory.waypoints):
+            if not self.area.contains(x, y):
+                raise Invalid("[trajectory] waypoints", f"{i + 1} ({x:g}, {y:g}) m is outside the area; "
+                                                        "move it or enlarge [area]")
+        for a in self.ranging.slot_order:
+            if a not in ids:
+                raise Invalid("[ranging] slot_order", f"names anchor {a}, which is not in [[anchors]]; "
+                                                      "list only anchor ids")
+        if self.ranging.slot_ms * len(self.slot_order) > self.ranging.cycle_ms:
+            raise Invalid("[ranging] slot_ms", f"x {len(self.slot_order)} anchors exceeds cycle_ms "
+                                               f"{self.ranging.cycle_ms:g}; shorten the slots")
+        for i, f in enumerate(self.faults):
+            if getattr(f, "anchor", None) is not None and f.anchor not in ids:
+                raise Invalid(f"[[faults]] #{i + 1} anchor", f"{f.anchor} is not in [[anchors]]; "
+                                                             "name an anchor id")
+        if BD_RATES[self.xbee.router.BD] != self.board.baud:
+            raise Invalid("[xbee.router] BD", f"{BD_RATES[self.xbee.router.BD]} bit/s differs from the "
+                                              f"board's {self.board.baud}; match [board] baud")
+
+    # -- derived views ---------------------------------------------------------------------
+    @property
+    def slot_order(self) -> tuple[int, ...]:
+        return self.ranging.slot_order or tuple(a.id for a in self.anchors)
+
+    def anchor_z(self, anchor: Anchor) -> float:
+        return self.tag.z if anchor.z is None else anchor.z
+
+    @property
+    def duration_ns(self) -> int:
+        return round(self.duration_s * 1e9)
+
+    @property
+    def ports(self) -> dict:
+        """Serial settings of the three ports the emulated lab exposes."""
+        c = self.xbee.coordinator
+        return {"sins": {"baud": self.board.baud},
+                "xbee": {"baud": BD_RATES[c.BD], "api_mode": c.AP},
+                "nanoloc": {"baud": self.gateway.baud}}
+
+    @property
+    def radios(self) -> dict:
+        """AT values of the coordinator and the router (router MY joined with :attr:`seed`)."""
+        return self.radios_for(self.seed)
+
+    def radios_for(self, seed: int) -> dict:
+        """AT values of both radios for a run with *seed*: the network the coordinator formed
+        (OP, OI, CH) and the router's MY come from the seed, as on a real join."""
+        rng = stream(seed, "xbee.join")
+        my, oi = (int(v) for v in rng.integers(0x0001, 0xFFF8, size=2))  # 0xFFF8.. reserved
+        op = int(rng.integers(1, 2**63))
+        ch = int(rng.integers(0x0B, 0x1B))
+        network = {"OP": op, "OI": oi, "CH": ch, "ID": 0}
+        coord = dataclasses.asdict(self.xbee.coordinator) | network | {"MY": 0x0000}
+        router = dataclasses.asdict(self.xbee.router) | network | {"MY": my}
+        return {"coordinator": coord, "router": router}
+
+    def to_toml(self) -> str:
+        """The scenario exactly as run, every key written; :func:`load_scenario` reads it back."""
+        return dump(self)
+
+
+def schema_markdown() -> str:
+    """The table of every key (docs/scenarios.md carries it verbatim)."""
+    return markdown_table(Scenario)
+
+
+# -- loading ------------------------------------------------------------------------------
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _resolve(ref: str, relative_to: Path | None) -> Path:
+    if ref in SCENARIO_NAMES:
+        return SCENARIO_DIR / f"{ref}.toml"
+    path = Path(ref)
+    if relative_to is not None and not path.is_absolute():
+        path = relative_to / path
+    if path.is_file():
+        return path
+    if path.suffix == ".toml" or len(path.parts) > 1:
+        raise ScenarioError(f"no scenario file {path}; check the path")
+    names = ", ".join(SCENARIO_NAMES)
+    raise ScenarioError(f"unknown scenario '{ref}'; use one of {names} or the path of a .toml file")
+
+
+def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
+    if path.resolve() in chain:
+        raise ScenarioError(f"{path.name}: base chain loops back to {path.name}; remove the loop")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path.name}: not valid TOML: {e}; fix the syntax") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError(f"{path.name}: cannot read it ({e}); check the path") from None
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ScenarioError(f"{path.name}: base must be a scenario name or path in quotes; "
+                            'write e.g. base = "office"')
+    return _merge(_read(_resolve(base, path.parent), chain + (path.resolve(),)), data)
+
+
+def load_scenario(ref: str | Path) -> Scenario:
+    """A shipped scenario by name, or a scenario file by path; ScenarioError (one line) if bad."""
+    path = _resolve(str(ref), None)
+    return parse_scenario(_read(path), path.name)
+
+
+def parse_scenario(data: dict, source: str = "scenario") -> Scenario:
+    """Validate a parsed TOML dict (``base`` already resolved); *source* names it in errors."""
+    try:
+        return build(Scenario, data)
+    except Invalid as e:
+        raise ScenarioError(f"{source}: {e}".replace("\n", " ")) from None

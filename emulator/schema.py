@@ -1,0 +1,317 @@
+"""Typed TOML tables declared as frozen dataclasses: validation, TOML output, docs table.
+
+A table is a dataclass whose fields carry their unit, meaning and checks (:func:`key`).
+:func:`build` turns a parsed TOML dict into the dataclass and raises :class:`Invalid` with
+ONE line naming the key, the problem and the fix; :func:`dump` writes it back as TOML
+(every key, defaults included, so the text is the scenario exactly as run); :func:`rows`
+lists every key for the documentation. Field types understood: bool, int, float, str,
+``float | None`` (optional), fixed and variable tuples of numbers, tuples of points, a
+nested table (dataclass) and an array of tables (``tuple[Table, ...]``; a class attribute
+``KINDS`` maps a ``kind`` key to one dataclass per kind).
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import math
+import types
+import typing
+from dataclasses import MISSING, dataclass
+from typing import Any, Callable
+
+
+class Invalid(ValueError):
+    """A validation problem: *where* (e.g. ``[trajectory] speed_m_s``) and a one-line text."""
+
+    def __init__(self, where: str, problem: str) -> None:
+        super().__init__(f"{where} {problem}".strip())
+        self.where = where
+        self.problem = problem
+
+
+@dataclass(frozen=True)
+class Check:
+    """``ok(value)`` must hold, else ``<key> <must> (got <value>); <fix>``."""
+
+    ok: Callable[[Any], bool]
+    must: str
+    fix: str
+
+
+def positive(fix: str = "set a positive value") -> Check:
+    return Check(lambda v: v > 0, "must be > 0", fix)
+
+
+def non_negative(fix: str = "set 0 or a positive value") -> Check:
+    return Check(lambda v: v >= 0, "must be >= 0", fix)
+
+
+def _num(v) -> str:
+    return str(v) if isinstance(v, int) else f"{v:g}"
+
+
+def between(lo: float, hi: float, fix: str | None = None) -> Check:
+    return Check(lambda v: lo <= v <= hi, f"must be in [{_num(lo)}, {_num(hi)}]",
+                 fix or f"use a value from {_num(lo)} to {_num(hi)}")
+
+
+def one_of(*allowed, fix: str | None = None) -> Check:
+    names = ", ".join(repr(a) if isinstance(a, str) else _num(a) for a in allowed)
+    return Check(lambda v: v in allowed, f"must be one of {names}", fix or f"use one of {names}")
+
+
+def each(check: Check) -> Check:
+    """Apply *check* to every element of a tuple value."""
+    return Check(lambda v: all(check.ok(x) for x in v), f"elements {check.must}", check.fix)
+
+
+REQUIRED = MISSING
+
+
+def key(default: Any, unit: str, doc: str, *checks: Check, hex: int = 0) -> Any:
+    """A dataclass field with its unit, meaning and checks (*default* REQUIRED = required);
+    an integer with *hex* digits is written in hex."""
+    meta = {"unit": unit, "doc": doc, "checks": checks, "hex": hex}
+    if isinstance(default, (list, dict)):
+        raise TypeError("use tuples for defaults")
+    return dataclasses.field(default=default, metadata=meta)
+
+
+# -- building ----------------------------------------------------------------------------
+def _describe(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_describe(v) for v in value) + "]"
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def _is_table(tp) -> bool:
+    return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+
+
+def _example(tp) -> tuple[str, str]:
+    """(what a value of type *tp* is, how one is written) for error messages."""
+    if tp is float:
+        return "a number", "0.5"
+    if tp is int:
+        return "an integer", "3"
+    if tp is bool:
+        return "true or false", "true"
+    if tp is str:
+        return "a string", '"text"'
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        return _example(next(a for a in args if a is not type(None)))
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        if typing.get_origin(args[0]) is tuple:
+            return "a list of points", "[[0.0, 0.0], [1.0, 2.0]]"
+        return "a list", "[1.0, 2.0]"
+    if origin is tuple:
+        return f"a list of {len(args)} numbers", "[" + ", ".join(["1.0"] * len(args)) + "]"
+    raise TypeError(f"unsupported field type {tp!r}")
+
+
+def _convert(value: Any, tp, at: str) -> Any:
+    """*value* from TOML as type *tp*, or Invalid naming *at*."""
+    what, like = _example(tp)
+    wrong = Invalid(at, f"must be {what} (got {_describe(value)}); write it like {like}")
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise wrong
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise wrong
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise wrong
+        if not math.isfinite(value):
+            raise Invalid(at, f"must be a finite number (got {_describe(value)}); write a finite number")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise wrong
+        return value
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        return _convert(value, next(a for a in args if a is not type(None)), at)
+    if not isinstance(value, list):
+        raise wrong
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(_convert(v, args[0], f"{at}[{i}]") for i, v in enumerate(value))
+    if len(value) != len(args):
+        raise wrong
+    return tuple(_convert(v, a, f"{at}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+
+
+KeyPath = tuple  # of (table name, 1-based entry number or 0)
+
+
+def where(path: KeyPath, name: str = "") -> str:
+    """How a key is named in messages: ``duration_s``, ``[trajectory] speed_m_s``,
+    ``[[anchors]] #2 x``."""
+    if not path:
+        return name or "top level"
+    label = ".".join(n for n, _ in path)
+    entry = path[-1][1]
+    table = f"[[{label}]] #{entry}" if entry else f"[{label}]"
+    return f"{table} {name}".strip()
+
+
+def _how_to_add(path: KeyPath, name: str, tp, meta) -> str:
+    label = ".".join([n for n, _ in path] + [name])
+    if _is_table(tp):
+        return f"add a [{label}] table"
+    args = typing.get_args(tp)
+    if typing.get_origin(tp) is tuple and args and _is_table(args[0]):
+        return f"add [[{label}]] tables"
+    what = ", ".join(x for x in (meta.get("doc", "").split(";")[0], meta.get("unit", "")) if x)
+    return f"add {name} = <{what or _example(tp)[0]}>"
+
+
+def _unknown(at: str, name: str, known: list[str]) -> Invalid:
+    near = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+    hint = f"did you mean '{near[0]}'?" if near else "known keys: " + ", ".join(known)
+    return Invalid(at, f"has an unknown key '{name}'; {hint}")
+
+
+def build(cls, data: Any, path: KeyPath = ()):
+    """An instance of table class *cls* from TOML *data* found at *path*."""
+    if not isinstance(data, dict):
+        raise Invalid(where(path), f"must be a table (got {_describe(data)}); write it as a table")
+    kinds = getattr(cls, "KINDS", None)
+    if kinds is not None:
+        kind = data.get("kind")
+        if kind not in kinds:
+            names = ", ".join(repr(k) for k in kinds)
+            raise Invalid(where(path, "kind"), f"must be one of {names} (got {_describe(kind)}); "
+                                               f"set kind to one of {names}")
+        cls = kinds[kind]
+        data = {k: v for k, v in data.items() if k != "kind"}
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    for name in data:
+        if name not in fields:
+            raise _unknown(where(path), name, list(fields) + (["kind"] if kinds else []))
+    values = {}
+    for name, f in fields.items():
+        at = where(path, name)
+        tp = hints[name]
+        if name not in data:
+            if f.default is MISSING:
+                raise Invalid(at, "is missing; " + _how_to_add(path, name, tp, f.metadata))
+            continue
+        raw = data[name]
+        if _is_table(tp):
+            values[name] = build(tp, raw, path + ((name, 0),))
+            continue
+        origin, args = typing.get_origin(tp), typing.get_args(tp)
+        if origin is tuple and args and _is_table(args[0]):
+            if not isinstance(raw, list):
+                raise Invalid(at, f"must be an array of tables (got {_describe(raw)}); "
+                                  f"write each entry as [[{name}]]")
+            values[name] = tuple(build(args[0], item, path + ((name, i + 1),))
+                                 for i, item in enumerate(raw))
+            continue
+        v = _convert(raw, tp, at)
+        for check in f.metadata.get("checks", ()):
+            if v is not None and not check.ok(v):
+                unit = f.metadata.get("unit", "")
+                got = _describe(v) + (f" {unit}" if unit and not isinstance(v, tuple) else "")
+                raise Invalid(at, f"{check.must} (got {got}); {check.fix}")
+        values[name] = v
+    try:
+        return cls(**values)
+    except Invalid as e:  # a cross-field check in __post_init__ names a key of this table
+        raise Invalid(where(path, e.where), e.problem) from None
+
+
+def kind_of(obj) -> str | None:
+    """The ``kind`` value of an array-of-tables entry whose class is one of a KINDS map."""
+    return getattr(type(obj), "KIND", None)
+
+
+# -- TOML output -------------------------------------------------------------------------
+def _scalar(v: Any, hex: int = 0) -> str:
+    if hex:
+        return f"0x{v:0{hex}X}"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, str):  # JSON string escapes are TOML basic-string escapes
+        return json.dumps(v).replace("\x7f", "\\u007f")
+    if isinstance(v, tuple):
+        return "[" + ", ".join(_scalar(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def dump(obj, path: str = "") -> str:
+    """TOML text of table *obj* (a dataclass instance) and its sub-tables, every key written."""
+    return "\n".join(_sections(obj, path, "")).lstrip("\n") + "\n"
+
+
+def _sections(obj, path: str, header: str) -> list[str]:
+    """[header + plain keys] then the sub-tables; a header with no keys of its own is left out
+    (TOML creates it implicitly)."""
+    plain, tables = [], []
+    if kind_of(obj) is not None:
+        plain.append(f"kind = {_scalar(kind_of(obj))}")
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        sub = f"{path}.{f.name}" if path else f.name
+        if dataclasses.is_dataclass(v):
+            tables += _sections(v, sub, f"\n[{sub}]")
+        elif isinstance(v, tuple) and v and dataclasses.is_dataclass(v[0]):
+            for item in v:
+                tables += _sections(item, sub, f"\n[[{sub}]]")
+        elif v is not None:
+            plain.append(f"{f.name} = {_scalar(v, f.metadata.get('hex', 0))}")
+    head = [header] if header and (plain or header.startswith("\n[[")) else []
+    return head + plain + tables
+
+
+# -- documentation -------------------------------------------------------------------------
+def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str]]:
+    """(key, unit, default, meaning) for every key of *cls* and its sub-tables; keys are
+    dotted paths, ``[]`` marking an array of tables (``anchors[].x``)."""
+    out = []
+    kinds = getattr(cls, "KINDS", None)
+    classes = list(kinds.values()) if kinds else [cls]
+    if kinds:
+        out.append((prefix + "kind", "", "required", "one of " + ", ".join(f"`{k}`" for k in kinds)))
+    seen = set()
+    for c in classes:
+        hints = typing.get_type_hints(c)
+        for f in dataclasses.fields(c):
+            name = prefix + f.name
+            if name in seen:
+                continue
+            seen.add(name)
+            tp = hints[f.name]
+            origin, args = typing.get_origin(tp), typing.get_args(tp)
+            if _is_table(tp):
+                out.extend(rows(tp, name + "."))
+            elif origin is tuple and args and _is_table(args[0]):
+                out.extend(rows(args[0], name + "[]."))
+            else:
+                default = "required" if f.default is MISSING else (
+                    "none" if f.default is None else _scalar(f.default, f.metadata.get("hex", 0)))
+                doc = f.metadata.get("doc", "")
+                if len(classes) > 1:
+                    users = [k.KIND for k in classes if f.name in {g.name for g in dataclasses.fields(k)}]
+                    doc = f"({', '.join(users)}) {doc}"
+                out.append((name, f.metadata.get("unit", ""), default, doc))
+    return out
+
+
+def markdown_table(cls) -> str:
+    lines = ["| key | unit | default | meaning |", "|---|---|---|---|"]
+    for name, unit, default, doc in rows(cls):
+        lines.append(f"| `{name}` | {unit} | `{default}` | {doc} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,132 @@
+"""The emulated lab in virtual time: every device's output as timed events.
+
+``World(sc, seed)`` builds the vehicle, the ADIS16350 and its DSP board, the XBee router
+and link, and the nanoLOC network of scenario *sc*. ``advance(until_ns)`` returns, sorted by
+(t_ns, port order sins < nanoloc < xbee), every event with t_ns < until_ns not returned
+before:
+
+- ``Event(t, "sins", bytes)``: one SINS frame; t = when the board starts writing it;
+- ``Event(t, "nanoloc", bytes)``: one gateway report; t = when the gateway starts writing it;
+- ``Event(t, "xbee", RfPacket)``: an RF packet the coordinator's radio received at t (after
+  the router's packetisation, latency and retries; lost packets never appear).
+
+The devices run in fixed blocks of true time (BLOCK_NS); an event is generated with the
+block of its cause (frame tick, packet closing, exchange start) and is never earlier than
+it, so the events do not depend on how the caller slices time. Every random draw comes
+from a named stream of the seed (emulator.rng). Events at or after the scenario's duration
+are dropped.
+"""
+from __future__ import annotations
+
+import bisect
+from typing import NamedTuple
+
+import numpy as np
+
+from .board import Board
+from .imu import Adis16350
+from .nanoloc import NanolocNetwork
+from .radio import OPT_ACKNOWLEDGED, Link, Router
+from .rng import stream
+from .scenario import LinkLoss, Scenario
+from .trajectory import Trajectory
+from .truth import truth_arrays
+
+PORTS = ("sins", "nanoloc", "xbee")
+PORT_RANK = {p: i for i, p in enumerate(PORTS)}
+
+
+class RfPacket(NamedTuple):
+    src64: int
+    src16: int
+    options: int
+    data: bytes
+
+
+class Event(NamedTuple):
+    t_ns: int
+    port: str
+    data: bytes | RfPacket
+
+
+def _order(e: Event) -> tuple[int, int]:
+    return e.t_ns, PORT_RANK[e.port]
+
+
+class World:
+    BLOCK_NS = 1_000_000_000
+
+    def __init__(self, sc: Scenario, seed: int | None = None) -> None:
+        self.scenario = sc
+        self.seed = sc.seed if seed is None else seed
+        self.duration_ns = sc.duration_ns
+        self.radios = sc.radios_for(self.seed)
+        router = self.radios["router"]
+        self.src64 = (router["SH"] << 32) | router["SL"]
+        self.src16 = router["MY"]
+        self.trajectory = Trajectory(sc.trajectory, sc.tag.z)
+        self.imu = Adis16350(sc.imu, sc.site, sc.area, self.trajectory, sc.clocks.imu_ppm,
+                             stream(self.seed, "imu"))
+        self.board = Board(sc.board, sc.clocks.board_ppm, self.imu)
+        self.router = Router(router["NP"], router["RO"], self.board.char_ns)
+        link_faults = [f for f in sc.faults if isinstance(f, LinkLoss)]
+        self._uplink = Link(sc.link, link_faults, stream(self.seed, "xbee.link.router"))
+        #: the host -> router direction (0x10, 0x17); its own stream, so host activity never
+        #: changes the device byte streams
+        self.link = Link(sc.link, link_faults, stream(self.seed, "xbee.link.coordinator"))
+        self.nanoloc = NanolocNetwork(sc, self.trajectory, self.seed)
+        self._generated_ns = 0  # blocks before this are generated
+        self._pending: list[Event] = []  # generated, not yet returned, in order
+        self._times: list[int] = []  # their t_ns
+        self._returned_ns = 0
+
+    # -- generation -------------------------------------------------------------------------
+    def _block(self) -> list[Event]:
+        lo = self._generated_ns
+        hi = min(lo + self.BLOCK_NS, self.duration_ns)
+        self._generated_ns = hi
+        self.imu.generate(lo, hi)
+        events = []
+        t_sins, frames = self.board.frames(lo, hi)
+        events += [Event(t, "sins", f) for t, f in zip(t_sins.tolist(), frames)]
+        t_nl, reports = self.nanoloc.reports(lo, hi)
+        events += [Event(t, "nanoloc", r) for t, r in zip(t_nl.tolist(), reports)]
+        more = hi < self.duration_ns
+        next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
+        times = self.board.byte_times(t_sins).ravel()
+        packets = self.router.packetise(b"".join(frames), times, next_byte)
+        arrival, delivered = self._uplink.transmit(packets.ready_ns, [len(p) for p in packets.payloads])
+        events += [Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p))
+                   for t, p, ok in zip(arrival.tolist(), packets.payloads, delivered.tolist()) if ok]
+        return events
+
+    def advance(self, until_ns: int) -> list[Event]:
+        """Events with t_ns < until_ns not returned before, in (t_ns, port) order."""
+        until_ns = min(until_ns, self.duration_ns)
+        if until_ns <= self._returned_ns:
+            return []
+        fresh = []
+        while self._generated_ns < until_ns:
+            fresh += [e for e in self._block() if e.t_ns < self.duration_ns]
+        if fresh:  # a stable sort keeps generation order among equal keys
+            self._pending += fresh
+            self._pending.sort(key=_order)
+            self._times = [e.t_ns for e in self._pending]
+        cut = bisect.bisect_left(self._times, until_ns)
+        out = self._pending[:cut]
+        del self._times[:cut], self._pending[:cut]
+        self._returned_ns = until_ns
+        return out
+
+    @property
+    def finished(self) -> bool:
+        return self._returned_ns >= self.duration_ns
+
+    # -- truth ------------------------------------------------------------------------------
+    def truth(self, t0_ns: int, t1_ns: int) -> np.ndarray:
+        """The true state every millisecond in [t0_ns, t1_ns) (emulator.truth.FIELDS)."""
+        return truth_arrays(self.trajectory, t0_ns, t1_ns)
+
+    def device_truth(self) -> dict:
+        """What the devices drew at power-on and the router's join: evaluation only."""
+        return {"seed": self.seed, "imu": self.imu.errors(), "router_my": self.src16}

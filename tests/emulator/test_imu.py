@@ -1,0 +1,248 @@
+"""ADIS16350 model, checked on the decoded SINS bytes: the datasheet's filter, the physics
+at rest and in motion, the error budget of the integrated z gyro, and the register flags."""
+import math
+
+import numpy as np
+import pytest
+
+from emulator.imu import EARTH_RATE, Adis16350, bartlett_taps
+from emulator.scenario import load_scenario
+from emulator.trajectory import Trajectory
+from protocols import adis16350 as adis
+
+from ..protocols.vectors import SINS_LEVEL
+from .world_helpers import port_bytes, run, sins, variant
+
+NOISE_FREE = """
+[imu]
+arw_deg_rt_hr = 0.0
+gyro_bias_instability_dps = 0.0
+gyro_turn_on_bias_dps = 0.0
+gyro_scale_factor_ppm = 0.0
+gyro_misalignment_deg = 0.0
+vrw_m_s_rt_hr = 0.0
+accel_bias_instability_mg = 0.0
+accel_turn_on_bias_mg = 0.0
+accel_scale_factor_ppm = 0.0
+accel_misalignment_deg = 0.0
+temperature_noise_c = 0.0
+supply_noise_v = 0.0
+"""
+
+
+@pytest.mark.parametrize("n", [1, 2, 4, 16, 64])
+def test_bartlett_taps_have_the_datasheet_response(n):
+    """Datasheet p. 17: H(f) = [sin(pi N f ts) / (N sin(pi f ts))]^2, unity at DC."""
+    h = bartlett_taps(n)
+    assert len(h) == 2 * n - 1 and h.sum() == pytest.approx(1.0)
+    f = np.linspace(0.001, 0.499, 50)  # in units of fs
+    dtft = np.abs(np.exp(-2j * np.pi * np.outer(f, np.arange(len(h)))) @ h)
+    expected = (np.sin(np.pi * n * f) / (n * np.sin(np.pi * f))) ** 2
+    assert np.allclose(dtft, expected, atol=1e-12)
+
+
+def _imu(sc):
+    return Adis16350(sc.imu, sc.site, sc.area, Trajectory(sc.trajectory, sc.tag.z), 0.0,
+                     np.random.default_rng(0))
+
+
+def test_physics_at_rest_and_on_a_straight_leg():
+    """Level at rest, heading 0 = east (x east, y north, z up): f = (0, 0, g) and
+    w = W (0, cos L, sin L); at cruise eastward the Coriolis term 2 W x v appears."""
+    sc = load_scenario("office")
+    imu = _imu(sc)
+    lat = math.radians(sc.site.latitude_deg)
+    f, w = imu.true_outputs(np.array([1_000_000_000]))
+    assert np.allclose(f[0], [0, 0, sc.site.local_gravity], atol=1e-12)
+    assert np.allclose(w[0], [0, EARTH_RATE * math.cos(lat), EARTH_RATE * math.sin(lat)], atol=1e-15)
+    traj = imu.trajectory
+    t_cruise = (traj.speed.t2 + 0.5) * 1e9  # still on the first (eastward) leg
+    k = traj.kinematics(np.array([t_cruise]))
+    assert k.vel[0, 0] == pytest.approx(sc.trajectory.speed_m_s) and k.yaw[0] == pytest.approx(0)
+    f, w = imu.true_outputs(np.array([t_cruise]))
+    v = sc.trajectory.speed_m_s
+    expected = [0, 2 * EARTH_RATE * math.sin(lat) * v, sc.site.local_gravity - 2 * EARTH_RATE * math.cos(lat) * v]
+    assert np.allclose(f[0], expected, atol=1e-12)
+
+
+def test_north_facing_area_projects_earth_rate_on_x(tmp_path):
+    sc = variant(tmp_path, "office", "[area]\nx_azimuth_deg = 0.0\n")
+    lat = math.radians(sc.site.latitude_deg)
+    _, w = _imu(sc).true_outputs(np.array([0]))
+    assert np.allclose(w[0], [EARTH_RATE * math.cos(lat), 0, EARTH_RATE * math.sin(lat)], atol=1e-15)
+
+
+def test_noise_free_level_frame_is_the_wire_format_vector(tmp_path):
+    """With every error off, the board's frame seq 1 at rest is wire-formats.md's first test
+    vector byte for byte (local g = 9.7952 m/s^2 reads 396 LSB)."""
+    sc = variant(tmp_path, "office", "duration_s = 1.0\n" + NOISE_FREE)
+    _, events = run(sc)
+    frames = [e.data for e in events if e.port == "sins"]
+    assert frames[1] == SINS_LEVEL
+
+
+def test_noise_free_motion_reads_the_truth(tmp_path):
+    sc = variant(tmp_path, "office", NOISE_FREE)
+    w, events = run(sc)
+    s = sins(events)
+    lat = math.radians(sc.site.latitude_deg)
+    truth = w.truth(0, w.duration_ns)
+    t_read = s["t_ns"] - round(sc.board.spi_read_us * 1e3)
+    wz = np.interp(t_read, truth["t"], truth["wz"]) + EARTH_RATE * math.sin(lat)
+    lsb = math.radians(adis.GYRO_LSB_DPS[300])
+    # the filter and the sample hold delay the reading by a few ms: rates change slowly
+    assert np.max(np.abs(s["gyro_rad_s"][:, 2] - wz)) < 0.5 * lsb + 0.005
+    yaw = np.interp(t_read, truth["t"], np.unwrap(truth["yaw"]))
+    ax = np.interp(t_read, truth["t"], truth["ax"])
+    ay = np.interp(t_read, truth["t"], truth["ay"])
+    forward = ax * np.cos(yaw) + ay * np.sin(yaw)
+    left = -ax * np.sin(yaw) + ay * np.cos(yaw)
+    alsb = adis.ACCEL_LSB_G * adis.STANDARD_GRAVITY
+    assert np.max(np.abs(s["accel_m_s2"][:, 0] - forward)) < 0.5 * alsb + 0.01
+    assert np.max(np.abs(s["accel_m_s2"][:, 1] - left)) < 0.5 * alsb + 0.01
+    assert np.all(s["accel_m_s2"][:, 2] == 396 * alsb)
+
+
+@pytest.fixture(scope="module")
+def office():
+    sc = load_scenario("office")
+    w, events = run(sc)
+    return sc, w, events, sins(events)
+
+
+def read_sigma(sc, gyro: bool) -> float:
+    """Model noise of one register read: white noise through the Bartlett filter plus
+    rounding (reads 10 ms apart see disjoint filter windows, so they are independent)."""
+    imu = sc.imu
+    fs = 1 / imu.sample_period_s
+    taps = bartlett_taps(imu.filter_taps)
+    if gyro:
+        white = math.radians(imu.arw_deg_rt_hr) / 60 * math.sqrt(fs)
+        lsb = math.radians(adis.GYRO_LSB_DPS[imu.gyro_range_dps])
+    else:
+        white = imu.vrw_m_s_rt_hr / 60 * math.sqrt(fs)
+        lsb = adis.ACCEL_LSB_G * adis.STANDARD_GRAVITY
+    return math.sqrt(white ** 2 * np.sum(taps ** 2) + lsb ** 2 / 12)
+
+
+def test_stationary_start_reads_local_g_and_no_rotation(office):
+    sc, _, _, s = office
+    imu, g = sc.imu, sc.site.local_gravity
+    still = (s["t_ns"] > 0.2e9) & (s["t_ns"] < sc.trajectory.alignment_s * 1e9)
+    n = still.sum()
+    acc, gyr = s["accel_m_s2"][still], s["gyro_rad_s"][still]
+    # the read noise is the modelled one
+    assert acc.std(axis=0) == pytest.approx([read_sigma(sc, False)] * 3, rel=0.1)
+    assert gyr.std(axis=0) == pytest.approx([read_sigma(sc, True)] * 3, rel=0.1)
+    mg = 1e-3 * adis.STANDARD_GRAVITY
+    mean_noise = read_sigma(sc, False) / math.sqrt(n)
+    bias = math.hypot(imu.accel_turn_on_bias_mg * mg, imu.accel_bias_instability_mg * mg)
+    tilt = g * math.radians(imu.accel_misalignment_deg)
+    sigma_xy = math.sqrt(mean_noise ** 2 + bias ** 2 + tilt ** 2)
+    sigma_z = math.sqrt(mean_noise ** 2 + bias ** 2 + (g * imu.accel_scale_factor_ppm * 1e-6) ** 2)
+    mean = acc.mean(axis=0)
+    assert abs(mean[0]) < 4 * sigma_xy and abs(mean[1]) < 4 * sigma_xy
+    assert abs(mean[2] - g) < 4 * sigma_z
+    gyro_sigma = math.sqrt((read_sigma(sc, True) / math.sqrt(n)) ** 2
+                           + math.radians(imu.gyro_turn_on_bias_dps) ** 2
+                           + math.radians(imu.gyro_bias_instability_dps) ** 2)
+    assert np.all(np.abs(gyr.mean(axis=0)) < 4 * gyro_sigma)  # near zero: 0.4 deg/s at most
+
+
+def gauss_markov_integral_var(sigma, tau, times, weights, bin_s=0.5):
+    """Variance of sum(w_i b(t_i)) for a stationary Gauss-Markov b (binned)."""
+    bins = np.floor(times / bin_s).astype(int)
+    w = np.bincount(bins, weights)
+    centre = (np.arange(len(w)) + 0.5) * bin_s
+    cov = sigma ** 2 * np.exp(-np.abs(centre[:, None] - centre[None, :]) / tau)
+    return float(w @ cov @ w)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_integrated_z_gyro_matches_truth_heading_change(seed):
+    """Remove the bias seen in the alignment period, integrate the z gyro over the run and
+    compare with the truth heading change; the predicted error is computed from ARW, the
+    bias estimate's error, the bias instability (Gauss-Markov) and the scale factor."""
+    sc = load_scenario("office")
+    w, events = run(sc, seed)
+    s = sins(events)
+    imu = sc.imu
+    dt = sc.board.period_ms * 1e-3 / (1 + sc.clocks.board_ppm * 1e-6)
+    t = s["t_ns"] / 1e9
+    align = (t > 0.2) & (t < sc.trajectory.alignment_s)
+    move = t >= sc.trajectory.alignment_s
+    gz = s["gyro_rad_s"][:, 2]
+    n_a, n_m = align.sum(), move.sum()
+    heading = dt * np.sum(gz[move] - gz[align].mean())
+    truth = w.truth(0, w.duration_ns)
+    yaw = np.unwrap(truth["yaw"])
+    change = yaw[-1] - yaw[round(sc.trajectory.alignment_s * 1000)]
+    assert abs(change) == pytest.approx(2 * math.pi)
+    sr = read_sigma(sc, True)
+    weights = np.where(move, dt, 0.0) + np.where(align, -n_m * dt / n_a, 0.0)
+    var = (np.sum(weights ** 2) * sr ** 2
+           + gauss_markov_integral_var(math.radians(imu.gyro_bias_instability_dps), imu.gyro_bias_corr_s,
+                                       t, weights)
+           + (imu.gyro_scale_factor_ppm * 1e-6 * change) ** 2)
+    sigma = math.sqrt(var)
+    assert 0.005 < sigma < 0.1  # about 1.9 deg: a meaningful check
+    assert abs(heading - change) < 4 * sigma
+
+
+def test_registers_flags_and_counters(office):
+    _, _, _, s = office
+    words = s["words"]
+    assert np.all(words & adis.ND)  # 819.2 SPS: a new sample before every 10 ms read
+    assert not np.any(words & adis.EA)
+    assert np.array_equal(s["seq"], np.arange(len(words)) % 65536)
+    assert np.all(np.diff(s["t_ns"]) == 10_000_000)
+    assert s["temp_c"].mean() == pytest.approx(25.0, abs=0.02)
+    assert s["supply_v"].mean() == pytest.approx(5.0, abs=0.002)
+
+
+def test_slow_sampling_clears_nd_and_repeats_the_registers(tmp_path):
+    """SMPL_PRD 20: 0.61035 ms x 21 = 12.8 ms, slower than the reads: some reads find no new
+    sample (ND = 0) and then return the same registers as the read before."""
+    sc = variant(tmp_path, "office", "duration_s = 10.0\n[imu]\nsmpl_prd = 20\n")
+    _, events = run(sc)
+    words = sins(events)["words"]
+    nd = (words[:, 1] & adis.ND) != 0
+    assert np.all(((words & adis.ND) != 0) == nd[:, None])  # every word carries ND
+    ts = sc.imu.sample_period_s
+    assert 1 - nd.mean() == pytest.approx(1 - 0.01 / ts, abs=0.02)
+    stale = np.flatnonzero(~nd)
+    stale = stale[stale > 0]
+    assert np.array_equal(words[stale] & 0x3FFF, words[stale - 1] & 0x3FFF)
+
+
+def test_supply_out_of_range_sets_ea(tmp_path):
+    sc = variant(tmp_path, "office", "duration_s = 2.0\n[imu]\nsupply_v = 5.3\n")
+    s = sins(run(sc)[1])
+    assert np.all(s["words"] & adis.EA)
+    assert s["supply_v"].mean() == pytest.approx(5.3, abs=0.002)
+
+
+def test_fast_turns_saturate_the_75_dps_range(tmp_path):
+    """2 m/s round 0.5 m turns is about 230 deg/s: the z gyro clips at 75 deg/s, 4095 LSB of
+    0.018315 deg/s, and EA flags the overrange while the turn lasts."""
+    sc = variant(tmp_path, "office", "[imu]\ngyro_range_dps = 75\nfilter_taps = 16\n"
+                                     "[trajectory]\nspeed_m_s = 2.0\naccel_m_s2 = 1.0\nturn_radius_m = 0.5\n"
+                                     "transition_m = 0.2\nalignment_s = 1.0\n")
+    w, events = run(sc)
+    s = sins(events, gyro_range=75)
+    raw_z = adis.signed(s["words"][:, 3], 14)
+    ea = (s["words"][:, 0] & adis.EA) != 0
+    assert np.abs(raw_z).max() == 4095
+    truth = w.truth(0, w.duration_ns)
+    fast = np.abs(np.interp(s["t_ns"], truth["t"], truth["wz"])) > math.radians(90)
+    slow = np.abs(np.interp(s["t_ns"], truth["t"], truth["wz"])) < math.radians(40)
+    assert fast.sum() > 50 and ea[fast].mean() > 0.95 and not ea[slow].any()
+    assert np.mean(np.abs(raw_z[fast]) == 4095) > 0.9  # but for the filter's lag at the onset
+
+
+def test_same_seed_same_bytes_other_seed_other_bytes():
+    sc = load_scenario("office")
+    a = port_bytes(run(sc, 5)[1], "sins")
+    b = port_bytes(run(sc, 5)[1], "sins")
+    c = port_bytes(run(sc, 6)[1], "sins")
+    assert a == b and a != c and len(a) == len(c)

@@ -1,0 +1,72 @@
+"""Helpers for the physics tests: scenario variants, whole runs, decoding the bytes back.
+
+Decoding goes through protocols' streaming decoders, the same path the host uses, so the
+tests check the bytes on the wire, not the emulator's internal numbers.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from emulator.scenario import load_scenario
+from emulator.world import World
+from protocols import adis16350 as adis
+from protocols.nanoloc import SPEED_OF_LIGHT
+from protocols.stream import Frame, nanoloc_decoder, sins_decoder
+
+
+def variant(tmp_path: Path, base: str, toml: str, name: str = "variant") -> object:
+    """A scenario that starts from *base* and overrides what *toml* says."""
+    path = tmp_path / f"{name}.toml"
+    path.write_text(f'base = "{base}"\nname = "{name}"\n{toml}', encoding="utf-8")
+    return load_scenario(path)
+
+
+def run(sc, seed: int | None = None) -> tuple[World, list]:
+    w = World(sc, seed)
+    return w, w.advance(w.duration_ns)
+
+
+def port_bytes(events, port: str) -> bytes:
+    return b"".join(e.data for e in events if e.port == port)
+
+
+def sins(events, gyro_range: int = 300) -> dict:
+    """Decoded SINS frames: t_ns (write start), seq, words (N, 11) and SI arrays."""
+    t = np.array([e.t_ns for e in events if e.port == "sins"], dtype=np.int64)
+    frames = [f for f in sins_decoder().decode(port_bytes(events, "sins"))]
+    assert all(isinstance(f, Frame) for f in frames), "the SINS stream must decode cleanly"
+    words = np.array([f.fields["words"] for f in frames], dtype=np.int64)
+    out = adis.words_to_arrays(words, gyro_range)
+    out.update(t_ns=t, seq=np.array([f.fields["seq"] for f in frames]), words=words)
+    return out
+
+
+def reports(events) -> dict:
+    """Decoded gateway reports as arrays, with both distances of the taus."""
+    frames = nanoloc_decoder().decode(port_bytes(events, "nanoloc"))
+    assert all(isinstance(f, Frame) for f in frames), "the nanoLOC stream must decode cleanly"
+    f = [x.fields for x in frames]
+    tau = np.array([x["tau"] for x in f], dtype=np.int64).reshape(-1, 4)
+    ps = 1e-12 * SPEED_OF_LIGHT
+    return {
+        "t_ns": np.array([e.t_ns for e in events if e.port == "nanoloc"], dtype=np.int64),
+        "seq": np.array([x["seq"] for x in f]), "t_us": np.array([x["t_us"] for x in f], dtype=np.int64),
+        "anchor": np.array([x["anchor"] for x in f]), "tag": np.array([x["tag"] for x in f]),
+        "status": np.array([x["status"] for x in f]), "rssi": np.array([x["rssi"] for x in f]),
+        "tau": tau,
+        "d": ps * (tau[:, 0] - tau[:, 1] + tau[:, 2] - tau[:, 3]) / 4,  # wire-formats.md section 3
+        "d_single": ps * (tau[:, 0] - tau[:, 1]) / 2,
+    }
+
+
+def true_distances(world, sc, rep: dict) -> np.ndarray:
+    """3-D truth distance tag-anchor at each report's exchange time (t_us on the network
+    clock), from the world's 1 kHz truth."""
+    true_ns = rep["t_us"] * 1000 / (1 + sc.clocks.network_ppm * 1e-6)
+    truth = world.truth(0, world.duration_ns)
+    pos = np.column_stack([np.interp(true_ns, truth["t"], truth[c]) for c in "xyz"])
+    anchors = {a.id: (a.x, a.y, sc.anchor_z(a)) for a in sc.anchors}
+    apos = np.array([anchors[a] for a in rep["anchor"]])
+    return np.linalg.norm(pos - apos, axis=1)
