@@ -142,8 +142,10 @@ class Recording:
 
     def merged(self, ports: list[str] | None = None, clock: str = "t_wall_ns") -> Iterator[Chunk]:
         """Chunks of several ports in time order (ties: port name order) by *clock*."""
-        names = sorted(ports or self.ports)
-        streams = [((getattr(c, clock) or 0, i, c.offset, c) for c in self.chunks(p))
-                   for i, p in enumerate(names)]
+        def keyed(i: int, port: str):
+            for c in self.chunks(port):
+                yield getattr(c, clock) or 0, i, c.offset, c
+
+        streams = [keyed(i, p) for i, p in enumerate(sorted(ports or self.ports))]
         for *_, chunk in heapq.merge(*streams):
             yield chunk
