@@ -201,15 +201,10 @@ ApiFrame = Struct(
 
 def escape(data: bytes) -> bytes:
     """API mode 2 escaping of the bytes after the start delimiter."""
-    if not any(b in ESCAPED_BYTES for b in data):
-        return bytes(data)
-    out = bytearray()
-    for b in data:
-        if b in ESCAPED_BYTES:
-            out += bytes((ESCAPE, b ^ 0x20))
-        else:
-            out.append(b)
-    return bytes(out)
+    data = bytes(data)
+    # four C-level replaces; 7D first, so the 7D of the later pairs is not escaped again
+    return (data.replace(b"\x7d", b"\x7d\x5d").replace(b"\x7e", b"\x7d\x5e")
+            .replace(b"\x11", b"\x7d\x31").replace(b"\x13", b"\x7d\x33"))
 
 
 def unescape_partial(data: bytes) -> tuple[bytes, int]:

@@ -1,0 +1,154 @@
+"""Python API: start an emulated lab for your own integration tests.
+
+::
+
+    from emulator.api import emulate
+
+    with emulate("office", seed=1, speed="realtime", duration=30) as lab:
+        ser = serial.Serial(lab.ports["xbee"], 115200)   # the stable link to the coordinator
+        ...
+        summary = lab.wait_done(timeout=60)             # or leave the block: the lab is stopped
+
+The lab runs as a subprocess of ``navtwin emulate`` (the same program users run), so its
+state, threads and signal handling stay out of the test process, and a crash or hang of
+either side cannot take the other down. Each lab gets its own private link directory
+(``mkdtemp``, mode 0700) unless ``link_dir`` is given, so labs can run side by side.
+"""
+from __future__ import annotations
+
+import json
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from contextlib import contextmanager
+from typing import Iterator
+
+
+class EmulatorError(RuntimeError):
+    """The emulator failed to start or ended badly; the message includes its stderr."""
+
+
+class Lab:
+    """A running ``navtwin emulate`` subprocess."""
+
+    def __init__(self, args: list[str], ready_timeout: float) -> None:
+        self._stderr = tempfile.TemporaryFile()
+        self.process = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                        stderr=self._stderr)
+        self._buf = b""
+        self.summary: dict | None = None
+        try:
+            self.info = self._line(ready_timeout)
+        except BaseException:
+            self._kill()
+            raise
+        if not self.info.get("ready"):
+            self._kill()
+            raise EmulatorError(f"unexpected first line from the emulator: {self.info}")
+        self.ports: dict[str, str] = self.info["ports"]  # port name -> stable link
+        self.pts: dict[str, str] = self.info["pts"]  # port name -> /dev/pts/N
+
+    def _line(self, timeout: float) -> dict:
+        """The next JSON line on the emulator's stdout, waiting at most *timeout* s."""
+        deadline = time.monotonic() + timeout
+        fd = self.process.stdout.fileno()
+        while b"\n" not in self._buf:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([fd], [], [], left)[0]:
+                raise TimeoutError(f"no line from the emulator within {timeout:g} s")
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                self.process.wait(timeout=10)
+                raise EmulatorError(f"emulator exited with status {self.process.returncode}: "
+                                    f"{self.stderr().strip() or 'no message'}")
+            self._buf += chunk
+        line, self._buf = self._buf.split(b"\n", 1)
+        return json.loads(line)
+
+    def stderr(self) -> str:
+        """What the emulator wrote on stderr so far (progress lines, errors)."""
+        self._stderr.seek(0)
+        return self._stderr.read().decode("utf-8", "replace")
+
+    def running(self) -> bool:
+        return self.process.poll() is None
+
+    def wait_done(self, timeout: float) -> dict:
+        """Wait for the run to end (duration reached or stopped); returns the ``done`` line."""
+        if self.summary is None:
+            deadline = time.monotonic() + timeout
+            line = self._line(timeout)
+            if not line.get("done"):
+                raise EmulatorError(f"unexpected line from the emulator: {line}")
+            self.summary = line
+            self.process.wait(timeout=max(0.1, deadline - time.monotonic()))
+            if self.process.returncode != 0:
+                raise EmulatorError(f"emulator exited with status {self.process.returncode}: "
+                                    f"{self.stderr().strip()}")
+        return self.summary
+
+    def stop(self, timeout: float = 60.0) -> dict:
+        """Stop the lab as SIGTERM does (links removed, recording completed); the ``done`` line."""
+        if self.summary is None and self.running():
+            self.process.send_signal(signal.SIGTERM)
+        return self.wait_done(timeout)
+
+    def _kill(self) -> None:
+        if self.running():
+            self.process.kill()
+        self.process.wait()
+        self.close()
+
+    def close(self) -> None:
+        self.process.stdout.close()
+        self._stderr.close()
+
+
+def command(scenario: str, *, seed: int | None = None, speed: str | float = "realtime",
+            duration: float | None = None, link_dir: str | os.PathLike | None = None,
+            record: str | os.PathLike | None = None, overwrite: bool = False) -> list[str]:
+    """The ``navtwin emulate`` command line for these settings (run with this Python)."""
+    args = [sys.executable, "-m", "protocols", "emulate", "--scenario", str(scenario), "--speed", str(speed)]
+    for flag, value in (("--seed", seed), ("--duration", duration), ("--link-dir", link_dir),
+                        ("--record", record)):
+        if value is not None:
+            args += [flag, str(value)]
+    if overwrite:
+        args.append("--overwrite")
+    return args
+
+
+@contextmanager
+def emulate(scenario: str = "office", *, seed: int | None = None, speed: str | float = "realtime",
+            duration: float | None = None, link_dir: str | os.PathLike | None = None,
+            record: str | os.PathLike | None = None, overwrite: bool = False,
+            ready_timeout: float = 60.0) -> Iterator[Lab]:
+    """Start ``navtwin emulate`` and yield the running :class:`Lab` once its ports exist;
+    on exit stop it (if still running) and remove its private link directory."""
+    private = None
+    if link_dir is None:
+        private = link_dir = tempfile.mkdtemp(prefix="navtwin-lab-")
+    try:
+        lab = Lab(command(scenario, seed=seed, speed=speed, duration=duration, link_dir=link_dir,
+                          record=record, overwrite=overwrite), ready_timeout)
+        try:
+            yield lab
+        finally:
+            try:
+                lab.stop()
+            finally:  # whatever happened, leave no emulator behind
+                if lab.running():
+                    lab.process.kill()
+                    lab.process.wait()
+                lab.close()
+    finally:
+        if private is not None:
+            shutil.rmtree(private, ignore_errors=True)
+
+
+__all__ = ["emulate", "Lab", "EmulatorError", "command"]

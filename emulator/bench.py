@@ -1,0 +1,159 @@
+"""Benchmarks of the emulator runtime (not tests: they measure, they do not assert).
+
+``python -m emulator.bench jitter --seconds 60``
+    starts ``navtwin emulate --speed realtime`` (as a subprocess, like a user would), reads
+    the ``sins`` port with pyserial and reports how regular the SINS frames arrive: p50, p99
+    and max of |period - nominal| (nominal = 10 ms of the board's clock, from the scenario's
+    ppm), frames lost (gaps in seq), drift (the last frame's lateness minus the first's,
+    against the absolute schedule t_first + k x nominal), and, from a recording of the same
+    run, the emulator's own lateness (write time minus scheduled end of each SINS chunk),
+    which separates the emulator's jitter from the reader's wake-up latency.
+``python -m emulator.bench speed [--scenario office]``
+    generates the whole scenario in virtual time (``--speed max``, no PTYs, no recording)
+    and reports how many times faster than real time it ran.
+``python -m emulator.bench digi-open [--repeat 10]``
+    times digi-xbee's ``XBeeDevice(port, 115200).open()`` on the coordinator's port.
+
+Both print one JSON object.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from protocols.recording import Recording
+from protocols.stream import Frame, sins_decoder
+
+from .runner import wire_ns
+
+
+def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = None) -> dict:
+    """Frame-period jitter seen by a pyserial reader on the ``sins`` port in real time."""
+    import serial
+
+    from .api import emulate
+    from .scenario import load_scenario
+
+    ppm = load_scenario(scenario).clocks.board_ppm
+    nominal_ns = 10_000_000 / (1 + ppm * 1e-6)
+    arrivals: list[int] = []
+    seqs: list[int] = []
+    dec = sins_decoder()
+    tmp = tempfile.TemporaryDirectory(prefix="navtwin-jitter-")
+    with tmp, emulate(scenario, seed=seed, speed="realtime", duration=seconds + 2,
+                      record=Path(tmp.name) / "rec") as lab:
+        with serial.Serial(lab.ports["sins"], 115200, timeout=1.0) as ser:
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                data = ser.read(ser.in_waiting or 1)
+                t = time.monotonic_ns()
+                for ev in dec.feed(data):
+                    if isinstance(ev, Frame):
+                        arrivals.append(t)
+                        seqs.append(ev.fields["seq"])
+        lab.stop()
+        # the emulator's own lateness: write time minus the scheduled end of each chunk
+        rec = Recording(Path(tmp.name) / "rec")
+        late = np.array([c.t_wall_ns - c.t_device_ns - wire_ns(len(c.data), 115200)
+                         for c in rec.chunks("sins")]) / 1e6
+    t = np.array(arrivals[1:], dtype=np.int64)  # the first read may start mid-frame
+    seq = np.array(seqs[1:], dtype=np.int64)
+    k = np.cumsum(np.r_[0, (np.diff(seq) % 65536)])
+    period = np.diff(t) / np.diff(k)
+    dev = np.abs(period - nominal_ns) / 1e6
+    drift = (t - t[0]) - k * nominal_ns  # lateness against the absolute schedule
+    return {"benchmark": "jitter", "scenario": scenario, "seconds": seconds, "frames": int(len(t)),
+            "lost": int(k[-1] - (len(k) - 1)), "nominal_ms": nominal_ns / 1e6,
+            "p50_ms": float(np.percentile(dev, 50)), "p99_ms": float(np.percentile(dev, 99)),
+            "max_ms": float(dev.max()),
+            "drift_ms": float((np.median(drift[-100:]) - np.median(drift[:100])) / 1e6),
+            "emulator_late_p50_ms": float(np.percentile(late, 50)),
+            "emulator_late_p99_ms": float(np.percentile(late, 99)),
+            "emulator_late_max_ms": float(late.max())}
+
+
+def speed(scenario: str = "office", seed: int | None = None, repeat: int = 3) -> dict:
+    """Virtual-time generation speed of a whole scenario (best of *repeat* runs)."""
+    from .runner import Emulation
+    from .scenario import load_scenario
+
+    sc = load_scenario(scenario)
+    best = float("inf")
+    for _ in range(repeat):
+        emu = Emulation(sc, seed, speed=None, ports=False)
+        t = time.perf_counter()
+        emu.run()
+        best = min(best, time.perf_counter() - t)
+        emu.close()
+    return {"benchmark": "speed", "scenario": scenario, "virtual_s": sc.duration_s,
+            "wall_s": best, "x_real_time": sc.duration_s / best}
+
+
+def digi_open(repeat: int = 10, scenario: str = "office") -> dict:
+    """How long digi-xbee's ``XBeeDevice(port, 115200).open()`` takes on the coordinator."""
+    from digi.xbee.devices import XBeeDevice
+
+    from .api import emulate
+
+    times = []
+    with emulate(scenario, speed="realtime") as lab:
+        for _ in range(repeat):
+            dev = XBeeDevice(lab.ports["xbee"], 115200)
+            t = time.perf_counter()
+            dev.open()
+            times.append(time.perf_counter() - t)
+            role = dev.get_role().description
+            dev.close()
+    return {"benchmark": "digi-open", "repeat": repeat, "role": role,
+            "min_s": min(times), "median_s": float(np.median(times)), "max_s": max(times)}
+
+
+def benchmarks() -> dict:
+    """The emulator's benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks)."""
+    def emulator_speed(quick: bool = False) -> dict:
+        """emulator: virtual-time generation speed of office (goal >= 300x real time)"""
+        return speed("office", repeat=1 if quick else 3)
+
+    def emulator_jitter(quick: bool = False) -> dict:
+        """emulator: SINS frame-period jitter seen by a pyserial reader, real time (goal p99 <= 0.3 ms)"""
+        return jitter(10.0 if quick else 60.0)
+
+    def digi_xbee_open(quick: bool = False) -> dict:
+        """emulator: digi-xbee XBeeDevice.open() on the coordinator (goal < 1.5 s)"""
+        return digi_open(3 if quick else 10)
+
+    return {"emulator-speed": emulator_speed, "emulator-jitter": emulator_jitter,
+            "digi-open": digi_xbee_open}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m emulator.bench", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="what", required=True)
+    j = sub.add_parser("jitter", help="SINS frame-period jitter on the sins port, real time")
+    j.add_argument("--seconds", type=float, default=60.0)
+    j.add_argument("--scenario", default="office")
+    s = sub.add_parser("speed", help="virtual-time generation speed")
+    s.add_argument("--scenario", default="office")
+    s.add_argument("--repeat", type=int, default=3)
+    d = sub.add_parser("digi-open", help="digi-xbee XBeeDevice.open() time on the coordinator")
+    d.add_argument("--repeat", type=int, default=10)
+    args = p.parse_args(argv)
+    if args.what == "jitter":
+        result = jitter(args.seconds, args.scenario)
+    elif args.what == "speed":
+        result = speed(args.scenario, repeat=args.repeat)
+    else:
+        result = digi_open(args.repeat)
+    print(json.dumps(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

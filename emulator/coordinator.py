@@ -1,0 +1,467 @@
+"""The lab computer's XBee-PRO S2B: a ZB coordinator in API mode 1 or 2.
+
+It turns the RF packets its radio receives into 0x90 Receive Packet frames (0x91 when AO
+bit 0 is set) and answers the host's API frames as XBee ZB firmware 21A7 does
+(``shared/reference/xbee-api-facts.md``):
+
+==========  ===========================================================================
+0x08        AT command: a query answers 0x88 with the value; a set applies it (and every
+            value queued by 0x09) and answers 0x88 OK; unknown command -> status 2,
+            bad value -> status 3, set of a read-only register -> status 1
+0x09        queued AT command: a query answers like 0x08; a set is queued until AC or
+            the next 0x08 set
+0x10 0x11   transmit request -> 0x8B after the link's delivery time: 0x00 delivered,
+            0x21 network ACK failure (retries exhausted), 0x74 payload over NP,
+            0x24 address not found (unknown 64-bit address), 0x25 route not found
+            (unknown 16-bit address), 0x23 self-addressed; broadcasts always 0x00
+0x17        remote AT command to the router -> 0x97 with the router's register value,
+            status 4 when the request or the answer is lost or the address is unknown
+==========  ===========================================================================
+
+Frame ID 0 suppresses the 0x88 / 0x8B / 0x97 answer, not the action. Every answer leaves
+``response_delay_ns`` (3 ms) or more after the request arrived: a real module takes that
+long, and digi-xbee 1.5.0 loses answers that come before it waits (race in
+``SyncRequestSender``).
+
+Executable commands: AC (apply queued values), WR (remember the values a reset restores),
+RE (back to the scenario's values), FR (OK, then after ``RESET_NS`` modem status 0x01 watchdog reset
+and, ``START_NS`` later, 0x06 coordinator started; values not written with WR are lost,
+and RF packets arriving during the reset are not reported), ND (one 0x88 per remote node,
+i.e. the router, each after a random delay within NT x 100 ms, drawn from the
+coordinator's own generator; ND with a parameter asks for that NI only. There is no OK
+before and no empty 0x88 after the node answers: ZB firmware sends neither in API mode,
+and python-xbee's ND parser loops forever on an empty one, so digi-xbee ends a ZB
+discovery on its NT timeout, as with real hardware).
+
+Role question: digi-xbee's ``open()`` reads CE after HV, VR, SH, SL, NI, MY. A 2x7x module
+answers CE with status 2, which costs digi-xbee an 8 s ZDO fallback; this coordinator
+answers CE = 1, so ``open()`` reports ``Role.COORDINATOR`` at once. The router (reached by
+0x17) answers CE with status 2, as 22A7 firmware does.
+
+Changes of AP (escaping) and BD (UART rate) take effect after the OK answer has gone out
+(immediately when the request had frame ID 0). AP 0 (transparent) is not emulated and is
+refused with status 3. Sets on the router are stored and answered but do not change the
+device model (its packetisation keeps the scenario's RO and NP).
+
+Power-up: modem status 0x00 (hardware reset) at t = 0, then 0x06 (coordinator started).
+DB (RSSI of the last packet) is a fixed -40 dBm (0x28): the link model has no RSSI.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, NamedTuple
+
+import numpy as np
+
+from protocols import xbee
+from protocols.stream import Frame, XBeeDecoder
+from protocols.xbee import AtStatus, DeliveryStatus, FrameType, ModemStatus
+
+MS = 1_000_000
+RESPONSE_DELAY_NS = 3 * MS
+RESET_NS = 100 * MS  # FR: software reset until modem status 0x01
+START_NS = 400 * MS  # then until the coordinator has re-formed its network (0x06)
+POWER_UP_START_NS = 5 * MS
+ADDRESS_TIMEOUT_NS = 1_600 * MS  # unicast timeout (50 x NH + 100 ms, NH = 0x1E)
+BROADCAST_PAYLOAD_EXTRA = 8  # a ZB broadcast carries 8 bytes more than NP
+DIGI_PROFILE = 0xC105
+DIGI_MANUFACTURER = 0x101E
+DIGI_DATA = (0xE8, 0xE8, 0x0011, DIGI_PROFILE)  # endpoints, cluster, profile of 0x91 data
+BAUD_CODES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
+TEXT = 0  # Param.size of a text register
+
+
+def baud_rate(bd: int) -> int:
+    """The UART rate for a BD value (0-7 standard codes, 0x80-0xE1000 the rate itself)."""
+    return BAUD_CODES[bd] if bd < len(BAUD_CODES) else bd
+
+
+@dataclass(frozen=True)
+class Param:
+    """An AT register: answer width in bytes (TEXT for NI), writable, valid values."""
+
+    size: int
+    writable: bool = True
+    valid: Callable[[Any], bool] = lambda v: True
+
+
+def _range(lo: int, hi: int) -> Callable[[int], bool]:
+    return lambda v: lo <= v <= hi
+
+
+def _one_of(*values: int) -> Callable[[int], bool]:
+    return lambda v: v in values
+
+
+#: The registers of a ZB 2x7x module that this emulation answers (xbee-api-facts.md sect. 2).
+PARAMS: dict[str, Param] = {
+    "SH": Param(4, False), "SL": Param(4, False), "MY": Param(2, False), "MP": Param(2, False),
+    "HV": Param(2, False), "VR": Param(2, False), "OP": Param(8, False), "OI": Param(2, False),
+    "CH": Param(1, False), "AI": Param(1, False), "NP": Param(2, False), "DB": Param(1, False),
+    "CE": Param(1, False),
+    "NI": Param(TEXT, valid=lambda v: len(v) <= 20 and all(0x20 <= b < 0x7F for b in v)),
+    "AP": Param(1, valid=_one_of(1, 2)),
+    "AO": Param(1, valid=_one_of(0, 1, 3)),
+    "BD": Param(4, valid=lambda v: v <= 7 or 0x80 <= v <= 0xE1000),
+    "NT": Param(1, valid=_range(0x20, 0xFF)),
+    "NO": Param(1, valid=_range(0, 7)),
+    "ID": Param(8), "DH": Param(4), "DL": Param(4), "DD": Param(4),
+    "SC": Param(2, valid=_range(1, 0xFFFF)), "SD": Param(1, valid=_range(0, 7)),
+    "ZS": Param(1, valid=_range(0, 2)), "NJ": Param(1), "NH": Param(1),
+    "BH": Param(1, valid=_range(0, 0x1E)), "PL": Param(1, valid=_range(0, 4)),
+    "PM": Param(1, valid=_range(0, 1)), "EE": Param(1, valid=_range(0, 1)),
+    "SM": Param(1, valid=_one_of(0)), "RO": Param(1),
+}
+EXECUTE = ("AC", "WR", "RE", "FR")  # and ND, which answers differently
+
+#: Register values of a fresh ZB module (where the identity does not set them).
+DEFAULTS: dict[str, Any] = {
+    "MY": 0xFFFE, "MP": 0xFFFE, "AI": 0x00, "NP": 0x54, "DB": 0x28, "CH": 0x0C,
+    "ID": 0, "OP": 0, "OI": 0, "NI": b" ", "AP": 2, "AO": 0, "BD": 7, "NT": 0x3C,
+    "NO": 0, "DH": 0, "DL": 0, "DD": 0x30000, "SC": 0x7FFF, "SD": 3, "ZS": 0, "NJ": 0xFF,
+    "NH": 0x1E, "BH": 0, "PL": 4, "PM": 1, "EE": 0, "SM": 0, "RO": 3,
+}
+
+
+class Registers:
+    """One module's AT registers: applied values, the 0x09 queue, and what WR saved."""
+
+    def __init__(self, values: dict[str, Any]) -> None:
+        self.params = PARAMS
+        self.factory = {k: v for k, v in values.items() if k in PARAMS}  # what RE restores
+        self.values = dict(self.factory)
+        self.saved = dict(self.factory)
+        self.queued: dict[str, Any] = {}
+
+    def knows(self, name: str) -> bool:
+        return name in self.values
+
+    def answer(self, name: str) -> bytes:
+        v, size = self.values[name], self.params[name].size
+        return bytes(v) if size == TEXT else int(v).to_bytes(size, "big")
+
+    def check(self, name: str, parameter: bytes) -> tuple[int, Any]:
+        """(status, value) of a set request: status 0 with the decoded value, or an error."""
+        p = self.params[name]
+        if not p.writable:
+            return AtStatus.ERROR, None
+        if p.size == TEXT:
+            value: Any = bytes(parameter)
+        elif len(parameter) > p.size:
+            return AtStatus.INVALID_PARAMETER, None
+        else:
+            value = int.from_bytes(parameter, "big")
+        return (AtStatus.OK, value) if p.valid(value) else (AtStatus.INVALID_PARAMETER, None)
+
+    def apply(self) -> None:
+        self.values.update(self.queued)
+        self.queued.clear()
+
+    def write(self) -> None:
+        self.saved = dict(self.values)
+
+    def restore_defaults(self) -> None:
+        self.values = dict(self.factory)
+        self.queued.clear()
+
+    def reset(self) -> None:
+        """Software reset: back to what WR saved; the queue is lost."""
+        self.values = dict(self.saved)
+        self.queued.clear()
+
+
+class Reply(NamedTuple):
+    """An answer frame waiting for the UART: frame data, and whether AP/BD may change
+    after it has been sent."""
+
+    data: bytes
+    reconfigure: bool = False
+
+
+class Output(NamedTuple):
+    t_ns: int
+    item: Any  # Reply, or an RF packet (rendered when the UART takes it)
+
+
+@dataclass
+class Remote:
+    """A node the coordinator can reach over the link: its registers and role."""
+
+    registers: Registers
+    device_type: int = 1  # router
+
+    @property
+    def addr64(self) -> int:
+        return self.registers.values["SH"] << 32 | self.registers.values["SL"]
+
+    @property
+    def addr16(self) -> int:
+        return self.registers.values["MY"]
+
+
+def identity_registers(identity: dict[str, Any], **overrides) -> Registers:
+    """Registers of a module from a scenario's radio identity (AT name -> value)."""
+    values = dict(DEFAULTS)
+    for k, v in identity.items():
+        k = k.upper()
+        if k in PARAMS:
+            values[k] = v.encode("ascii") if isinstance(v, str) and PARAMS[k].size == TEXT else v
+    values.update(overrides)
+    return Registers(values)
+
+
+@dataclass
+class Coordinator:
+    """Coordinator state machine; pure function of its inputs and its generator.
+
+    ``received`` and ``host`` return :class:`Output` items for the coordinator's UART;
+    ``render`` turns an item into the bytes of an API frame at the moment the UART starts
+    sending it (so AP changes apply to every frame sent after the change).
+    """
+
+    registers: Registers
+    remotes: list[Remote]
+    link: Any  # .unicast(t_ns, nbytes) -> (delivered, retries, latency_ns)
+    rng: np.random.Generator
+    response_delay_ns: int = RESPONSE_DELAY_NS
+    escaped: bool = field(init=False)
+    baud: int = field(init=False)
+    reset_until_ns: int = field(default=-1, init=False)
+    ignored: int = field(default=0, init=False)  # host frames the firmware does not handle
+    _prefix: dict = field(default_factory=dict, init=False)
+
+    def __post_init__(self) -> None:
+        self._sync_line()
+        self._decoder = XBeeDecoder(self.escaped)
+
+    # -- UART side ------------------------------------------------------------------------
+    def _sync_line(self) -> None:
+        self.escaped = self.registers.values["AP"] == 2
+        self.baud = baud_rate(self.registers.values["BD"])
+
+    def render(self, t_ns: int, item) -> bytes:
+        """The API frame bytes of an output item, in the current API mode; b"" = nothing."""
+        if isinstance(item, Reply):
+            out = xbee.wrap(item.data, self.escaped)
+            if item.reconfigure:
+                self._reconfigure()
+            return out
+        if t_ns < self.reset_until_ns:
+            return b""  # the radio is rebooting: the packet is never reported
+        return xbee.wrap(self._rx_prefix(item) + item.data, self.escaped)
+
+    def _rx_prefix(self, pkt) -> bytes:
+        """Frame data of a 0x90 (or 0x91) up to the payload, built once per sender."""
+        explicit = bool(self.registers.values["AO"] & 1)
+        key = (explicit, pkt.src64, pkt.src16, pkt.options)
+        prefix = self._prefix.get(key)
+        if prefix is None:
+            if explicit:
+                src_ep, dst_ep, cluster, profile = DIGI_DATA
+                prefix = xbee.frame_data(FrameType.EXPLICIT_RX, src64=pkt.src64, src16=pkt.src16,
+                                         src_endpoint=src_ep, dest_endpoint=dst_ep,
+                                         cluster=cluster, profile=profile, options=pkt.options,
+                                         data=b"")
+            else:
+                prefix = xbee.frame_data(FrameType.RECEIVE_PACKET, src64=pkt.src64,
+                                         src16=pkt.src16, options=pkt.options, data=b"")
+            self._prefix[key] = prefix
+        return prefix
+
+    def _reconfigure(self) -> None:
+        was = self.escaped
+        self._sync_line()
+        if self.escaped != was:
+            self._decoder = XBeeDecoder(self.escaped)
+
+    # -- events -----------------------------------------------------------------------------
+    def power_up(self) -> list[Output]:
+        return [Output(0, self._modem(ModemStatus.HARDWARE_RESET)),
+                Output(POWER_UP_START_NS, self._modem(ModemStatus.COORDINATOR_STARTED))]
+
+    def received(self, t_ns: int, packet) -> Output:
+        """An RF packet the radio received at *t_ns*: reported as a 0x90/0x91 frame."""
+        return Output(t_ns, packet)
+
+    def host(self, t_ns: int, data: bytes) -> list[Output]:
+        """Bytes the host wrote, arriving at *t_ns*: the answers they cause."""
+        out: list[Output] = []
+        for ev in self._decoder.feed(data):
+            if not isinstance(ev, Frame):
+                continue  # firmware drops frames with bad checksums silently
+            handler = self._HANDLERS.get(ev.type)
+            if handler is None:
+                self.ignored += 1
+                continue
+            out += handler(self, t_ns, ev.fields)
+        return out
+
+    # -- frame builders -------------------------------------------------------------------
+    @staticmethod
+    def _modem(status: int) -> Reply:
+        return Reply(xbee.frame_data(FrameType.MODEM_STATUS, status=status))
+
+    @staticmethod
+    def _at_reply(frame_id: int, command: bytes, status: int, value: bytes = b"",
+                  reconfigure: bool = False) -> Reply:
+        return Reply(xbee.frame_data(FrameType.AT_RESPONSE, frame_id=frame_id, command=command,
+                                     status=status, value=value), reconfigure)
+
+    # -- local AT ---------------------------------------------------------------------------
+    def _at(self, t_ns: int, f: dict, queued: bool) -> list[Output]:
+        fid, raw_cmd, param = f["frame_id"], f["command"], f["parameter"]
+        name = raw_cmd.decode("ascii", "replace").upper()
+        t = t_ns + self.response_delay_ns
+        reg = self.registers
+        extra: list[Output] = []
+        reconfigure = False
+        value = b""
+        if name == "ND":  # only the nodes answer, no OK of its own
+            return self._discover(t_ns, fid, raw_cmd, param)
+        if name in EXECUTE:
+            status, reconfigure, extra = self._execute(name, t_ns)
+        elif not reg.knows(name):
+            status = AtStatus.INVALID_COMMAND
+        elif not param:
+            status, value = AtStatus.OK, reg.answer(name)
+        else:
+            status, v = reg.check(name, param)
+            if status == AtStatus.OK:
+                reg.queued[name] = v
+                if not queued:
+                    reg.apply()
+                    reconfigure = True
+        if fid == 0:
+            if reconfigure:
+                self._reconfigure()
+            return extra
+        return [Output(t, self._at_reply(fid, raw_cmd, status, value, reconfigure)), *extra]
+
+    def _execute(self, name: str, t_ns: int):
+        """(status, reconfigure, later outputs) of AC, WR, RE or FR."""
+        reg = self.registers
+        if name == "AC":
+            reg.apply()
+            return AtStatus.OK, True, []
+        if name == "WR":
+            reg.write()
+            return AtStatus.OK, False, []
+        if name == "RE":
+            reg.restore_defaults()
+            return AtStatus.OK, True, []
+        t = t_ns + self.response_delay_ns  # FR
+        reg.reset()
+        self.reset_until_ns = t + RESET_NS + START_NS
+        return AtStatus.OK, True, [
+            Output(t + RESET_NS, self._modem(ModemStatus.WATCHDOG_RESET)),
+            Output(t + RESET_NS + START_NS, self._modem(ModemStatus.COORDINATOR_STARTED))]
+
+    def _discover(self, t_ns: int, fid: int, raw_cmd: bytes, wanted_ni: bytes) -> list[Output]:
+        """ND: each remote answers after a random delay within NT x 100 ms, over the link."""
+        window = self.registers.values["NT"] * 100 * MS
+        no = self.registers.values["NO"]
+        out = []
+        for node in self.remotes:
+            delay = int(self.rng.integers(self.response_delay_ns, window))
+            if wanted_ni and bytes(wanted_ni) != node.registers.values["NI"]:
+                continue
+            delivered, _, latency = self.link.unicast(t_ns + delay, 32)
+            if not delivered or delay + latency >= window or fid == 0:
+                continue
+            r = node.registers.values
+            value = (r["MY"].to_bytes(2, "big") + r["SH"].to_bytes(4, "big")
+                     + r["SL"].to_bytes(4, "big") + bytes(r["NI"]) + b"\x00"
+                     + (0xFFFE).to_bytes(2, "big") + bytes((node.device_type, 0))
+                     + DIGI_PROFILE.to_bytes(2, "big") + DIGI_MANUFACTURER.to_bytes(2, "big")
+                     + (r["DD"].to_bytes(4, "big") if no & 1 else b""))
+            out.append(Output(t_ns + delay + latency,
+                              self._at_reply(fid, raw_cmd, AtStatus.OK, value)))
+        return out
+
+    # -- transmit ---------------------------------------------------------------------------
+    def _find(self, addr64: int, addr16: int) -> Remote | None:
+        for node in self.remotes:
+            if addr64 == node.addr64 or (addr64 == 0xFFFFFFFFFFFFFFFF and addr16 == node.addr16):
+                return node
+        return None
+
+    def _own(self, addr64: int) -> bool:
+        r = self.registers.values
+        return addr64 in (r["SH"] << 32 | r["SL"], xbee.COORDINATOR64)
+
+    def _transmit(self, t_ns: int, f: dict) -> list[Output]:
+        fid, dest64, dest16, data = f["frame_id"], f["dest64"], f["dest16"], f["data"]
+        t = t_ns + self.response_delay_ns
+        np_limit = self.registers.values["NP"]
+        retries = discovery = 0
+        to16 = dest16
+        if dest64 == xbee.BROADCAST64:
+            status = (DeliveryStatus.PAYLOAD_TOO_LARGE
+                      if len(data) > np_limit + BROADCAST_PAYLOAD_EXTRA else DeliveryStatus.SUCCESS)
+            to16 = xbee.UNKNOWN16
+        elif len(data) > np_limit:
+            status = DeliveryStatus.PAYLOAD_TOO_LARGE
+        elif self._own(dest64):
+            status, to16 = DeliveryStatus.SELF_ADDRESSED, self.registers.values["MY"]
+        elif (node := self._find(dest64, dest16)) is None:
+            status = (DeliveryStatus.ROUTE_NOT_FOUND if dest64 == 0xFFFFFFFFFFFFFFFF
+                      else DeliveryStatus.ADDRESS_NOT_FOUND)
+            t += ADDRESS_TIMEOUT_NS
+            to16 = 0xFFFD
+        else:
+            delivered, retries, latency = self.link.unicast(t_ns, len(data))
+            t = t_ns + max(self.response_delay_ns, latency)
+            status = DeliveryStatus.SUCCESS if delivered else DeliveryStatus.NETWORK_ACK_FAILURE
+            to16 = node.addr16 if delivered else 0xFFFD
+            discovery = 0x01 if dest16 == xbee.UNKNOWN16 else 0x00
+        if fid == 0:
+            return []
+        return [Output(t, Reply(xbee.frame_data(
+            FrameType.TRANSMIT_STATUS, frame_id=fid, dest16=to16, retries=min(retries, 0xFF),
+            delivery=status, discovery=discovery)))]
+
+    # -- remote AT --------------------------------------------------------------------------
+    def _remote_at(self, t_ns: int, f: dict) -> list[Output]:
+        fid, raw_cmd, param = f["frame_id"], f["command"], f["parameter"]
+        name = raw_cmd.decode("ascii", "replace").upper()
+        node = self._find(f["dest64"], f["dest16"])
+        value = b""
+        if node is None:
+            status, t = AtStatus.TX_FAILURE, t_ns + self.response_delay_ns + ADDRESS_TIMEOUT_NS
+            src64, src16 = f["dest64"], f["dest16"]
+        else:
+            src64, src16 = node.addr64, node.addr16
+            there, _, lat1 = self.link.unicast(t_ns, 4 + len(param))
+            back, _, lat2 = self.link.unicast(t_ns + lat1, 8) if there else (False, 0, 0)
+            t = t_ns + max(self.response_delay_ns, lat1 + lat2)
+            reg = node.registers
+            if not there:
+                status = AtStatus.TX_FAILURE
+            elif name in ("AC", "WR"):
+                (reg.apply if name == "AC" else reg.write)()
+                status = AtStatus.OK
+            elif not reg.knows(name):
+                status = AtStatus.INVALID_COMMAND
+            elif not param:
+                status, value = AtStatus.OK, reg.answer(name)
+            else:
+                status, v = reg.check(name, param)
+                if status == AtStatus.OK:
+                    reg.queued[name] = v
+                    if f["options"] & 0x02:  # apply changes
+                        reg.apply()
+            if there and not back:
+                status, value = AtStatus.TX_FAILURE, b""
+        if fid == 0:
+            return []
+        return [Output(t, Reply(xbee.frame_data(
+            FrameType.REMOTE_AT_RESPONSE, frame_id=fid, src64=src64, src16=src16,
+            command=raw_cmd, status=status, value=value)))]
+
+    _HANDLERS = {
+        FrameType.AT_COMMAND: lambda self, t, f: self._at(t, f, queued=False),
+        FrameType.AT_COMMAND_QUEUE: lambda self, t, f: self._at(t, f, queued=True),
+        FrameType.TRANSMIT_REQUEST: _transmit,
+        FrameType.EXPLICIT_ADDRESSING: _transmit,
+        FrameType.REMOTE_AT_REQUEST: _remote_at,
+    }

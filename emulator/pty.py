@@ -1,0 +1,220 @@
+"""Pseudo-terminal ports with stable links: the lab's serial lines as the host sees them.
+
+Each port is the master side of a Linux PTY. The emulator never keeps the slave open, so
+the kernel tells it whether a client is attached (``POLLHUP`` on the master means no slave
+fd is open). The slave is put in raw mode once (termios persist across reopen) and opened
+and closed once at creation, because a never-opened slave raises no HUP.
+
+Line discipline of the emulated cable (peers-and-pty-facts.md section 5):
+
+* unplugged: while no client has the port open, the device's output is dropped and
+  counted (``dropped_unplugged``), as on a line with nothing at the other end;
+* no stale bytes: when a client attaches, whatever an earlier client left unread is
+  flushed (``tcflush(TCIFLUSH)`` on a short-lived ``O_NOCTTY`` slave fd), so the first
+  bytes a new opener reads are fresh;
+* overflow: the master is ``O_NONBLOCK``; when the client does not read and the kernel
+  buffer (about 20 KiB) is full, the bytes that do not fit are dropped and counted
+  (``dropped_overflow``), as a UART loses what the host does not read. The emulator never
+  blocks on a client;
+* a detached master reads EIO and ``select`` reports it readable forever, so only
+  attached ports are waited on; detached ones are re-checked with :meth:`PtyPort.check`.
+
+:class:`LinkDir` is the directory of stable symlinks (``sins``, ``xbee``, ``nanoloc``) to
+the ``/dev/pts/N`` paths: created 0700, refused when owned by another user or writable by
+group or others, locked (``flock`` on ``.lock``) while an emulator uses it; links are
+replaced atomically, so links left by a dead run are simply overwritten.
+"""
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import select
+import stat
+import termios
+import tty
+from pathlib import Path
+
+LOCK = ".lock"
+
+
+class LinkDirError(ValueError):
+    """A link directory the emulator must not use; the message is one line with the fix."""
+
+
+def default_link_dir() -> Path:
+    """``$XDG_RUNTIME_DIR/navtwin`` when that directory exists, else ``/tmp/navtwin-<uid>``."""
+    runtime = os.environ.get("XDG_RUNTIME_DIR")
+    if runtime and os.path.isdir(runtime):
+        return Path(runtime) / "navtwin"
+    return Path("/tmp") / f"navtwin-{os.getuid()}"
+
+
+class LinkDir:
+    """A private directory of symlinks to PTY slaves, held by one emulator at a time."""
+
+    def __init__(self, path: str | os.PathLike | None = None) -> None:
+        self.path = Path(path) if path is not None else default_link_dir()
+        self._created = False
+        try:
+            os.mkdir(self.path, 0o700)
+            self._created = True
+        except FileExistsError:
+            pass
+        except OSError as e:
+            raise LinkDirError(f"cannot create link directory {self.path} ({e.strerror}); "
+                               f"pass --link-dir with a writable path") from None
+        st = os.lstat(self.path)
+        if not stat.S_ISDIR(st.st_mode):
+            raise LinkDirError(f"link directory {self.path} is not a directory; "
+                               f"pass --link-dir with another path")
+        if st.st_uid != os.getuid():
+            raise LinkDirError(f"link directory {self.path} is owned by uid {st.st_uid}, not you; "
+                               f"pass --link-dir with a directory of your own")
+        if st.st_mode & 0o022:
+            raise LinkDirError(f"link directory {self.path} is writable by others "
+                               f"(mode {stat.S_IMODE(st.st_mode):04o}); chmod 700 it or pass "
+                               f"another --link-dir")
+        self._lock = os.open(self.path / LOCK, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            other = os.pread(self._lock, 32, 0).decode("ascii", "replace").strip() or "?"
+            os.close(self._lock)
+            raise LinkDirError(f"link directory {self.path} is in use by another emulator "
+                               f"(pid {other}); stop it or pass another --link-dir") from None
+        os.ftruncate(self._lock, 0)
+        os.pwrite(self._lock, f"{os.getpid()}\n".encode(), 0)
+        self.links: dict[str, str] = {}
+
+    def link(self, name: str, target: str) -> Path:
+        """Point ``DIR/name`` at *target*, atomically replacing any older link."""
+        final = self.path / name
+        tmp = self.path / f".{name}.{os.getpid()}.tmp"
+        try:
+            tmp.unlink()
+        except FileNotFoundError:
+            pass
+        os.symlink(target, tmp)
+        os.replace(tmp, final)
+        self.links[name] = target
+        return final
+
+    def close(self) -> None:
+        """Remove the links this emulator made (if still ours), the lock, and a dir it created."""
+        for name, target in self.links.items():
+            final = self.path / name
+            try:
+                if os.readlink(final) == target:
+                    final.unlink()
+            except OSError:
+                pass
+        self.links.clear()
+        if self._lock >= 0:
+            try:
+                (self.path / LOCK).unlink()
+            except OSError:
+                pass
+            os.close(self._lock)
+            self._lock = -1
+        if self._created:
+            try:
+                self.path.rmdir()
+            except OSError:
+                pass  # something else lives there; leave it
+
+
+class PtyPort:
+    """The master side of one PTY in raw mode; see the module docstring for the policy."""
+
+    def __init__(self, name: str, baud: int = 115200) -> None:
+        self.name = name
+        master, slave = os.openpty()
+        self.pts = os.ttyname(slave)
+        tty.setraw(slave)
+        attrs = termios.tcgetattr(slave)
+        speed = getattr(termios, f"B{baud}", None)
+        if speed is not None:  # cosmetic: tools that query the line see the port's rate
+            attrs[4] = attrs[5] = speed
+            termios.tcsetattr(slave, termios.TCSANOW, attrs)
+        os.close(slave)  # from now on HUP says "no client" (a never-opened slave shows none)
+        os.set_blocking(master, False)
+        self.fd = master
+        self.attached = False
+        self.attaches = 0
+        self.written = 0
+        self.dropped_unplugged = 0
+        self.dropped_overflow = 0
+        self.received = 0
+
+    def fileno(self) -> int:
+        return self.fd
+
+    def check(self) -> bool:
+        """Refresh and return ``attached`` (one non-blocking poll of the master)."""
+        p = select.poll()
+        p.register(self.fd, select.POLLIN)
+        hup = any(ev & select.POLLHUP for _, ev in p.poll(0))
+        if not hup and not self.attached:
+            self._flush_stale()
+            self.attached = True
+            self.attaches += 1
+        elif hup and self.attached:
+            self.attached = False
+        return self.attached
+
+    def _flush_stale(self) -> None:
+        try:
+            fd = os.open(self.pts, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK | os.O_CLOEXEC)
+        except OSError:
+            return
+        try:
+            termios.tcflush(fd, termios.TCIFLUSH)
+        finally:
+            os.close(fd)
+
+    def write(self, data: bytes) -> int:
+        """Send *data* to the client; returns how many bytes got through (the rest is counted)."""
+        if not self.attached:
+            self.dropped_unplugged += len(data)
+            return 0
+        try:
+            n = os.write(self.fd, data)
+        except BlockingIOError:
+            n = 0
+        except OSError as e:
+            if e.errno != errno.EIO:
+                raise
+            n = 0
+        self.written += n
+        self.dropped_overflow += len(data) - n
+        return n
+
+    def read(self) -> bytes:
+        """What the client wrote, without blocking. EIO (client gone) marks the port detached."""
+        out = bytearray()
+        while True:
+            try:
+                chunk = os.read(self.fd, 65536)
+            except BlockingIOError:
+                break
+            except OSError as e:
+                if e.errno != errno.EIO:
+                    raise
+                self.attached = False
+                break
+            if not chunk:
+                break
+            out += chunk
+        self.received += len(out)
+        return bytes(out)
+
+    def stats(self) -> dict:
+        return {"pts": self.pts, "attaches": self.attaches, "written": self.written,
+                "dropped_unplugged": self.dropped_unplugged,
+                "dropped_overflow": self.dropped_overflow, "received": self.received}
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1

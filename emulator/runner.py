@@ -1,0 +1,422 @@
+"""The emulated lab in time: the world's events on the ports' UARTs, in real or virtual time.
+
+Timeline. Every device writes to its port through a :class:`Line`, a model of its UART: a
+chunk of n bytes occupies n x 10 / baud seconds (8N1), chunks never overlap (a chunk
+starts at the later of its ready time and the end of the previous chunk, in ready order),
+and a chunk is delivered to the PTY whole when its last byte would have arrived. The
+world's events are the ready times of the SINS and nanoLOC lines; on the ``xbee`` line the
+coordinator's frames (0x90 for each RF packet, answers to the host) queue the same way,
+so an answer never splits a frame in progress. Times are integer nanoseconds since the
+run started.
+
+Speeds. ``realtime`` keeps an absolute schedule: the chunk that ends at virtual time t is
+written at wall time t0 + t (no drift; a late write never shifts later ones). The loop
+sleeps in ``select`` on the attached ports until 0.25 ms before the deadline and
+then spins. A FACTOR runs the same schedule at FACTOR x real time; ``max`` runs it as fast
+as the world can be generated. World events are generated in blocks: when paced, a second
+ahead before the clock starts and then, up to two seconds ahead, only in idle gaps longer
+than twice the slowest recent block, so generation does not delay a write (a thread
+would: it competes for the GIL exactly when a deadline is near). After writing to the
+PTYs the loop yields the CPU once, so a client it woke runs first. Because chunk contents
+and times come from the world and the UART model only, the bytes of every port, and their
+device times, are identical in every mode; only host commands (read from the PTYs when
+they arrive) add answers on the ``xbee`` line.
+
+Recording. Each chunk a device emits is recorded, whether or not a client is attached:
+``t_device_ns`` = when its first byte leaves the UART, ``t_wall_ns`` (paced runs only) =
+monotonic ns since the run started when it was written to the PTY.
+"""
+from __future__ import annotations
+
+import heapq
+import os
+import select
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from protocols.recording import RecordingWriter
+
+from .coordinator import Coordinator, Remote, identity_registers
+from .pty import LinkDir, PtyPort
+from .rng import stream
+
+PORTS = ("sins", "xbee", "nanoloc")
+SEC = 1_000_000_000
+SPIN_NS = 250_000  # busy-wait for the last 0.25 ms before a deadline (select overshoots ~0.1 ms)
+CHECK_NS = 10_000_000  # how often detached ports are looked at for a new client
+PROGRESS_NS = 3 * SEC  # wall time between progress reports
+PACED_BLOCK_NS = 100_000_000  # world generation step when paced, done in idle gaps ...
+LOOKAHEAD_NS = 2 * SEC  # ... up to this far ahead of the clock
+PREFILL_NS = SEC  # generated before the clock starts
+MAX_BLOCK_NS = SEC
+END = 1 << 62  # later than any event
+
+
+class RunError(ValueError):
+    """A run that cannot start as asked; the message is one line with the fix."""
+
+
+def parse_speed(text: str | float) -> float | None:
+    """``realtime`` -> 1.0, ``max`` -> None, a positive number -> that factor."""
+    if text == "realtime":
+        return 1.0
+    if text == "max":
+        return None
+    try:
+        factor = float(text)
+    except ValueError:
+        raise RunError(f"--speed {text!r} is not realtime, max or a number; "
+                         f"use e.g. --speed realtime, --speed max or --speed 10") from None
+    if not 0 < factor < float("inf"):
+        raise RunError(f"--speed {text!r} must be a positive factor; use e.g. --speed 10")
+    return factor
+
+
+def speed_name(factor: float | None) -> str:
+    return "max" if factor is None else "realtime" if factor == 1.0 else f"{factor:g}"
+
+
+def wire_ns(nbytes: int, baud: int) -> int:
+    """Time on the wire of *nbytes* at *baud*, 8N1 (10 bit times a byte)."""
+    return (nbytes * 10 * SEC + baud // 2) // baud
+
+
+@dataclass(slots=True)
+class Chunk:
+    port: str
+    start_ns: int  # first byte leaves the device's UART
+    end_ns: int  # last byte has arrived; the chunk is delivered now
+    data: bytes
+
+
+class Wire:
+    """A device that writes its bytes as they are (SINS board, nanoLOC gateway)."""
+
+    def __init__(self, baud: int) -> None:
+        self.baud = baud
+
+    @staticmethod
+    def render(t_ns: int, item: bytes) -> bytes:
+        return item
+
+
+class Line:
+    """One port's UART: queued items in ready order, sent one chunk at a time."""
+
+    def __init__(self, name: str, device: Any) -> None:
+        self.name = name
+        self.device = device  # .baud and .render(t_ns, item) -> bytes
+        self._pending: list = []
+        self._seq = 0
+        self.free_ns = 0
+        self.current: Chunk | None = None
+        self.chunks = 0
+        self.bytes = 0
+
+    def put(self, t_ns: int, item: Any) -> None:
+        heapq.heappush(self._pending, (t_ns, self._seq, item))
+        self._seq += 1
+
+    def next_ns(self) -> int | None:
+        """When this line next has something to do: end of the chunk in progress or start
+        of the next one."""
+        if self.current is not None:
+            return self.current.end_ns
+        if self._pending:
+            return max(self._pending[0][0], self.free_ns)
+        return None
+
+    def poll(self, now_ns: int, known_ns: int, end_ns: int) -> list[Chunk]:
+        """Chunks that have ended by *now_ns*; starts those due. An item starts only when all
+        items that could precede it are known (ready < *known_ns*) and before *end_ns*."""
+        out = []
+        while True:
+            cur = self.current
+            if cur is not None:
+                if cur.end_ns > now_ns:
+                    break
+                out.append(cur)
+                self.current = None
+            if not self._pending:
+                break
+            ready, _, item = self._pending[0]
+            start = max(ready, self.free_ns)
+            if start > now_ns or ready >= known_ns or start >= end_ns:
+                break
+            heapq.heappop(self._pending)
+            baud = self.device.baud  # before rendering: a BD change applies to later chunks
+            data = self.device.render(ready, item)
+            if not data:
+                continue
+            end = start + wire_ns(len(data), baud)
+            self.current = Chunk(self.name, start, end, data)
+            self.free_ns = end
+            self.chunks += 1
+            self.bytes += len(data)
+        return out
+
+    def busy(self) -> bool:
+        return self.current is not None
+
+
+class Feed:
+    """The world's events, generated in blocks of virtual time on demand."""
+
+    def __init__(self, world, end_ns: int, block_ns: int) -> None:
+        self.world = world
+        self.end_ns = end_ns
+        self.block_ns = block_ns
+        self.known_ns = 0  # every event with t < known_ns has been taken
+        self.cost_ns = 0  # a decaying maximum of the wall time one block takes
+
+    @property
+    def exhausted(self) -> bool:
+        return self.known_ns >= self.end_ns
+
+    def step(self) -> list:
+        """The events of the next block."""
+        t = time.monotonic_ns()
+        until = min(self.known_ns + self.block_ns, self.end_ns)
+        events = self.world.advance(until)
+        self.known_ns = until
+        self.cost_ns = max(time.monotonic_ns() - t, self.cost_ns * 99 // 100)
+        return events
+
+    def take(self, need_ns: int) -> list:
+        """New events; afterwards ``known_ns > need_ns`` or the feed is exhausted."""
+        events: list = []
+        while not self.exhausted and self.known_ns <= need_ns:
+            events += self.step()
+        return events
+
+
+class Emulation:
+    """One run of a scenario: world, coordinator, UART lines, PTY ports, recording.
+
+    ``Emulation(...)`` creates the ports and links (so clients can open them at once);
+    :meth:`run` plays the timeline and returns the summary; :meth:`close` removes the
+    links. With ``ports=False`` nothing is published (recording-only runs and tests).
+    """
+
+    def __init__(self, scenario, seed: int | None = None, *, speed: float | None = 1.0,
+                 duration_s: float | None = None, link_dir: str | os.PathLike | None = None,
+                 record: str | os.PathLike | None = None, ports: bool = True,
+                 response_delay_ns: int | None = None,
+                 progress: Callable[[str], None] | None = None) -> None:
+        from .world import World
+
+        self.scenario = scenario
+        self.seed = scenario.seed if seed is None else int(seed)
+        self.speed = speed
+        self.world = World(scenario, self.seed)
+        full = self.world.duration_ns
+        self.end_ns = full if duration_s is None else int(round(duration_s * SEC))
+        if not 0 < self.end_ns <= full:
+            raise RunError(f"--duration {duration_s:g} is outside (0, {full / SEC:g}] s, the "
+                           f"length of scenario {scenario.name}; pass a duration in that range")
+        self.progress = progress
+        self.coordinator = self._coordinator(response_delay_ns)
+        bauds = {name: scenario.ports[name]["baud"] for name in PORTS}
+        self.lines = {name: Line(name, self.coordinator if name == "xbee" else Wire(bauds[name]))
+                      for name in PORTS}
+        for out in self.coordinator.power_up():
+            self.lines["xbee"].put(out.t_ns, out.item)
+        self.link_dir: LinkDir | None = None
+        self.ports: dict[str, PtyPort] = {}
+        self.links: dict[str, str] = {}
+        try:
+            if ports:
+                self.link_dir = LinkDir(link_dir)
+                for name in PORTS:
+                    self.ports[name] = PtyPort(name, bauds[name])
+                    self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
+            self.recorder = self._recorder(record) if record is not None else None
+        except OSError as e:
+            self.close()
+            raise RunError(f"--record {record}: {e.strerror or e}; choose a directory you "
+                           f"can write") from None
+        except BaseException:
+            self.close()
+            raise
+        self.reached_ns = 0
+        self.interrupted = False
+
+    # -- assembly -------------------------------------------------------------------------
+    def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
+        radios = self.scenario.radios_for(self.seed)  # the router's MY, the network: from the seed
+        coord = identity_registers(radios["coordinator"], CE=1)  # CE: see coordinator.py
+        router = Remote(identity_registers(radios["router"]))
+        kw = {} if response_delay_ns is None else {"response_delay_ns": response_delay_ns}
+        return Coordinator(coord, [router], self.world.link, stream(self.seed, "coordinator"), **kw)
+
+    def _recorder(self, directory) -> RecordingWriter:
+        rec = RecordingWriter(directory, meta={
+            "source": "navtwin emulate", "scenario": self.scenario.name, "seed": self.seed,
+            "speed": speed_name(self.speed), "duration_s": self.end_ns / SEC,
+            "ports": {name: dict(self.scenario.ports[name]) for name in PORTS},
+            "clocks": {"t_device_ns": "ns since the run started when the chunk's first byte "
+                                      "leaves the device's UART",
+                       "t_wall_ns": "monotonic ns since the run started when the chunk was "
+                                    "written to the port (paced runs only)"}})
+        (rec.directory / "scenario.toml").write_text(self.scenario.to_toml())
+        for name in PORTS:  # every port has its files, even if it stays silent
+            rec.port(name)
+        return rec
+
+    def info(self) -> dict:
+        """The ``ready`` line: ports (stable links), pts paths, scenario, seed, speed."""
+        return {"ready": True, "ports": dict(self.links),
+                "pts": {n: p.pts for n, p in self.ports.items()},
+                "scenario": self.scenario.name, "seed": self.seed, "speed": speed_name(self.speed),
+                "duration_s": self.end_ns / SEC,
+                "link_dir": str(self.link_dir.path) if self.link_dir else None,
+                "pid": os.getpid()}
+
+    # -- the loop ---------------------------------------------------------------------------
+    def run(self, stop: threading.Event | None = None) -> dict:
+        """Play the timeline until the end or until *stop* is set; returns :meth:`summary`."""
+        stop = stop or threading.Event()
+        paced = self.speed is not None
+        feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS)
+        for ev in feed.take(PREFILL_NS if paced else 0):  # before the clock starts
+            self._enqueue(ev)
+        t0 = time.monotonic_ns()
+        vt = 0  # virtual time of the loop (max speed)
+        next_check = t0 if self.ports else END
+        next_progress = t0 + PROGRESS_NS if self.progress else END
+        while not stop.is_set():
+            wall = time.monotonic_ns()
+            now = int((wall - t0) * self.speed) if paced else vt
+            if self.ports:
+                self._service(now, wall >= next_check)
+                if wall >= next_check:
+                    next_check = wall + CHECK_NS
+            for ev in feed.take(now):
+                self._enqueue(ev)
+            if not paced:  # everything known so far, in one go
+                now = END if feed.exhausted else feed.known_ns
+            delivered = False
+            for line in self.lines.values():
+                for chunk in line.poll(now, feed.known_ns, self.end_ns):
+                    self._deliver(chunk, wall - t0 if paced else None)
+                    delivered = True
+            if delivered and paced and self.ports:
+                os.sched_yield()  # let a client woken by these writes run before we go on
+            self.reached_ns = max(self.reached_ns, min(now, self.end_ns))
+            if wall >= next_progress:
+                self._report(wall - t0)
+                next_progress = wall + PROGRESS_NS
+            target = min((t for line in self.lines.values()
+                          if (t := line.next_ns()) is not None), default=None)
+            if not feed.exhausted:
+                target = feed.known_ns if target is None else min(target, feed.known_ns)
+            if target is None or (target >= self.end_ns
+                                  and not any(l.busy() for l in self.lines.values())):
+                self.reached_ns = self.end_ns
+                break
+            if not paced:
+                vt = max(vt, min(now, target))
+                continue
+            deadline = t0 + int(target / self.speed)
+            if (feed.known_ns < now + LOOKAHEAD_NS and not feed.exhausted
+                    and deadline - time.monotonic_ns() > 2 * feed.cost_ns + 2 * SPIN_NS):
+                for ev in feed.step():  # generate ahead while there is time to spare
+                    self._enqueue(ev)
+                continue
+            self._wait(deadline, min(next_check, next_progress))
+        else:
+            self.interrupted = True
+        return self.summary()
+
+    def _wait(self, deadline: int, check_at: int) -> None:
+        """Sleep until *deadline* (monotonic ns) or a client writes; spin the last SPIN_NS."""
+        fds = [p.fd for p in self.ports.values() if p.attached]
+        now = time.monotonic_ns()
+        sleep_until = min(deadline - SPIN_NS, check_at)
+        if sleep_until > now:
+            r, _, _ = select.select(fds, [], [], (sleep_until - now) / SEC)
+            now = time.monotonic_ns()
+        else:
+            r = []
+        if r or now < deadline - SPIN_NS:
+            return  # input, or time to look at the ports: the loop comes back here
+        while time.monotonic_ns() < deadline:
+            pass
+
+    def _service(self, now: int, check_detached: bool) -> None:
+        """Read what clients wrote (stamped *now*) and notice clients coming and going."""
+        ports = self.ports
+        attached = [p for p in ports.values() if p.attached]
+        readable = select.select(attached, [], [], 0)[0] if attached else []
+        for port in readable:
+            self._host_bytes(port, now)
+        if check_detached:
+            for port in ports.values():
+                if not port.attached:
+                    port.check()
+                    # what a client wrote before it was noticed (it may even have gone
+                    # again): a real line delivers it all the same
+                    self._host_bytes(port, now)
+
+    def _host_bytes(self, port: PtyPort, now: int) -> None:
+        data = port.read()
+        if data and port.name == "xbee":
+            for out in self.coordinator.host(now, data):
+                self.lines["xbee"].put(out.t_ns, out.item)
+        # the SINS board and the nanoLOC gateway ignore what the host sends them
+
+    def _enqueue(self, ev) -> None:
+        if ev.port == "xbee":
+            out = self.coordinator.received(ev.t_ns, ev.data)
+            self.lines["xbee"].put(out.t_ns, out.item)
+        else:
+            self.lines[ev.port].put(ev.t_ns, ev.data)
+
+    def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
+        port = self.ports.get(chunk.port)
+        if port is not None:
+            port.write(chunk.data)
+        if self.recorder is not None:
+            self.recorder.port(chunk.port).write(chunk.data, chunk.start_ns, wall_ns)
+
+    def _report(self, elapsed_ns: int) -> None:
+        v = self.reached_ns / SEC
+        self.progress(f"{self.scenario.name}: {v:.1f} / {self.end_ns / SEC:g} s "
+                      f"({v / (elapsed_ns / SEC):.0f}x real time)")
+
+    # -- results ----------------------------------------------------------------------------
+    def summary(self) -> dict:
+        ports = {}
+        for name, line in self.lines.items():
+            entry = {"frames": line.chunks, "bytes": line.bytes}
+            if name in self.ports:
+                entry.update(self.ports[name].stats())
+            ports[name] = entry
+        return {"done": True, "scenario": self.scenario.name, "seed": self.seed,
+                "speed": speed_name(self.speed), "virtual_s": self.reached_ns / SEC,
+                "interrupted": self.interrupted, "ports": ports}
+
+    def close(self) -> None:
+        """Finish the recording (truth.csv up to where the run got), close ports, remove links."""
+        rec, self.recorder = getattr(self, "recorder", None), None
+        if rec is not None:
+            from .truth import write_truth_csv
+
+            rec.meta["interrupted"] = self.interrupted
+            rec.meta["virtual_s"] = self.reached_ns / SEC
+            rec.close()
+            truth = self.world.truth(0, max(self.reached_ns, 1))
+            write_truth_csv(rec.directory / "truth.csv", truth)
+        for port in self.ports.values():
+            port.close()
+        if self.link_dir is not None:
+            self.link_dir.close()
+            self.link_dir = None
+
+    def __enter__(self) -> "Emulation":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
