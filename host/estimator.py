@@ -1,0 +1,449 @@
+"""The fusion core: IMU samples and range exchanges in, one estimate per filter per period out.
+
+Filters (``FILTER_NAMES``):
+
+=====  =====================================================================================
+sins   pure strapdown track (host.sins): coarse alignment on the stationary start, then
+       mechanization at the IMU rate (000 eqs. 1-5)
+wsn    pure WSN track (host.wsn): one TDOA (``wsn_method="toa"``: TOA) fix per TDMA cycle
+       (000 eqs. 6-13)
+kf     linear KF, loosely coupled: predicts at each IMU sample, measures the SINS nav-frame
+       acceleration and each WSN position fix
+ekf    EKF, tightly coupled: same prediction and acceleration; measures each cycle's range
+       differences to anchor 1 (``tight="toa"``: each range at its own time)
+ukf    UKF: as the EKF, through sigma points
+=====  =====================================================================================
+
+Time. ``t_s`` is the measurement time (host time base, seconds). The fusion filters keep
+one time, the latest measurement's; a measurement older than that (the two streams are
+merged by the caller) is applied with its lag through the motion model (host.filters.model)
+if the lag is at most ``max_lag_s``, else rejected as ``late``. The SINS needs its IMU
+samples strictly in order; an IMU sample not after the previous one is rejected.
+
+Output. Estimates are emitted at the instants k * output_period_s of the measurement time
+base: an estimate at t_k reflects every measurement with t_s <= t_k, the fusion state
+predicted from its last measurement to t_k. They are returned by the ``imu`` / ``range``
+call that first passes t_k (nothing comes out before the first measurement), one per
+configured filter in ``cfg.filters`` order. The Estimator is a pure function of its call
+sequence: no wall clock, no randomness.
+
+Estimate fields: x, y (m), vx, vy (m/s) in the area frame; yaw (rad, 0 along area +x,
+counter-clockwise) from the SINS attitude for sins/kf/ekf/ukf (the configured initial heading
+until alignment ends), None for wsn; cov = the 4x4 covariance of (x, y, vx, vy), row-major,
+16 floats. For wsn: the fix's CRLB covariance and the velocity of the last two fixes
+(finite difference) with its propagated covariance; the wsn track holds its last fix
+between fixes and starts once two fixes exist. For sins: the initial covariance plus the
+growth that the accelerometer's velocity random walk alone causes (a lower bound: tilt and
+heading errors add to it).
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter, defaultdict
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from protocols.nanoloc import STATUS_TIMEOUT, is_complete
+
+from .filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter,
+                      Linear, Ranges, UnscentedKalmanFilter, position_fix)
+from .sins import Alignment, AlignmentResult, Strapdown
+from .wsn import AnchorLayout, CycleGrouper, Fix, Solver, chi2_gate, tdoa_covariance
+
+FILTER_NAMES = ("sins", "wsn", "kf", "ekf", "ukf")
+FUSION = ("kf", "ekf", "ukf")
+OFFICE_ANCHORS = {1: (1.3, 1.6, 0.0), 2: (10.8, 1.6, 0.0), 3: (10.8, 5.4, 0.0), 4: (1.3, 5.4, 0.0)}
+
+#: At rest: velocity and acceleration are zero (used while the alignment runs).
+STATIONARY = Linear(np.hstack([np.zeros((4, 2)), np.eye(4)]))
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Everything the estimator needs; the defaults are 000's office lab."""
+
+    anchors: Mapping[int, tuple[float, ...]] = field(default_factory=lambda: dict(OFFICE_ANCHORS))
+    tag_height: float = 0.0  # m, same datum as the anchors' z
+    latitude_deg: float = 34.316
+    gravity: float = 9.7952  # m/s^2, local
+    altitude_m: float = 0.0
+    x_azimuth_deg: float = 90.0  # azimuth of the area's +x, clockwise from north (90: x east)
+    filters: tuple[str, ...] = FILTER_NAMES
+    start: tuple[float, float] = (6.0, 1.8)  # m, where the vehicle rests during alignment
+    heading0_rad: float = 0.0  # initial heading (MEMS gyros cannot gyrocompass)
+    alignment_s: float = 5.0  # stationary period from the first IMU sample
+    gyro_range_dps: int = 300  # ADIS16350 range: the service's word scale; counts overrange
+    output_period_s: float = 0.1
+    # noise and tuning
+    range_sigma_m: float = 0.4  # one exchange's distance, 1 sigma
+    range_bias_m: Mapping[int, float] = field(default_factory=dict)  # c_i of 001: calibrated delays
+    range_scale: float = 1.0  # f of 001: distance = (reported - c_i) / f
+    vrw_m_s_rt_hr: float = 2.0  # ADIS16350 velocity random walk (the sins track's covariance)
+    arw_deg_rt_hr: float = 4.2  # ADIS16350 angle random walk
+    gyro_bias_instability_dps: float = 0.015  # ADIS16350 in-run bias stability
+    # SINS acceleration as a measurement (docs/filters.md): sigma^2 = accel_sigma_m_s2^2 +
+    # (tilt_inflation g s T)^2, s = the tilt rate the alignment leaves, T = time since it
+    accel_sigma_m_s2: float = 1.0
+    tilt_inflation: float = 10.0
+    jerk_psd: float = 0.5  # m^2/s^5, constant-acceleration model's white jerk
+    p0_sigma: tuple[float, float, float] = (0.2, 0.02, 0.1)  # initial position, velocity, accel
+    stationary_sigma: tuple[float, float] = (0.01, 0.05)  # velocity, accel while aligning
+    gate_probability: float = 0.9999  # chi-square innovation gate
+    gate_reopen_s: float = 2.0  # accept again after this long with every update gated out
+    wsn_method: str = "tdoa"  # pure-WSN and KF fixes: "toa" | "tdoa" (000 eqs. 12-13)
+    tight: str = "tdoa"  # EKF/UKF range measurement: "tdoa" (per cycle) | "toa" (each range)
+    reference_anchor: int = 1  # TDOA reference (000 eq. 12)
+    cycle_s: float = 0.1  # TDMA cycle: exchanges grouped within this window
+    max_lag_s: float = 0.5
+    max_range_m: float = 100.0
+    fix_margin_m: float | None = 2.0  # WSN fixes beyond the anchors' box grown by this are refused
+    ukf_alpha: float = 1.0
+    ukf_beta: float = 2.0
+    ukf_kappa: float | None = None  # None: 3 - n
+
+    def __post_init__(self):
+        unknown = [f for f in self.filters if f not in FILTER_NAMES]
+        if unknown or not self.filters:
+            raise ValueError(f"filters: unknown {unknown or 'empty list'}; use some of {','.join(FILTER_NAMES)}")
+        for name in ("wsn_method", "tight"):
+            if getattr(self, name) not in ("toa", "tdoa"):
+                raise ValueError(f"{name}: {getattr(self, name)!r} is not a method; use 'toa' or 'tdoa'")
+        for name in ("alignment_s", "output_period_s", "range_sigma_m", "range_scale", "vrw_m_s_rt_hr",
+                     "arw_deg_rt_hr", "accel_sigma_m_s2", "jerk_psd", "cycle_s", "max_range_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number (got {value}); set a value > 0")
+        for name in ("gyro_bias_instability_dps", "tilt_inflation"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"{name} must be a number >= 0 (got {getattr(self, name)}); set a value >= 0")
+        for name in ("p0_sigma", "stationary_sigma"):
+            if not all(math.isfinite(v) and v > 0 for v in getattr(self, name)):
+                raise ValueError(f"{name} must hold positive numbers (got {getattr(self, name)}); set each > 0")
+        if not 0 < self.gate_probability < 1:
+            raise ValueError(f"gate_probability must be in (0, 1) (got {self.gate_probability}); use e.g. 0.9999")
+        if len(self.anchors) < 3:
+            raise ValueError(f"anchors: {len(self.anchors)} given; a 2-D fix needs at least 3, list them all")
+
+    @property
+    def tilt_rate_sigma(self) -> float:
+        """rad/s: gyro bias error left by averaging ARW over the alignment, and the bias's
+        in-run wander; the tilt error grows as this times the time since the alignment."""
+        arw = math.radians(self.arw_deg_rt_hr) / 60.0  # rad/sqrt(s)
+        return math.sqrt(arw**2 / self.alignment_s + math.radians(self.gyro_bias_instability_dps) ** 2)
+
+
+@dataclass(frozen=True, slots=True)
+class Estimate:
+    t: float
+    filter: str
+    x: float
+    y: float
+    vx: float
+    vy: float
+    yaw: float | None
+    cov: list[float]  # 4x4 covariance of (x, y, vx, vy), row-major
+
+
+def _estimate(t, name, p, v, yaw, cov4) -> Estimate:
+    return Estimate(float(t), name, float(p[0]), float(p[1]), float(v[0]), float(v[1]),
+                    None if yaw is None else float(yaw), [float(c) for c in np.ravel(cov4)])
+
+
+class Estimator:
+    def __init__(self, cfg: EstimatorConfig | None = None):
+        self.cfg = cfg = cfg or EstimatorConfig()
+        self.layout = AnchorLayout(cfg.anchors, cfg.tag_height)
+        self.model = ConstantAcceleration(cfg.jerk_psd)
+        self.fusion = [f for f in cfg.filters if f in FUSION]
+        self.need_sins = any(f != "wsn" for f in cfg.filters)
+        self.need_fix = "wsn" in cfg.filters or "kf" in cfg.filters
+        self.solver = Solver(self.layout, cfg.range_sigma_m, cfg.wsn_method, cfg.reference_anchor,
+                             cfg.gate_probability, cfg.fix_margin_m)
+        self.grouper = CycleGrouper(len(self.layout.ids), cfg.cycle_s)
+        self.filters: dict[str, KalmanFilter | UnscentedKalmanFilter] = {}
+        self.alignment = Alignment()
+        self.aligned: AlignmentResult | None = None
+        self.sins: Strapdown | None = None
+        self._t: float | None = None  # time of the fusion filters
+        self._t_imu_first: float | None = None
+        self._t_imu: float | None = None
+        self._t_aligned: float | None = None
+        self._last_sample: tuple[np.ndarray, np.ndarray] | None = None
+        self._k_out = 0  # next output instant: k * output_period_s
+        self._fixes: list[Fix] = []
+        self._gated_since: dict[tuple[str, str], float] = {}  # first rejection of a run of them
+        self._tilt_growth = (cfg.tilt_inflation * cfg.gravity * cfg.tilt_rate_sigma) ** 2
+        self._range_bias = {int(a): float(c) for a, c in cfg.range_bias_m.items()}
+        sv, sa = cfg.stationary_sigma
+        self._r_stationary = np.diag([sv**2, sv**2, sa**2, sa**2])
+        self._gyro_limit = math.radians(cfg.gyro_range_dps)
+        self.counts: Counter = Counter()
+        self.input_rejections: Counter = Counter()
+        self.updates: defaultdict[str, Counter] = defaultdict(Counter)
+        self.rejections: defaultdict[str, Counter] = defaultdict(Counter)
+        self.emitted: Counter = Counter()
+
+    # ---------------------------------------------------------------- inputs
+
+    def imu(self, t_s: float, gyro_rad_s, accel_m_s2, nd_ok: bool = True) -> list[Estimate]:
+        """One IMU sample (body axes: x forward, y left, z up) at measurement time t_s;
+        ``nd_ok`` False (ND clear: the registers were not updated) skips it."""
+        self.counts["imu"] += 1
+        gyro = np.asarray(gyro_rad_s, dtype=float)
+        accel = np.asarray(accel_m_s2, dtype=float)
+        if not (math.isfinite(t_s) and np.all(np.isfinite(gyro)) and np.all(np.isfinite(accel))):
+            self.input_rejections["imu_implausible"] += 1
+            return []
+        if not nd_ok:  # a repeated register read: the next sample covers the interval
+            self.input_rejections["imu_stale"] += 1
+            return []
+        if self._t_imu is not None and t_s <= self._t_imu:
+            self.input_rejections["imu_out_of_order"] += 1
+            return []
+        if np.any(np.abs(gyro) >= self._gyro_limit):
+            self.counts["imu_overrange"] += 1  # saturated, still the best reading there is
+        out = self._begin(t_s)
+        acceleration = self._sins_step(t_s, gyro, accel)
+        if acceleration is not None:
+            T = t_s - self._t_aligned
+            r_acc = (self.cfg.accel_sigma_m_s2**2 + self._tilt_growth * T * T) * np.eye(2)
+        for name in self.fusion:
+            if acceleration is None:
+                self._update(name, "stationary", np.zeros(4), self._r_stationary, STATIONARY, t_s)
+            else:
+                self._update(name, "accel", acceleration, r_acc, ACCELERATION, t_s)
+        return out + self._end(t_s)
+
+    def range(self, t_s: float, anchor: int, distance_m: float | None, rssi_dbm: int = 0,
+              status: int = 0x0F) -> list[Estimate]:
+        """One exchange report; ``distance_m`` None when the exchange did not complete."""
+        self.counts["exchanges"] += 1
+        if anchor not in self.layout:
+            self.input_rejections["unknown_anchor"] += 1
+            return []
+        if not math.isfinite(t_s):
+            self.input_rejections["range_implausible"] += 1
+            return []
+        out = self._begin(t_s)
+        d = None
+        if distance_m is None or not is_complete(status):
+            self.input_rejections["outage" if status & STATUS_TIMEOUT else "incomplete"] += 1
+        elif not (math.isfinite(distance_m) and 0.0 < distance_m <= self.cfg.max_range_m):
+            self.input_rejections["range_implausible"] += 1
+        else:
+            d = (float(distance_m) - self._range_bias.get(anchor, 0.0)) / self.cfg.range_scale
+            if self.cfg.tight == "toa":
+                meas = Ranges(self.layout, (anchor,), (max(self._t - t_s, 0.0),))
+                for name in self.fusion:
+                    if name != "kf":
+                        self._update(name, "range", np.array([d]),
+                                     np.array([[self.cfg.range_sigma_m**2]]), meas, t_s)
+        for cycle in self.grouper.add(t_s, anchor, d):
+            self._cycle(cycle)
+        return out + self._end(t_s)
+
+    # ---------------------------------------------------------------- processing
+
+    def _begin(self, t: float) -> list[Estimate]:
+        """Start the filters at the first measurement; emit the instants before t."""
+        if self._t is None:
+            self._t = t
+            self._k_out = math.ceil(t / self.cfg.output_period_s)
+            self._init_filters()
+        out = self._emit(lambda b: b < t)
+        if t > self._t:
+            for name in self.fusion:
+                try:
+                    self.filters[name].predict(t - self._t)
+                except np.linalg.LinAlgError:
+                    self._reset(name)
+            self._t = t
+        return out
+
+    def _end(self, t: float) -> list[Estimate]:
+        return self._emit(lambda b: b <= t)
+
+    def _init_filters(self, only: str | None = None) -> None:
+        c = self.cfg
+        if only is None:
+            x0 = np.array([*c.start, 0.0, 0.0, 0.0, 0.0])
+        else:  # a reset: the latest WSN fix, else the SINS
+            p = self._fixes[-1].p if self._fixes else self.sins.p[:2] if self.sins else c.start
+            v = self.sins.v[:2] if self.sins else (0.0, 0.0)
+            x0 = np.array([*p, *v, 0.0, 0.0])
+        sp, sv, sa = c.p0_sigma
+        P0 = np.diag([sp**2, sp**2, sv**2, sv**2, sa**2, sa**2])
+        make = {
+            "kf": lambda: KalmanFilter(x0, P0, self.model),
+            "ekf": lambda: ExtendedKalmanFilter(x0, P0, self.model),
+            "ukf": lambda: UnscentedKalmanFilter(x0, P0, self.model, c.ukf_alpha, c.ukf_beta, c.ukf_kappa),
+        }
+        for name in ([only] if only else self.fusion):
+            self.filters[name] = make[name]()
+
+    def _sins_step(self, t: float, gyro: np.ndarray, accel: np.ndarray) -> np.ndarray | None:
+        """Advance alignment or strapdown; the nav-frame horizontal acceleration once aligned."""
+        if self._t_imu_first is None:
+            self._t_imu_first = t
+        try:
+            if self.sins is None:
+                if not self.need_sins or t - self._t_imu_first < self.cfg.alignment_s \
+                        or self._last_sample is None:
+                    self.alignment.add(gyro, accel)
+                    self._last_sample = (gyro, accel)
+                    return None
+                self._start_strapdown()
+            return self.sins.step(t - self._t_imu, gyro, accel)[:2]
+        finally:
+            self._t_imu = t
+
+    def _start_strapdown(self) -> None:
+        c = self.cfg
+        self.aligned = a = self.alignment.result(c.heading0_rad, math.radians(c.latitude_deg), c.x_azimuth_deg)
+        self.sins = Strapdown(position=c.start, q=a.q, gyro_bias=a.gyro_bias, latitude_deg=c.latitude_deg,
+                              gravity=c.gravity, altitude_m=c.altitude_m, x_azimuth_deg=c.x_azimuth_deg)
+        self.sins.step(0.0, *self._last_sample)  # the interval to the next sample starts here
+        self._t_aligned = self._t_imu
+
+    def _update(self, name: str, kind: str, z, R, meas, t: float) -> None:
+        """One gated update of filter ``name``; counts the outcome by kind or reason."""
+        lag = self._t - t
+        if lag > self.cfg.max_lag_s:
+            self.rejections[name]["late"] += 1
+            return
+        f = self.filters[name]
+        key = (name, kind)
+        try:
+            inn = f.update(z, R, meas, chi2_gate(meas.dim, self.cfg.gate_probability))
+            if not inn.accepted:
+                if t - self._gated_since.setdefault(key, t) <= self.cfg.gate_reopen_s:
+                    self.rejections[name]["gate"] += 1
+                    return
+                # Everything of this kind gated out for too long: the filter, not the sensor, is off.
+                self.rejections[name]["gate_reopened"] += 1
+                f.update(z, R, meas)
+        except np.linalg.LinAlgError:
+            self._reset(name)
+            return
+        self._gated_since.pop(key, None)
+        self.updates[name][kind] += 1
+
+    def _reset(self, name: str) -> None:
+        """A covariance lost positive definiteness (never seen; rounding can do it)."""
+        self.rejections[name]["numerical_reset"] += 1
+        self._init_filters(only=name)
+
+    def _cycle(self, cycle) -> None:
+        """A closed TDMA cycle: the WSN fix (wsn track, KF) and the TDOA update (EKF/UKF)."""
+        c = self.cfg
+        if self.need_fix:
+            fix = self.solver.fix(cycle.t, cycle.valid_anchors, cycle.distances)
+            if isinstance(fix, str):
+                self.rejections["wsn"][fix] += 1
+            else:
+                self.updates["wsn"]["fix"] += 1
+                if fix.dropped:
+                    self.rejections["wsn"]["outlier_dropped"] += 1
+                # two fixes with one time would give no velocity: keep the newer
+                older = [f for f in self._fixes[-1:] if f.t < fix.t]
+                self._fixes = [*older, fix]
+                if "kf" in self.fusion:
+                    self._update("kf", "fix", fix.p, fix.cov, position_fix(max(self._t - fix.t, 0.0)), fix.t)
+        if c.tight == "tdoa" and any(n != "kf" for n in self.fusion):
+            self._tdoa_update(cycle)
+
+    def _tdoa_update(self, cycle) -> None:
+        """Range differences to the reference anchor (000 eqs. 12-13), R = sigma^2 (I + 11^T)."""
+        tight = [n for n in self.fusion if n != "kf"]
+        r = dict(zip(cycle.valid_anchors, cycle.distances))
+        t_of = dict(zip(cycle.valid_anchors, cycle.valid_times))
+        ref = self.cfg.reference_anchor if self.cfg.reference_anchor in r else min(r, default=None)
+        # |r_i - r_ref| cannot exceed the anchors' separation (triangle inequality), give or
+        # take 4 sigma of the difference's noise (it is tight on the line through the two)
+        slack = 4.0 * math.sqrt(2.0) * self.cfg.range_sigma_m
+        others = []
+        for a in r:
+            if a != ref and abs(r[a] - r[ref]) <= self.layout.baseline(a, ref) + slack:
+                others.append(a)
+            elif a != ref:
+                for name in tight:
+                    self.rejections[name]["implausible"] += 1
+        if len(others) < 2:
+            for name in tight:
+                self.rejections[name]["too_few"] += 1
+            return
+        keep = [ref, *others]
+        z = np.array([r[a] - r[ref] for a in others])
+        meas = Ranges(self.layout, keep, [max(self._t - t_of[a], 0.0) for a in keep], reference=ref)
+        R = tdoa_covariance(self.cfg.range_sigma_m, len(others))
+        for name in tight:
+            self._update(name, "tdoa", z, R, meas, cycle.t)
+
+    # ---------------------------------------------------------------- output
+
+    def _emit(self, due) -> list[Estimate]:
+        out = []
+        while due(b := self._k_out * self.cfg.output_period_s):
+            for name in self.cfg.filters:
+                e = self._snapshot(name, b)
+                if e is not None:
+                    out.append(e)
+                    self.emitted[name] += 1
+            self._k_out += 1
+        return out
+
+    def _yaw(self) -> float:
+        return self.sins.yaw if self.sins is not None else self.cfg.heading0_rad
+
+    def _snapshot(self, name: str, b: float) -> Estimate | None:
+        if name in FUSION:
+            x, P = self.model.propagate(self.filters[name].x, self.filters[name].P, b - self._t)
+            return _estimate(b, name, x[:2], x[2:4], self._yaw(), P[:4, :4])
+        if name == "sins":
+            return self._sins_snapshot(b)
+        return self._wsn_snapshot(b)
+
+    def _sins_snapshot(self, b: float) -> Estimate:
+        sp, sv, _ = self.cfg.p0_sigma
+        cov = np.diag([sp**2, sp**2, sv**2, sv**2])
+        if self.sins is None:
+            return _estimate(b, "sins", self.cfg.start, (0.0, 0.0), self._yaw(), cov)
+        dt = b - self._t_imu
+        p = self.sins.p[:2] + self.sins.v[:2] * dt
+        # velocity random walk q per axis: P_pp = q T^3/3, P_pv = q T^2/2, P_vv = q T
+        T = b - self._t_aligned
+        q = (self.cfg.vrw_m_s_rt_hr / 60.0) ** 2
+        block = q * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+        return _estimate(b, "sins", p, self.sins.v[:2], self._yaw(), cov + np.kron(block, np.eye(2)))
+
+    def _wsn_snapshot(self, b: float) -> Estimate | None:
+        if len(self._fixes) < 2:
+            return None
+        f0, f1 = self._fixes
+        dt = f1.t - f0.t
+        v = (f1.p - f0.p) / dt
+        cov = np.block([[f1.cov, f1.cov / dt], [f1.cov / dt, (f0.cov + f1.cov) / dt**2]])
+        return _estimate(b, "wsn", f1.p, v, None, cov)
+
+    # ---------------------------------------------------------------- status
+
+    def stats(self) -> dict:
+        """Counts: inputs, input rejections, updates and rejections per filter by kind/reason,
+        estimates emitted, and the alignment result."""
+        a = self.aligned
+        return {
+            "imu_samples": self.counts["imu"],
+            "imu_overrange": self.counts["imu_overrange"],
+            "exchanges": self.counts["exchanges"],
+            "input_rejections": dict(sorted(self.input_rejections.items())),
+            "updates": {n: dict(sorted(self.updates[n].items())) for n in self.cfg.filters if n != "sins"},
+            "rejections": {n: dict(sorted(self.rejections[n].items())) for n in self.cfg.filters
+                           if n != "sins"},
+            "estimates": {n: self.emitted[n] for n in self.cfg.filters},
+            "alignment": None if a is None else {
+                "samples": a.samples, "roll_rad": a.roll, "pitch_rad": a.pitch, "yaw_rad": a.yaw,
+                "gyro_bias_rad_s": [float(v) for v in a.gyro_bias],
+                "specific_force_m_s2": a.specific_force},
+        }

@@ -1,0 +1,15 @@
+"""Filters of 000 section 4 on x = [x, y, vx, vy, ax, ay]: one filter per module.
+
+kf.KalmanFilter, ekf.ExtendedKalmanFilter, ukf.UnscentedKalmanFilter share
+``predict(dt)`` and ``update(z, R, measurement, gate=None) -> Innovation``;
+model.py holds the motion model (000 eq. 14) and measurement models (000 eq. 15).
+"""
+from .ekf import ExtendedKalmanFilter
+from .innovation import Innovation
+from .kf import KalmanFilter
+from .model import ACCELERATION, ConstantAcceleration, Linear, Ranges, lag_matrix, position_fix
+from .ukf import UnscentedKalmanFilter
+
+__all__ = ["ACCELERATION", "ConstantAcceleration", "ExtendedKalmanFilter", "Innovation",
+           "KalmanFilter", "Linear", "Ranges", "UnscentedKalmanFilter", "lag_matrix",
+           "position_fix"]

@@ -1,0 +1,211 @@
+"""Strapdown inertial navigation: coarse alignment and mechanization (000 section 3.1).
+
+Frames
+    Navigation frame n: local level, x and y along the lab area's axes, z up. The area's +x
+    points at azimuth ``x_azimuth_deg`` (clockwise from north); the default 90 makes n the
+    east-north-up frame of 000. The earth and transport rates of eq. 3 (written in ENU)
+    are rotated into the area axes.
+    Body frame b: x forward, y left, z up, so a level unit at rest reads +g on z.
+    Attitude: unit quaternion q (scalar first) with v^n = q v^b q*, i.e. C_b^n.
+    Euler angles: C_b^n = Rz(yaw) Ry(pitch) Rx(roll), right-handed about each axis: yaw 0 =
+    body x along area +x, counter-clockwise positive; positive pitch is a rotation about
+    the body's left axis (nose down), positive roll about the forward axis (left side up).
+
+Mechanization, per IMU sample over dt (000 eqs. 1-5)::
+
+    w_ie^n = W_ie (0, cos L, sin L)                                        (eq. 3)
+    w_en^n = (-v_N / (R_M + h), v_E / (R_N + h), v_E tan L / (R_N + h))   (eq. 3)
+    w_in^n = w_ie^n + w_en^n                           (the nav frame's inertial rate)
+    q     <- exp(w_in^n dt)* (x) q (x) exp((w_ib^b - b_g) dt)   (exact for constant rates)
+    f^n    = C_b^n(mid-interval) f^b                   (000 eq. 2 decomposition)
+    dv/dt  = f^n - (2 w_ie^n + w_en^n) x v^n + g^n,  g^n = (0, 0, -g)     (eqs. 2, 4)
+    v_U    = 0                                         (eq. 5: the car stays on the floor)
+    p     <- p + v dt + dv/dt dt^2 / 2
+
+Each sample is taken as the instantaneous rate and specific force at its time stamp; the
+interval to the previous sample uses their mean (trapezoid), second-order accurate.
+
+R_M and R_N are the WGS-84 meridian and prime-vertical radii at the latitude L. Over a
+room the latitude is treated as constant.
+
+Alignment (coarse, on the stationary start): the mean specific force is -g^n seen in
+body axes, so roll = atan2(f_y, f_z), pitch = atan2(-f_x, hypot(f_y, f_z)). A MEMS gyro
+(ARW 4.2 deg/sqrt(h), bias instability 0.015 deg/s = 54 deg/h) cannot sense the
+earth's 15 deg/h, so it cannot gyrocompass: the heading is the configured initial
+heading. The gyro bias is the mean rate minus the earth rate in body axes,
+b_g = mean(w_ib^b) - C_n^b w_ie^n. An accelerometer bias cannot be told apart from a
+tilt at rest; it is absorbed in roll and pitch (and cancels while the unit stays level).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+EARTH_RATE = 7.2916e-5  # rad/s, as 000 sect. 3.3
+WGS84_A = 6378137.0  # m
+WGS84_E2 = 6.69437999014e-3
+
+
+def earth_radii(latitude_rad: float) -> tuple[float, float]:
+    """(R_M, R_N): meridian and prime-vertical radii of curvature (WGS-84)."""
+    s2 = math.sin(latitude_rad) ** 2
+    w = 1.0 - WGS84_E2 * s2
+    return WGS84_A * (1.0 - WGS84_E2) / w**1.5, WGS84_A / math.sqrt(w)
+
+
+def area_from_enu(x_azimuth_deg: float = 90.0) -> np.ndarray:
+    """Rotation taking east-north-up components to area components (x at the azimuth)."""
+    a = math.radians(x_azimuth_deg)
+    return np.array([[math.sin(a), math.cos(a), 0.0], [-math.cos(a), math.sin(a), 0.0], [0.0, 0.0, 1.0]])
+
+
+def earth_rate_nav(latitude_rad: float, x_azimuth_deg: float = 90.0) -> np.ndarray:
+    """w_ie^n = W_ie (0, cos L, sin L) in ENU (000 eq. 3), in area axes."""
+    enu = EARTH_RATE * np.array([0.0, math.cos(latitude_rad), math.sin(latitude_rad)])
+    return area_from_enu(x_azimuth_deg) @ enu
+
+
+def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    pw, px, py, pz = p
+    qw, qx, qy, qz = q
+    return np.array([pw * qw - px * qx - py * qy - pz * qz,
+                     pw * qx + px * qw + py * qz - pz * qy,
+                     pw * qy - px * qz + py * qw + pz * qx,
+                     pw * qz + px * qy - py * qx + pz * qw])
+
+
+def quat_from_rotvec(v: np.ndarray) -> np.ndarray:
+    """exp of a rotation vector (rad): the quaternion of a rotation by |v| about v."""
+    angle = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    half = 0.5 * angle
+    # sin(half)/angle by its series for tiny angles, where the quotient loses precision
+    k = 0.5 - angle * angle / 48.0 if angle < 1e-4 else math.sin(half) / angle
+    return np.array([math.cos(half), k * v[0], k * v[1], k * v[2]])
+
+
+def quat_to_dcm(q: np.ndarray) -> np.ndarray:
+    """C_b^n of q (v^n = C v^b)."""
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def quat_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """q of C_b^n = Rz(yaw) Ry(pitch) Rx(roll)."""
+    qz = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+    qy = np.array([math.cos(pitch / 2), 0.0, math.sin(pitch / 2), 0.0])
+    qx = np.array([math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0])
+    return quat_multiply(quat_multiply(qz, qy), qx)
+
+
+def euler_from_quat(q: np.ndarray) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) of q, inverse of :func:`quat_from_euler`."""
+    C = quat_to_dcm(q)
+    return (math.atan2(C[2, 1], C[2, 2]),
+            math.asin(max(-1.0, min(1.0, -C[2, 0]))),
+            math.atan2(C[1, 0], C[0, 0]))
+
+
+@dataclass(frozen=True, slots=True)
+class AlignmentResult:
+    q: np.ndarray  # initial attitude C_b^n
+    gyro_bias: np.ndarray  # rad/s, body axes
+    roll: float
+    pitch: float
+    yaw: float
+    samples: int
+    specific_force: float  # |mean f^b|, m/s^2: about g when the unit was at rest
+
+
+class Alignment:
+    """Accumulates the stationary start; :meth:`result` levels and estimates the gyro bias."""
+
+    def __init__(self):
+        self.samples = 0
+        self._gyro = np.zeros(3)
+        self._accel = np.zeros(3)
+
+    def add(self, gyro: np.ndarray, accel: np.ndarray) -> None:
+        self.samples += 1
+        self._gyro += gyro
+        self._accel += accel
+
+    def result(self, heading: float, latitude_rad: float, x_azimuth_deg: float = 90.0) -> AlignmentResult:
+        if self.samples == 0:
+            raise ValueError("alignment needs at least one IMU sample")
+        f = self._accel / self.samples
+        roll = math.atan2(f[1], f[2])
+        pitch = math.atan2(-f[0], math.hypot(f[1], f[2]))
+        q = quat_from_euler(roll, pitch, heading)
+        bias = self._gyro / self.samples - quat_to_dcm(q).T @ earth_rate_nav(latitude_rad, x_azimuth_deg)
+        return AlignmentResult(q, bias, roll, pitch, heading, self.samples, float(np.linalg.norm(f)))
+
+
+class Strapdown:
+    """The pure SINS: attitude, velocity and position from IMU samples alone."""
+
+    def __init__(self, *, position, q: np.ndarray, gyro_bias=(0.0, 0.0, 0.0),
+                 velocity=(0.0, 0.0, 0.0), latitude_deg: float, gravity: float,
+                 altitude_m: float = 0.0, x_azimuth_deg: float = 90.0):
+        self.p = np.array([*position, 0.0][:3], dtype=float)
+        self.v = np.array(velocity, dtype=float)
+        self.q = np.array(q, dtype=float)
+        self.gyro_bias = np.array(gyro_bias, dtype=float)
+        lat = math.radians(latitude_deg)
+        self._w_ie = earth_rate_nav(lat, x_azimuth_deg)
+        self._area_from_enu = area_from_enu(x_azimuth_deg)
+        r_m, r_n = earth_radii(lat)
+        self._r_m, self._r_n = r_m + altitude_m, r_n + altitude_m
+        self._tan_lat = math.tan(lat)
+        self._g = np.array([0.0, 0.0, -gravity])
+        self._prev: tuple[np.ndarray, np.ndarray] | None = None  # last sample, bias removed
+
+    def transport_rate(self) -> np.ndarray:
+        """w_en^n of 000 eq. 3 (ENU), in area axes."""
+        ve, vn, _ = self._area_from_enu.T @ self.v
+        return self._area_from_enu @ np.array([-vn / self._r_m, ve / self._r_n, ve * self._tan_lat / self._r_n])
+
+    def step(self, dt: float, gyro: np.ndarray, accel: np.ndarray) -> np.ndarray:
+        """Integrate from the previous sample to this one, ``dt`` later.
+
+        Samples are the instantaneous rates (rad/s) and specific force (m/s^2) at their time
+        stamps; over the interval their mean (trapezoid) is held; with dt = 0 the sample is
+        only recorded (the start of the first interval). Returns dv/dt in the nav frame (its
+        horizontal part is the filters' acceleration measurement)."""
+        gyro = np.asarray(gyro, float) - self.gyro_bias
+        accel = np.asarray(accel, float)
+        if self._prev is not None:
+            w_ib, f_b = 0.5 * (gyro + self._prev[0]), 0.5 * (accel + self._prev[1])
+        else:
+            w_ib, f_b = gyro, accel
+        self._prev = (gyro, accel)
+        w_en = self.transport_rate()
+        w_in = self._w_ie + w_en
+        # The body turns by w_ib against inertial space and the nav frame by w_in:
+        # q(t+dt) = exp(w_in dt)* (x) q (x) exp(w_ib dt), exact for constant rates.
+        q_mid = quat_multiply(quat_from_rotvec(w_in * (-0.5 * dt)),
+                              quat_multiply(self.q, quat_from_rotvec(w_ib * (0.5 * dt))))
+        q_new = quat_multiply(quat_from_rotvec(w_in * -dt),
+                              quat_multiply(self.q, quat_from_rotvec(w_ib * dt)))
+        self.q = q_new / np.linalg.norm(q_new)
+        w = 2.0 * self._w_ie + w_en
+        v = self.v
+        coriolis = np.array([w[1] * v[2] - w[2] * v[1], w[2] * v[0] - w[0] * v[2], w[0] * v[1] - w[1] * v[0]])
+        a = quat_to_dcm(q_mid) @ f_b - coriolis + self._g
+        a[2] = 0.0  # eq. 5: V_U = 0 on the floor
+        self.p += self.v * dt + a * (0.5 * dt * dt)
+        self.v += a * dt
+        return a
+
+    @property
+    def euler(self) -> tuple[float, float, float]:
+        return euler_from_quat(self.q)
+
+    @property
+    def yaw(self) -> float:
+        return self.euler[2]

@@ -1,0 +1,318 @@
+"""WSN positioning: anchor geometry, TOA and TDOA position fixes, TDMA cycles.
+
+Ranges come from the four-timestamp exchange (000 eq. 6, ``protocols.nanoloc.distance``).
+The tag moves on a level floor at a known height, so each 3-D range constrains the 2-D
+position p = (x, y) (000 eqs. 10-11 with the height term)::
+
+    r_i = sqrt(|p - a_i|^2 + dz_i^2),      dz_i = tag_height - z_i
+
+TOA fix
+    Closed-form start: linear least squares after differencing the squared ranges against
+    their mean (every range enters alike, so no single reference range biases the start)::
+
+        -2 (a_i - mean a)^T p = (r_i^2 - k_i) - mean(r^2 - k),   k_i = |a_i|^2 + dz_i^2
+
+    then Gauss-Newton on r_i with Jacobian rows u_i^T = (p - a_i)^T / r_i. Covariance
+    sigma^2 (J^T J)^-1, the CRLB at the solution (its trace root is sigma * HDOP).
+
+TDOA fix (000 eqs. 12-13, reference anchor 1)
+    d_i = r_i - r_ref for i != ref, noise R = sigma^2 (I + 1 1^T) because every difference
+    shares the reference range's noise. Closed-form start by spherical intersection (SX):
+    the differenced equations ``2 (a_i - a_ref)^T p = k_i - k_ref - d_i^2 - 2 d_i r_ref`` are
+    solved for p = u + w r_ref in least squares, and r_ref from the quadratic
+    ``r_ref^2 = |u + w r_ref - a_ref|^2 + dz_ref^2``. (Chan-Ho's method needs more anchors:
+    with four anchors in a rectangle its first stage is singular on the symmetry axes.)
+    Then Gauss-Newton weighted by R^-1, Jacobian rows (u_i - u_ref)^T.
+
+Outliers and plausibility
+    The weighted residual sum of squares is chi-square with (equations - 2) degrees of
+    freedom. When it exceeds the gate, each leave-one-out subset is solved and the best
+    passing one is kept, but only if the subset keeps two degrees of freedom (TOA: five
+    anchors, TDOA: six): with one left, a wrong subset's mirror solution can fit its ranges
+    exactly (seen on the office layout), so four anchors give no fix instead. A fix outside
+    the anchors' bounding box grown by ``margin_m`` is refused as well (TDOA's hyperbolae
+    have far branches near the lines through two anchors).
+
+TDMA cycle
+    The anchors range the tag in turn (one exchange per anchor per 0.1 s cycle). A fix
+    treats the ranges of one cycle as simultaneous, at the mean time of its exchanges:
+    the tag moves at most v * cycle/2 (2.5 cm at 0.5 m/s) in the meantime. (The
+    EKF/UKF do not need this: they apply each range at its own time.)
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+from itertools import combinations
+
+import numpy as np
+from scipy.stats import chi2 as chi2_distribution
+
+MIN_RANGES = 3  # TOA: 3 ranges for 2 unknowns; TDOA: 3 ranges give 2 differences
+GN_ITERATIONS = 20
+GN_TOLERANCE_M = 1e-6  # last step; Gauss-Newton converges quadratically from there
+
+
+class AnchorLayout:
+    """The surveyed anchors and the tag height: the geometry of every range.
+
+    ``ids`` are sorted; solver and measurement functions take row indices (``index``).
+    """
+
+    def __init__(self, anchors: Mapping[int, Sequence[float]], tag_height: float = 0.0):
+        if len(anchors) < 3:
+            raise ValueError(f"need at least 3 anchors for a 2-D fix, got {len(anchors)}")
+        items = sorted((int(i), tuple(p)) for i, p in anchors.items())
+        self.ids = tuple(i for i, _ in items)
+        xyz = np.array([[*p[:2], p[2] if len(p) > 2 else 0.0] for _, p in items], dtype=float)
+        self.xy = xyz[:, :2].copy()
+        self.z = xyz[:, 2].copy()
+        self.tag_height = float(tag_height)
+        self.dz = self.tag_height - self.z
+        self._row = {a: k for k, a in enumerate(self.ids)}
+
+    def index(self, anchors: Sequence[int]) -> np.ndarray:
+        return np.array([self._row[a] for a in anchors], dtype=np.intp)
+
+    def __contains__(self, anchor: int) -> bool:
+        return anchor in self._row
+
+    def ranges(self, p: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """3-D ranges from tag positions ``p`` (..., m, 2) or (..., 1, 2) to anchors ``idx``."""
+        d = p - self.xy[idx]
+        return np.sqrt(np.einsum("...i,...i->...", d, d) + self.dz[idx] ** 2)
+
+    def geometry(self, p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ranges (m,) from a position (2,) (or one per anchor, (m, 2)) and d r / d p (m, 2)."""
+        d = p - self.xy[idx]
+        r = np.sqrt(np.einsum("ij,ij->i", d, d) + self.dz[idx] ** 2)
+        return r, d / r[:, None]
+
+    def baseline(self, a: int, b: int) -> float:
+        """3-D distance between anchors a and b (ids): the bound on |r_a - r_b|."""
+        i, j = self._row[a], self._row[b]
+        return float(np.hypot(np.linalg.norm(self.xy[i] - self.xy[j]), self.z[i] - self.z[j]))
+
+    def hdop(self, p: np.ndarray, idx: np.ndarray | None = None) -> float:
+        """sqrt(tr((G^T G)^-1)), G rows = u_i^T: RMSE >= sigma * HDOP (TOA CRLB)."""
+        idx = np.arange(len(self.ids)) if idx is None else idx
+        _, g = self.geometry(np.asarray(p, float), idx)
+        return float(np.sqrt(np.trace(np.linalg.inv(g.T @ g))))
+
+
+def tdoa_covariance(sigma: float, m: int) -> np.ndarray:
+    """R = sigma^2 (I + 1 1^T) of the m range differences to one reference range."""
+    return sigma**2 * (np.eye(m) + np.ones((m, m)))
+
+
+@lru_cache(maxsize=64)
+def chi2_gate(dof: int, probability: float) -> float:
+    """Squared-Mahalanobis threshold passing *probability* of consistent innovations."""
+    return float(chi2_distribution.ppf(probability, dof))
+
+
+@dataclass(frozen=True, slots=True)
+class Fix:
+    """A WSN position fix. ``cov`` is the 2x2 position covariance (CRLB at ``p``)."""
+
+    t: float
+    p: np.ndarray
+    cov: np.ndarray
+    anchors: tuple[int, ...]
+    chi2: float
+    dropped: tuple[int, ...] = ()
+
+
+def toa_linear(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Closed-form TOA position: squared ranges differenced against their mean."""
+    a = layout.xy[idx]
+    k = np.einsum("ij,ij->i", a, a) + layout.dz[idx] ** 2
+    rhs = r**2 - k
+    A = -2.0 * (a - a.mean(axis=0))
+    return np.linalg.lstsq(A, rhs - rhs.mean(), rcond=None)[0]
+
+
+def tdoa_closed_form(layout: AnchorLayout, idx: np.ndarray, d: np.ndarray, ref: int) -> np.ndarray:
+    """Spherical-intersection (SX) TDOA position; ``d`` = r_i - r_ref for rows idx != ref."""
+    a_ref = layout.xy[ref]
+    a = layout.xy[idx]
+    k = np.einsum("ij,ij->i", a, a) + layout.dz[idx] ** 2
+    k_ref = a_ref @ a_ref + layout.dz[ref] ** 2
+    G = 2.0 * (a - a_ref)
+    pinv = np.linalg.pinv(G)
+    u = pinv @ (k - k_ref - d**2)
+    w = pinv @ (-2.0 * d)
+    e = u - a_ref
+    qa, qb, qc = w @ w - 1.0, 2.0 * (w @ e), e @ e + layout.dz[ref] ** 2
+    if abs(qa) < 1e-12:
+        roots = np.array([-qc / qb]) if qb else np.array([0.0])
+    else:
+        disc = qb * qb - 4.0 * qa * qc
+        # No real root: the noise pushed the quadratic past tangency; take its vertex.
+        roots = (np.array([-qb / (2 * qa)]) if disc < 0
+                 else (-qb + np.array([1.0, -1.0]) * np.sqrt(disc)) / (2 * qa))
+    roots = roots[roots >= 0.0] if np.any(roots >= 0.0) else np.array([0.0])
+    candidates = [u + w * r0 for r0 in roots]
+
+    def misfit(p):
+        return np.sum((layout.ranges(p[None], idx) - layout.ranges(p[None], np.array([ref])) - d) ** 2)
+
+    return min(candidates, key=misfit)
+
+
+def _gauss_newton(residual_jacobian, p0: np.ndarray, weight_sqrt: np.ndarray):
+    """Minimise |W^1/2 e(p)|^2; returns p, (J^T W J)^-1 and the weighted RSS."""
+    p = np.asarray(p0, float).copy()
+    for _ in range(GN_ITERATIONS):
+        e, J = residual_jacobian(p)
+        ew, Jw = weight_sqrt @ e, weight_sqrt @ J
+        step = np.linalg.solve(Jw.T @ Jw, -(Jw.T @ ew))
+        p += step
+        if not np.all(np.isfinite(p)):
+            raise np.linalg.LinAlgError("Gauss-Newton diverged")
+        if step @ step < GN_TOLERANCE_M**2:
+            break
+    e, J = residual_jacobian(p)
+    ew, Jw = weight_sqrt @ e, weight_sqrt @ J
+    return p, np.linalg.inv(Jw.T @ Jw), float(ew @ ew)
+
+
+def toa_fix(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray, sigma: float):
+    """Gauss-Newton TOA fix from the closed-form start: (p, cov, chi2)."""
+    def rj(p):
+        rho, J = layout.geometry(p, idx)
+        return rho - r, J
+
+    return _gauss_newton(rj, toa_linear(layout, idx, r), np.eye(len(idx)) / sigma)
+
+
+def tdoa_fix(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray, sigma: float, ref_row: int):
+    """Gauss-Newton TDOA fix (differences to row ``ref_row`` of idx): (p, cov, chi2)."""
+    others = np.array([k for k in range(len(idx)) if k != ref_row], dtype=np.intp)
+    ref = idx[ref_row]
+    d = r[others] - r[ref_row]
+    # Whitening by the Cholesky factor of R^-1 makes the weighted LS an ordinary one.
+    w_sqrt = np.linalg.cholesky(np.linalg.inv(tdoa_covariance(sigma, len(others)))).T
+
+    def rj(p):
+        rho, J = layout.geometry(p, idx)
+        return (rho[others] - rho[ref_row]) - d, J[others] - J[ref_row]
+
+    return _gauss_newton(rj, tdoa_closed_form(layout, idx[others], d, ref), w_sqrt)
+
+
+@dataclass(slots=True)
+class Solver:
+    """Position fixes from the ranges of one cycle, TOA or TDOA, with outlier gating."""
+
+    layout: AnchorLayout
+    sigma: float
+    method: str = "toa"  # "toa" | "tdoa"
+    reference: int = 1  # TDOA reference anchor; the lowest present id stands in if it is missing
+    gate_probability: float = 0.9999
+    margin_m: float | None = 2.0  # plausible region: anchors' bounding box grown by this
+
+    def __post_init__(self):
+        if self.method not in ("toa", "tdoa"):
+            raise ValueError(f"WSN method {self.method!r}: use 'toa' or 'tdoa'")
+
+    def _inside(self, p: np.ndarray) -> bool:
+        if self.margin_m is None:
+            return True
+        lo = self.layout.xy.min(axis=0) - self.margin_m
+        hi = self.layout.xy.max(axis=0) + self.margin_m
+        return bool(np.all(lo <= p) and np.all(p <= hi))
+
+    def _dof(self, m: int) -> int:
+        return m - 2 if self.method == "toa" else m - 3
+
+    def _solve(self, anchors: tuple[int, ...], r: np.ndarray):
+        idx = self.layout.index(anchors)
+        if self.method == "toa":
+            return toa_fix(self.layout, idx, r, self.sigma)
+        ref_row = anchors.index(self.reference) if self.reference in anchors else 0
+        return tdoa_fix(self.layout, idx, r, self.sigma, ref_row)
+
+    def _passes(self, m: int, rss: float) -> bool:
+        dof = self._dof(m)
+        return dof < 1 or rss <= chi2_gate(dof, self.gate_probability)
+
+    def fix(self, t: float, anchors: Sequence[int], ranges: Sequence[float]) -> Fix | str:
+        """A :class:`Fix`, or why there is none: ``"too_few"`` ranges, ``"geometry"``
+        (singular or diverging, e.g. collinear anchors), ``"outside"`` the plausible region,
+        ``"residual"`` (inconsistent ranges and no consistent subset)."""
+        order = np.argsort(anchors, kind="stable")
+        anchors = tuple(int(anchors[k]) for k in order)
+        r = np.asarray(ranges, float)[order]
+        m = len(anchors)
+        if m < MIN_RANGES:
+            return "too_few"
+        result = self._checked(t, anchors, r)
+        if not isinstance(result, Fix) or self._passes(m, result.chi2):
+            return result
+        if self._dof(m - 1) < 2:
+            return "residual"
+        best = None
+        for keep in combinations(range(m), m - 1):
+            sub = self._checked(t, tuple(anchors[k] for k in keep), r[list(keep)])
+            if isinstance(sub, Fix) and self._passes(m - 1, sub.chi2) and (best is None or sub.chi2 < best.chi2):
+                best = sub
+        if best is None:
+            return "residual"
+        return Fix(t, best.p, best.cov, best.anchors, best.chi2, tuple(a for a in anchors if a not in best.anchors))
+
+    def _checked(self, t: float, anchors: tuple[int, ...], r: np.ndarray) -> Fix | str:
+        try:
+            p, cov, rss = self._solve(anchors, r)
+        except np.linalg.LinAlgError:
+            return "geometry"
+        return Fix(t, p, cov, anchors, rss) if self._inside(p) else "outside"
+
+
+@dataclass(slots=True)
+class Cycle:
+    """The exchanges of one TDMA cycle: every report, and the usable distances."""
+
+    times: list[float] = field(default_factory=list)
+    anchors: list[int] = field(default_factory=list)
+    valid_anchors: list[int] = field(default_factory=list)
+    valid_times: list[float] = field(default_factory=list)
+    distances: list[float] = field(default_factory=list)
+
+    @property
+    def t(self) -> float:
+        """Time of the fix: the mean time of the usable exchanges."""
+        return float(np.mean(self.valid_times)) if self.valid_times else self.times[-1]
+
+
+class CycleGrouper:
+    """Groups exchange reports into TDMA cycles.
+
+    A cycle closes when every anchor has reported (complete or not), when an anchor reports
+    a second time, or when an exchange comes more than ``window_s`` after the cycle's first.
+    """
+
+    def __init__(self, n_anchors: int, window_s: float = 0.1):
+        self.n_anchors = n_anchors
+        self.window_s = window_s
+        self._open: Cycle | None = None
+
+    def add(self, t: float, anchor: int, distance: float | None) -> list[Cycle]:
+        closed = []
+        c = self._open
+        if c is not None and (anchor in c.anchors or t - c.times[0] > self.window_s):
+            closed.append(c)
+            c = None
+        if c is None:
+            c = self._open = Cycle()
+        c.times.append(t)
+        c.anchors.append(anchor)
+        if distance is not None:
+            c.valid_anchors.append(anchor)
+            c.valid_times.append(t)
+            c.distances.append(distance)
+        if len(c.anchors) >= self.n_anchors:
+            closed.append(c)
+            self._open = None
+        return closed

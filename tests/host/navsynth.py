@@ -1,0 +1,117 @@
+"""Test-side synthetic lab data for the navigation math (no emulator involved).
+
+An analytic trajectory on an ellipse (a circle when both semi-axes are equal) with a smooth
+start, the perfect IMU readings it implies (specific force and body rates including local
+gravity, the earth rate and Coriolis, written independently of host.sins with scipy's
+Rotation), and TDMA range exchanges. Noise comes from a seeded numpy Generator.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+OFFICE_ANCHORS = {1: (1.3, 1.6, 0.0), 2: (10.8, 1.6, 0.0), 3: (10.8, 5.4, 0.0), 4: (1.3, 5.4, 0.0)}
+OFFICE_START = (6.0, 1.8)
+LATITUDE_DEG = 34.316
+GRAVITY = 9.7952
+OMEGA_E = 7.2916e-5
+
+
+@dataclass
+class Trajectory:
+    t: np.ndarray
+    p: np.ndarray  # (N, 2)
+    v: np.ndarray
+    a: np.ndarray
+    yaw: np.ndarray
+    yaw_rate: np.ndarray
+
+
+def ellipse(t, *, centre=(6.0, 3.5), semi=(4.0, 1.7), omega=0.12, t_start=0.0, ramp=0.0):
+    """Counter-clockwise ellipse from its lowest point (heading 0 = +x there).
+
+    The angle rate rises from 0 to ``omega`` between t_start and t_start + ramp (smoothstep,
+    so the acceleration is continuous); before t_start the vehicle is at rest."""
+    t = np.asarray(t, float)
+    A, B = semi
+    if ramp > 0:
+        u = np.clip((t - t_start) / ramp, 0.0, 1.0)
+        rate = omega * (3 * u**2 - 2 * u**3)
+        accel = np.where((u > 0) & (u < 1), omega * (6 * u - 6 * u**2) / ramp, 0.0)
+        theta = np.where(u < 1, omega * ramp * (u**3 - u**4 / 2),
+                         omega * ramp / 2 + omega * (t - t_start - ramp))
+    else:
+        on = t >= t_start
+        rate = np.where(on, omega, 0.0)
+        accel = np.zeros_like(t)
+        theta = np.where(on, omega * (t - t_start), 0.0)
+    s, c = np.sin(theta), np.cos(theta)
+    p = np.column_stack([centre[0] + A * s, centre[1] - B * c])
+    tangent = np.column_stack([A * c, B * s])
+    v = rate[:, None] * tangent
+    a = accel[:, None] * tangent + (rate**2)[:, None] * np.column_stack([-A * s, B * c])
+    yaw = np.arctan2(B * s, A * c)
+    yaw_rate = rate * A * B / (A**2 * c**2 + B**2 * s**2)
+    return Trajectory(t, p, v, a, yaw, yaw_rate)
+
+
+def _radii(lat):
+    e2, a = 6.69437999014e-3, 6378137.0
+    w = 1 - e2 * math.sin(lat) ** 2
+    return a * (1 - e2) / w**1.5, a / math.sqrt(w)
+
+
+def perfect_imu(tr: Trajectory, *, latitude_deg=LATITUDE_DEG, gravity=GRAVITY, roll=0.0, pitch=0.0,
+                x_azimuth_deg=90.0):
+    """(gyro rad/s, specific force m/s^2), body x fwd / y left / z up, for a vehicle
+    following ``tr`` with a constant roll and pitch of its body on the chassis. The area's
+    +x points at ``x_azimuth_deg`` clockwise from north."""
+    lat = math.radians(latitude_deg)
+    r_m, r_n = _radii(lat)
+    n = len(tr.t)
+    v3 = np.column_stack([tr.v, np.zeros(n)])
+    a3 = np.column_stack([tr.a, np.zeros(n)])
+    # unit vectors of the area axes in (east, north): x at the azimuth, y 90 deg counter-clockwise
+    az = math.radians(x_azimuth_deg)
+    ex, ey = np.array([math.sin(az), math.cos(az)]), np.array([-math.cos(az), math.sin(az)])
+    w_ie_en = OMEGA_E * math.cos(lat) * np.array([0.0, 1.0])  # horizontal part, along north
+    w_ie = np.array([w_ie_en @ ex, w_ie_en @ ey, OMEGA_E * math.sin(lat)])
+    v_en = np.outer(tr.v[:, 0], ex) + np.outer(tr.v[:, 1], ey)  # (east, north) velocity
+    w_en_en = np.column_stack([-v_en[:, 1] / r_m, v_en[:, 0] / r_n])
+    w_en = np.column_stack([w_en_en @ ex, w_en_en @ ey, v_en[:, 0] * math.tan(lat) / r_n])
+    f_n = a3 + np.cross(2 * w_ie + w_en, v3) - np.array([0.0, 0.0, -gravity])
+    rot = Rotation.from_euler("ZYX", np.column_stack([tr.yaw, np.full(n, pitch), np.full(n, roll)]))
+    f_b = rot.inv().apply(f_n)
+    # body rate = nav-frame turn (about nav z, the chassis is level) + earth + transport
+    w_b = rot.inv().apply(np.column_stack([np.zeros(n), np.zeros(n), tr.yaw_rate]) + w_ie + w_en)
+    return w_b, f_b
+
+
+def noisy_imu(gyro, accel, rng: np.random.Generator, *, dt=0.01, arw_deg_rt_hr=4.2,
+              vrw_m_s_rt_hr=2.0, gyro_bias=(0, 0, 0), accel_bias=(0, 0, 0)):
+    """White noise from the ADIS16350 random walks plus constant biases."""
+    g_sigma = math.radians(arw_deg_rt_hr) / 60.0 / math.sqrt(dt)
+    a_sigma = vrw_m_s_rt_hr / 60.0 / math.sqrt(dt)
+    return (gyro + np.asarray(gyro_bias) + rng.normal(0, g_sigma, gyro.shape),
+            accel + np.asarray(accel_bias) + rng.normal(0, a_sigma, accel.shape))
+
+
+def exchanges(traj_fn, anchors, *, duration, sigma, rng: np.random.Generator, cycle=0.1, slot=0.025,
+              tag_height=0.0, t0=0.0):
+    """TDMA range exchanges: list of (t, anchor, distance); anchor k's slot at cycle start +
+    k * slot; the distance is the 3-D range at that moment plus N(0, sigma^2)."""
+    ids = sorted(anchors)
+    out = []
+    k = 0
+    while t0 + k * cycle < duration:
+        ts = np.array([t0 + k * cycle + j * slot for j in range(len(ids))])
+        tr = traj_fn(ts)
+        for j, a in enumerate(ids):
+            ax, ay, az = anchors[a]
+            d = math.sqrt((tr.p[j, 0] - ax) ** 2 + (tr.p[j, 1] - ay) ** 2 + (tag_height - az) ** 2)
+            out.append((float(ts[j]), a, d + rng.normal(0.0, sigma)))
+        k += 1
+    return out

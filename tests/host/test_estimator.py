@@ -1,0 +1,242 @@
+"""The fusion core on synthetic lab data: outputs, accuracy against truth, bad input, outages."""
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+
+import numpy as np
+import pytest
+
+from host.estimator import FILTER_NAMES, Estimate, Estimator, EstimatorConfig
+
+from .navsynth import GRAVITY, OFFICE_ANCHORS, ellipse, exchanges, noisy_imu, perfect_imu
+
+ALIGN = 3.0
+
+
+def office_truth(t):
+    return ellipse(np.atleast_1d(t), omega=0.1, t_start=ALIGN + 1.0, ramp=2.0)
+
+
+def synth_events(seconds, seed=1, *, noise=True, sigma=0.15, drop=lambda t, a: False, range_bias=0.0,
+                 gyro_bias=(0.002, -0.003, 0.004), roll=0.0, pitch=0.0):
+    """Time-ordered calls [(t, "imu", args) | (t, "range", args)] for the office ellipse."""
+    rng = np.random.default_rng(seed)
+    t = np.round(np.arange(0.0, seconds, 0.01), 9)
+    tr = office_truth(t)
+    gyro, accel = perfect_imu(tr, roll=roll, pitch=pitch)
+    if noise:
+        gyro, accel = noisy_imu(gyro, accel, rng, gyro_bias=gyro_bias)
+    else:
+        gyro = gyro + np.asarray(gyro_bias)
+    ev = [(tk, 0, "imu", (tk, gyro[k], accel[k])) for k, tk in enumerate(t)]
+    for tk, a, d in exchanges(office_truth, OFFICE_ANCHORS, duration=seconds, sigma=sigma if noise else 0.0,
+                              rng=rng, t0=0.005):
+        if drop(tk, a):
+            ev.append((tk, 1, "range", (tk, a, None, -90, 0x40)))
+        else:
+            ev.append((tk, 1, "range", (tk, a, d + range_bias, -60, 0x0F)))
+    ev.sort(key=lambda e: e[:2])
+    return [(e[2], e[3]) for e in ev]
+
+
+def run(cfg=None, calls=None, **kw):
+    est = Estimator(cfg or EstimatorConfig(alignment_s=ALIGN, range_sigma_m=0.15))
+    out = []
+    for kind, args in calls if calls is not None else synth_events(**{"seconds": 30.0, **kw}):
+        out += getattr(est, kind)(*args)
+    return est, out
+
+
+def errors(out, t_from=0.0, t_to=math.inf):
+    by = defaultdict(list)
+    for e in out:
+        if t_from <= e.t <= t_to:
+            p = office_truth(e.t).p[0]
+            by[e.filter].append(math.hypot(e.x - p[0], e.y - p[1]))
+    return {k: np.array(v) for k, v in by.items()}
+
+
+@pytest.fixture(scope="module")
+def default_run():
+    return run()
+
+
+def test_config_errors_name_the_field_and_the_fix():
+    with pytest.raises(ValueError, match=r"filters: unknown \['pf'\]; use some of sins,wsn,kf,ekf,ukf"):
+        EstimatorConfig(filters=("kf", "pf"))
+    with pytest.raises(ValueError, match="tight: 'rss' is not a method; use 'toa' or 'tdoa'"):
+        EstimatorConfig(tight="rss")
+    with pytest.raises(ValueError, match="output_period_s must be a positive number"):
+        EstimatorConfig(output_period_s=0)
+    with pytest.raises(ValueError, match="anchors: 2 given"):
+        EstimatorConfig(anchors={1: (0, 0), 2: (1, 0)})
+
+
+def test_one_estimate_per_filter_per_period_in_config_order(default_run):
+    est, out = default_run
+    assert all(isinstance(e, Estimate) for e in out)
+    by_t = defaultdict(list)
+    for e in out:
+        by_t[e.t].append(e.filter)
+    times = sorted(by_t)
+    assert [round(t * 10) for t in times] == list(range(0, 300))  # 0.0 .. 29.9 s, every 0.1 s
+    assert [e.t for e in out] == sorted(e.t for e in out)
+    for t in times[3:]:  # wsn starts with its second fix
+        assert by_t[t] == list(FILTER_NAMES)
+    assert est.stats()["estimates"] == {n: len([e for e in out if e.filter == n]) for n in FILTER_NAMES}
+    assert all(len(e.cov) == 16 for e in out)
+    cov = np.array(out[-1].cov).reshape(4, 4)
+    np.testing.assert_allclose(cov, cov.T)
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+
+
+def test_same_calls_same_estimates(default_run):
+    _, out = default_run
+    _, again = run()
+    assert again == out
+
+
+def test_fusion_beats_both_pure_tracks_and_sins_drifts(default_run):
+    est, out = default_run
+    err = errors(out, t_from=ALIGN)
+    for name in ("kf", "ekf", "ukf"):
+        assert err[name].mean() < err["wsn"].mean(), name
+        assert err[name].mean() < err["sins"].mean(), name
+        assert err[name].max() < 0.5, name
+    assert err["wsn"].max() < 1.0  # bounded, however long it runs
+    sins = err["sins"]
+    assert sins[-1] > 5 * sins[len(sins) // 4]  # drift grows with time
+    assert est.stats()["alignment"]["samples"] == ALIGN / 0.01
+
+
+def test_stationary_exact_data_stays_at_the_start():
+    """Perfect IMU (with a gyro bias the alignment removes) and exact ranges, parked."""
+    est, out = run(calls=synth_events(ALIGN + 1.0, noise=False))
+    assert {e.filter for e in out} == set(FILTER_NAMES)
+    for e in out:
+        assert math.hypot(e.x - 6.0, e.y - 1.8) < 1e-3, e
+        assert math.hypot(e.vx, e.vy) < 1e-3, e
+        assert e.yaw is None if e.filter == "wsn" else abs(e.yaw) < 1e-6
+
+
+def test_anchor_outage_is_counted_and_bridged():
+    """Anchor 2 silent for 5 s (timeout reports): 3 anchors still give TDOA, and the
+    fusion filters stay on track."""
+    out_window = lambda t, a: a == 2 and 10.0 <= t < 15.0
+    est, out = run(drop=out_window)
+    assert est.stats()["input_rejections"]["outage"] == 50
+    err = errors(out, 10.0, 15.0)
+    for name in ("kf", "ekf", "ukf"):
+        assert err[name].max() < 0.6, name
+    # three ranges, two differences: an exact TDOA fix without redundancy, noisier but there
+    assert err["wsn"].max() < 2.0 and est.stats()["updates"]["wsn"]["fix"] == 300
+
+
+def test_total_wsn_outage_coasts_on_the_sins_and_recovers():
+    gone = lambda t, a: 12.0 <= t < 16.0
+    est, out = run(drop=gone)
+    err = errors(out)
+    during = errors(out, 12.0, 16.0)
+    after = errors(out, 19.0, 30.0)
+    for name in ("kf", "ekf", "ukf"):
+        assert during[name].max() < 2.0, name  # 4 s on the SINS acceleration alone
+        assert after[name].max() < 0.5, name
+    assert err["wsn"].size > 0
+    assert est.stats()["input_rejections"]["outage"] == 160
+
+
+def test_bad_input_is_counted_not_fatal():
+    est = Estimator(EstimatorConfig(alignment_s=1.0))
+    g, f = np.zeros(3), np.array([0.0, 0.0, GRAVITY])
+    est.imu(0.0, g, f)
+    est.imu(0.01, g, f, nd_ok=False)
+    est.imu(0.01, [np.nan, 0, 0], f)
+    est.imu(0.0, g, f)  # not after the previous sample
+    est.range(0.02, 9, 5.0, -60, 0x0F)
+    est.range(0.03, 1, -1.0, -60, 0x0F)
+    est.range(0.04, 1, 1e6, -60, 0x0F)
+    est.range(0.05, 2, None, -90, 0x40)
+    est.range(0.06, 3, 4.0, -60, 0x80)
+    est.imu(0.02, g, f)
+    s = est.stats()
+    assert s["input_rejections"] == {"imu_implausible": 1, "imu_out_of_order": 1, "imu_stale": 1,
+                                     "incomplete": 1, "outage": 1, "range_implausible": 2, "unknown_anchor": 1}
+    assert s["imu_samples"] == 5 and s["exchanges"] == 5
+
+
+def test_late_measurements_use_their_lag_or_are_refused():
+    cfg = EstimatorConfig(alignment_s=ALIGN, tight="toa", filters=("ekf", "ukf"))
+    calls = synth_events(6.0, noise=False)
+    imus = [c for c in calls if c[0] == "imu"]
+    ranges = [c for c in calls if c[0] == "range"]
+    est = Estimator(cfg)
+    for kind, args in imus:  # all IMU first: every range arrives after the filters' time
+        est.imu(*args)
+    for kind, args in ranges[-5:]:  # lag < 0.5 s
+        est.range(*args)
+    est.range(*ranges[0][1])  # almost 6 s old
+    s = est.stats()
+    assert s["updates"]["ekf"]["range"] == 5 and s["updates"]["ukf"]["range"] == 5
+    assert s["rejections"]["ekf"] == {"late": 1} and s["rejections"]["ukf"] == {"late": 1}
+
+
+def test_an_outlier_range_is_gated_in_the_tight_filters():
+    cfg = EstimatorConfig(alignment_s=ALIGN, tight="toa", range_sigma_m=0.15)
+    calls = synth_events(20.0, noise=True)
+    k = next(i for i, (kind, a) in enumerate(calls) if kind == "range" and a[0] > 15.0)
+    t, a, d, rssi, status = calls[k][1]
+    calls[k] = ("range", (t, a, d + 8.0, rssi, status))
+    est, out = run(cfg, calls)
+    s = est.stats()
+    assert s["rejections"]["ekf"]["gate"] >= 1 and s["rejections"]["ukf"]["gate"] >= 1
+    err = errors(out, 15.0)
+    assert err["ekf"].max() < 0.5 and err["ukf"].max() < 0.5
+
+
+def test_calibrated_range_bias_is_removed():
+    biased = dict(range_bias=0.5, seconds=12.0)
+    cfg = dict(alignment_s=ALIGN, range_sigma_m=0.15, wsn_method="toa", filters=("wsn",))
+    _, raw = run(EstimatorConfig(**cfg), **biased)
+    _, fixed = run(EstimatorConfig(**cfg, range_bias_m={1: 0.5, 2: 0.5, 3: 0.5, 4: 0.5}), **biased)
+    assert errors(fixed)["wsn"].mean() < 0.5 * errors(raw)["wsn"].mean()
+
+
+def test_alignment_of_a_tilted_unit_is_reported():
+    est, _ = run(seconds=5.0, roll=0.03, pitch=-0.02, noise=False)
+    a = est.stats()["alignment"]
+    assert a["roll_rad"] == pytest.approx(0.03, abs=1e-9)
+    assert a["pitch_rad"] == pytest.approx(-0.02, abs=1e-9)
+    np.testing.assert_allclose(a["gyro_bias_rad_s"], [0.002, -0.003, 0.004], atol=1e-12)
+    assert a["specific_force_m_s2"] == pytest.approx(GRAVITY, rel=1e-6)
+
+
+@pytest.mark.parametrize("filters", [("wsn",), ("kf",), ("ukf", "sins")])
+def test_a_subset_of_filters(filters):
+    est, out = run(EstimatorConfig(alignment_s=ALIGN, filters=filters, range_sigma_m=0.15), seconds=6.0)
+    assert {e.filter for e in out} == set(filters)
+    assert (est.stats()["alignment"] is None) == (filters == ("wsn",))
+
+
+def test_fusion_yaw_follows_the_turning_vehicle(default_run):
+    """Heading error within 4 sigma of the ARW: its random walk plus the bias the alignment
+    leaves (ARW / sqrt(T_align)) integrated over the time since."""
+    _, out = default_run
+    arw = math.radians(4.2) / 60.0
+    for e in out:
+        if e.filter in ("kf", "ukf", "sins") and e.t > ALIGN:
+            yaw = office_truth(e.t).yaw[0]
+            T = e.t - ALIGN
+            sigma = arw * math.sqrt(T * T / ALIGN + T)
+            assert abs(math.remainder(e.yaw - yaw, math.tau)) < max(4 * sigma, 1e-3), e
+        if e.filter == "wsn":
+            assert e.yaw is None
+
+
+@pytest.mark.parametrize("tight,wsn", [("toa", "toa"), ("tdoa", "toa"), ("toa", "tdoa")])
+def test_other_measurement_choices_also_track(tight, wsn):
+    est, out = run(EstimatorConfig(alignment_s=ALIGN, range_sigma_m=0.15, tight=tight, wsn_method=wsn,
+                                   filters=("wsn", "kf", "ekf", "ukf")), seconds=20.0)
+    err = errors(out, ALIGN)
+    for name in ("kf", "ekf", "ukf"):
+        assert err[name].mean() < err["wsn"].mean() and err[name].max() < 0.5, name
