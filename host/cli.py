@@ -1,5 +1,154 @@
 """`navtwin host` and `navtwin replay`."""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+from protocols.cli import UsageError
+from protocols.recording import Recording, RecordingError
+
+from . import config as host_config
+from .config import ConfigError
+from .output import estimate_line, info_line, open_output
+
+PORT_HELP = ("a device path (/dev/ttyUSB0, an emulator PTY link) or a pyserial URL "
+             "(socket://, rfc2217://, spy://)")
 
 
 def register(sub) -> None:
-    """Filled in by the host service."""
+    p = sub.add_parser(
+        "host", help="run the lab computer's fusion service on live serial ports",
+        description="Read the coordinator (API mode; or the SINS board's direct line) and the "
+        "nanoLOC gateway, fuse IMU and ranges, and write one JSON line per estimate: "
+        '{"t","filter","x","y","vx","vy","yaw","cov"}. A status line goes to stderr every few '
+        "seconds; a port that disappears is reopened every 0.5 s while the filters keep their "
+        "state. SIGINT or SIGTERM ends the run with a summary line on stderr (exit 0).")
+    p.add_argument("--xbee", metavar="PORT", help=f"the coordinator in API mode: {PORT_HELP}")
+    p.add_argument("--sins", metavar="PORT",
+                   help="the SINS board's direct RS-232 line (same forms)")
+    p.add_argument("--nanoloc", metavar="PORT", help="the anchors' gateway (same forms)")
+    p.add_argument("--api1", dest="escaped", action="store_false", default=True,
+                   help="the coordinator runs API mode 1 (AP=1); default API mode 2, escaped")
+    p.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
+    _common(p)
+    p.add_argument("--record", metavar="DIR",
+                   help="record every chunk read, with its arrival time, in a new directory "
+                        "('navtwin replay DIR' then gives the same output)")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="stop after S seconds of wall time (default: run until SIGINT/SIGTERM)")
+    p.add_argument("--status-period", type=float, default=2.0, metavar="S",
+                   help="seconds between status lines on stderr (default 2)")
+    p.set_defaults(func=run_host)
+
+    r = sub.add_parser(
+        "replay", help="run the host's pipeline over a recording",
+        description="Feed a recording through the host's pipeline and write the estimate lines. "
+        "A recording made by 'navtwin host --record' gives exactly the live run's lines (its "
+        "config, filters and API mode are in the recording; --config and --filters override "
+        "them). An emulator recording "
+        "('navtwin emulate --record') is run with arrival = the time each chunk's last byte "
+        "leaves the UART: a deterministic offline run, not equal to any live run.")
+    r.add_argument("directory", metavar="DIR", help="the recording directory")
+    _common(r, recorded=True)
+    r.add_argument("--api1", dest="escaped", action="store_const", const=False, default=None,
+                   help="the coordinator in an emulator recording ran API mode 1 "
+                        "(default: as its meta says, else 2)")
+    r.set_defaults(func=run_replay)
+
+
+def _common(p, recorded: bool = False) -> None:
+    src = "the recorded run's" if recorded else "the config's"
+    p.add_argument("--config", metavar="NAME|FILE",
+                   help=f"host config: {', '.join(host_config.shipped())} or a TOML file "
+                        f"(default: {'the recorded config' if recorded else host_config.DEFAULT})")
+    p.add_argument("--filters", metavar="LIST",
+                   help=f"comma list of {','.join(host_config.FILTER_NAMES)}, or all "
+                        f"(default: {src})")
+    p.add_argument("--out", default="-", metavar="FILE|-",
+                   help="estimate lines (default - = stdout)")
+
+
+def _config_and_filters(args, default_config: bool):
+    try:
+        cfg = host_config.load(args.config) if (args.config or default_config) else None
+        filters = host_config.parse_filters(args.filters) if args.filters else None
+    except ConfigError as e:
+        raise UsageError(str(e)) from None
+    return cfg, filters
+
+
+def _open_out(spec: str):
+    try:
+        return open_output(spec)
+    except OSError as e:
+        raise UsageError(f"--out {spec}: {e.strerror}; choose a writable file or -") from None
+
+
+def run_host(args) -> int:
+    from .pipeline import INPUTS
+    from .service import Service, StartError, stop_on_signals
+
+    ports = {p: getattr(args, p) for p in INPUTS if getattr(args, p)}
+    if not ports:
+        raise UsageError("no input port; give --xbee PORT and/or --sins PORT, and --nanoloc PORT")
+    if args.duration is not None and args.duration <= 0:
+        raise UsageError(f"--duration {args.duration}: must be positive")
+    if args.status_period <= 0:
+        raise UsageError(f"--status-period {args.status_period}: must be positive")
+    cfg, filters = _config_and_filters(args, default_config=True)
+    out = _open_out(args.out)
+    stop = threading.Event()
+    try:
+        service = Service(ports, cfg, filters or cfg.filters, out=out, escaped=args.escaped,
+                          baud=args.baud, record=args.record, status=sys.stderr,
+                          status_period_s=args.status_period)
+        with stop_on_signals(stop):
+            service.run(stop, duration_s=args.duration)
+    except StartError as e:
+        raise UsageError(str(e)) from None
+    finally:
+        if out is not sys.stdout:
+            out.close()
+    return 0
+
+
+def run_replay(args) -> int:
+    from .replay import replay
+
+    cfg, filters = _config_and_filters(args, default_config=False)
+    try:
+        rec = Recording(args.directory)
+    except RecordingError as e:
+        raise UsageError(str(e)) from None
+    out = _open_out(args.out)
+    t0 = time.monotonic()
+    shown = [t0]
+
+    def emit(estimates: list) -> None:
+        out.write("".join(map(estimate_line, estimates)))
+
+    def progress(fraction: float) -> None:
+        now = time.monotonic()
+        if now - shown[0] >= 2.0:
+            shown[0] = now
+            sys.stderr.write(info_line("progress", {"done": round(fraction, 3),
+                                                    "elapsed_s": round(now - t0, 1)}))
+
+    try:
+        pipe = replay(rec, emit, progress=progress, config=cfg, filters=filters,
+                      escaped=args.escaped)
+    except BrokenPipeError:
+        raise
+    except (RecordingError, ConfigError, OSError) as e:
+        raise UsageError(str(e)) from None
+    finally:
+        if out is not sys.stdout:
+            out.close()
+        else:
+            out.flush()
+    stats = pipe.stats()
+    sys.stderr.write(info_line("summary", {"recording": str(rec.directory),
+                                           "elapsed_s": round(time.monotonic() - t0, 3),
+                                           **stats, "estimator": pipe.estimator.stats()}))
+    return 0

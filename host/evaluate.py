@@ -1,0 +1,101 @@
+"""Accuracy of the host's estimates against a truth file, beside paper 000's published figures.
+
+Truth reaches the host only as a file (the emulator's ``truth.csv``: a header row with at least
+``t,x,y,yaw``, t in seconds of scenario time). Estimates are the host's JSON lines. Each
+estimate is compared with the truth interpolated at its time, shifted by ``offset_s`` (scenario
+time = host time + offset_s).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+#: Paper 000, section 3.3 and 4.3: mean position error (m) on the office run.
+PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
+PAPER_MAX_ERROR_M = {"sins": 1.27, "wsn": 0.94}
+
+
+def load_truth(path: str | Path) -> dict[str, np.ndarray]:
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        rows = np.array([[float(v) for v in row] for row in reader], dtype=float)
+    return {name: rows[:, i] for i, name in enumerate(header)}
+
+
+def load_estimates(lines) -> dict[str, dict[str, np.ndarray]]:
+    """Estimate JSON lines (an iterable of str, or a path) grouped by filter."""
+    if isinstance(lines, (str, Path)):
+        lines = Path(lines).read_text().splitlines()
+    by_filter: dict[str, list] = {}
+    for line in lines:
+        if not line.strip():
+            continue
+        e = json.loads(line)
+        if "filter" in e:
+            by_filter.setdefault(e["filter"], []).append((e["t"], e["x"], e["y"]))
+    return {k: dict(zip(("t", "x", "y"), np.array(v, dtype=float).T)) for k, v in by_filter.items()}
+
+
+def position_errors(truth: dict, estimates: dict, offset_s: float = 0.0,
+                    skip_s: float = 0.0) -> dict[str, dict[str, float]]:
+    """Per filter: mean, max and RMS horizontal position error (m) and the number of estimates,
+    over estimates inside the truth's time span and after *skip_s* of scenario time."""
+    out = {}
+    t_truth = truth["t"]
+    for name, e in sorted(estimates.items()):
+        t = e["t"] + offset_s
+        keep = (t >= max(t_truth[0], skip_s)) & (t <= t_truth[-1])
+        if not keep.any():
+            continue
+        dx = e["x"][keep] - np.interp(t[keep], t_truth, truth["x"])
+        dy = e["y"][keep] - np.interp(t[keep], t_truth, truth["y"])
+        err = np.hypot(dx, dy)
+        out[name] = {"mean": float(err.mean()), "max": float(err.max()),
+                     "rms": float(math.sqrt((err ** 2).mean())), "n": int(keep.sum())}
+    return out
+
+
+def table(errors: dict[str, dict[str, float]]) -> str:
+    """A text table of the errors beside paper 000's figures."""
+    lines = [f"{'filter':<7}{'mean m':>9}{'max m':>9}{'rms m':>9}{'n':>7}   paper 000 mean (max)"]
+    for name, e in errors.items():
+        paper = PAPER_MEAN_ERROR_M.get(name)
+        ref = "" if paper is None else f"{paper:.2f}" + (
+            f" ({PAPER_MAX_ERROR_M[name]:.2f})" if name in PAPER_MAX_ERROR_M else "")
+        lines.append(f"{name:<7}{e['mean']:9.3f}{e['max']:9.3f}{e['rms']:9.3f}{e['n']:7d}   {ref}")
+    return "\n".join(lines)
+
+
+def plot(truth: dict, estimates: dict, path: str | Path, offset_s: float = 0.0,
+         anchors: dict | None = None) -> Path:
+    """Tracks and error over time, as a PNG (needs matplotlib: the ``plot`` extra)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 5))
+    ax1.plot(truth["x"], truth["y"], "k-", lw=2, label="truth")
+    for name, e in sorted(estimates.items()):
+        ax1.plot(e["x"], e["y"], lw=1, label=name)
+        t = e["t"] + offset_s
+        ax2.plot(t, np.hypot(e["x"] - np.interp(t, truth["t"], truth["x"]),
+                             e["y"] - np.interp(t, truth["t"], truth["y"])), lw=1, label=name)
+    if anchors:
+        xs, ys = zip(*[(a[0], a[1]) for a in anchors.values()])
+        ax1.plot(xs, ys, "r^", ms=9, label="anchors")
+    ax1.set(xlabel="x (m)", ylabel="y (m)", title="tracks", aspect="equal")
+    ax2.set(xlabel="scenario time (s)", ylabel="position error (m)", title="error")
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,73 @@
+"""What the host writes.
+
+Estimates: one JSON object per line, keys in this order, numbers as Python's ``repr``
+(``json.dumps``), so equal estimates give equal bytes::
+
+    {"t":12.34,"filter":"ukf","x":6.01,"y":1.79,"vx":0.0,"vy":0.0,"yaw":0.0,"cov":[[...],...]}
+
+``t`` is host time in seconds since the run started (docs/host.md); ``yaw`` is null for
+the pure WSN track; ``cov`` is the estimator's covariance of (x, y, vx, vy), row-major.
+Status, progress and summary lines go to stderr as one JSON
+object each, ``{"status": {...}}``, ``{"progress": {...}}``, ``{"summary": {...}}``; they
+carry wall-clock figures (rates, latency) and are not part of the deterministic output.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from collections import deque
+from typing import TextIO
+
+import numpy as np
+
+KEYS = ("t", "filter", "x", "y", "vx", "vy", "yaw", "cov")
+
+
+def estimate_line(e) -> str:
+    """The output line of one :class:`host.estimator.Estimate`."""
+    return json.dumps({"t": float(e.t), "filter": str(e.filter), "x": float(e.x), "y": float(e.y),
+                       "vx": float(e.vx), "vy": float(e.vy),
+                       "yaw": None if e.yaw is None else float(e.yaw),
+                       "cov": np.asarray(e.cov, dtype=float).tolist()},
+                      separators=(",", ":")) + "\n"
+
+
+def info_line(kind: str, body: dict) -> str:
+    """A status / progress / summary line for stderr."""
+    return json.dumps({kind: body}, separators=(",", ":"), default=str) + "\n"
+
+
+def open_output(spec: str) -> TextIO:
+    """``-`` is stdout; anything else a file, created or truncated."""
+    if spec == "-":
+        return sys.stdout
+    return open(spec, "w", encoding="utf-8")
+
+
+class Latency:
+    """Processing latencies in ns: percentiles of the current status period and of the run."""
+
+    def __init__(self, keep: int = 100_000) -> None:
+        self._period: list[int] = []
+        self._all: deque[int] = deque(maxlen=keep)
+
+    def add(self, ns: int) -> None:
+        self._period.append(ns)
+        self._all.append(ns)
+
+    @staticmethod
+    def _summary(values) -> dict:
+        if not len(values):
+            return {"n": 0}
+        ms = np.asarray(values, dtype=float) / 1e6
+        p50, p99 = np.percentile(ms, [50, 99])
+        return {"n": int(ms.size), "p50_ms": round(float(p50), 3), "p99_ms": round(float(p99), 3),
+                "max_ms": round(float(ms.max()), 3)}
+
+    def period(self) -> dict:
+        """Since the last call."""
+        out, self._period = self._summary(self._period), []
+        return out
+
+    def overall(self) -> dict:
+        return self._summary(self._all)

@@ -1,0 +1,243 @@
+"""Bytes -> time-stamped measurements -> estimator, as a pure function of the input.
+
+The input is the sequence of chunks ``(port, bytes, arrival ns since start)`` in the
+order the host processed them (live) or recorded them (replay). Nothing here reads a
+clock: the same chunks give the same estimates, bit for bit.
+
+Ports (also the names of a host recording's files):
+
+=========  ==========================================================================
+xbee       the coordinator in API mode: 0x90 packets carry the SINS byte stream
+           (:class:`protocols.stream.XBeeSinsChain`); 0x88 DB answers give link quality
+sins       the SINS board's direct RS-232 line
+nanoloc    the anchors' gateway: one ranging report per exchange
+=========  ==========================================================================
+
+Time. Each SINS sample's host time comes from the board's counter and each range's from
+the anchor network's ``t_us``, both through :class:`host.clock.DeviceClock` (unwrapped,
+aligned to arrival times online, never stepping back). A sample counter seen on both
+``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate.
+
+Time order, with bounded latency (docs/host.md). Let T be the filter time: the latest
+measurement time given to the estimator. Every measurement is given with its own time.
+
+* A SINS sample is processed as soon as it is decoded (its times strictly increase).
+* A range with t <= T is late: it is processed at once (the estimator applies it with its
+  lag, or refuses it beyond its ``max_lag_s``); the pipeline counts it and its lateness.
+* A range with t > T is held until a SINS sample with time >= t is decoded (it is
+  processed just before that sample), or until a chunk arrives at or after t + ``hold_s``
+  on any port (the IMU stream stalled), or the input ends. Without a SINS input nothing is
+  held beyond the chunk that carried it.
+
+So SINS samples wait for nothing, ranges at most one SINS period in normal operation and
+``hold_s`` of arrival time when the IMU stream stalls.
+"""
+from __future__ import annotations
+
+import heapq
+import math
+from collections import Counter
+from typing import Any
+
+from protocols import adis16350, nanoloc, sins, xbee
+from protocols.stream import DecodeError, Frame, XBeeSinsChain, nanoloc_decoder, sins_decoder
+
+from .clock import DeviceClock, Unwrapper
+from .config import HostConfig
+from .estimator import Estimator
+
+INPUTS = ("xbee", "sins", "nanoloc")
+IMU_INPUTS = ("xbee", "sins")
+DB_PERIOD_S = 5.0  # AT DB query period, in arrival time
+T_US_TICK_S = 1e-6
+
+
+class Pipeline:
+    """Decoders, clocks, time order and the estimator for one run of the host."""
+
+    def __init__(self, config: HostConfig, filters: tuple[str, ...] | None = None, *,
+                 inputs: tuple[str, ...] = INPUTS, escaped: bool = True, estimator=None,
+                 db_period_s: float = DB_PERIOD_S) -> None:
+        unknown = set(inputs) - set(INPUTS)
+        if unknown:
+            raise ValueError(f"unknown input {sorted(unknown)[0]!r}; use {', '.join(INPUTS)}")
+        self.config = config
+        self.filters = tuple(filters or config.filters)
+        if estimator is None:
+            estimator = Estimator(config.estimator_config(self.filters))
+        self.estimator = estimator
+        self.inputs = tuple(p for p in INPUTS if p in inputs)
+        self.escaped = escaped
+        self._decoders: dict[str, Any] = {}
+        for port in self.inputs:
+            self._decoders[port] = (XBeeSinsChain(escaped) if port == "xbee" else
+                                    sins_decoder() if port == "sins" else nanoloc_decoder())
+        self._hold = config.hold_s if set(IMU_INPUTS) & set(self.inputs) else 0.0
+        self.imu_clock = DeviceClock(16, sins.PERIOD_S, strict=True)
+        self.range_clock = DeviceClock(32, T_US_TICK_S, strict=False)
+        # the gateway's report counter: equal = a duplicate, any step back = a restart
+        self._report_seq = Unwrapper(16, restart=0)
+        self._held: list[tuple] = []  # heap of (t, n, anchor, distance, rssi, status)
+        self._n = 0
+        self.t = -math.inf  # filter time
+        self._arrival = 0.0
+        self._router = config.router
+        self._db_period = db_period_s
+        self._next_db = 0.0
+        self._frame_id = 0
+        self._tx = bytearray()
+        self.link_dbm: int | None = None
+        self.modem_status: int | None = None
+        self.errors: dict[str, Counter] = {p: Counter() for p in self.inputs}
+        self.counts: Counter = Counter()
+        self.max_late_s = 0.0
+        self.estimates: Counter = Counter()
+
+    # -- input ------------------------------------------------------------------------------
+    def feed(self, port: str, data: bytes, t_ns: int) -> list:
+        """Process one chunk that arrived at *t_ns* (ns since start); the estimates it gives."""
+        a = t_ns * 1e-9
+        self._arrival = a
+        out: list = []
+        self._events(port, self._decoders[port].feed(data), a, out)
+        if port == "xbee" and a >= self._next_db:
+            self._query_db()
+            self._next_db = a + self._db_period
+        self._release(a - self._hold, out)
+        return self._count(out)
+
+    def finish(self) -> list:
+        """End of input: what the decoders still buffer, then every held range."""
+        out: list = []
+        for port, dec in self._decoders.items():
+            self._events(port, dec.flush(), self._arrival, out)
+        self._release(math.inf, out)
+        return self._count(out)
+
+    def take_tx(self) -> bytes:
+        """Bytes the host should send to the coordinator (AT DB queries); cleared."""
+        tx, self._tx = bytes(self._tx), bytearray()
+        return tx
+
+    # -- decoding ---------------------------------------------------------------------------
+    def _events(self, port: str, events: list, a: float, out: list) -> None:
+        for ev in events:
+            if isinstance(ev, DecodeError):
+                kind = ev.kind if ev.format in (port, "") else f"{ev.format}_{ev.kind}"
+                self.errors[port][kind] += 1
+                continue
+            if not ev.known:
+                self.counts[f"{ev.format}_unknown_type"] += 1
+            elif ev.format == "sins":
+                self._imu(ev, a, out)
+            elif ev.format == "nanoloc":
+                self._range(ev.fields, a, out)
+            else:
+                self._xbee(ev)
+
+    def _xbee(self, ev: Frame) -> None:
+        f = ev.fields
+        if ev.type == xbee.FrameType.AT_RESPONSE and f["command"] == b"DB":
+            if f["status"] == xbee.AtStatus.OK and len(f["value"]) == 1:
+                self.link_dbm = -f["value"][0]
+                self.counts["db_answers"] += 1
+        elif ev.type == xbee.FrameType.MODEM_STATUS:
+            self.modem_status = f["status"]
+            self.counts["modem_status"] += 1
+        elif ev.type != xbee.FrameType.RECEIVE_PACKET:
+            self.counts["xbee_other"] += 1
+
+    def _query_db(self) -> None:
+        self._frame_id = self._frame_id % 255 + 1  # 0 would ask for no answer
+        self._tx += xbee.build(xbee.FrameType.AT_COMMAND, self.escaped, frame_id=self._frame_id,
+                               command=b"DB", parameter=b"")
+        self.counts["db_queries"] += 1
+
+    # -- measurements ---------------------------------------------------------------------------
+    def _imu(self, ev: Frame, a: float, out: list) -> None:
+        if ev.source is not None:  # through the radio: one vehicle router
+            if self._router is None:
+                self._router = ev.source
+            elif ev.source != self._router:
+                self.counts["imu_other_router"] += 1
+                return
+        t = self.imu_clock.time(ev.fields["seq"], a)
+        if t is None:
+            return
+        s = adis16350.words_to_sample(ev.fields["words"], self.config.gyro_range_dps)
+        nd_ok = all(s.nd)
+        self.counts["imu"] += 1
+        self.counts["imu_no_new_data"] += not nd_ok
+        self.counts["imu_alarm"] += s.ea
+        self._release(t, out)
+        self.t = max(t, self.t)
+        out += self.estimator.imu(t, s.gyro_rad_s, s.accel_m_s2, nd_ok=nd_ok)
+
+    def _range(self, f: dict, a: float, out: list) -> None:
+        self.counts["reports"] += 1
+        if self.config.tag is not None and f["tag"] != self.config.tag:
+            self.counts["reports_other_tag"] += 1
+            return
+        _, step = self._report_seq.unwrap(f["seq"], a)
+        if step is not None:
+            if step <= 0:
+                self.counts["reports_duplicate"] += 1
+                return
+            self.counts["reports_lost"] += step - 1
+        t = self.range_clock.time(f["t_us"], a)
+        if f["anchor"] not in self.config.anchors:
+            self.counts["reports_unknown_anchor"] += 1
+            return
+        status = f["status"]
+        if nanoloc.is_complete(status):
+            distance = nanoloc.distance(*f["tau"])
+            self.counts["ranges"] += 1
+        else:
+            distance = None
+            self.counts["timeouts" if status & nanoloc.STATUS_TIMEOUT else "range_errors"] += 1
+        item = (t, self._n, f["anchor"], distance, f["rssi"], status)
+        self._n += 1
+        if t > self.t:
+            heapq.heappush(self._held, item)
+        else:
+            self._apply_range(item, out)
+
+    def _release(self, until: float, out: list) -> None:
+        held = self._held
+        while held and held[0][0] <= until:
+            self._apply_range(heapq.heappop(held), out)
+
+    def _apply_range(self, item: tuple, out: list) -> None:
+        t, _, anchor, distance, rssi, status = item
+        if t < self.t:
+            self.counts["ranges_late"] += 1
+            self.max_late_s = max(self.max_late_s, self.t - t)
+        self.t = max(t, self.t)
+        out += self.estimator.range(t, anchor, distance, rssi, status)
+
+    def _count(self, out: list) -> list:
+        for e in out:
+            self.estimates[e.filter] += 1
+        return out
+
+    # -- status -------------------------------------------------------------------------------
+    def _top_decoders(self):
+        """(port, the decoder of the port's own frames): the XBee layer of the xbee port."""
+        for port, dec in self._decoders.items():
+            yield port, dec.xbee if port == "xbee" else dec
+
+    def stats(self) -> dict:
+        """Counters of everything the pipeline saw (part of the status and summary lines)."""
+        return {
+            "ports": {p: {"bytes": top.bytes, "frames": top.frames, "errors": dict(self.errors[p])}
+                      for p, top in self._top_decoders()},
+            "counts": dict(sorted(self.counts.items())),
+            "held": len(self._held),
+            "max_late_ms": self.max_late_s * 1e3,
+            "imu_clock": self.imu_clock.stats(),
+            "anchor_clock": self.range_clock.stats(),
+            "link_dbm": self.link_dbm,
+            "modem_status": self.modem_status,
+            "estimates": dict(self.estimates),
+            "filter_time": None if self.t == -math.inf else self.t,
+        }

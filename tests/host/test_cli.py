@@ -1,0 +1,152 @@
+"""`navtwin host` / `navtwin replay` arguments and host config files: one-line errors."""
+import math
+import os
+
+import pytest
+
+from host import config as host_config
+from host.config import ConfigError
+from protocols.cli import main
+
+
+def run_cli(capsys, *argv) -> tuple[int, str, str]:
+    try:
+        code = main(list(argv))
+    except SystemExit as e:  # argparse
+        code = e.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def one_line_error(capsys, *argv) -> str:
+    code, _, err = run_cli(capsys, *argv)
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+@pytest.fixture
+def pty_path():
+    master, slave = os.openpty()
+    yield os.ttyname(slave)
+    os.close(slave)
+    os.close(master)
+
+
+def test_host_without_ports(capsys):
+    assert "give --xbee PORT" in one_line_error(capsys, "host")
+
+
+def test_host_port_that_does_not_exist(capsys, tmp_path):
+    line = one_line_error(capsys, "host", "--sins", str(tmp_path / "ttyNOPE"))
+    assert "cannot open --sins" in line and "check the device path" in line
+
+
+def test_host_bad_url_scheme(capsys):
+    assert "cannot open --xbee" in one_line_error(capsys, "host", "--xbee", "nosuch://x")
+
+
+def test_host_unknown_filter(capsys, pty_path):
+    line = one_line_error(capsys, "host", "--sins", pty_path, "--filters", "kf,pf")
+    assert "unknown filter 'pf'" in line and "sins, wsn, kf, ekf, ukf or all" in line
+
+
+def test_host_unknown_config_name(capsys, pty_path):
+    line = one_line_error(capsys, "host", "--sins", pty_path, "--config", "garage")
+    assert "no host config named 'garage'" in line and "office" in line
+
+
+def test_host_record_into_a_used_directory(capsys, pty_path, tmp_path):
+    (tmp_path / "x").write_text("keep me")
+    line = one_line_error(capsys, "host", "--sins", pty_path, "--record", str(tmp_path))
+    assert "not an empty directory" in line
+    assert (tmp_path / "x").read_text() == "keep me"
+
+
+def test_host_negative_duration(capsys, pty_path):
+    assert "--duration" in one_line_error(capsys, "host", "--sins", pty_path, "--duration", "-1")
+
+
+def test_replay_of_a_directory_that_is_no_recording(capsys, tmp_path):
+    assert "recording.json" in one_line_error(capsys, "replay", str(tmp_path))
+
+
+def test_help_texts_name_the_commands(capsys):
+    code, out, _ = run_cli(capsys, "host", "--help")
+    assert code == 0 and "--nanoloc" in out and "--record" in out and "SIGTERM" in out
+    code, out, _ = run_cli(capsys, "replay", "--help")
+    assert code == 0 and "gives exactly the live run's lines" in " ".join(out.split())
+
+
+# -- config files -------------------------------------------------------------------------
+
+def test_office_config_is_the_survey_of_scenarios_md():
+    cfg = host_config.load("office")
+    # shared/specs/scenarios.md, office: anchors, start, latitude, gravity
+    assert {i: a[:2] for i, a in cfg.anchors.items()} == {
+        1: (1.3, 1.6), 2: (10.8, 1.6), 3: (10.8, 5.4), 4: (1.3, 5.4)}
+    assert cfg.start == (6.0, 1.8) and cfg.heading_deg == 0.0
+    assert cfg.latitude_deg == 34.316 and cfg.gravity == 9.7952
+    assert cfg.filters == host_config.FILTER_NAMES
+
+
+def test_corridor_config_starts_at_the_origin():
+    cfg = host_config.load("corridor")
+    assert cfg.start == (0.0, 0.0) and len(cfg.anchors) == 4
+
+
+def test_config_round_trips_through_its_dict():
+    cfg = host_config.load("office")
+    assert host_config.from_dict(cfg.to_dict()) == cfg
+    with_extras = host_config.from_dict({**cfg.to_dict(), "tag": 16, "router": "0013A20040A1B2D4",
+                                         "estimator": {"alignment_s": 3.0}})
+    assert host_config.from_dict(with_extras.to_dict()) == with_extras
+
+
+def test_estimator_config_carries_the_host_config():
+    cfg = host_config.load("office")
+    ec = cfg.estimator_config(("wsn", "ukf"))
+    assert ec.filters == ("wsn", "ukf") and dict(ec.anchors) == cfg.anchors
+    assert ec.start == cfg.start and ec.gravity == cfg.gravity
+    assert ec.heading0_rad == math.radians(cfg.heading_deg)
+
+
+def write(tmp_path, text: str) -> str:
+    p = tmp_path / "lab.toml"
+    p.write_text(text)
+    return str(p)
+
+
+ANCHORS = "".join(f"[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n"
+                  for i, (x, y) in enumerate([(0, 0), (5, 0), (5, 5)], 1))
+
+
+@pytest.mark.parametrize("text, words", [
+    ("[site\n", "not valid TOML"),
+    ("[garage]\n" + ANCHORS, "unknown section [garage]"),
+    ("[site]\nlatitude = 3\n" + ANCHORS, "unknown key 'latitude' in [site]"),
+    ("[site]\nlatitude_deg = 123\n" + ANCHORS, "outside [-90"),
+    ("[site]\n", "[[anchors]] missing"),
+    (ANCHORS + "[[anchors]]\nid = 1\nx = 0\ny = 1\n", "anchor id 1 appears twice"),
+    ("[[anchors]]\nid = 1\nx = 0\n", "anchor #1 has no 'y'"),
+    (ANCHORS + "[vehicle]\nstart = [1]\n", "start must be [x, y]"),
+    (ANCHORS + "[vehicle]\ngyro_range_dps = 100\n", "one of 300, 150, 75"),
+    (ANCHORS + "[vehicle]\nrouter = 'xyz'\n", "16 hex digits"),
+    (ANCHORS + "[filters]\nenabled = ['kf', 'pf']\n", "unknown filter 'pf'"),
+    (ANCHORS + "[filters]\nsmoothing = 3\n", "unknown key 'smoothing' in [filters]"),
+    (ANCHORS + "[filters]\nalignment_s = 'long'\n", "alignment_s must be a number"),
+])
+def test_bad_config_files_get_one_line_naming_key_and_fix(tmp_path, capsys, pty_path, text, words):
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as e:
+        host_config.load(path)
+    assert words in str(e.value) and path in str(e.value) and "\n" not in str(e.value)
+    assert words in one_line_error(capsys, "host", "--sins", pty_path, "--config", path)
+
+
+def test_a_good_config_file_is_read(tmp_path):
+    cfg = host_config.load(write(tmp_path, ANCHORS + "[vehicle]\nstart = [1, 2]\ntag = 16\n"
+                                 "[filters]\nenabled = ['ukf']\nalignment_s = 2.5\n"))
+    assert cfg.start == (1.0, 2.0) and cfg.tag == 16 and cfg.filters == ("ukf",)
+    assert cfg.estimator_config().alignment_s == 2.5 and cfg.anchors[3] == (5.0, 5.0, 0.0)

@@ -1,0 +1,117 @@
+"""Replay: a host recording gives the pipeline's estimates exactly; emulator recordings
+get synthesised arrival times."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from host import config as host_config
+from host.bench import synthetic_chunks, write_host_recording
+from host.output import estimate_line
+from host.pipeline import Pipeline
+from host.replay import chunks, replay, settings
+from protocols import sins
+from protocols.recording import Recording, RecordingWriter
+
+from .fake_estimator import RecordingEstimator
+
+OFFICE = host_config.load("office")
+NAVTWIN = str(Path(sys.executable).with_name("navtwin"))
+
+
+def direct_lines(chunks_, filters=host_config.FILTER_NAMES, config=OFFICE) -> str:
+    pipe = Pipeline(config, filters)
+    out = []
+    for c in chunks_:
+        out += pipe.feed(*c)
+    out += pipe.finish()
+    return "".join(map(estimate_line, out))
+
+
+@pytest.fixture(scope="module")
+def host_recording(tmp_path_factory):
+    data = list(synthetic_chunks(OFFICE, 8.0, seed=11))
+    path = write_host_recording(tmp_path_factory.mktemp("rec") / "run", OFFICE,
+                                host_config.FILTER_NAMES, data)
+    return path, data
+
+
+def test_replay_of_a_host_recording_equals_the_pipeline_run(host_recording):
+    path, data = host_recording
+    expected = direct_lines(data)
+    got = []
+    replay(Recording(path), lambda es: got.extend(map(estimate_line, es)))
+    assert "".join(got) == expected
+    filters = {json.loads(line)["filter"] for line in expected.splitlines()}
+    assert filters == set(host_config.FILTER_NAMES)
+
+
+def test_navtwin_replay_prints_the_same_bytes(host_recording, tmp_path):
+    path, data = host_recording
+    expected = direct_lines(data)
+    res = subprocess.run([NAVTWIN, "replay", str(path)],
+                         capture_output=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.decode() == expected
+    summary = json.loads(res.stderr.decode().strip().splitlines()[-1])["summary"]
+    assert summary["counts"]["imu"] == 800
+    out = tmp_path / "est.jsonl"
+    res = subprocess.run([NAVTWIN, "replay", str(path), "--out",
+                          str(out), "--filters", "wsn,ukf"], capture_output=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert {json.loads(x)["filter"] for x in out.read_text().splitlines()} == {"wsn", "ukf"}
+
+
+def test_recorded_config_is_used_unless_overridden(host_recording):
+    path, _ = host_recording
+    rec = Recording(path)
+    assert settings(rec)["config"] == OFFICE
+    corridor = host_config.load("corridor")
+    assert settings(rec, config=corridor)["config"] == corridor
+
+
+def _emulator_recording(path, chunks_by_port):
+    meta = {"source": "navtwin emulate", "scenario": "office", "seed": 1,
+            "ports": {"sins": {"baud": 115200}, "xbee": {"baud": 115200, "api_mode": 2},
+                      "nanoloc": {"baud": 115200}}}
+    with RecordingWriter(path, meta) as rec:
+        for port, items in chunks_by_port.items():
+            for t_dev, data in items:
+                rec.port(port).write(data, t_device_ns=t_dev)
+    return Recording(path)
+
+
+def test_emulator_recording_arrival_is_last_byte_off_the_uart(tmp_path):
+    frame = sins.build_sample(0, [0x8000] * 11)
+    rec = _emulator_recording(tmp_path / "emu", {
+        "sins": [(0, frame)],
+        "xbee": [(1_000_000, b"\x7e" * 10)],
+        "nanoloc": [(1_000_004, b"N" * 10), (5_000_000, b"L")]})
+    kw = settings(rec)
+    assert kw["inputs"] == ("xbee", "nanoloc") and kw["escaped"] is True
+    assert kw["config"].name == "office"
+    got = list(chunks(rec, kw["inputs"]))
+    # a byte is 10 bits at 115200 baud = 86 805.6 ns; 10 bytes 868 055.6 ns
+    assert [(p, t) for p, _, t in got] == [("xbee", 1_868_056), ("nanoloc", 1_868_060),
+                                           ("nanoloc", 5_086_806)]
+
+
+def test_emulator_recording_ties_are_made_strictly_increasing(tmp_path):
+    rec = _emulator_recording(tmp_path / "emu", {"xbee": [(0, b"\x7e")], "nanoloc": [(0, b"N")]})
+    got = [(p, t) for p, _, t in chunks(rec, ("xbee", "nanoloc"))]
+    assert got == [("xbee", 86_806), ("nanoloc", 86_807)]
+
+
+def test_replay_runs_an_emulator_recording_through_the_pipeline(tmp_path):
+    data = list(synthetic_chunks(OFFICE, 2.0, seed=12))
+    # as the emulator would record it: device time = first byte out = last byte - wire time
+    by_port: dict = {}
+    for port, chunk, t in data:
+        by_port.setdefault(port, []).append((t - round(len(chunk) * 10 * 1e9 / 115200), chunk))
+    rec = _emulator_recording(tmp_path / "emu", by_port)
+    est = RecordingEstimator()
+    replay(rec, lambda es: None, estimator=est)
+    assert sum(c[0] == "imu" for c in est.calls) == 200
+    assert sum(c[0] == "range" for c in est.calls) == 80
