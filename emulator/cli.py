@@ -7,7 +7,7 @@ import sys
 import threading
 from pathlib import Path
 
-from protocols.cli import UsageError
+from protocols.cli import UsageError, stop_on_signals
 
 DESCRIPTION = """\
 Run the emulated lab: the SINS board, the lab computer's XBee coordinator (API mode) and the
@@ -69,14 +69,13 @@ def run_emulate(args) -> int:
         raise UsageError(str(e)) from None
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # stop cleanly, links removed
-        signal.signal(sig, lambda *_: stop.set())
     try:
         emu = Emulation(scenario, args.seed, speed=speed, duration_s=args.duration,
                         link_dir=args.link_dir, record=args.record, progress=progress)
     except (LinkDirError, RunError) as e:
         raise UsageError(str(e)) from None
-    with emu:
+    # stop cleanly, links removed, on Ctrl-C, kill and a closed terminal
+    with emu, stop_on_signals(stop, (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)):
         _emit(emu.info())
         summary = emu.run(stop)
     _emit(summary)  # after close: the recording is complete when "done" appears

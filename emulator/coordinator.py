@@ -153,6 +153,21 @@ class Registers:
             value = int.from_bytes(parameter, "big")
         return (AtStatus.OK, value) if p.valid(value) else (AtStatus.INVALID_PARAMETER, None)
 
+    def command(self, name: str, parameter: bytes, apply: bool) -> tuple[int, bytes, bool]:
+        """A register read (no parameter) or set: (status, value, applied). A set is queued,
+        and applied at once when *apply* (0x08, or 0x17 with the apply option)."""
+        if not self.knows(name):
+            return AtStatus.INVALID_COMMAND, b"", False
+        if not parameter:
+            return AtStatus.OK, self.answer(name), False
+        status, v = self.check(name, parameter)
+        if status != AtStatus.OK:
+            return status, b"", False
+        self.queued[name] = v
+        if apply:
+            self.apply()
+        return status, b"", apply
+
     def apply(self) -> None:
         self.values.update(self.queued)
         self.queued.clear()
@@ -320,17 +335,8 @@ class Coordinator:
             return self._discover(t_ns, fid, raw_cmd, param)
         if name in EXECUTE:
             status, reconfigure, extra = self._execute(name, t_ns)
-        elif not reg.knows(name):
-            status = AtStatus.INVALID_COMMAND
-        elif not param:
-            status, value = AtStatus.OK, reg.answer(name)
         else:
-            status, v = reg.check(name, param)
-            if status == AtStatus.OK:
-                reg.queued[name] = v
-                if not queued:
-                    reg.apply()
-                    reconfigure = True
+            status, value, reconfigure = reg.command(name, param, apply=not queued)
         if fid == 0:
             if reconfigure:
                 self._reconfigure()
@@ -440,16 +446,8 @@ class Coordinator:
             elif name in ("AC", "WR"):
                 (reg.apply if name == "AC" else reg.write)()
                 status = AtStatus.OK
-            elif not reg.knows(name):
-                status = AtStatus.INVALID_COMMAND
-            elif not param:
-                status, value = AtStatus.OK, reg.answer(name)
-            else:
-                status, v = reg.check(name, param)
-                if status == AtStatus.OK:
-                    reg.queued[name] = v
-                    if f["options"] & 0x02:  # apply changes
-                        reg.apply()
+            else:  # options bit 1: apply changes
+                status, value, _ = reg.command(name, param, apply=bool(f["options"] & 0x02))
             if there and not back:
                 status, value = AtStatus.TX_FAILURE, b""
         if fid == 0:

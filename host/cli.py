@@ -87,7 +87,9 @@ def _open_out(spec: str):
 
 def run_host(args) -> int:
     from .pipeline import INPUTS
-    from .service import Service, StartError, stop_on_signals
+    from protocols.cli import stop_on_signals
+
+    from .service import Service, StartError
 
     ports = {p: getattr(args, p) for p in INPUTS if getattr(args, p)}
     if not ports:

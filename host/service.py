@@ -17,10 +17,8 @@ from __future__ import annotations
 
 import os
 import queue
-import signal
 import threading
 import time
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, TextIO
 
@@ -131,20 +129,6 @@ def recording_meta(config: HostConfig, filters: tuple[str, ...], escaped: bool,
             "clock": "t_wall_ns = arrival, monotonic ns since the host started",
             "ports": {**{p: {"url": u, "baud": baud} for p, u in ports.items()},
                       **({TX_PORT: {"of": "xbee"}} if "xbee" in ports else {})}}
-
-
-@contextmanager
-def stop_on_signals(stop: threading.Event):
-    """SIGINT and SIGTERM set *stop* (the loop ends between chunks, never inside one)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
 
 
 class Service:

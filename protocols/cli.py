@@ -11,6 +11,8 @@ import argparse
 import json
 import signal
 import sys
+import threading
+from contextlib import contextmanager
 from importlib.metadata import entry_points
 
 from . import __version__
@@ -85,32 +87,37 @@ def register_decode(sub) -> None:
     p.set_defaults(func=run_decode)
 
 
-def stop_on_signals():
-    """An Event set by SIGINT or SIGTERM: long-running commands stop at their next check
-    and still flush and summarise."""
-    import threading
-
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    return stop
+@contextmanager
+def stop_on_signals(stop: threading.Event, signals=(signal.SIGINT, signal.SIGTERM)):
+    """While active, *signals* set *stop*: a long-running command ends at its next check
+    (between chunks, never inside one) and still flushes and summarises."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {s: signal.signal(s, lambda *_: stop.set()) for s in signals}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 def run_decode(args) -> int:
     from .decode import decode
     from .recording import RecordingError
 
-    out = sys.stdout
-    stop = stop_on_signals()
+    stop = threading.Event()
     try:
-        for rec in decode(args.source, args.format, escaped=args.escaped, with_hex=args.hex,
-                          gyro_range=args.gyro_range, baud=args.baud, follow=args.follow,
-                          port=args.port, stop=stop):
-            if args.errors_only and "format" in rec and "error" not in rec:
-                continue
-            out.write(json.dumps(rec, separators=(",", ":")) + "\n")
-            if args.follow:
-                out.flush()
+        with stop_on_signals(stop):
+            records = decode(args.source, args.format, escaped=args.escaped, with_hex=args.hex,
+                             gyro_range=args.gyro_range, baud=args.baud, follow=args.follow,
+                             port=args.port, stop=stop)
+            for rec in records:
+                if args.errors_only and "format" in rec and "error" not in rec:
+                    continue
+                sys.stdout.write(json.dumps(rec, separators=(",", ":")) + "\n")
+                if args.follow:
+                    sys.stdout.flush()
     except FileNotFoundError:
         raise UsageError(f"{args.source}: no such file or port; SOURCE is a file, -, a recording "
                          "directory, a serial port or a pyserial URL") from None

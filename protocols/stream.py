@@ -32,7 +32,7 @@ than one maximal candidate plus the last chunk fed, whatever a length field clai
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from . import nanoloc, sins, xbee

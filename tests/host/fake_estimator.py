@@ -6,19 +6,7 @@ mean something without the real filters; ``calls`` lets tests check times and or
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-
-@dataclass(frozen=True)
-class Estimate:
-    t: float
-    filter: str
-    x: float
-    y: float
-    vx: float
-    vy: float
-    yaw: float
-    cov: tuple
+from host.estimator import Estimate
 
 
 class RecordingEstimator:
