@@ -210,6 +210,7 @@ class Emulation:
         self.scenario = scenario
         self.seed = scenario.seed if seed is None else int(seed)
         self.speed = speed
+        self.t0_monotonic_ns: int | None = None  # set when the clock starts
         self.world = World(scenario, self.seed)
         full = self.world.duration_ns
         self.end_ns = full if duration_s is None else int(round(duration_s * SEC))
@@ -282,7 +283,7 @@ class Emulation:
         feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS)
         for ev in feed.take(PREFILL_NS if paced else 0):  # before the clock starts
             self._enqueue(ev)
-        t0 = time.monotonic_ns()
+        t0 = self.t0_monotonic_ns = time.monotonic_ns()
         vt = 0  # virtual time of the loop (max speed)
         next_check = t0 if self.ports else END
         next_progress = t0 + PROGRESS_NS if self.progress else END
@@ -396,7 +397,10 @@ class Emulation:
             ports[name] = entry
         return {"done": True, "scenario": self.scenario.name, "seed": self.seed,
                 "speed": speed_name(self.speed), "virtual_s": self.reached_ns / SEC,
-                "interrupted": self.interrupted, "ports": ports}
+                "interrupted": self.interrupted, "ports": ports,
+                # scenario time 0 on this machine's CLOCK_MONOTONIC (paced runs), so a host on
+                # the same machine can put its estimates on the scenario's time for evaluation
+                "t0_monotonic_ns": self.t0_monotonic_ns if self.speed is not None else None}
 
     def close(self) -> None:
         """Finish the recording (truth.csv up to where the run got), close ports, remove links."""

@@ -1,7 +1,7 @@
 """Accuracy of the host's estimates against a truth file, beside paper 000's published figures.
 
 Truth reaches the host only as a file (the emulator's ``truth.csv``: a header row with at least
-``t,x,y,yaw``, t in seconds of scenario time). Estimates are the host's JSON lines. Each
+``t,x,y,yaw``; ``t`` in integer nanoseconds of scenario time, one row per millisecond). Estimates are the host's JSON lines. Each
 estimate is compared with the truth interpolated at its time, shifted by ``offset_s`` (scenario
 time = host time + offset_s).
 """
@@ -24,7 +24,9 @@ def load_truth(path: str | Path) -> dict[str, np.ndarray]:
         reader = csv.reader(f)
         header = next(reader)
         rows = np.array([[float(v) for v in row] for row in reader], dtype=float)
-    return {name: rows[:, i] for i, name in enumerate(header)}
+    truth = {name: rows[:, i] for i, name in enumerate(header)}
+    truth["t"] = truth["t"] / 1e9  # seconds, like the estimates
+    return truth
 
 
 def load_estimates(lines) -> dict[str, dict[str, np.ndarray]]:
@@ -93,7 +95,7 @@ def plot(truth: dict, estimates: dict, path: str | Path, offset_s: float = 0.0,
     ax2.set(xlabel="scenario time (s)", ylabel="position error (m)", title="error")
     for ax in (ax1, ax2):
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="best", framealpha=0.7)
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=110)

@@ -304,7 +304,7 @@ class Service:
         self._info("status", body)
 
     def summary(self) -> dict:
-        return {"chunks": self.chunks, "lines": self.lines,
+        return {"chunks": self.chunks, "lines": self.lines, "t0_monotonic_ns": self._t0,
                 "reconnects": {p: r.reconnects for p, r in self._readers.items()},
                 "tx_dropped": sum(r.tx_dropped for r in self._readers.values()),
                 "latency": self.latency.overall(), **self.pipeline.stats(),

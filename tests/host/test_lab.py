@@ -1,0 +1,37 @@
+"""`navtwin lab`: the emulator process and the host on its PTYs, judged against truth.csv."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = [pytest.mark.pty, pytest.mark.slow]
+
+
+def test_lab_runs_and_reports_against_truth(tmp_path):
+    d = tmp_path / "run"
+    p = subprocess.run([sys.executable, "-m", "protocols", "lab", "--duration", "16",
+                        "--dir", str(d), "--no-plot"], capture_output=True, timeout=180)
+    assert p.returncode == 0, p.stderr.decode()[-2000:]
+    report = json.loads((d / "report.json").read_text())
+    errors = report["errors"]
+    assert set(errors) == {"sins", "wsn", "kf", "ekf", "ukf"}
+    assert all(e["n"] >= 100 for e in errors.values())  # ~10 estimates/s for 16 s each
+    # the fused tracks beat pure WSN on the same run (pure SINS only drifts after alignment)
+    for name in ("kf", "ekf", "ukf"):
+        assert errors[name]["mean"] < errors["wsn"]["mean"]
+    assert errors["wsn"]["mean"] < 1.5  # bounded: the emulated office is calibrated near 000's 0.64 m
+    assert abs(report["time_offset_s"]) < 5  # both clocks are this machine's CLOCK_MONOTONIC
+    # the host's own recording replays to its live lines
+    replayed = subprocess.run([sys.executable, "-m", "protocols", "replay", str(d / "host")],
+                              capture_output=True, timeout=120)
+    assert replayed.stdout.decode() == (d / "estimates.jsonl").read_text()
+    assert "filter" in p.stdout.decode() and str(d) in p.stdout.decode()
+
+
+def test_lab_reports_a_bad_scenario_in_one_line(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "protocols", "lab", "--scenario", "nowhere",
+                        "--config", "office", "--dir", str(tmp_path / "r")], capture_output=True,
+                       timeout=120)
+    err = p.stderr.decode().strip()
+    assert p.returncode == 2 and len(err.splitlines()) == 1 and "nowhere" in err
