@@ -7,7 +7,9 @@
     ppm), frames lost (gaps in seq), drift (the last frame's lateness minus the first's,
     against the absolute schedule t_first + k x nominal), and, from a recording of the same
     run, the emulator's own lateness (write time minus scheduled end of each SINS chunk),
-    which separates the emulator's jitter from the reader's wake-up latency.
+    which separates the emulator's jitter from the reader's wake-up latency; and, as the peer
+    in the same run, the same reader measure on a bare PTY pair written on an exact schedule
+    (``bare_pty``): the floor of the kernel's PTY path on this machine.
 ``python -m emulator.bench speed [--scenario office]``
     generates the whole scenario in virtual time (``--speed max``, no PTYs, no recording)
     and reports how many times faster than real time it ran.
@@ -20,6 +22,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import select
 import sys
 import tempfile
 import time
@@ -75,7 +79,49 @@ def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = N
             "drift_ms": float((np.median(drift[-100:]) - np.median(drift[:100])) / 1e6),
             "emulator_late_p50_ms": float(np.percentile(late, 50)),
             "emulator_late_p99_ms": float(np.percentile(late, 99)),
-            "emulator_late_max_ms": float(late.max())}
+            "emulator_late_max_ms": float(late.max()),
+            # the peer in the same run: a bare PTY pair with exactly timed writes
+            "bare_pty": pty_floor(min(len(t), 3000), int(round(nominal_ns)))}
+
+
+def _bare_writer(master: int, frames: int, start_ns: int, period_ns: int) -> None:
+    """Write 30 bytes at start + k x period: sleep, then spin the last 0.5 ms."""
+    for k in range(frames):
+        due = start_ns + k * period_ns
+        while (left := due - time.monotonic_ns()) > 0:
+            if left > 600_000:
+                time.sleep((left - 500_000) / 1e9)
+        os.write(master, b"\x00" * 30)
+
+
+def pty_floor(frames: int = 3000, period_ns: int = 10_000_000) -> dict:
+    """The same reader measure on a bare PTY pair: a separate process writes 30 bytes every
+    10 ms on an exact schedule, this one reads. What is left is the kernel's PTY path and
+    the reader's wake-ups: the floor any PTY-based emulator sits on, on this machine."""
+    import multiprocessing as mp
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    reader = os.open(os.ttyname(slave), os.O_RDWR | os.O_NOCTTY)
+    writer = mp.get_context("fork").Process(
+        target=_bare_writer, args=(master, frames, time.monotonic_ns() + 100_000_000, period_ns))
+    writer.start()
+    stamps, got = [], 0
+    try:
+        while got < 30 * frames:
+            if select.select([reader], [], [], 5.0)[0]:
+                got += len(os.read(reader, 4096))
+                stamps.append(time.monotonic_ns())
+            elif not writer.is_alive():
+                break
+    finally:
+        writer.join()
+        for fd in (reader, slave, master):
+            os.close(fd)
+    dev = np.abs(np.diff(np.array(stamps)) - period_ns) / 1e6
+    return {"frames": len(stamps), "p50_ms": float(np.percentile(dev, 50)),
+            "p99_ms": float(np.percentile(dev, 99)), "max_ms": float(dev.max())}
 
 
 def speed(scenario: str = "office", seed: int | None = None, repeat: int = 3) -> dict:
