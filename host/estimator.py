@@ -15,10 +15,12 @@ ukf    UKF: as the EKF, through sigma points
 =====  =====================================================================================
 
 Time. ``t_s`` is the measurement time (host time base, seconds). The fusion filters keep
-one time, the latest measurement's; a measurement older than that (the two streams are
-merged by the caller) is applied with its lag through the motion model (host.filters.model)
-if the lag is at most ``max_lag_s``, else rejected as ``late``. The SINS needs its IMU
-samples strictly in order; an IMU sample not after the previous one is rejected.
+one time, the latest measurement's (they are predicted to it lazily, before their next
+update or output: one predict then spans the exchanges that updated none of them); a
+measurement older than that (the two streams are merged by the caller) is applied with its
+lag through the motion model (host.filters.model) if the lag is at most ``max_lag_s``, else
+rejected as ``late``. The SINS needs its IMU samples strictly in order; an IMU sample not
+after the previous one is rejected.
 
 Output. Estimates are emitted at the instants k * output_period_s of the measurement time
 base: an estimate at t_k reflects every measurement with t_s <= t_k, the fusion state
@@ -147,8 +149,10 @@ class Estimate:
 
 
 def _estimate(t, name, p, v, yaw, cov4) -> Estimate:
-    return Estimate(float(t), name, float(p[0]), float(p[1]), float(v[0]), float(v[1]),
-                    None if yaw is None else float(yaw), [float(c) for c in np.ravel(cov4)])
+    """p, v: sequences of 2; cov4: a 4x4 array, or its 16 floats row-major."""
+    (x, y), (vx, vy) = np.asarray(p, float).tolist(), np.asarray(v, float).tolist()
+    cov = cov4 if isinstance(cov4, list) else np.ravel(cov4).tolist()
+    return Estimate(float(t), name, x, y, vx, vy, None if yaw is None else float(yaw), cov)
 
 
 class Estimator:
@@ -166,18 +170,23 @@ class Estimator:
         self.alignment = Alignment()
         self.aligned: AlignmentResult | None = None
         self.sins: Strapdown | None = None
-        self._t: float | None = None  # time of the fusion filters
+        self._t: float | None = None  # filter time: the latest measurement's
+        self._t_predicted: float | None = None  # the fusion filters' state is predicted to here
         self._t_imu_first: float | None = None
         self._t_imu: float | None = None
         self._t_aligned: float | None = None
-        self._last_sample: tuple[np.ndarray, np.ndarray] | None = None
+        self._last_sample: tuple[tuple, tuple] | None = None  # (gyro, accel)
         self._k_out = 0  # next output instant: k * output_period_s
+        self._next_out = 0.0  # its time
         self._fixes: list[Fix] = []
         self._gated_since: dict[tuple[str, str], float] = {}  # first rejection of a run of them
         self._tilt_growth = (cfg.tilt_inflation * cfg.gravity * cfg.tilt_rate_sigma) ** 2
+        self._accel_var = cfg.accel_sigma_m_s2**2
         self._range_bias = {int(a): float(c) for a, c in cfg.range_bias_m.items()}
         sv, sa = cfg.stationary_sigma
         self._r_stationary = np.diag([sv**2, sv**2, sa**2, sa**2])
+        self._at_rest = np.zeros(4)
+        self._i2 = np.eye(2)
         self._gyro_limit = math.radians(cfg.gyro_range_dps)
         self.counts: Counter = Counter()
         self.input_rejections: Counter = Counter()
@@ -191,9 +200,10 @@ class Estimator:
         """One IMU sample (body axes: x forward, y left, z up) at measurement time t_s;
         ``nd_ok`` False (ND clear: the registers were not updated) skips it."""
         self.counts["imu"] += 1
-        gyro = np.asarray(gyro_rad_s, dtype=float)
-        accel = np.asarray(accel_m_s2, dtype=float)
-        if not (math.isfinite(t_s) and np.all(np.isfinite(gyro)) and np.all(np.isfinite(accel))):
+        # plain floats: the strapdown's arithmetic is faster on them than on small arrays
+        gyro = tuple(map(float, gyro_rad_s))
+        accel = tuple(map(float, accel_m_s2))
+        if not (math.isfinite(t_s) and all(map(math.isfinite, gyro)) and all(map(math.isfinite, accel))):
             self.input_rejections["imu_implausible"] += 1
             return []
         if not nd_ok:  # a repeated register read: the next sample covers the interval
@@ -202,19 +212,19 @@ class Estimator:
         if self._t_imu is not None and t_s <= self._t_imu:
             self.input_rejections["imu_out_of_order"] += 1
             return []
-        if np.any(np.abs(gyro) >= self._gyro_limit):
+        if max(map(abs, gyro)) >= self._gyro_limit:
             self.counts["imu_overrange"] += 1  # saturated, still the best reading there is
         out = self._begin(t_s)
         acceleration = self._sins_step(t_s, gyro, accel)
-        if acceleration is not None:
+        if acceleration is None:
+            kind, z, R, meas = "stationary", self._at_rest, self._r_stationary, STATIONARY
+        else:
             T = t_s - self._t_aligned
-            r_acc = (self.cfg.accel_sigma_m_s2**2 + self._tilt_growth * T * T) * np.eye(2)
+            kind, z, meas = "accel", np.array(acceleration[:2]), ACCELERATION
+            R = (self._accel_var + self._tilt_growth * T * T) * self._i2
         for name in self.fusion:
-            if acceleration is None:
-                self._update(name, "stationary", np.zeros(4), self._r_stationary, STATIONARY, t_s)
-            else:
-                self._update(name, "accel", acceleration, r_acc, ACCELERATION, t_s)
-        return out + self._end(t_s)
+            self._update(name, kind, z, R, meas, t_s)
+        return self._end(t_s, out)
 
     def range(self, t_s: float, anchor: int, distance_m: float | None, rssi_dbm: int = 0,
               status: int = 0x0F) -> list[Estimate]:
@@ -242,28 +252,36 @@ class Estimator:
                                      np.array([[self.cfg.range_sigma_m**2]]), meas, t_s)
         for cycle in self.grouper.add(t_s, anchor, d):
             self._cycle(cycle)
-        return out + self._end(t_s)
+        return self._end(t_s, out)
 
     # ---------------------------------------------------------------- processing
 
     def _begin(self, t: float) -> list[Estimate]:
         """Start the filters at the first measurement; emit the instants before t."""
         if self._t is None:
-            self._t = t
+            self._t = self._t_predicted = t
             self._k_out = math.ceil(t / self.cfg.output_period_s)
+            self._next_out = self._k_out * self.cfg.output_period_s
             self._init_filters()
-        out = self._emit(lambda b: b < t)
-        if t > self._t:
-            for name in self.fusion:
-                try:
-                    self.filters[name].predict(t - self._t)
-                except np.linalg.LinAlgError:
-                    self._reset(name)
-            self._t = t
+        out = self._emit(t, through=False) if self._next_out < t else []
+        self._t = max(self._t, t)
         return out
 
-    def _end(self, t: float) -> list[Estimate]:
-        return self._emit(lambda b: b <= t)
+    def _predict(self) -> None:
+        """Predict the fusion filters to the filter time. Lazily, before their next update:
+        over measurements that update none of them (most exchanges), F(dt1 + dt2) =
+        F(dt2) F(dt1) and the Q likewise make one predict the same as several."""
+        dt = self._t - self._t_predicted
+        for name in self.fusion:
+            try:
+                self.filters[name].predict(dt)
+            except np.linalg.LinAlgError:
+                self._reset(name)
+        self._t_predicted = self._t
+
+    def _end(self, t: float, out: list[Estimate]) -> list[Estimate]:
+        """out and the estimates of the output instants up to t."""
+        return out + self._emit(t, through=True) if self._next_out <= t else out
 
     def _init_filters(self, only: str | None = None) -> None:
         c = self.cfg
@@ -283,7 +301,7 @@ class Estimator:
         for name in ([only] if only else self.fusion):
             self.filters[name] = make[name]()
 
-    def _sins_step(self, t: float, gyro: np.ndarray, accel: np.ndarray) -> np.ndarray | None:
+    def _sins_step(self, t: float, gyro: tuple, accel: tuple) -> tuple | None:
         """Advance alignment or strapdown; the nav-frame horizontal acceleration once aligned."""
         if self._t_imu_first is None:
             self._t_imu_first = t
@@ -313,12 +331,13 @@ class Estimator:
         if lag > self.cfg.max_lag_s:
             self.rejections[name]["late"] += 1
             return
+        if self._t_predicted < self._t:
+            self._predict()
         f = self.filters[name]
-        key = (name, kind)
         try:
             inn = f.update(z, R, meas, chi2_gate(meas.dim, self.cfg.gate_probability))
             if not inn.accepted:
-                if t - self._gated_since.setdefault(key, t) <= self.cfg.gate_reopen_s:
+                if t - self._gated_since.setdefault((name, kind), t) <= self.cfg.gate_reopen_s:
                     self.rejections[name]["gate"] += 1
                     return
                 # Everything of this kind gated out for too long: the filter, not the sensor, is off.
@@ -327,7 +346,8 @@ class Estimator:
         except np.linalg.LinAlgError:
             self._reset(name)
             return
-        self._gated_since.pop(key, None)
+        if self._gated_since:
+            self._gated_since.pop((name, kind), None)
         self.updates[name][kind] += 1
 
     def _reset(self, name: str) -> None:
@@ -383,40 +403,43 @@ class Estimator:
 
     # ---------------------------------------------------------------- output
 
-    def _emit(self, due) -> list[Estimate]:
+    def _emit(self, t: float, through: bool) -> list[Estimate]:
+        """The estimates of the output instants before t (``through``: up to t inclusive)."""
         out = []
-        while due(b := self._k_out * self.cfg.output_period_s):
+        while (b := self._next_out) < t or (through and b == t):
+            yaw = self.sins.yaw if self.sins is not None else self.cfg.heading0_rad
             for name in self.cfg.filters:
-                e = self._snapshot(name, b)
+                e = self._snapshot(name, b, yaw)
                 if e is not None:
                     out.append(e)
                     self.emitted[name] += 1
             self._k_out += 1
+            self._next_out = self._k_out * self.cfg.output_period_s
         return out
 
-    def _yaw(self) -> float:
-        return self.sins.yaw if self.sins is not None else self.cfg.heading0_rad
-
-    def _snapshot(self, name: str, b: float) -> Estimate | None:
+    def _snapshot(self, name: str, b: float, yaw: float) -> Estimate | None:
         if name in FUSION:
-            x, P = self.model.propagate(self.filters[name].x, self.filters[name].P, b - self._t)
-            return _estimate(b, name, x[:2], x[2:4], self._yaw(), P[:4, :4])
+            x, P = self.model.propagate(self.filters[name].x, self.filters[name].P, b - self._t_predicted)
+            return _estimate(b, name, x[:2], x[2:4], yaw, P[:4, :4])
         if name == "sins":
-            return self._sins_snapshot(b)
+            return self._sins_snapshot(b, yaw)
         return self._wsn_snapshot(b)
 
-    def _sins_snapshot(self, b: float) -> Estimate:
+    def _sins_snapshot(self, b: float, yaw: float) -> Estimate:
         sp, sv, _ = self.cfg.p0_sigma
-        cov = np.diag([sp**2, sp**2, sv**2, sv**2])
+        pp, pv, vv = float(sp) ** 2, 0.0, float(sv) ** 2
         if self.sins is None:
-            return _estimate(b, "sins", self.cfg.start, (0.0, 0.0), self._yaw(), cov)
-        dt = b - self._t_imu
-        p = self.sins.p[:2] + self.sins.v[:2] * dt
-        # velocity random walk q per axis: P_pp = q T^3/3, P_pv = q T^2/2, P_vv = q T
-        T = b - self._t_aligned
-        q = (self.cfg.vrw_m_s_rt_hr / 60.0) ** 2
-        block = q * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
-        return _estimate(b, "sins", p, self.sins.v[:2], self._yaw(), cov + np.kron(block, np.eye(2)))
+            p, v = self.cfg.start, (0.0, 0.0)
+        else:
+            dt = b - self._t_imu
+            v = self.sins.v[:2]
+            p = self.sins.p[:2] + v * dt
+            # velocity random walk q per axis: P_pp = q T^3/3, P_pv = q T^2/2, P_vv = q T
+            T = b - self._t_aligned
+            q = (self.cfg.vrw_m_s_rt_hr / 60.0) ** 2
+            pp, pv, vv = pp + q * (T**3 / 3), pv + q * (T**2 / 2), vv + q * T
+        cov = [pp, 0.0, pv, 0.0, 0.0, pp, 0.0, pv, pv, 0.0, vv, 0.0, 0.0, pv, 0.0, vv]  # (x, y) alike
+        return _estimate(b, "sins", p, v, yaw, cov)
 
     def _wsn_snapshot(self, b: float) -> Estimate | None:
         if len(self._fixes) < 2:
@@ -424,7 +447,10 @@ class Estimator:
         f0, f1 = self._fixes
         dt = f1.t - f0.t
         v = (f1.p - f0.p) / dt
-        cov = np.block([[f1.cov, f1.cov / dt], [f1.cov / dt, (f0.cov + f1.cov) / dt**2]])
+        cov = np.empty((4, 4))  # [[C1, C1/dt], [C1/dt, (C0 + C1)/dt^2]]
+        cov[:2, :2] = f1.cov
+        cov[:2, 2:] = cov[2:, :2] = f1.cov / dt
+        cov[2:, 2:] = (f0.cov + f1.cov) / dt**2
         return _estimate(b, "wsn", f1.p, v, None, cov)
 
     # ---------------------------------------------------------------- status

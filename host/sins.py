@@ -39,6 +39,7 @@ tilt at rest; it is absorbed in roll and pitch (and cancels while the unit stays
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,53 +68,66 @@ def earth_rate_nav(latitude_rad: float, x_azimuth_deg: float = 90.0) -> np.ndarr
     return area_from_enu(x_azimuth_deg) @ enu
 
 
-def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]  # (w, x, y, z)
+
+# The per-sample math works on tuples of Python floats: at 3 and 4 components a numpy call
+# costs more than the arithmetic (docs/filters.md, "Speed").
+
+
+def quat_multiply(p: Sequence[float], q: Sequence[float]) -> Quat:
     pw, px, py, pz = p
     qw, qx, qy, qz = q
-    return np.array([pw * qw - px * qx - py * qy - pz * qz,
-                     pw * qx + px * qw + py * qz - pz * qy,
-                     pw * qy - px * qz + py * qw + pz * qx,
-                     pw * qz + px * qy - py * qx + pz * qw])
+    return (pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw)
 
 
-def quat_from_rotvec(v: np.ndarray) -> np.ndarray:
+def quat_from_rotvec(v: Sequence[float]) -> Quat:
     """exp of a rotation vector (rad): the quaternion of a rotation by |v| about v."""
-    angle = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    x, y, z = v
+    angle = math.sqrt(x * x + y * y + z * z)
     half = 0.5 * angle
     # sin(half)/angle by its series for tiny angles, where the quotient loses precision
     k = 0.5 - angle * angle / 48.0 if angle < 1e-4 else math.sin(half) / angle
-    return np.array([math.cos(half), k * v[0], k * v[1], k * v[2]])
+    return (math.cos(half), k * x, k * y, k * z)
 
 
-def quat_to_dcm(q: np.ndarray) -> np.ndarray:
-    """C_b^n of q (v^n = C v^b)."""
+def quat_to_dcm(q: Sequence[float]) -> tuple[Vec3, Vec3, Vec3]:
+    """C_b^n of q (v^n = C v^b), as three rows."""
     w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
 
 
-def quat_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
+def mat_vec(m: Sequence[Sequence[float]], v: Sequence[float]) -> Vec3:
+    """m v for a 3x3 m given by rows."""
+    (a, b, c), (d, e, f), (g, h, i) = m
+    x, y, z = v
+    return (a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z)
+
+
+def quat_from_euler(roll: float, pitch: float, yaw: float) -> Quat:
     """q of C_b^n = Rz(yaw) Ry(pitch) Rx(roll)."""
-    qz = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
-    qy = np.array([math.cos(pitch / 2), 0.0, math.sin(pitch / 2), 0.0])
-    qx = np.array([math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0])
+    qz = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+    qy = (math.cos(pitch / 2), 0.0, math.sin(pitch / 2), 0.0)
+    qx = (math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0)
     return quat_multiply(quat_multiply(qz, qy), qx)
 
 
-def euler_from_quat(q: np.ndarray) -> tuple[float, float, float]:
+def euler_from_quat(q: Sequence[float]) -> tuple[float, float, float]:
     """(roll, pitch, yaw) of q, inverse of :func:`quat_from_euler`."""
     C = quat_to_dcm(q)
-    return (math.atan2(C[2, 1], C[2, 2]),
-            math.asin(max(-1.0, min(1.0, -C[2, 0]))),
-            math.atan2(C[1, 0], C[0, 0]))
+    return (math.atan2(C[2][1], C[2][2]),
+            math.asin(max(-1.0, min(1.0, -C[2][0]))),
+            math.atan2(C[1][0], C[0][0]))
 
 
 @dataclass(frozen=True, slots=True)
 class AlignmentResult:
-    q: np.ndarray  # initial attitude C_b^n
+    q: Quat  # initial attitude C_b^n
     gyro_bias: np.ndarray  # rad/s, body axes
     roll: float
     pitch: float
@@ -142,69 +156,96 @@ class Alignment:
         roll = math.atan2(f[1], f[2])
         pitch = math.atan2(-f[0], math.hypot(f[1], f[2]))
         q = quat_from_euler(roll, pitch, heading)
-        bias = self._gyro / self.samples - quat_to_dcm(q).T @ earth_rate_nav(latitude_rad, x_azimuth_deg)
+        C = np.array(quat_to_dcm(q))
+        bias = self._gyro / self.samples - C.T @ earth_rate_nav(latitude_rad, x_azimuth_deg)
         return AlignmentResult(q, bias, roll, pitch, heading, self.samples, float(np.linalg.norm(f)))
 
 
 class Strapdown:
     """The pure SINS: attitude, velocity and position from IMU samples alone."""
 
-    def __init__(self, *, position, q: np.ndarray, gyro_bias=(0.0, 0.0, 0.0),
+    def __init__(self, *, position, q: Sequence[float], gyro_bias=(0.0, 0.0, 0.0),
                  velocity=(0.0, 0.0, 0.0), latitude_deg: float, gravity: float,
                  altitude_m: float = 0.0, x_azimuth_deg: float = 90.0):
-        self.p = np.array([*position, 0.0][:3], dtype=float)
-        self.v = np.array(velocity, dtype=float)
-        self.q = np.array(q, dtype=float)
-        self.gyro_bias = np.array(gyro_bias, dtype=float)
+        self._p: Vec3 = tuple(float(c) for c in [*position, 0.0][:3])
+        self._v: Vec3 = tuple(float(c) for c in velocity)
+        self._q: Quat = tuple(float(c) for c in q)
+        self.gyro_bias: Vec3 = tuple(float(c) for c in gyro_bias)
         lat = math.radians(latitude_deg)
-        self._w_ie = earth_rate_nav(lat, x_azimuth_deg)
-        self._area_from_enu = area_from_enu(x_azimuth_deg)
-        r_m, r_n = earth_radii(lat)
+        self._w_ie: Vec3 = tuple(earth_rate_nav(lat, x_azimuth_deg).tolist())
+        self._area_from_enu = area_from_enu(x_azimuth_deg).tolist()
+        self._enu_from_area = area_from_enu(x_azimuth_deg).T.tolist()
+        r_m, r_n = earth_radii(lat)  # once: over a room the latitude is constant
         self._r_m, self._r_n = r_m + altitude_m, r_n + altitude_m
         self._tan_lat = math.tan(lat)
-        self._g = np.array([0.0, 0.0, -gravity])
-        self._prev: tuple[np.ndarray, np.ndarray] | None = None  # last sample, bias removed
+        self.gravity = float(gravity)  # g^n = (0, 0, -g) acts on v_U alone, which eq. 5 holds at 0
+        self._prev: tuple[Vec3, Vec3] | None = None  # last sample, bias removed
 
-    def transport_rate(self) -> np.ndarray:
+    @property
+    def p(self) -> np.ndarray:
+        """Position (m), nav frame."""
+        return np.array(self._p)
+
+    @property
+    def v(self) -> np.ndarray:
+        """Velocity (m/s), nav frame."""
+        return np.array(self._v)
+
+    @property
+    def q(self) -> np.ndarray:
+        """Attitude C_b^n as a quaternion (w, x, y, z)."""
+        return np.array(self._q)
+
+    def transport_rate(self) -> Vec3:
         """w_en^n of 000 eq. 3 (ENU), in area axes."""
-        ve, vn, _ = self._area_from_enu.T @ self.v
-        return self._area_from_enu @ np.array([-vn / self._r_m, ve / self._r_n, ve * self._tan_lat / self._r_n])
+        ve, vn, _ = mat_vec(self._enu_from_area, self._v)
+        return mat_vec(self._area_from_enu, (-vn / self._r_m, ve / self._r_n, ve * self._tan_lat / self._r_n))
 
-    def step(self, dt: float, gyro: np.ndarray, accel: np.ndarray) -> np.ndarray:
+    def step(self, dt: float, gyro: Sequence[float], accel: Sequence[float]) -> Vec3:
         """Integrate from the previous sample to this one, ``dt`` later.
 
         Samples are the instantaneous rates (rad/s) and specific force (m/s^2) at their time
         stamps; over the interval their mean (trapezoid) is held; with dt = 0 the sample is
         only recorded (the start of the first interval). Returns dv/dt in the nav frame (its
         horizontal part is the filters' acceleration measurement)."""
-        gyro = np.asarray(gyro, float) - self.gyro_bias
-        accel = np.asarray(accel, float)
+        bx, by, bz = self.gyro_bias
+        gx, gy, gz = gyro
+        gx, gy, gz = gx - bx, gy - by, gz - bz
+        fx, fy, fz = accel
         if self._prev is not None:
-            w_ib, f_b = 0.5 * (gyro + self._prev[0]), 0.5 * (accel + self._prev[1])
+            (gx0, gy0, gz0), (fx0, fy0, fz0) = self._prev
+            w_ib = (0.5 * (gx + gx0), 0.5 * (gy + gy0), 0.5 * (gz + gz0))
+            f_b = (0.5 * (fx + fx0), 0.5 * (fy + fy0), 0.5 * (fz + fz0))
         else:
-            w_ib, f_b = gyro, accel
-        self._prev = (gyro, accel)
-        w_en = self.transport_rate()
-        w_in = self._w_ie + w_en
+            w_ib, f_b = (gx, gy, gz), (fx, fy, fz)
+        self._prev = ((gx, gy, gz), (fx, fy, fz))
+        ie_x, ie_y, ie_z = self._w_ie
+        en_x, en_y, en_z = self.transport_rate()
         # The body turns by w_ib against inertial space and the nav frame by w_in:
-        # q(t+dt) = exp(w_in dt)* (x) q (x) exp(w_ib dt), exact for constant rates.
-        q_mid = quat_multiply(quat_from_rotvec(w_in * (-0.5 * dt)),
-                              quat_multiply(self.q, quat_from_rotvec(w_ib * (0.5 * dt))))
-        q_new = quat_multiply(quat_from_rotvec(w_in * -dt),
-                              quat_multiply(self.q, quat_from_rotvec(w_ib * dt)))
-        self.q = q_new / np.linalg.norm(q_new)
-        w = 2.0 * self._w_ie + w_en
-        v = self.v
-        coriolis = np.array([w[1] * v[2] - w[2] * v[1], w[2] * v[0] - w[0] * v[2], w[0] * v[1] - w[1] * v[0]])
-        a = quat_to_dcm(q_mid) @ f_b - coriolis + self._g
-        a[2] = 0.0  # eq. 5: V_U = 0 on the floor
-        self.p += self.v * dt + a * (0.5 * dt * dt)
-        self.v += a * dt
-        return a
+        # q(t+dt) = exp(w_in dt)* (x) q (x) exp(w_ib dt), exact for constant rates; the
+        # half step (mid-interval attitude) taken twice is the whole step.
+        h = 0.5 * dt
+        nav_half = quat_from_rotvec(((ie_x + en_x) * -h, (ie_y + en_y) * -h, (ie_z + en_z) * -h))
+        body_half = quat_from_rotvec((w_ib[0] * h, w_ib[1] * h, w_ib[2] * h))
+        q_mid = quat_multiply(nav_half, quat_multiply(self._q, body_half))
+        qw, qx, qy, qz = quat_multiply(nav_half, quat_multiply(q_mid, body_half))
+        norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        self._q = (qw / norm, qx / norm, qy / norm, qz / norm)
+        # dv/dt = C_b^n f^b - (2 w_ie + w_en) x v + g^n, horizontal: v_U = 0 on the floor (eq. 5)
+        wx, wy, wz = 2.0 * ie_x + en_x, 2.0 * ie_y + en_y, 2.0 * ie_z + en_z
+        vx, vy, vz = self._v
+        fn_x, fn_y, _ = mat_vec(quat_to_dcm(q_mid), f_b)
+        ax = fn_x - (wy * vz - wz * vy)
+        ay = fn_y - (wz * vx - wx * vz)
+        s = 0.5 * dt * dt
+        x, y, z = self._p
+        self._p = (x + (vx * dt + ax * s), y + (vy * dt + ay * s), z + vz * dt)
+        self._v = (vx + ax * dt, vy + ay * dt, vz)
+        return (ax, ay, 0.0)
 
     @property
     def euler(self) -> tuple[float, float, float]:
-        return euler_from_quat(self.q)
+        return euler_from_quat(self._q)
 
     @property
     def yaw(self) -> float:

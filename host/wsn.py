@@ -41,6 +41,7 @@ TDMA cycle
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -49,6 +50,10 @@ from itertools import combinations
 import numpy as np
 from scipy.stats import chi2 as chi2_distribution
 
+from .filters.linalg import solve
+
+_ONES2 = np.ones(2)
+_I2 = np.eye(2)
 MIN_RANGES = 3  # TOA: 3 ranges for 2 unknowns; TDOA: 3 ranges give 2 differences
 GN_ITERATIONS = 20
 GN_TOLERANCE_M = 1e-6  # last step; Gauss-Newton converges quadratically from there
@@ -70,7 +75,12 @@ class AnchorLayout:
         self.z = xyz[:, 2].copy()
         self.tag_height = float(tag_height)
         self.dz = self.tag_height - self.z
+        self._dz2 = self.dz**2
         self._row = {a: k for k, a in enumerate(self.ids)}
+        # |r_a - r_b| <= the 3-D distance of anchors a and b: a few, checked every cycle
+        self._baselines = {
+            (a, b): float(np.hypot(np.linalg.norm(self.xy[i] - self.xy[j]), self.z[i] - self.z[j]))
+            for a, i in self._row.items() for b, j in self._row.items()}
 
     def index(self, anchors: Sequence[int]) -> np.ndarray:
         return np.array([self._row[a] for a in anchors], dtype=np.intp)
@@ -78,21 +88,23 @@ class AnchorLayout:
     def __contains__(self, anchor: int) -> bool:
         return anchor in self._row
 
+    def _offsets(self, p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """p - a_i (horizontal) and the 3-D ranges (take, not fancy indexing: faster)."""
+        d = p - self.xy.take(idx, 0)
+        return d, np.sqrt((d * d).dot(_ONES2) + self._dz2.take(idx))
+
     def ranges(self, p: np.ndarray, idx: np.ndarray) -> np.ndarray:
         """3-D ranges from tag positions ``p`` (..., m, 2) or (..., 1, 2) to anchors ``idx``."""
-        d = p - self.xy[idx]
-        return np.sqrt(np.einsum("...i,...i->...", d, d) + self.dz[idx] ** 2)
+        return self._offsets(p, idx)[1]
 
     def geometry(self, p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Ranges (m,) from a position (2,) (or one per anchor, (m, 2)) and d r / d p (m, 2)."""
-        d = p - self.xy[idx]
-        r = np.sqrt(np.einsum("ij,ij->i", d, d) + self.dz[idx] ** 2)
+        d, r = self._offsets(p, idx)
         return r, d / r[:, None]
 
     def baseline(self, a: int, b: int) -> float:
         """3-D distance between anchors a and b (ids): the bound on |r_a - r_b|."""
-        i, j = self._row[a], self._row[b]
-        return float(np.hypot(np.linalg.norm(self.xy[i] - self.xy[j]), self.z[i] - self.z[j]))
+        return self._baselines[a, b]
 
     def hdop(self, p: np.ndarray, idx: np.ndarray | None = None) -> float:
         """sqrt(tr((G^T G)^-1)), G rows = u_i^T: RMSE >= sigma * HDOP (TOA CRLB)."""
@@ -101,9 +113,22 @@ class AnchorLayout:
         return float(np.sqrt(np.trace(np.linalg.inv(g.T @ g))))
 
 
+@lru_cache(maxsize=64)
 def tdoa_covariance(sigma: float, m: int) -> np.ndarray:
-    """R = sigma^2 (I + 1 1^T) of the m range differences to one reference range."""
-    return sigma**2 * (np.eye(m) + np.ones((m, m)))
+    """R = sigma^2 (I + 1 1^T) of the m range differences to one reference range.
+    Cached, so read-only."""
+    R = sigma**2 * (np.eye(m) + np.ones((m, m)))
+    R.flags.writeable = False
+    return R
+
+
+@lru_cache(maxsize=64)
+def tdoa_whitening(sigma: float, m: int) -> np.ndarray:
+    """W^1/2 with W^1/2^T W^1/2 = R^-1 (Cholesky factor of R^-1): whitened, the weighted
+    least squares of the m differences is an ordinary one. Cached, so read-only."""
+    w = np.linalg.cholesky(np.linalg.inv(tdoa_covariance(sigma, m))).T
+    w.flags.writeable = False
+    return w
 
 
 @lru_cache(maxsize=64)
@@ -133,18 +158,26 @@ def toa_linear(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray) -> np.ndarr
     return np.linalg.lstsq(A, rhs - rhs.mean(), rcond=None)[0]
 
 
-def tdoa_closed_form(layout: AnchorLayout, idx: np.ndarray, d: np.ndarray, ref: int) -> np.ndarray:
-    """Spherical-intersection (SX) TDOA position; ``d`` = r_i - r_ref for rows idx != ref."""
+@lru_cache(maxsize=64)
+def _sx_geometry(layout: AnchorLayout, rows: tuple[int, ...], ref: int) -> tuple[np.ndarray, np.ndarray]:
+    """pinv(G), G = 2 (a_i - a_ref), and k_i - k_ref of the SX equations: the survey's alone,
+    so computed once per anchor set (a fixed layout has a handful)."""
+    idx = np.array(rows, dtype=np.intp)
     a_ref = layout.xy[ref]
     a = layout.xy[idx]
     k = np.einsum("ij,ij->i", a, a) + layout.dz[idx] ** 2
     k_ref = a_ref @ a_ref + layout.dz[ref] ** 2
-    G = 2.0 * (a - a_ref)
-    pinv = np.linalg.pinv(G)
-    u = pinv @ (k - k_ref - d**2)
-    w = pinv @ (-2.0 * d)
+    return np.linalg.pinv(2.0 * (a - a_ref)), k - k_ref
+
+
+def tdoa_closed_form(layout: AnchorLayout, idx: np.ndarray, d: np.ndarray, ref: int) -> np.ndarray:
+    """Spherical-intersection (SX) TDOA position; ``d`` = r_i - r_ref for rows idx != ref."""
+    a_ref = layout.xy[ref]
+    pinv, dk = _sx_geometry(layout, tuple(idx.tolist()), int(ref))
+    u = pinv.dot(dk - d**2)
+    w = pinv.dot(-2.0 * d)
     e = u - a_ref
-    qa, qb, qc = w @ w - 1.0, 2.0 * (w @ e), e @ e + layout.dz[ref] ** 2
+    qa, qb, qc = w.dot(w) - 1.0, 2.0 * w.dot(e), e.dot(e) + layout.dz[ref] ** 2
     if abs(qa) < 1e-12:
         roots = np.array([-qc / qb]) if qb else np.array([0.0])
     else:
@@ -154,6 +187,8 @@ def tdoa_closed_form(layout: AnchorLayout, idx: np.ndarray, d: np.ndarray, ref: 
                  else (-qb + np.array([1.0, -1.0]) * np.sqrt(disc)) / (2 * qa))
     roots = roots[roots >= 0.0] if np.any(roots >= 0.0) else np.array([0.0])
     candidates = [u + w * r0 for r0 in roots]
+    if len(candidates) == 1:
+        return candidates[0]
 
     def misfit(p):
         return np.sum((layout.ranges(p[None], idx) - layout.ranges(p[None], np.array([ref])) - d) ** 2)
@@ -166,16 +201,16 @@ def _gauss_newton(residual_jacobian, p0: np.ndarray, weight_sqrt: np.ndarray):
     p = np.asarray(p0, float).copy()
     for _ in range(GN_ITERATIONS):
         e, J = residual_jacobian(p)
-        ew, Jw = weight_sqrt @ e, weight_sqrt @ J
-        step = np.linalg.solve(Jw.T @ Jw, -(Jw.T @ ew))
+        ew, Jw = weight_sqrt.dot(e), weight_sqrt.dot(J)
+        step = solve(Jw.T.dot(Jw), -Jw.T.dot(ew))  # LAPACK: ill-conditioned in a corridor
         p += step
-        if not np.all(np.isfinite(p)):
+        if not (math.isfinite(p[0]) and math.isfinite(p[1])):
             raise np.linalg.LinAlgError("Gauss-Newton diverged")
-        if step @ step < GN_TOLERANCE_M**2:
+        if step.dot(step) < GN_TOLERANCE_M**2:
             break
     e, J = residual_jacobian(p)
-    ew, Jw = weight_sqrt @ e, weight_sqrt @ J
-    return p, np.linalg.inv(Jw.T @ Jw), float(ew @ ew)
+    ew, Jw = weight_sqrt.dot(e), weight_sqrt.dot(J)
+    return p, solve(Jw.T.dot(Jw), _I2), float(ew.dot(ew))
 
 
 def toa_fix(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray, sigma: float):
@@ -192,12 +227,11 @@ def tdoa_fix(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray, sigma: float,
     others = np.array([k for k in range(len(idx)) if k != ref_row], dtype=np.intp)
     ref = idx[ref_row]
     d = r[others] - r[ref_row]
-    # Whitening by the Cholesky factor of R^-1 makes the weighted LS an ordinary one.
-    w_sqrt = np.linalg.cholesky(np.linalg.inv(tdoa_covariance(sigma, len(others)))).T
+    w_sqrt = tdoa_whitening(sigma, len(others))
 
     def rj(p):
         rho, J = layout.geometry(p, idx)
-        return (rho[others] - rho[ref_row]) - d, J[others] - J[ref_row]
+        return (rho.take(others) - rho[ref_row]) - d, J.take(others, 0) - J[ref_row]
 
     return _gauss_newton(rj, tdoa_closed_form(layout, idx[others], d, ref), w_sqrt)
 
@@ -213,16 +247,21 @@ class Solver:
     gate_probability: float = 0.9999
     margin_m: float | None = 2.0  # plausible region: anchors' bounding box grown by this
 
+    _box: tuple[float, float, float, float] | None = field(init=False, default=None, repr=False)
+
     def __post_init__(self):
         if self.method not in ("toa", "tdoa"):
             raise ValueError(f"WSN method {self.method!r}: use 'toa' or 'tdoa'")
+        if self.margin_m is not None:
+            (x0, y0), (x1, y1) = self.layout.xy.min(axis=0), self.layout.xy.max(axis=0)
+            m = self.margin_m
+            self._box = (x0 - m, y0 - m, x1 + m, y1 + m)
 
     def _inside(self, p: np.ndarray) -> bool:
-        if self.margin_m is None:
+        if self._box is None:
             return True
-        lo = self.layout.xy.min(axis=0) - self.margin_m
-        hi = self.layout.xy.max(axis=0) + self.margin_m
-        return bool(np.all(lo <= p) and np.all(p <= hi))
+        x0, y0, x1, y1 = self._box
+        return bool(x0 <= p[0] <= x1 and y0 <= p[1] <= y1)
 
     def _dof(self, m: int) -> int:
         return m - 2 if self.method == "toa" else m - 3
@@ -242,9 +281,9 @@ class Solver:
         """A :class:`Fix`, or why there is none: ``"too_few"`` ranges, ``"geometry"``
         (singular or diverging, e.g. collinear anchors), ``"outside"`` the plausible region,
         ``"residual"`` (inconsistent ranges and no consistent subset)."""
-        order = np.argsort(anchors, kind="stable")
+        order = sorted(range(len(anchors)), key=anchors.__getitem__)  # stable
         anchors = tuple(int(anchors[k]) for k in order)
-        r = np.asarray(ranges, float)[order]
+        r = np.array([float(ranges[k]) for k in order])
         m = len(anchors)
         if m < MIN_RANGES:
             return "too_few"
@@ -283,7 +322,7 @@ class Cycle:
     @property
     def t(self) -> float:
         """Time of the fix: the mean time of the usable exchanges."""
-        return float(np.mean(self.valid_times)) if self.valid_times else self.times[-1]
+        return sum(self.valid_times) / len(self.valid_times) if self.valid_times else self.times[-1]
 
 
 class CycleGrouper:

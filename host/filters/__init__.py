@@ -2,7 +2,8 @@
 
 kf.KalmanFilter, ekf.ExtendedKalmanFilter, ukf.UnscentedKalmanFilter share
 ``predict(dt)`` and ``update(z, R, measurement, gate=None) -> Innovation``;
-model.py holds the motion model (000 eq. 14) and measurement models (000 eq. 15).
+model.py holds the motion model (000 eq. 14) and measurement models (000 eq. 15);
+linalg.py the small inverse and solve (shared with host.wsn's Gauss-Newton).
 """
 from .ekf import ExtendedKalmanFilter
 from .innovation import Innovation

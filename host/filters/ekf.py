@@ -20,6 +20,6 @@ from .kf import KalmanFilter
 
 class ExtendedKalmanFilter(KalmanFilter):
     def update(self, z, R, measurement, gate: float | None = None) -> Innovation:
-        """``measurement`` has ``h(x)`` and ``jacobian(x)`` (host.filters.model)."""
-        y = np.asarray(z, float) - measurement.h(self.x)
-        return self._correct(y, measurement.jacobian(self.x), np.asarray(R, float), gate)
+        """``measurement.linearize(x)`` gives h(x) and dh/dx(x) (host.filters.model)."""
+        hx, H = measurement.linearize(self.x)
+        return self._correct(np.asarray(z, float) - hx, H, np.asarray(R, float), gate)

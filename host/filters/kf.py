@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .innovation import Innovation, gated, inverse
+from .innovation import Innovation, gated
+from .linalg import inverse
 from .model import ConstantAcceleration, Linear
 
 
@@ -39,16 +40,16 @@ class KalmanFilter:
         if not isinstance(measurement, Linear):
             raise TypeError(f"KalmanFilter needs a Linear measurement, got {type(measurement).__name__}")
         H = measurement.H
-        return self._correct(np.asarray(z, float) - H @ self.x, H, np.asarray(R, float), gate)
+        return self._correct(np.asarray(z, float) - H.dot(self.x), H, np.asarray(R, float), gate)
 
     def _correct(self, y: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float | None) -> Innovation:
-        PHT = self.P @ H.T
-        S = H @ PHT + R
+        PHT = self.P.dot(H.T)
+        S = H.dot(PHT) + R
         SI = inverse(S)
         inn = gated(y, S, SI, gate)
         if inn.accepted:
-            K = PHT @ SI
-            self.x = self.x + K @ y
-            I_KH = self._I - K @ H
-            self.P = I_KH @ self.P @ I_KH.T + K @ R @ K.T
+            K = PHT.dot(SI)
+            self.x = self.x + K.dot(y)
+            I_KH = self._I - K.dot(H)
+            self.P = I_KH.dot(self.P).dot(I_KH.T) + K.dot(R).dot(K.T)
         return inn

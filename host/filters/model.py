@@ -28,15 +28,19 @@ Ranges(reference)  r_i(p_i) - r_ref(p_ref), i != ref                TDOA (000 eq
 A measurement taken ``lag`` seconds before the filter's time is predicted by running the
 same constant-acceleration model backwards (p - lag v + lag^2/2 a); the process noise
 over the lag (tens of milliseconds) is neglected. Every ``h`` works on one state (6,) and
-on a stack of sigma points (N, 6).
+on a stack of sigma points (N, 6); ``linearize(x)`` gives h(x) and dh/dx at one state (the
+EKF's), ``jacobian(x)`` the latter alone.
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from host.wsn import AnchorLayout
+if TYPE_CHECKING:  # a type only: host.wsn imports this package's linalg
+    from host.wsn import AnchorLayout
 
 DIM_X = 6
 _I2 = np.eye(2)
@@ -64,28 +68,40 @@ class ConstantAcceleration:
 
     def __init__(self, jerk_psd: float):
         self.jerk_psd = float(jerk_psd)
-        self._last: tuple[float, np.ndarray, np.ndarray] | None = None
+        # F and Q by dt: the IMU period recurs (a few values, as the host clock's rate
+        # estimate steps), and the filters sharing a model share each dt
+        self._transition = lru_cache(maxsize=32)(self._build)
 
+    # ndarray.dot rather than @ here and in the filters: the same BLAS call, a third of
+    # the overhead on these 6x6 operands (python -m host.bench_filters)
     def F(self, dt: float) -> np.ndarray:
-        return (np.array([1.0, dt, dt * dt / 2]) @ _F_BASIS).reshape(DIM_X, DIM_X)
+        return np.array((1.0, dt, dt * dt / 2)).dot(_F_BASIS).reshape(DIM_X, DIM_X)
 
     def Q(self, dt: float) -> np.ndarray:
         d2 = dt * dt
         d3 = d2 * dt
-        powers = np.array([dt, d2 / 2, d3 / 3, d3 / 6, d2 * d2 / 8, d3 * d2 / 20])
-        return (self.jerk_psd * powers @ _Q_BASIS).reshape(DIM_X, DIM_X)
+        powers = np.array((dt, d2 / 2, d3 / 3, d3 / 6, d2 * d2 / 8, d3 * d2 / 20))
+        return (self.jerk_psd * powers).dot(_Q_BASIS).reshape(DIM_X, DIM_X)
+
+    def _build(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        F, Q = self.F(dt), self.Q(dt)
+        F.flags.writeable = Q.flags.writeable = False  # cached
+        return F, Q
 
     def propagate(self, x: np.ndarray, P: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Linear prediction: F x, F P F^T + Q."""
-        if self._last is None or self._last[0] != dt:  # the filters sharing a model share a dt
-            self._last = (dt, self.F(dt), self.Q(dt))
-        _, F, Q = self._last
-        return F @ x, F @ P @ F.T + Q
+        F, Q = self._transition(dt)
+        return F.dot(x), F.dot(P).dot(F.T) + Q
+
+
+def lag_coefficients(lag: float) -> tuple[float, float, float]:
+    """c = (1, -lag, lag^2/2): the position ``lag`` seconds earlier is c_0 p + c_1 v + c_2 a."""
+    return (1.0, -lag, lag * lag / 2)
 
 
 def lag_matrix(lag: float) -> np.ndarray:
-    """C with C x = the position ``lag`` seconds earlier: [I, -lag I, lag^2/2 I] (2x6)."""
-    return np.hstack([_I2, -lag * _I2, (lag * lag / 2) * _I2])
+    """C with C x = the position ``lag`` seconds earlier: c (x) I = [I, -lag I, lag^2/2 I] (2x6)."""
+    return np.hstack([c * _I2 for c in lag_coefficients(lag)])
 
 
 class Linear:
@@ -96,10 +112,14 @@ class Linear:
         self.dim = self.H.shape[0]
 
     def h(self, x: np.ndarray) -> np.ndarray:
-        return x @ self.H.T
+        return x.dot(self.H.T)
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         return self.H
+
+    def linearize(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """h(x) and dh/dx(x)."""
+        return self.h(x), self.H
 
 
 #: The SINS nav-frame horizontal acceleration measures (ax, ay) directly.
@@ -124,8 +144,8 @@ class Ranges:
         self.anchors = tuple(anchors)
         self.idx = layout.index(self.anchors)
         m = len(self.anchors)
-        lags = np.zeros(m) if lags is None else np.asarray(lags, float)
-        self._C = np.stack([lag_matrix(lag) for lag in lags])  # (m, 2, 6)
+        lags = [0.0] * m if lags is None else lags
+        self._c = np.array([lag_coefficients(lag) for lag in lags])  # (m, 3): C_i = c_i (x) I
         if reference is None:
             self._ref, self._others = None, None
             self.dim = m
@@ -135,12 +155,18 @@ class Ranges:
             self.dim = m - 1
 
     def h(self, x: np.ndarray) -> np.ndarray:
-        p = np.einsum("mij,...j->...mi", self._C, x)  # lagged positions (..., m, 2)
+        p = self._c @ x.reshape(*x.shape[:-1], 3, 2)  # lagged positions C_i x, (..., m, 2)
         r = self.layout.ranges(p, self.idx)
         return r if self._ref is None else r[..., self._others] - r[..., self._ref:self._ref + 1]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
-        p = np.einsum("mij,j->mi", self._C, x)
-        _, u = self.layout.geometry(p, self.idx)
-        J = np.einsum("mi,mij->mj", u, self._C)  # d r_i / d x = u_i^T C_i
-        return J if self._ref is None else J[self._others] - J[self._ref]
+        return self.linearize(x)[1]
+
+    def linearize(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """h(x) and dh/dx(x) of one state, from one evaluation of the geometry."""
+        r, u = self.layout.geometry(self._c.dot(x.reshape(3, 2)), self.idx)
+        # d r_i / d x = u_i^T C_i = c_i (x) u_i^T
+        J = (self._c[:, :, None] * u[:, None, :]).reshape(len(u), DIM_X)
+        if self._ref is None:
+            return r, J
+        return r[self._others] - r[self._ref], J[self._others] - J[self._ref]

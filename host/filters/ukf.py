@@ -33,7 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .innovation import Innovation, gated, inverse
+from .innovation import Innovation, gated
+from .linalg import inverse
 from .model import ConstantAcceleration, Linear
 
 
@@ -56,7 +57,7 @@ class UnscentedKalmanFilter:
     def sigma_points(self) -> np.ndarray:
         """(2n+1, n) sigma points of the current (x, P)."""
         U = np.linalg.cholesky(self._scale * self.P).T  # rows = columns of L
-        return np.vstack([self.x, self.x + U, self.x - U])
+        return np.concatenate((self.x[None], self.x + U, self.x - U))
 
     def predict(self, dt: float) -> None:
         """The unscented transform through the linear F, in closed form (exact)."""
@@ -68,22 +69,22 @@ class UnscentedKalmanFilter:
         R = np.asarray(R, float)
         if isinstance(measurement, Linear):
             H = measurement.H
-            zp = H @ self.x
-            Pxz = self.P @ H.T
-            S = H @ Pxz + R
+            zp = H.dot(self.x)
+            Pxz = self.P.dot(H.T)
+            S = H.dot(Pxz) + R
         else:
             X = self.sigma_points()
             Z = measurement.h(X)
-            zp = self.Wm @ Z
+            zp = self.Wm.dot(Z)
             dZ = Z - zp
             WdZ = self.Wc[:, None] * dZ
-            S = dZ.T @ WdZ + R
-            Pxz = (X - self.x).T @ WdZ
+            S = dZ.T.dot(WdZ) + R
+            Pxz = (X - self.x).T.dot(WdZ)
         SI = inverse(S)
         y = np.asarray(z, float) - zp
         inn = gated(y, S, SI, gate)
         if inn.accepted:
-            K = Pxz @ SI
-            self.x = self.x + K @ y
-            self.P = self.P - K @ S @ K.T
+            K = Pxz.dot(SI)
+            self.x = self.x + K.dot(y)
+            self.P = self.P - K.dot(S).dot(K.T)
         return inn

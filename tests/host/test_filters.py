@@ -8,7 +8,7 @@ from scipy.stats import chi2
 
 from host.filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter, Linear,
                           Ranges, UnscentedKalmanFilter, position_fix)
-from host.filters.innovation import inverse
+from host.filters.linalg import inverse, solve
 from host.wsn import AnchorLayout, tdoa_covariance
 
 from .navsynth import OFFICE_ANCHORS
@@ -48,6 +48,9 @@ def test_range_jacobians_match_finite_differences(reference):
     meas = Ranges(LAYOUT, (1, 2, 3, 4), lags=(0.075, 0.05, 0.025, 0.0), reference=reference)
     np.testing.assert_allclose(meas.jacobian(x), numeric_jacobian(meas.h, x), atol=1e-8)
     assert meas.dim == (4 if reference is None else 3)
+    hx, J = meas.linearize(x)  # the EKF's one-pass form: the same h and Jacobian
+    np.testing.assert_allclose(hx, meas.h(x), rtol=1e-15)
+    np.testing.assert_array_equal(J, meas.jacobian(x))
 
 
 def test_ranges_use_the_lagged_position_and_work_on_sigma_stacks():
@@ -69,6 +72,41 @@ def test_small_inverse_matches_numpy():
         A = rng.normal(size=(m, m))
         S = A @ A.T + np.eye(m)
         np.testing.assert_allclose(inverse(S), np.linalg.inv(S), rtol=1e-12)
+
+
+def test_solve_gives_numpys_numbers_even_ill_conditioned():
+    """solve calls the LAPACK routine np.linalg.solve and inv wrap: equal to the last bit, also
+    for the nearly singular normal equations of anchors almost on a line (a WSN fix in a
+    corridor), where another method's rounding shows."""
+    rng = np.random.default_rng(3)
+    solved = 0
+    for k in range(200):
+        J = rng.normal(size=(3, 2))
+        if k % 2:
+            J[:, 1] = J[:, 0] * (1 + 1e-7 * rng.normal()) + 1e-9 * rng.normal(size=3)
+        N, b = J.T @ J, rng.normal(size=2)
+        try:
+            expected = np.linalg.solve(N, b)
+        except np.linalg.LinAlgError:  # so singular that LAPACK met a zero pivot: so must we
+            with pytest.raises(np.linalg.LinAlgError):
+                solve(N, b)
+            continue
+        solved += 1
+        np.testing.assert_array_equal(solve(N, b), expected)
+        np.testing.assert_array_equal(solve(N, np.eye(2)), np.linalg.inv(N))
+    assert solved > 100
+    S = rng.normal(size=(4, 4))
+    S = S @ S.T
+    np.testing.assert_array_equal(inverse(S), np.linalg.inv(S))
+
+
+@pytest.mark.parametrize("S", [np.zeros((1, 1)), np.ones((2, 2)), np.ones((3, 3))])
+def test_singular_systems_raise_linalgerror(S):
+    """What the estimator catches to re-initialise a filter, instead of going on with inf."""
+    with pytest.raises(np.linalg.LinAlgError):
+        inverse(S)
+    with pytest.raises(np.linalg.LinAlgError):
+        solve(S, np.ones(len(S)))
 
 
 @pytest.mark.parametrize("cls", [KalmanFilter, ExtendedKalmanFilter, UnscentedKalmanFilter])
