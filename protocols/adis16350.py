@@ -106,26 +106,45 @@ class Sample:
 
     @property
     def gyro_rad_s(self) -> tuple[float, float, float]:
-        return tuple(math.radians(v) for v in self.gyro_dps)
+        x, y, z = self.gyro_dps
+        return (x * _RAD, y * _RAD, z * _RAD)
 
     @property
     def accel_m_s2(self) -> tuple[float, float, float]:
-        return tuple(v * STANDARD_GRAVITY for v in self.accel_g)
+        x, y, z = self.accel_g
+        return (x * STANDARD_GRAVITY, y * STANDARD_GRAVITY, z * STANDARD_GRAVITY)
+
+
+_RAD = math.pi / 180.0
+
+
+def _s14(w: int) -> int:
+    v = w & 0x3FFF
+    return v - 0x4000 if v & 0x2000 else v
+
+
+def _s12(w: int) -> int:
+    v = w & 0x0FFF
+    return v - 0x1000 if v & 0x0800 else v
 
 
 def words_to_sample(words, gyro_range: int = 300) -> Sample:
-    """Engineering units from the 11 raw words of a SINS frame."""
+    """Engineering units from the 11 raw words of a SINS frame (once per frame on the host:
+    plain int arithmetic, no per-word calls beyond the sign extension)."""
     glsb = GYRO_LSB_DPS[gyro_range]
-    w = words
+    supply, gx, gy, gz, ax, ay, az, tx, ty, tz, aux = words
+    either = 0
+    for w in words:
+        either |= w
     return Sample(
-        supply_v=unsigned(w[0], 12) * SUPPLY_LSB_V,
-        gyro_dps=(signed(w[1], 14) * glsb, signed(w[2], 14) * glsb, signed(w[3], 14) * glsb),
-        accel_g=(signed(w[4], 14) * ACCEL_LSB_G, signed(w[5], 14) * ACCEL_LSB_G,
-                 signed(w[6], 14) * ACCEL_LSB_G),
-        temp_c=tuple(signed(w[i], 12) * TEMP_LSB_C + TEMP_ZERO_C for i in (7, 8, 9)),
-        aux_v=unsigned(w[10], 12) * AUX_LSB_V,
-        nd=tuple(bool(x & ND) for x in w),
-        ea=any(x & EA for x in w),
+        supply_v=(supply & 0x0FFF) * SUPPLY_LSB_V,
+        gyro_dps=(_s14(gx) * glsb, _s14(gy) * glsb, _s14(gz) * glsb),
+        accel_g=(_s14(ax) * ACCEL_LSB_G, _s14(ay) * ACCEL_LSB_G, _s14(az) * ACCEL_LSB_G),
+        temp_c=(_s12(tx) * TEMP_LSB_C + TEMP_ZERO_C, _s12(ty) * TEMP_LSB_C + TEMP_ZERO_C,
+                _s12(tz) * TEMP_LSB_C + TEMP_ZERO_C),
+        aux_v=(aux & 0x0FFF) * AUX_LSB_V,
+        nd=tuple([w >= ND for w in words]),  # 16-bit words: bit 15 set <=> w >= 0x8000
+        ea=bool(either & EA),
     )
 
 

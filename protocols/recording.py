@@ -14,7 +14,6 @@ feeds exactly the recorded chunks at exactly the recorded times.
 """
 from __future__ import annotations
 
-import csv
 import heapq
 import json
 import os
@@ -25,6 +24,7 @@ from typing import Iterator
 FORMAT = "navtwin-recording"
 VERSION = 1
 META = "recording.json"
+INDEX_HEADER = "offset,size,t_device_ns,t_wall_ns"
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,7 +41,7 @@ class PortWriter:
         self.name = name
         self._bin = open(directory / f"{name}.bin", "wb")
         self._idx = open(directory / f"{name}.csv", "w", newline="")
-        self._idx.write("offset,size,t_device_ns,t_wall_ns\n")
+        self._idx.write(INDEX_HEADER + "\n")
         self.offset = 0
 
     def write(self, data: bytes, t_device_ns: int | None = None, t_wall_ns: int | None = None) -> None:
@@ -133,12 +133,19 @@ class Recording:
 
     def chunks(self, port: str) -> Iterator[Chunk]:
         data = self.read_bytes(port)
-        with open(self.directory / f"{port}.csv", newline="") as f:
-            for row in csv.DictReader(f):
-                off, size = int(row["offset"]), int(row["size"])
-                yield Chunk(port, off, data[off:off + size],
-                            int(row["t_device_ns"]) if row["t_device_ns"] else None,
-                            int(row["t_wall_ns"]) if row["t_wall_ns"] else None)
+        index = self.directory / f"{port}.csv"
+        lines = index.read_text().splitlines()
+        if not lines or lines[0] != INDEX_HEADER:
+            raise RecordingError(f"{index}: the first line must be {INDEX_HEADER!r}")
+        for n, line in enumerate(lines[1:], 2):  # plain integers: split, no csv dialect
+            try:
+                off, size, dev, wall = line.split(",")
+                off, size = int(off), int(size)
+                yield Chunk(port, off, data[off:off + size], int(dev) if dev else None,
+                            int(wall) if wall else None)
+            except ValueError:
+                raise RecordingError(f"{index}:{n}: expected offset,size,t_device_ns,t_wall_ns "
+                                     f"as integers, got {line!r}") from None
 
     def merged(self, ports: list[str] | None = None, clock: str = "t_wall_ns") -> Iterator[Chunk]:
         """Chunks of several ports in time order (ties: port name order) by *clock*."""
