@@ -88,15 +88,24 @@ def plot(truth: dict, estimates: dict, path: str | Path, offset_s: float = 0.0,
         t = e["t"] + offset_s
         ax2.plot(t, np.hypot(e["x"] - np.interp(t, truth["t"], truth["x"]),
                              e["y"] - np.interp(t, truth["t"], truth["y"])), lw=1, label=name)
+    xs, ys = list(truth["x"]), list(truth["y"])
     if anchors:
-        xs, ys = zip(*[(a[0], a[1]) for a in anchors.values()])
-        ax1.plot(xs, ys, "r^", ms=9, label="anchors")
-    ax1.set(xlabel="x (m)", ylabel="y (m)", title="tracks", aspect="equal")
-    ax2.set(xlabel="scenario time (s)", ylabel="position error (m)", title="error")
+        ax, ay = zip(*[(a[0], a[1]) for a in anchors.values()])
+        ax1.plot(ax, ay, "r^", ms=9, label="anchors")
+        xs += ax
+        ys += ay
+    # the room, not wherever a drifting track went; errors on a log scale for the same reason
+    margin = 1.5
+    ax1.set(xlim=(min(xs) - margin, max(xs) + margin), ylim=(min(ys) - margin, max(ys) + margin),
+            xlabel="x (m)", ylabel="y (m)", title="tracks (the area; drifting tracks leave it)",
+            aspect="equal")
+    ax2.set(xlabel="scenario time (s)", ylabel="position error (m)", title="error", yscale="log",
+            ylim=(0.01, None))
     for ax in (ax1, ax2):
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8, loc="best", framealpha=0.7)
-    fig.tight_layout()
+    handles, labels = ax1.get_legend_handles_labels()  # one legend, below: nothing hidden
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
