@@ -28,6 +28,7 @@ monotonic ns since the run started when it was written to the PTY.
 """
 from __future__ import annotations
 
+import gc
 import heapq
 import os
 import select
@@ -283,6 +284,9 @@ class Emulation:
         feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS)
         for ev in feed.take(PREFILL_NS if paced else 0):  # before the clock starts
             self._enqueue(ev)
+        if paced:  # what exists now lives for the run: keep full collections from walking it
+            gc.collect()
+            gc.freeze()
         t0 = self.t0_monotonic_ns = time.monotonic_ns()
         vt = 0  # virtual time of the loop (max speed)
         next_check = t0 if self.ports else END
