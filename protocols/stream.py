@@ -129,11 +129,6 @@ class Decoder:
         With *final* (end of stream) every byte must be consumed."""
         raise NotImplementedError
 
-    def _starved(self, j: int) -> None:
-        """End of stream inside the candidate at buffer index *j*."""
-        self._error(TRUNCATED, self._base + j, len(self._buf) - j)
-        self._garbage(self._base + j, 1)
-
     def _frame(self, frame: Frame) -> None:
         self._close_garbage(frame.offset)
         self.frames += 1
@@ -158,64 +153,98 @@ class Decoder:
         self.errors[kind] += 1
         self._out.append(DecodeError(kind, offset, size, self.format))
 
+    def _accept(self, offset: int, raw: bytes, ftype: int, parser, data, start: int,
+                size: int) -> None:
+        """An intact frame of *ftype* whose body is ``data[start:start + size]``: parsed by
+        *parser* (a :func:`protocols.fast.parser_for` pair), kept raw when the type is not
+        declared, malformed when the body does not fit its layout."""
+        if parser is None:
+            self._frame(Frame(self.format, offset, raw, ftype,
+                              {"payload": bytes(data[start:start + size])}, False))
+            return
+        fields = parser[0](data, start, size)
+        if fields is None:
+            self._error(MALFORMED, offset, len(raw))
+            self._garbage(offset, len(raw))
+            return
+        self._frame(Frame(self.format, offset, raw, ftype, fields))
 
-class CrcFramedDecoder(Decoder):
-    """SINS frames and nanoLOC reports: sync(2) type len payload crc16."""
 
-    def __init__(self, fmt: str, sync: bytes, layouts: dict) -> None:
-        super().__init__()
-        self.format = fmt
-        self._sync = sync
-        self._parsers = {t: parser_for(st) for t, st in layouts.items()}
+class LengthFramed(Decoder):
+    """Frames that start with a sync pattern and say their length in a header: the scan and
+    its resync rule, shared by the SINS/nanoLOC framing and XBee API mode 1. A subclass
+    gives ``sync``, ``header`` (bytes needed to know the size), ``integrity`` (the error kind
+    of a failed check) and the three methods below."""
+
+    sync: bytes
+    header: int
+    integrity: str
+
+    def _size(self, buf, j: int) -> tuple[int, bool]:
+        """(claimed frame size, whether any frame can have it) of the candidate at *j*."""
+        raise NotImplementedError
+
+    def _intact(self, buf, j: int, end: int) -> bool:
+        raise NotImplementedError
+
+    def _take(self, offset: int, raw: bytes) -> None:
+        """Parse and emit an intact frame."""
+        raise NotImplementedError
 
     def _scan(self, final: bool) -> int:
-        buf, base, sync = self._buf, self._base, self._sync
+        buf, base, sync, header = self._buf, self._base, self.sync, self.header
+        size_of, intact, take, garbage = self._size, self._intact, self._take, self._garbage
         n = len(buf)
         i = 0
         while True:
             j = buf.find(sync, i)
             if j < 0:
                 # keep a possible first sync byte at the very end for the next chunk
-                keep = n - 1 if n > i and buf[-1] == sync[0] and not final else n
-                self._garbage(base + i, keep - i)
+                keep = n - 1 if len(sync) > 1 and n > i and buf[-1] == sync[0] and not final else n
+                garbage(base + i, keep - i)
                 return keep
-            self._garbage(base + i, j - i)
-            if n - j < HEADER:
+            if j > i:
+                garbage(base + i, j - i)
+            size, possible = size_of(buf, j) if n - j >= header else (n + 1, True)
+            if not possible:  # judged before waiting, so a false length cannot grow the buffer
+                self._error(BAD_LENGTH, base + j, size)
+            elif j + size > n:
                 if not final:
                     return j
-                self._starved(j)
-                i = j + 1
-                continue
-            ftype, length = buf[j + 2], buf[j + 3]
-            parser = self._parsers.get(ftype)
-            if parser is not None and parser[1] is not None and length != parser[1]:
-                self._error(BAD_LENGTH, base + j, HEADER + length + TRAILER)
-                self._garbage(base + j, 1)
-                i = j + 1
-                continue
-            end = j + HEADER + length + TRAILER
-            if end > n:
-                if not final:
-                    return j
-                self._starved(j)
-                i = j + 1
-                continue
-            if crc16(buf[j + 2:end - 2]) != (buf[end - 2] << 8 | buf[end - 1]):
-                self._error(BAD_CRC, base + j, end - j)
-                self._garbage(base + j, 1)
-                i = j + 1
-                continue
-            if parser is None:
-                fields, known = {"payload": bytes(buf[j + HEADER:end - TRAILER])}, False
+                self._error(TRUNCATED, base + j, n - j)
+            elif not intact(buf, j, j + size):
+                self._error(self.integrity, base + j, size)
             else:
-                fields, known = parser[0](buf, j + HEADER, length), True
-                if fields is None:
-                    self._error(MALFORMED, base + j, end - j)
-                    self._garbage(base + j, end - j)
-                    i = end
-                    continue
-            self._frame(Frame(self.format, base + j, bytes(buf[j:end]), ftype, fields, known))
-            i = end
+                take(base + j, bytes(buf[j:j + size]))
+                i = j + size
+                continue
+            self._garbage(base + j, 1)  # resync one byte after the failed start
+            i = j + 1
+
+
+class CrcFramedDecoder(LengthFramed):
+    """SINS frames and nanoLOC reports: sync(2) type len payload crc16."""
+
+    header = HEADER
+    integrity = BAD_CRC
+
+    def __init__(self, fmt: str, sync: bytes, layouts: dict) -> None:
+        super().__init__()
+        self.format = fmt
+        self.sync = sync
+        self._parsers = {t: parser_for(st) for t, st in layouts.items()}
+
+    def _size(self, buf, j: int) -> tuple[int, bool]:
+        length = buf[j + 3]
+        parser = self._parsers.get(buf[j + 2])
+        # a declared type of fixed size must say exactly that; others are skipped by len
+        return HEADER + length + TRAILER, parser is None or parser[1] in (None, length)
+
+    def _intact(self, buf, j: int, end: int) -> bool:
+        return crc16(buf[j + 2:end - 2]) == (buf[end - 2] << 8 | buf[end - 1])
+
+    def _take(self, offset: int, raw: bytes) -> None:
+        self._accept(offset, raw, raw[2], self._parsers.get(raw[2]), raw, HEADER, raw[3])
 
 
 def sins_decoder() -> CrcFramedDecoder:
@@ -230,68 +259,37 @@ _XBEE_PARSERS = {t: parser_for(st) for t, st in xbee.FRAME_BODIES.items()}
 _ESCAPED = tuple(bytes((b,)) for b in sorted(xbee.ESCAPED_BYTES))
 
 
-class XBeeDecoder(Decoder):
+class XBeeDecoder(LengthFramed):
     """XBee API frames in API mode 1 (``escaped=False``) or 2 (``escaped=True``)."""
 
     format = "xbee"
+    sync = b"\x7e"
+    header = 3
+    integrity = BAD_CHECKSUM
 
     def __init__(self, escaped: bool = True, max_frame_data: int = 1024) -> None:
         super().__init__()
         self.escaped = escaped
         self.max_frame_data = max_frame_data
-        self._scan = self._scan_escaped if escaped else self._scan_plain
+        if escaped:
+            self._scan = self._scan_escaped
 
     def _emit(self, offset: int, raw: bytes, data: bytes) -> None:
-        ftype = data[0]
-        parser = _XBEE_PARSERS.get(ftype)
-        if parser is None:
-            self._frame(Frame("xbee", offset, raw, ftype, {"payload": bytes(data[1:])}, False))
-            return
-        fields = parser[0](data, 1, len(data) - 1)
-        if fields is None:
-            self._error(MALFORMED, offset, len(raw))
-            self._garbage(offset, len(raw))
-            return
-        self._frame(Frame("xbee", offset, raw, ftype, fields))
+        """An intact frame with its unescaped frame data (type + fields)."""
+        self._accept(offset, raw, data[0], _XBEE_PARSERS.get(data[0]), data, 1, len(data) - 1)
 
-    def _scan_plain(self, final: bool) -> int:
-        buf, base = self._buf, self._base
-        n = len(buf)
-        i = 0
-        while True:
-            j = buf.find(0x7E, i)
-            if j < 0:
-                self._garbage(base + i, n - i)
-                return n
-            self._garbage(base + i, j - i)
-            if n - j < 3:
-                if not final:
-                    return j
-                self._starved(j)
-                i = j + 1
-                continue
-            length = buf[j + 1] << 8 | buf[j + 2]
-            if length == 0 or length > self.max_frame_data:
-                self._error(BAD_LENGTH, base + j, length + 4)
-                self._garbage(base + j, 1)
-                i = j + 1
-                continue
-            end = j + 4 + length
-            if end > n:
-                if not final:
-                    return j
-                self._starved(j)
-                i = j + 1
-                continue
-            if sum(buf[j + 3:end]) & 0xFF != 0xFF:
-                self._error(BAD_CHECKSUM, base + j, end - j)
-                self._garbage(base + j, 1)
-                i = j + 1
-                continue
-            raw = bytes(buf[j:end])
-            self._emit(base + j, raw, raw[3:-1])
-            i = end
+    # API mode 1: the shared length-framed scan
+    def _size(self, buf, j: int) -> tuple[int, bool]:
+        length = buf[j + 1] << 8 | buf[j + 2]
+        return length + 4, 0 < length <= self.max_frame_data
 
+    def _intact(self, buf, j: int, end: int) -> bool:
+        return sum(buf[j + 3:end]) & 0xFF == 0xFF
+
+    def _take(self, offset: int, raw: bytes) -> None:
+        self._emit(offset, raw, raw[3:-1])
+
+    # API mode 2: a candidate runs to the next bare 7E
     def _scan_escaped(self, final: bool) -> int:
         buf, base = self._buf, self._base
         n = len(buf)
