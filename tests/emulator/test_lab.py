@@ -1,4 +1,4 @@
-"""`navtwin lab`: the emulator process and the host on its PTYs, judged against truth.csv."""
+"""`navtwin lab`: the emulator and the host, two processes on PTYs, judged against truth.csv."""
 import json
 import subprocess
 import sys
@@ -31,7 +31,8 @@ def test_lab_runs_and_reports_against_truth(tmp_path):
 
 def test_lab_reports_a_bad_scenario_in_one_line(tmp_path):
     p = subprocess.run([sys.executable, "-m", "protocols", "lab", "--scenario", "nowhere",
-                        "--config", "office", "--dir", str(tmp_path / "r")], capture_output=True,
+                        "--config", "office",
+                        "--dir", str(tmp_path / "r")], capture_output=True,
                        timeout=120)
     err = p.stderr.decode().strip()
     assert p.returncode == 2 and len(err.splitlines()) == 1 and "nowhere" in err

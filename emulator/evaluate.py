@@ -1,9 +1,9 @@
-"""Accuracy of the host's estimates against a truth file, beside paper 000's published figures.
+"""Accuracy of a host's estimates against the emulator's truth, beside paper 000's figures.
 
-Truth reaches the host only as a file (the emulator's ``truth.csv``: a header row with at least
-``t,x,y,yaw``; ``t`` in integer nanoseconds of scenario time, one row per millisecond). Estimates are the host's JSON lines. Each
-estimate is compared with the truth interpolated at its time, shifted by ``offset_s`` (scenario
-time = host time + offset_s).
+Truth is the emulator's ``truth.csv`` (a header row with at least ``t,x,y``; ``t`` in integer
+nanoseconds of scenario time, one row per millisecond); estimates are the host's JSON lines,
+read from its output file like any other program's. Each estimate is compared with the truth
+interpolated at its time, shifted by ``offset_s`` (scenario time = host time + offset_s).
 """
 from __future__ import annotations
 
