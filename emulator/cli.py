@@ -44,6 +44,8 @@ def register(sub) -> None:
 
 def _check_record_dir(path: str, overwrite: bool) -> None:
     d = Path(path)
+    if d.is_symlink():
+        return  # the recording writer refuses it, and says why
     if d.exists() and not d.is_dir():
         raise UsageError(f"--record {path}: not a directory; pass a directory path")
     if d.is_dir() and any(d.iterdir()):
@@ -78,7 +80,11 @@ def run_emulate(args) -> int:
     with emu, stop_on_signals(stop, (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)):
         _emit(emu.info())
         summary = emu.run(stop)
+    if emu.record_error is not None:  # the run ended there; the recording is closed
+        summary["recording_error"] = str(emu.record_error)
     _emit(summary)  # after close: the recording is complete when "done" appears
+    if emu.record_error is not None:
+        raise UsageError(f"--record {emu.record_error}")
     return 0
 
 

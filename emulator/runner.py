@@ -24,7 +24,10 @@ they arrive) add answers on the ``xbee`` line.
 
 Recording. Each chunk a device emits is recorded, whether or not a client is attached:
 ``t_device_ns`` = when its first byte leaves the UART, ``t_wall_ns`` (paced runs only) =
-monotonic ns since the run started when it was written to the PTY.
+monotonic ns since the run started when it was written to the PTY. The recording, and
+truth.csv up to the virtual time reached, are flushed every ``FLUSH_S`` of wall time (when
+paced, in an idle gap, as world generation is, but never more than ``FLUSH_S`` late), so a
+killed run leaves a replayable prefix. A write that fails ends the run (``record_error``).
 """
 from __future__ import annotations
 
@@ -37,11 +40,12 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from protocols.recording import RecordingWriter
+from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
 
 from .coordinator import Coordinator, Remote, identity_registers
 from .pty import LinkDir, PtyPort
 from .rng import stream
+from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
 
 PORTS = ("sins", "xbee", "nanoloc")
 SEC = 1_000_000_000
@@ -52,6 +56,8 @@ PACED_BLOCK_NS = 100_000_000  # world generation step when paced, done in idle g
 LOOKAHEAD_NS = 2 * SEC  # ... up to this far ahead of the clock
 PREFILL_NS = SEC  # generated before the clock starts
 MAX_BLOCK_NS = SEC
+FLUSH_NS = int(FLUSH_S * SEC)
+TRUTH_STEP_NS = 10 * SEC  # truth rows made at a time: bounds memory when --speed max races ahead
 END = 1 << 62  # later than any event
 
 
@@ -235,6 +241,9 @@ class Emulation:
                     self.ports[name] = PtyPort(name, bauds[name])
                     self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
             self.recorder = self._recorder(record) if record is not None else None
+        except RecordingWriteError as e:
+            self.close()
+            raise RunError(f"--record {e}") from None
         except OSError as e:
             self.close()
             raise RunError(f"--record {record}: {e.strerror or e}; choose a directory you "
@@ -244,6 +253,7 @@ class Emulation:
             raise
         self.reached_ns = 0
         self.interrupted = False
+        self.record_error: RecordingWriteError | None = None  # the write that ended the run
 
     # -- assembly -------------------------------------------------------------------------
     def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
@@ -254,7 +264,9 @@ class Emulation:
         return Coordinator(coord, [router], self.world.link, stream(self.seed, "coordinator"), **kw)
 
     def _recorder(self, directory) -> RecordingWriter:
-        rec = RecordingWriter(directory, meta={
+        # an existing recording in *directory* is replaced (the CLI checks that it is one,
+        # and asks for --overwrite)
+        rec = RecordingWriter(directory, replace=True, meta={
             "source": "navtwin emulate", "scenario": self.scenario.name, "seed": self.seed,
             "speed": speed_name(self.speed), "duration_s": self.end_ns / SEC,
             "ports": {name: dict(self.scenario.ports[name]) for name in PORTS},
@@ -262,10 +274,31 @@ class Emulation:
                                       "leaves the device's UART",
                        "t_wall_ns": "monotonic ns since the run started when the chunk was "
                                     "written to the port (paced runs only)"}})
-        (rec.directory / "scenario.toml").write_text(self.scenario.to_toml())
-        for name in PORTS:  # every port has its files, even if it stays silent
-            rec.port(name)
+        self._truth_ns = 0  # truth.csv has the rows before this
+        self._flush_cost_ns = 0  # a decaying maximum of the wall time one flush takes
+        try:
+            rec.write_file("scenario.toml", self.scenario.to_toml().encode())
+            rec.file("truth.csv").append(TRUTH_HEADER)
+        except BaseException:
+            rec.close()
+            raise
         return rec
+
+    def _flush(self, rec: RecordingWriter, truth_until_ns: int) -> None:
+        """Append truth.csv's rows up to *truth_until_ns* and write everything buffered."""
+        if rec.error is not None:
+            return  # it ended the run; nothing more is written
+        t = time.monotonic_ns()
+        truth = rec.file("truth.csv")
+        while True:
+            t1 = min(self._truth_ns + TRUTH_STEP_NS, truth_until_ns)
+            if t1 > self._truth_ns:
+                truth.append(truth_rows(self.world.truth(self._truth_ns, t1)))
+                self._truth_ns = t1
+            rec.flush()
+            if t1 >= truth_until_ns:
+                break
+        self._flush_cost_ns = max(time.monotonic_ns() - t, self._flush_cost_ns * 99 // 100)
 
     def info(self) -> dict:
         """The ``ready`` line: ports (stable links), pts paths, scenario, seed, speed."""
@@ -288,9 +321,19 @@ class Emulation:
             gc.collect()
             gc.freeze()
         t0 = self.t0_monotonic_ns = time.monotonic_ns()
-        vt = 0  # virtual time of the loop (max speed)
         next_check = t0 if self.ports else END
         next_progress = t0 + PROGRESS_NS if self.progress else END
+        next_flush = t0 + FLUSH_NS if self.recorder is not None else END
+        try:
+            self._loop(stop, feed, paced, t0, next_check, next_progress, next_flush)
+        except RecordingWriteError as e:
+            self.record_error = e
+            self.interrupted = True
+        return self.summary()
+
+    def _loop(self, stop, feed: Feed, paced: bool, t0: int, next_check: int,
+              next_progress: int, next_flush: int) -> None:
+        vt = 0  # virtual time of the loop (max speed)
         while not stop.is_set():
             wall = time.monotonic_ns()
             now = int((wall - t0) * self.speed) if paced else vt
@@ -321,6 +364,13 @@ class Emulation:
                                   and not any(l.busy() for l in self.lines.values())):
                 self.reached_ns = self.end_ns
                 break
+            if wall >= next_flush and (not paced or wall >= next_flush + FLUSH_NS
+                                       or t0 + int(target / self.speed) - wall
+                                       > 2 * self._flush_cost_ns + 2 * SPIN_NS):
+                self._flush(self.recorder, self.reached_ns)
+                next_flush = time.monotonic_ns() + FLUSH_NS
+                if paced:
+                    continue  # the flush took time: look at the clock again
             if not paced:
                 vt = max(vt, min(now, target))
                 continue
@@ -333,7 +383,6 @@ class Emulation:
             self._wait(deadline, min(next_check, next_progress))
         else:
             self.interrupted = True
-        return self.summary()
 
     def _wait(self, deadline: int, check_at: int) -> None:
         """Sleep until *deadline* (monotonic ns) or a client writes; spin the last SPIN_NS."""
@@ -410,13 +459,13 @@ class Emulation:
         """Finish the recording (truth.csv up to where the run got), close ports, remove links."""
         rec, self.recorder = getattr(self, "recorder", None), None
         if rec is not None:
-            from .truth import write_truth_csv
-
             rec.meta["interrupted"] = self.interrupted
             rec.meta["virtual_s"] = self.reached_ns / SEC
-            rec.close()
-            truth = self.world.truth(0, max(self.reached_ns, 1))
-            write_truth_csv(rec.directory / "truth.csv", truth)
+            for finish in (lambda: self._flush(rec, max(self.reached_ns, 1)), rec.close):
+                try:
+                    finish()
+                except RecordingWriteError as e:  # the first failure is the one to report
+                    self.record_error = self.record_error or e
         for port in self.ports.values():
             port.close()
         if self.link_dir is not None:

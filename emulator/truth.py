@@ -17,6 +17,7 @@ truth.csv has a header row with these names and one row per millisecond.
 """
 from __future__ import annotations
 
+import io
 import os
 
 import numpy as np
@@ -44,6 +45,21 @@ def truth_arrays(trajectory, t0_ns: int, t1_ns: int) -> np.ndarray:
     return out
 
 
+HEADER = (",".join(FIELDS) + "\n").encode("ascii")
+_FMT = ["%d"] + ["%.6f"] * 9 + ["%.9f"] * 6
+
+
+def csv_rows(arr: np.ndarray) -> bytes:
+    """truth.csv's rows for *arr*: the rows of a file do not depend on how it was cut up, so
+    a run can append them as it goes."""
+    if not len(arr):
+        return b""
+    out = io.StringIO()
+    # float64 holds integer ns exactly up to 104 days
+    np.savetxt(out, np.column_stack([arr[f] for f in FIELDS]), fmt=_FMT, delimiter=",")
+    return out.getvalue().encode("ascii")
+
+
 def write_truth_csv(path: str | os.PathLike, world_or_arrays, chunk_s: float = 10.0) -> int:
     """Write truth.csv from a World (its whole run) or from truth arrays; returns the rows."""
     if isinstance(world_or_arrays, np.ndarray):
@@ -52,14 +68,11 @@ def write_truth_csv(path: str | os.PathLike, world_or_arrays, chunk_s: float = 1
         w = world_or_arrays
         step = round(chunk_s * 1e9)
         parts = (w.truth(t, min(t + step, w.duration_ns)) for t in range(0, w.duration_ns, step))
-    fmt = ["%d"] + ["%.6f"] * 9 + ["%.9f"] * 6
     rows = 0
-    with open(path, "w", encoding="ascii", newline="") as fh:
-        fh.write(",".join(FIELDS) + "\n")
+    with open(path, "wb") as fh:
+        fh.write(HEADER)
         for arr in parts:
-            if len(arr):
-                # float64 holds integer ns exactly up to 104 days
-                np.savetxt(fh, np.column_stack([arr[f] for f in FIELDS]), fmt=fmt, delimiter=",")
+            fh.write(csv_rows(arr))
             rows += len(arr)
     return rows
 

@@ -6,7 +6,7 @@ import threading
 import time
 
 from protocols.cli import UsageError
-from protocols.recording import Recording, RecordingError
+from protocols.recording import Recording, RecordingError, write_failure
 
 from . import config as host_config
 from .config import ConfigError
@@ -50,6 +50,10 @@ def register(sub) -> None:
         "('navtwin emulate --record') is run with arrival = the time each chunk's last byte "
         "leaves the UART: a deterministic offline run, not equal to any live run.")
     r.add_argument("directory", metavar="DIR", help="the recording directory")
+    r.add_argument("--salvage", action="store_true",
+                   help="replay the intact prefix of a recording that is marked complete but "
+                        "whose tail is damaged (an incomplete one, from a killed run, always "
+                        "replays its intact prefix)")
     _common(r, recorded=True)
     r.add_argument("--api1", dest="escaped", action="store_const", const=False, default=None,
                    help="the coordinator in an emulator recording ran API mode 1 "
@@ -85,11 +89,27 @@ def _open_out(spec: str):
         raise UsageError(f"--out {spec}: {e.strerror}; choose a writable file or -") from None
 
 
+def _close_out(out) -> str | None:
+    """Close (or flush, for stdout) the estimate output; the failure, if any, as one line."""
+    try:
+        out.flush() if out is sys.stdout else out.close()
+    except BrokenPipeError:
+        raise
+    except OSError as e:
+        if out is not sys.stdout:
+            try:
+                out.close()  # what could not be written is lost: close the file all the same
+            except OSError:
+                pass
+        return f"--out {write_failure(out.name, e)}"
+    return None
+
+
 def run_host(args) -> int:
     from .pipeline import INPUTS
     from protocols.cli import stop_on_signals
 
-    from .service import Service, StartError
+    from .service import OutputError, Service, StartError
 
     ports = {p: getattr(args, p) for p in INPUTS if getattr(args, p)}
     if not ports:
@@ -101,6 +121,7 @@ def run_host(args) -> int:
     cfg, filters = _config_and_filters(args, default_config=True)
     out = _open_out(args.out)
     stop = threading.Event()
+    error = None
     try:
         service = Service(ports, cfg, filters or cfg.filters, out=out, escaped=args.escaped,
                           baud=args.baud, record=args.record, status=sys.stderr,
@@ -110,8 +131,13 @@ def run_host(args) -> int:
     except StartError as e:
         raise UsageError(str(e)) from None
     finally:
-        if out is not sys.stdout:
-            out.close()
+        # the run's own write error comes first; closing may fail on what was left buffered
+        error = _close_out(out)
+    if service.error is not None:
+        where = "--out" if isinstance(service.error, OutputError) else "--record"
+        raise UsageError(f"{where} {service.error}")
+    if error:
+        raise UsageError(error)
     return 0
 
 
@@ -120,9 +146,11 @@ def run_replay(args) -> int:
 
     cfg, filters = _config_and_filters(args, default_config=False)
     try:
-        rec = Recording(args.directory)
+        rec = Recording(args.directory, salvage=args.salvage)
     except RecordingError as e:
         raise UsageError(str(e)) from None
+    if (note := rec.skipped_line()) is not None:
+        print(f"navtwin replay: {note}", file=sys.stderr)
     out = _open_out(args.out)
     t0 = time.monotonic()
     shown = [t0]
@@ -137,20 +165,24 @@ def run_replay(args) -> int:
             sys.stderr.write(info_line("progress", {"done": round(fraction, 3),
                                                     "elapsed_s": round(now - t0, 1)}))
 
+    error = None
     try:
         pipe = replay(rec, emit, progress=progress, config=cfg, filters=filters,
                       escaped=args.escaped)
     except BrokenPipeError:
         raise
-    except (RecordingError, ConfigError, OSError) as e:
-        raise UsageError(str(e)) from None
+    except OSError as e:  # the data files are read through RecordingError: this is --out
+        error = f"--out {write_failure(args.out, e)}"
+    except (RecordingError, ConfigError) as e:
+        error = str(e)
     finally:
-        if out is not sys.stdout:
-            out.close()
-        else:
-            out.flush()
+        error = error or _close_out(out)
+    if error:
+        raise UsageError(error)
     stats = pipe.stats()
     sys.stderr.write(info_line("summary", {"recording": str(rec.directory),
+                                           "complete": rec.complete,
+                                           **({"skipped": rec.skipped} if rec.skipped else {}),
                                            "elapsed_s": round(time.monotonic() - t0, 3),
                                            **stats, "estimator": pipe.estimator.stats()}))
     return 0

@@ -29,11 +29,25 @@ def is_host_recording(rec: Recording) -> bool:
     return rec.meta.get("source") == HOST_SOURCE and "host" in rec.meta
 
 
+def _host_meta(rec: Recording) -> dict:
+    """The recorded run's settings, checked for shape (one-line errors)."""
+    h = rec.meta["host"]
+    ok = (isinstance(h, dict) and isinstance(h.get("config"), dict)
+          and isinstance(h.get("filters"), list) and all(isinstance(f, str) for f in h["filters"])
+          and isinstance(h.get("escaped"), bool) and isinstance(h.get("inputs"), list)
+          and h["inputs"] and all(p in INPUTS and p in rec.ports for p in h["inputs"]))
+    if not ok:
+        raise RecordingError(f"{rec.directory / 'recording.json'}: \"host\" is not "
+                             f"{{config: object, filters: [names], escaped: bool, inputs: "
+                             f"[recorded ports]}}; re-record, or pass --config and --filters")
+    return h
+
+
 def settings(rec: Recording, *, config: HostConfig | None = None,
              filters: tuple[str, ...] | None = None, escaped: bool | None = None) -> dict:
     """Pipeline keyword arguments for *rec*: the live run's, unless overridden."""
     if is_host_recording(rec):
-        h = rec.meta["host"]
+        h = _host_meta(rec)
         cfg = config or host_config.from_dict(h["config"], f"{rec.directory}: recorded config")
         return {"config": cfg, "filters": filters or tuple(h["filters"]),
                 "inputs": tuple(h["inputs"]),
@@ -84,7 +98,7 @@ def replay(rec: Recording, emit: Callable[[list], None], *,
     pipeline (its ``stats()``). *progress* gets the fraction of bytes done, now and then."""
     kw = settings(rec, **overrides)
     pipe = Pipeline(kw.pop("config"), kw.pop("filters"), estimator=estimator, **kw)
-    total = sum(rec.path(p).stat().st_size for p in pipe.inputs) or 1
+    total = sum(rec.sizes[p] for p in pipe.inputs) or 1
     done = 0
     for n, (port, data, t_ns) in enumerate(chunks(rec, pipe.inputs)):
         out = pipe.feed(port, data, t_ns)

@@ -9,6 +9,12 @@ unique and increasing), records it, and feeds it to the :class:`host.pipeline.Pi
 The recording therefore holds exactly what was processed, in order: ``navtwin replay``
 gives the same estimates.
 
+The recording is flushed every ``FLUSH_S`` (a kill loses at most ~1 s of it). A write that
+fails, to the recording or to the estimate output (disk full, EIO, a file size limit), ends
+the run: the recording is closed with what was written, the summary is still written, and
+:attr:`Service.error` holds the one-line reason. A broken pipe on the output is not such a
+failure: it ends the run quietly (``BrokenPipeError``), as the reader is gone.
+
 A read that fails (device unplugged, PTY link gone, EIO, socket closed) closes the port;
 its reader reopens it every ``RETRY_S`` by wall clock until it is back. The pipeline keeps
 its state meanwhile: only which bytes arrive, not how they are processed, depends on it.
@@ -25,7 +31,7 @@ from typing import Callable, TextIO
 import serial
 
 from protocols import __version__
-from protocols.recording import RecordingWriter
+from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter, write_failure
 
 from .config import HostConfig
 from .output import Latency, estimate_line, info_line
@@ -36,6 +42,10 @@ RETRY_S = 0.5
 MAX_CHUNK = 1 << 16
 TX_PORT = "xbee.tx"  # what the host sent to the coordinator, recorded for completeness
 HOST_SOURCE = "navtwin host"  # a host recording's meta "source"
+
+
+class OutputError(Exception):
+    """The estimate output cannot be written: one line naming it and the fix."""
 
 
 class StartError(Exception):
@@ -153,6 +163,7 @@ class Service:
         self.latency = Latency()
         self.record_dir = None if record is None else Path(record)
         self.recorder: RecordingWriter | None = None
+        self.error: RecordingWriteError | OutputError | None = None  # what ended the run
         self.lines = 0
         self.chunks = 0
         self.bytes = dict.fromkeys(self.ports, 0)
@@ -184,19 +195,11 @@ class Service:
         return opened
 
     def _start_recording(self) -> None:
-        d = self.record_dir
-        if d.exists() and (not d.is_dir() or any(d.iterdir())):
-            raise StartError(f"--record {d}: exists and is not an empty directory; "
-                             f"choose a new directory")
+        # a new or empty directory, never through a symbolic link (the writer checks)
         try:
-            self.recorder = RecordingWriter(d, self.meta())
-            for name in self.ports:
-                self.recorder.port(name)
-            if "xbee" in self.ports:
-                self.recorder.port(TX_PORT)
-            self.recorder.write_meta()
-        except OSError as e:
-            raise StartError(f"--record {d}: {e.strerror}; choose a writable directory") from None
+            self.recorder = RecordingWriter(self.record_dir, self.meta())
+        except RecordingWriteError as e:
+            raise StartError(f"--record {e}") from None
 
     # -- run -----------------------------------------------------------------------------
     def run(self, stop: threading.Event | None = None, duration_s: float | None = None) -> dict:
@@ -222,35 +225,50 @@ class Service:
         next_status = self._t0 + period_ns
         end = None if duration_s is None else self._t0 + int(duration_s * 1e9)
         try:
-            while not stop.is_set():
-                try:
-                    kind, name, data, t_read = self._queue.get(timeout=0.05)
-                except queue.Empty:
-                    kind = None
-                if kind == "data":
-                    self._process(name, data, t_read)
-                elif kind is not None:
-                    self._info("status", {"event": f"port_{kind}", "port": name,
-                                          **({"error": data.decode()} if data else {})})
-                now = time.monotonic_ns()
-                if now >= next_status:
-                    self._status(now)
-                    if self.recorder is not None:
-                        self.recorder.flush()
-                    next_status = now + period_ns
-                if end is not None and now >= end:
-                    break
+            self._loop(stop, period_ns, next_status, end)
+        except (RecordingWriteError, OutputError) as e:
+            self.error = e
         finally:
             self._stop_readers.set()
             for r in self._readers.values():
                 r.join()
             if self.recorder is not None:
-                self.recorder.close()
-        self._emit(self.pipeline.finish(), None, None)
-        self.out.flush()
+                try:
+                    self.recorder.close()
+                except RecordingWriteError as e:
+                    self.error = self.error or e
+        if not isinstance(self.error, OutputError):
+            try:
+                self._emit(self.pipeline.finish(), None, None)
+            except OutputError as e:
+                self.error = self.error or e
         summary = self.summary()
         self._info("summary", summary)
         return summary
+
+    def _loop(self, stop: threading.Event, period_ns: int, next_status: int,
+              end: int | None) -> None:
+        flush_ns = int(FLUSH_S * 1e9)
+        next_flush = self._t0 + flush_ns
+        while not stop.is_set():
+            try:
+                kind, name, data, t_read = self._queue.get(timeout=0.05)
+            except queue.Empty:
+                kind = None
+            if kind == "data":
+                self._process(name, data, t_read)
+            elif kind is not None:
+                self._info("status", {"event": f"port_{kind}", "port": name,
+                                      **({"error": data.decode()} if data else {})})
+            now = time.monotonic_ns()
+            if now >= next_status:
+                self._status(now)
+                next_status = now + period_ns
+            if self.recorder is not None and now >= next_flush:
+                self.recorder.flush()
+                next_flush = now + flush_ns
+            if end is not None and now >= end:
+                break
 
     def _process(self, name: str, data: bytes, t_read: int) -> None:
         stamp = max(t_read - self._t0, self._last_stamp + 1)
@@ -267,8 +285,13 @@ class Service:
     def _emit(self, estimates: list, port: str | None, t_read: int | None) -> None:
         if not estimates:
             return
-        self.out.write("".join(map(estimate_line, estimates)))
-        self.out.flush()
+        try:
+            self.out.write("".join(map(estimate_line, estimates)))
+            self.out.flush()
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise OutputError(write_failure(getattr(self.out, "name", "the output"), e)) from None
         self.lines += len(estimates)
         done = time.monotonic_ns()
         if port is not None:
@@ -309,4 +332,5 @@ class Service:
                 "tx_dropped": sum(r.tx_dropped for r in self._readers.values()),
                 "latency": self.latency.overall(), **self.pipeline.stats(),
                 "estimator": self.pipeline.estimator.stats(),
-                **({"recording": str(self.record_dir)} if self.record_dir else {})}
+                **({"recording": str(self.record_dir)} if self.record_dir else {}),
+                **({"error": str(self.error)} if self.error else {})}

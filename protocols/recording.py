@@ -1,8 +1,9 @@
 """Recordings: the bytes of each port with their times, in a directory.
 
-Layout (``docs/recording.md``)::
+Layout (``docs/emulator.md``, "Recordings")::
 
-    DIR/recording.json     {"format": "navtwin-recording", "version": 1, "ports": {...}, ...}
+    DIR/recording.json     {"format": "navtwin-recording", "version": 1, "complete": true,
+                            "ports": {...}, ...}
     DIR/<port>.bin         every byte of the port, in order
     DIR/<port>.csv         one line per chunk: offset,size,t_device_ns,t_wall_ns
 
@@ -11,12 +12,30 @@ device clock at the chunk's first byte (emulator recordings; empty in host recor
 ``t_wall_ns`` is the wall time of the write (emulator, real time only) or the arrival time
 of the read (host, monotonic ns since the run started). Both are integers, so a replay
 feeds exactly the recorded chunks at exactly the recorded times.
+
+Crash safety. ``recording.json`` is written when the recording starts, with
+``"complete": false``, and replaced atomically at close with ``"complete": true`` (false if
+a write failed). The writer buffers data and index in memory and writes them on
+:meth:`RecordingWriter.flush`, each port's data before its index, so the index on disk never
+names bytes that are not on disk: a killed process leaves a replayable prefix up to its
+last flush. Callers flush at least every ``FLUSH_S``; the writer flushes itself when
+``FLUSH_BYTES`` are buffered.
+
+Reading validates: the meta's shape, and each index against its data file (contiguous
+offsets from 0, sizes in (0, MAX_CHUNK], integer non-decreasing times). Data files are
+streamed, never read whole. A truncated tail (chunks past the end of the data, a partial
+last index line) is what a crash leaves: in a recording that is not complete it is skipped
+and reported in :attr:`Recording.skipped`; in a complete one it is damage, an error unless
+``salvage`` asks for the intact prefix.
 """
 from __future__ import annotations
 
+import errno
 import heapq
 import json
 import os
+import re
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -25,6 +44,29 @@ FORMAT = "navtwin-recording"
 VERSION = 1
 META = "recording.json"
 INDEX_HEADER = "offset,size,t_device_ns,t_wall_ns"
+FLUSH_S = 0.5  # callers flush at least this often: a kill loses at most ~1 s of wall time
+FLUSH_BYTES = 1 << 20  # buffered bytes (all files) that make the writer flush by itself
+MAX_CHUNK = 1 << 24  # no writer makes a chunk this big: a larger size is not a chunk
+BAUDS = range(50, 4_000_001)  # what a serial port can be set to (B50 .. B4000000)
+PORT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")  # a file stem in DIR, no path
+_MAX_INDEX_LINE = 100  # four integers and three commas
+_INT = re.compile(rb"[0-9]{1,19}")
+
+_FIX = {errno.ENOSPC: "the filesystem is full; free space or write to another filesystem",
+        errno.EDQUOT: "the disk quota is used up; free space or write elsewhere",
+        errno.EFBIG: "the file is larger than allowed (ulimit -f or the filesystem's limit); "
+                     "raise the limit or write elsewhere",
+        errno.EIO: "the device reported an I/O error; check the disk (dmesg) or write elsewhere"}
+
+
+def write_failure(path, err: OSError) -> str:
+    """One line for a write to *path* that failed with *err*: the problem and the fix."""
+    return (f"{path}: {err.strerror or err}; "
+            f"{_FIX.get(err.errno, 'check the path and its permissions, or write elsewhere')}")
+
+
+class RecordingWriteError(Exception):
+    """A recording that cannot be created or written: one line naming the file and the fix."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,25 +78,80 @@ class Chunk:
     t_wall_ns: int | None
 
 
-class PortWriter:
-    def __init__(self, directory: Path, name: str) -> None:
-        self.name = name
-        self._bin = open(directory / f"{name}.bin", "wb")
-        self._idx = open(directory / f"{name}.csv", "w", newline="")
-        self._idx.write(INDEX_HEADER + "\n")
-        self.offset = 0
+class _File:
+    """An append-only file of the recording: bytes are buffered until :meth:`flush`."""
 
-    def write(self, data: bytes, t_device_ns: int | None = None, t_wall_ns: int | None = None) -> None:
-        if not data:
-            return
-        self._bin.write(data)
-        self._idx.write(f"{self.offset},{len(data)},"
-                        f"{'' if t_device_ns is None else t_device_ns},"
-                        f"{'' if t_wall_ns is None else t_wall_ns}\n")
-        self.offset += len(data)
+    def __init__(self, writer: "RecordingWriter", name: str, replace: bool) -> None:
+        self.path = writer.directory / name
+        flags = (os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+                 | (os.O_TRUNC if replace else os.O_EXCL))
+        try:
+            self.fd = os.open(name, flags, 0o644, dir_fd=writer.dirfd)
+        except OSError as e:
+            raise RecordingWriteError(_refusal(self.path, e)) from None
+        if not stat.S_ISREG(os.fstat(self.fd).st_mode):
+            os.close(self.fd)
+            raise RecordingWriteError(f"{self.path}: not a regular file; remove it or record "
+                                      f"into a new directory")
+        self._writer = writer
+        self._buf = bytearray()
+
+    def append(self, data: bytes) -> None:
+        self._buf += data
+        self._writer.buffered += len(data)
 
     def flush(self) -> None:
-        self._bin.flush()
+        buf, done = self._buf, 0
+        try:
+            with memoryview(buf) as view:
+                while done < len(buf):
+                    done += os.write(self.fd, view[done:])
+        except OSError as e:
+            raise RecordingWriteError(write_failure(self.path, e)) from None
+        finally:
+            self._writer.buffered -= len(buf)
+            buf.clear()  # after a failure nothing more is written: see RecordingWriter
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+
+def _refusal(path: Path, e: OSError) -> str:
+    if e.errno == errno.ELOOP:
+        return f"{path}: is a symbolic link; navtwin does not record through links: remove it"
+    if e.errno == errno.EEXIST:
+        return f"{path}: exists; record into a new directory"
+    return write_failure(path, e)
+
+
+class PortWriter:
+    def __init__(self, writer: "RecordingWriter", name: str) -> None:
+        if not PORT_NAME.fullmatch(name):
+            raise ValueError(f"port name {name!r} is not a plain file name")
+        self.name = name
+        self._writer = writer
+        self._bin = _File(writer, f"{name}.bin", writer.replace)
+        self._idx = _File(writer, f"{name}.csv", writer.replace)
+        self._idx.append(INDEX_HEADER.encode() + b"\n")
+        self.offset = 0  # bytes written to this port so far (flushed or not)
+
+    def write(self, data: bytes, t_device_ns: int | None = None,
+              t_wall_ns: int | None = None) -> None:
+        """Buffer one chunk; may flush (and so raise :class:`RecordingWriteError`)."""
+        if not data or self._writer.error is not None:
+            return
+        if len(data) > MAX_CHUNK:
+            raise ValueError(f"a chunk of {len(data)} bytes is over MAX_CHUNK; write it in parts")
+        self._bin.append(data)
+        self._idx.append(f"{self.offset},{len(data)},"
+                         f"{'' if t_device_ns is None else t_device_ns},"
+                         f"{'' if t_wall_ns is None else t_wall_ns}\n".encode())
+        self.offset += len(data)
+        if self._writer.buffered >= FLUSH_BYTES:
+            self._writer.flush()
+
+    def flush(self) -> None:
+        self._bin.flush()  # the data first: the index never names bytes not on disk
         self._idx.flush()
 
     def close(self) -> None:
@@ -62,36 +159,139 @@ class PortWriter:
         self._idx.close()
 
 
-class RecordingWriter:
-    """Write a recording; ``meta`` is free JSON (scenario, seed, port settings, source)."""
+def _open_dir(directory: Path) -> int:
+    """The recording directory, created if missing, never through a symbolic link."""
+    try:
+        directory.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.mkdir(directory, 0o755)
+        except FileExistsError:
+            pass
+        if directory.is_symlink():
+            raise RecordingWriteError(f"{directory}: is a symbolic link; navtwin does not record "
+                                      f"through links: pass the directory itself")
+        return os.open(directory, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except OSError as e:
+        if e.errno == errno.ENOTDIR:
+            raise RecordingWriteError(f"{directory}: not a directory; pass a directory path") \
+                from None
+        raise RecordingWriteError(write_failure(directory, e)) from None
 
-    def __init__(self, directory: str | os.PathLike, meta: dict | None = None) -> None:
+
+class RecordingWriter:
+    """Write a recording; ``meta`` is free JSON (scenario, seed, port settings, source).
+
+    Every port of ``meta["ports"]`` gets its files at once, so a silent port is recorded as
+    such. The directory must be new or empty unless *replace* (then files of the same names
+    are truncated). The meta is on disk from the start (``"complete": false``). After a write
+    fails, :attr:`error` holds it, nothing more is written, and :meth:`close` leaves the meta
+    saying ``"complete": false``; the error is raised once, where it happened.
+    """
+
+    def __init__(self, directory: str | os.PathLike, meta: dict | None = None, *,
+                 replace: bool = False) -> None:
         self.directory = Path(directory)
-        self.directory.mkdir(parents=True, exist_ok=True)
         self.meta = dict(meta or {})
+        self.replace = replace
         self.ports: dict[str, PortWriter] = {}
+        self.files: dict[str, _File] = {}  # other append-only files (truth.csv)
+        self.buffered = 0
+        self.error: RecordingWriteError | None = None
+        self.dirfd = _open_dir(self.directory)
+        try:
+            if not replace and os.listdir(self.dirfd):
+                raise RecordingWriteError(f"{self.directory}: exists and is not an empty "
+                                          f"directory; choose a new directory")
+            for name in self.meta.get("ports", {}):
+                self.ports[name] = PortWriter(self, name)
+            self.write_meta(complete=False)
+        except BaseException:
+            self._close_files()
+            os.close(self.dirfd)
+            raise
 
     def port(self, name: str) -> PortWriter:
         if name not in self.ports:
-            self.ports[name] = PortWriter(self.directory, name)
+            self.ports[name] = PortWriter(self, name)
+            self.write_meta(complete=False)  # a crash leaves a meta that lists the port
         return self.ports[name]
 
-    def write_meta(self) -> None:
-        meta = {"format": FORMAT, "version": VERSION, **self.meta,
-                "ports": {**self.meta.get("ports", {}),
-                          **{n: self.meta.get("ports", {}).get(n, {}) for n in self.ports}}}
-        tmp = self.directory / (META + ".tmp")
-        tmp.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
-        os.replace(tmp, self.directory / META)
+    def file(self, name: str) -> _File:
+        """An append-only file beside the ports (flushed after them)."""
+        if name not in self.files:
+            self.files[name] = _File(self, name, self.replace)
+        return self.files[name]
+
+    def write_file(self, name: str, data: bytes) -> None:
+        """A whole small file, written now."""
+        f = _File(self, name, self.replace)
+        try:
+            f.append(data)
+            self._guard(f.flush)
+        finally:
+            f.close()
+
+    def write_meta(self, complete: bool) -> None:
+        ports = self.meta.get("ports", {})
+        meta = {"format": FORMAT, "version": VERSION, **self.meta, "complete": complete,
+                "ports": {**ports, **{n: ports.get(n, {}) for n in self.ports}},
+                **({"write_error": str(self.error)} if self.error else {})}
+        tmp = META + ".tmp"
+        t = _File(self, tmp, replace=True)  # a tmp left by a killed run is ours to replace
+        try:
+            t.append(json.dumps(meta, indent=2, sort_keys=True).encode() + b"\n")
+            t.flush()
+            os.replace(tmp, META, src_dir_fd=self.dirfd, dst_dir_fd=self.dirfd)
+        except OSError as e:
+            raise RecordingWriteError(write_failure(self.directory / META, e)) from None
+        finally:
+            t.close()
+
+    def _guard(self, action) -> None:
+        if self.error is not None:
+            return
+        try:
+            action()
+        except RecordingWriteError as e:
+            self.error = e
+            raise
 
     def flush(self) -> None:
-        for p in self.ports.values():
-            p.flush()
+        """Write what is buffered: each port's data, then its index, then the other files."""
+        def everything():
+            for p in self.ports.values():
+                p.flush()
+            for f in self.files.values():
+                f.flush()
+        self._guard(everything)
 
     def close(self) -> None:
+        """Flush and write the final meta; raises only a failure not raised before."""
+        if self.dirfd < 0:
+            return
+        failed_before = self.error is not None
+        try:
+            try:
+                self.flush()
+            except RecordingWriteError:
+                pass
+            self._close_files()
+            try:
+                self.write_meta(complete=self.error is None)
+            except RecordingWriteError as e:
+                # the meta on disk still says "complete": false, which is true
+                self.error = self.error or e
+        finally:
+            os.close(self.dirfd)
+            self.dirfd = -1
+        if self.error is not None and not failed_before:
+            raise self.error
+
+    def _close_files(self) -> None:
         for p in self.ports.values():
             p.close()
-        self.write_meta()
+        for f in self.files.values():
+            f.close()
 
     def __enter__(self) -> "RecordingWriter":
         return self
@@ -104,24 +304,69 @@ class RecordingError(ValueError):
     pass
 
 
-class Recording:
-    """Read a recording directory."""
+def _check_meta(meta, where: Path) -> None:
+    """One-line errors for a recording.json whose shape is not a recording's."""
+    def fail(problem: str) -> None:
+        raise RecordingError(f"{where}: {problem}; this is not a usable navtwin recording "
+                             f"(re-record it, or restore recording.json)")
 
-    def __init__(self, directory: str | os.PathLike) -> None:
+    if not isinstance(meta, dict):
+        fail(f"the top level is {type(meta).__name__}, not an object")
+    if meta.get("format") != FORMAT:
+        fail(f"format is {meta.get('format')!r}, not {FORMAT!r}")
+    version = meta.get("version")
+    if type(version) is not int or version < 1:
+        fail(f"version {version!r} is not a positive integer")
+    if version > VERSION:
+        raise RecordingError(f"{where}: version {version} is newer than this navtwin reads "
+                             f"({VERSION}); upgrade navtwin")
+    if "complete" in meta and type(meta["complete"]) is not bool:
+        fail(f"complete {meta['complete']!r} is not true or false")
+    ports = meta.get("ports")
+    if not isinstance(ports, dict) or not ports:
+        fail(f"ports {ports!r} is not a non-empty object of port objects")
+    for name, port in ports.items():
+        if not PORT_NAME.fullmatch(name):
+            fail(f"port name {name!r} is not a plain file name")
+        if not isinstance(port, dict):
+            fail(f"port {name!r} is {type(port).__name__}, not an object")
+        baud = port.get("baud", BAUDS.start)
+        if type(baud) is not int or baud not in BAUDS:
+            fail(f"port {name!r} baud {baud!r} is not an integer in {BAUDS.start}..{BAUDS[-1]}")
+        api = port.get("api_mode", 1)
+        if type(api) is not int or api not in (1, 2):
+            fail(f"port {name!r} api_mode {api!r} is not 1 or 2")
+
+
+class Recording:
+    """Read a recording directory, validating it (see the module docstring)."""
+
+    def __init__(self, directory: str | os.PathLike, *, salvage: bool = False) -> None:
         self.directory = Path(directory)
         meta_path = self.directory / META
         if not meta_path.is_file():
             raise RecordingError(f"{self.directory}: no {META}; is this a navtwin recording directory?")
         try:
-            self.meta = json.loads(meta_path.read_text())
+            self.meta = json.loads(meta_path.read_bytes().decode("utf-8"))
+        except UnicodeDecodeError as e:
+            raise RecordingError(f"{meta_path}: not UTF-8 text ({e.reason} at byte {e.start}); "
+                                 f"restore recording.json or re-record") from None
         except json.JSONDecodeError as e:
-            raise RecordingError(f"{meta_path}: not valid JSON ({e})") from None
-        if self.meta.get("format") != FORMAT:
-            raise RecordingError(f"{meta_path}: format is not {FORMAT!r}")
-        if self.meta.get("version", 0) > VERSION:
-            raise RecordingError(f"{meta_path}: version {self.meta['version']} is newer than this "
-                                 f"navtwin reads ({VERSION}); upgrade navtwin")
-        self.ports = sorted(self.meta.get("ports", {}))
+            raise RecordingError(f"{meta_path}: not valid JSON ({e}); restore recording.json "
+                                 f"or re-record") from None
+        except OSError as e:
+            raise RecordingError(f"{meta_path}: {e.strerror}; check the directory") from None
+        _check_meta(self.meta, meta_path)
+        self.ports = sorted(self.meta["ports"])
+        # a recording from before the "complete" field was closed normally or not at all: the
+        # old writer gave no way to tell, and a normal close is the usual case
+        self.complete = self.meta.get("complete", True)
+        self.salvage = salvage
+        self._intact: dict[str, int] = {}  # port -> chunks to replay
+        self.sizes: dict[str, int] = {}  # port -> bytes those chunks hold
+        self.skipped: dict[str, dict] = {}  # port -> {"chunks", "bytes", "why"}
+        for port in self.ports:
+            self._scan(port)
 
     def path(self, port: str) -> Path:
         if port not in self.ports:
@@ -129,23 +374,115 @@ class Recording:
         return self.directory / f"{port}.bin"
 
     def read_bytes(self, port: str) -> bytes:
-        return self.path(port).read_bytes()
+        """The port's recorded bytes (the intact chunks), for small recordings and tests."""
+        return b"".join(c.data for c in self.chunks(port))
+
+    def _entries(self, port: str, data_size: int) -> Iterator[tuple]:
+        """Validated index entries ``(line, offset, size, t_device, t_wall)``; a truncated tail
+        ends it with ``(line, None, why, None, None)``."""
+        index = self.directory / f"{port}.csv"
+        try:
+            fh = open(index, "rb")
+        except OSError as e:
+            raise RecordingError(f"{index}: {e.strerror}; the recording lacks the index of port "
+                                 f"{port!r}: restore it or re-record") from None
+        with fh:
+            if fh.readline(_MAX_INDEX_LINE + 1).rstrip(b"\r\n") != INDEX_HEADER.encode():
+                raise RecordingError(f"{index}:1: the first line must be {INDEX_HEADER!r}; "
+                                     f"restore the index or re-record")
+            offset, last = 0, {"t_device_ns": -1, "t_wall_ns": -1}
+            n = 1
+            while line := fh.readline(_MAX_INDEX_LINE + 1):
+                n += 1
+
+                def bad(problem: str):
+                    raise RecordingError(f"{index}:{n}: {problem}; the index is damaged: "
+                                         f"re-record, or restore {index.name}")
+                if not line.endswith(b"\n"):
+                    if len(line) > _MAX_INDEX_LINE:
+                        bad(f"a line longer than {_MAX_INDEX_LINE} characters")
+                    yield n, None, "a partial last index line", None, None
+                    return
+                fields = line.rstrip(b"\r\n").split(b",")
+                if len(fields) != 4:
+                    bad(f"expected offset,size,t_device_ns,t_wall_ns, got {line!r}")
+                if not all(_INT.fullmatch(f) for f in fields[:2]) or \
+                        not all(f == b"" or _INT.fullmatch(f) for f in fields[2:]):
+                    bad(f"expected non-negative integers offset,size,t_device_ns,t_wall_ns, "
+                        f"got {line.strip()!r}")
+                off, size = int(fields[0]), int(fields[1])
+                times = [None if f == b"" else int(f) for f in fields[2:]]
+                if off != offset:
+                    bad(f"offset {off} is not where the previous chunk ends ({offset})")
+                if not 0 < size <= MAX_CHUNK:
+                    bad(f"size {size} is not in 1..{MAX_CHUNK}")
+                for key, t in zip(last, times):
+                    if t is not None:
+                        if t < last[key]:
+                            bad(f"{key} {t} is before the previous chunk's ({last[key]})")
+                        last[key] = t
+                if off + size > data_size:
+                    yield n, None, f"chunks past the end of {port}.bin ({data_size} bytes)", \
+                        None, None
+                    return
+                yield n, off, size, *times
+                offset = off + size
+
+    def _scan(self, port: str) -> None:
+        data_path = self.path(port)
+        try:
+            data_size = data_path.stat().st_size
+        except OSError as e:
+            raise RecordingError(f"{data_path}: {e.strerror}; the recording lacks the data of "
+                                 f"port {port!r}: restore it or re-record") from None
+        count = used = 0
+        for n, off, size, *_ in self._entries(port, data_size):
+            if off is None:
+                why = size
+                index = self.directory / f"{port}.csv"
+                if self.complete and not self.salvage:
+                    raise RecordingError(
+                        f"{index}:{n}: {why}: the recording is marked complete, so it is "
+                        f"damaged; 'navtwin replay --salvage' replays the intact prefix")
+                rest = self._index_entries(index) - count
+                self.skipped[port] = {"chunks": rest, "bytes": data_size - used, "why": why}
+                break
+            count, used = count + 1, off + size
+        else:
+            if data_size > used:
+                self.skipped[port] = {"chunks": 0, "bytes": data_size - used,
+                                      "why": f"bytes of {port}.bin after its last indexed chunk"}
+        self._intact[port], self.sizes[port] = count, used
+
+    @staticmethod
+    def _index_entries(path: Path) -> int:
+        """Lines after the header, a partial last one included."""
+        lines, last = 0, b"\n"
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 16), b""):
+                lines, last = lines + block.count(b"\n"), block[-1:]
+        return lines - 1 + (last != b"\n")
 
     def chunks(self, port: str) -> Iterator[Chunk]:
-        data = self.read_bytes(port)
-        index = self.directory / f"{port}.csv"
-        lines = index.read_text().splitlines()
-        if not lines or lines[0] != INDEX_HEADER:
-            raise RecordingError(f"{index}: the first line must be {INDEX_HEADER!r}")
-        for n, line in enumerate(lines[1:], 2):  # plain integers: split, no csv dialect
-            try:
-                off, size, dev, wall = line.split(",")
-                off, size = int(off), int(size)
-                yield Chunk(port, off, data[off:off + size], int(dev) if dev else None,
-                            int(wall) if wall else None)
-            except ValueError:
-                raise RecordingError(f"{index}:{n}: expected offset,size,t_device_ns,t_wall_ns "
-                                     f"as integers, got {line!r}") from None
+        """The port's intact chunks in order, read from the data file one at a time."""
+        data_path = self.path(port)
+        want = self._intact[port]
+        if not want:
+            return
+        try:
+            with open(data_path, "rb") as data:
+                size = os.fstat(data.fileno()).st_size
+                for i, (_, off, n, dev, wall) in enumerate(self._entries(port, size), 1):
+                    blob = data.read(n) if off is not None else b""
+                    if len(blob) != n:
+                        raise RecordingError(f"{data_path}: changed while being read; read it "
+                                             f"again when nothing writes to it")
+                    yield Chunk(port, off, blob, dev, wall)
+                    if i == want:
+                        return
+        except OSError as e:
+            raise RecordingError(f"{data_path}: {e.strerror}; check the file and the disk") \
+                from None
 
     def merged(self, ports: list[str] | None = None, clock: str = "t_wall_ns") -> Iterator[Chunk]:
         """Chunks of several ports in time order (ties: port name order) by *clock*."""
@@ -156,3 +493,14 @@ class Recording:
         streams = [keyed(i, p) for i, p in enumerate(sorted(ports or self.ports))]
         for *_, chunk in heapq.merge(*streams):
             yield chunk
+
+    def skipped_line(self) -> str | None:
+        """One line on what a replay of this recording leaves out, or None."""
+        if self.complete and not self.skipped:
+            return None
+        parts = [f"{p}: {s['chunks']} chunks, {s['bytes']} bytes ({s['why']})"
+                 for p, s in self.skipped.items()]
+        state = ("is incomplete (its run was killed or a write failed)" if not self.complete
+                 else "is damaged and was salvaged" if self.salvage else "has extra bytes")
+        return (f"{self.directory} {state}: using the intact prefix; skipped "
+                f"{'; '.join(parts) if parts else 'nothing'}")
