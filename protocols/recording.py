@@ -30,6 +30,7 @@ and reported in :attr:`Recording.skipped`; in a complete one it is damage, an er
 """
 from __future__ import annotations
 
+import bisect
 import errno
 import heapq
 import json
@@ -66,7 +67,12 @@ def write_failure(path, err: OSError) -> str:
 
 
 class RecordingWriteError(Exception):
-    """A recording that cannot be created or written: one line naming the file and the fix."""
+    """A recording that cannot be created or written: one line naming the file and the fix.
+    ``written``: bytes of the failed flush that did reach the file."""
+
+    def __init__(self, message: str, written: int = 0) -> None:
+        super().__init__(message)
+        self.written = written
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,10 +113,15 @@ class _File:
                 while done < len(buf):
                     done += os.write(self.fd, view[done:])
         except OSError as e:
-            raise RecordingWriteError(write_failure(self.path, e)) from None
+            raise RecordingWriteError(write_failure(self.path, e), done) from None
         finally:
             self._writer.buffered -= len(buf)
             buf.clear()  # after a failure nothing more is written: see RecordingWriter
+
+    def keep(self, nbytes: int) -> None:
+        """Drop what is buffered after the first *nbytes*."""
+        self._writer.buffered -= len(self._buf) - nbytes
+        del self._buf[nbytes:]
 
     def close(self) -> None:
         os.close(self.fd)
@@ -133,7 +144,9 @@ class PortWriter:
         self._bin = _File(writer, f"{name}.bin", writer.replace)
         self._idx = _File(writer, f"{name}.csv", writer.replace)
         self._idx.append(INDEX_HEADER.encode() + b"\n")
+        self._idx.flush()  # now: an index on disk always has its header
         self.offset = 0  # bytes written to this port so far (flushed or not)
+        self._ends: list[tuple[int, int]] = []  # buffered chunks: (data end, index end)
 
     def write(self, data: bytes, t_device_ns: int | None = None,
               t_wall_ns: int | None = None) -> None:
@@ -142,16 +155,29 @@ class PortWriter:
             return
         if len(data) > MAX_CHUNK:
             raise ValueError(f"a chunk of {len(data)} bytes is over MAX_CHUNK; write it in parts")
+        line = (f"{self.offset},{len(data)},{'' if t_device_ns is None else t_device_ns},"
+                f"{'' if t_wall_ns is None else t_wall_ns}\n").encode()
+        data_end, index_end = self._ends[-1] if self._ends else (0, 0)
+        self._ends.append((data_end + len(data), index_end + len(line)))
         self._bin.append(data)
-        self._idx.append(f"{self.offset},{len(data)},"
-                         f"{'' if t_device_ns is None else t_device_ns},"
-                         f"{'' if t_wall_ns is None else t_wall_ns}\n".encode())
+        self._idx.append(line)
         self.offset += len(data)
         if self._writer.buffered >= FLUSH_BYTES:
             self._writer.flush()
 
     def flush(self) -> None:
-        self._bin.flush()  # the data first: the index never names bytes not on disk
+        ends, self._ends = self._ends, []
+        try:
+            self._bin.flush()  # the data first: the index never names bytes not on disk
+        except RecordingWriteError as e:
+            # index the chunks that did reach the disk whole, so that they replay
+            whole = bisect.bisect_right(ends, (e.written, 1 << 62))
+            self._idx.keep(ends[whole - 1][1] if whole else 0)
+            try:
+                self._idx.flush()
+            except RecordingWriteError:
+                pass  # the first failure is the one reported
+            raise
         self._idx.flush()
 
     def close(self) -> None:
