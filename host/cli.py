@@ -33,8 +33,9 @@ def register(sub) -> None:
     p.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
     _common(p)
     p.add_argument("--record", metavar="DIR",
-                   help="record every chunk read, with its arrival time, in a new directory "
-                        "('navtwin replay DIR' then gives the same output)")
+                   help="record every chunk read, with its arrival time, in a new directory, "
+                        "not a symbolic link ('navtwin replay DIR' then gives the same output); "
+                        "flushed every 0.5 s, so a killed run leaves a replayable recording")
     p.add_argument("--duration", type=float, metavar="S",
                    help="stop after S seconds of wall time (default: run until SIGINT/SIGTERM)")
     p.add_argument("--status-period", type=float, default=2.0, metavar="S",

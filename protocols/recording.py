@@ -364,6 +364,10 @@ def _check_meta(meta, where: Path) -> None:
             fail(f"port {name!r} api_mode {api!r} is not 1 or 2")
 
 
+def _text(line: bytes) -> str:
+    return line.strip().decode("ascii", "backslashreplace")
+
+
 class Recording:
     """Read a recording directory, validating it (see the module docstring)."""
 
@@ -431,11 +435,11 @@ class Recording:
                     return
                 fields = line.rstrip(b"\r\n").split(b",")
                 if len(fields) != 4:
-                    bad(f"expected offset,size,t_device_ns,t_wall_ns, got {line!r}")
+                    bad(f"expected offset,size,t_device_ns,t_wall_ns, got {_text(line)!r}")
                 if not all(_INT.fullmatch(f) for f in fields[:2]) or \
                         not all(f == b"" or _INT.fullmatch(f) for f in fields[2:]):
                     bad(f"expected non-negative integers offset,size,t_device_ns,t_wall_ns, "
-                        f"got {line.strip()!r}")
+                        f"got {_text(line)!r}")
                 off, size = int(fields[0]), int(fields[1])
                 times = [None if f == b"" else int(f) for f in fields[2:]]
                 if off != offset:

@@ -168,6 +168,34 @@ def test_host_refuses_to_record_through_a_symlink(capsys, tmp_path):
     assert not any(target.iterdir())
 
 
+def test_replay_of_a_host_killed_with_sigkill(tmp_path):
+    from host.output import estimate_line
+    from host.pipeline import Pipeline
+    from host.replay import chunks, settings
+
+    d = tmp_path / "rec"
+    host = Host(["--record", d, "--status-period", "60"], ["xbee", "nanoloc"])
+    host.feed(synthetic_chunks(OFFICE, 60.0, seed=5), pause_s=0.001)
+    deadline = time.monotonic() + DEADLINE_S
+    while (d / "xbee.csv").read_bytes().count(b"\n") < 300:  # flushed as the host runs
+        assert host.proc.poll() is None and time.monotonic() < deadline, host.err
+        time.sleep(0.02)
+    host.proc.kill()
+    code, live, err = host.finish()
+    assert code == -signal.SIGKILL
+    rec = Recording(d)
+    assert not rec.complete
+    # the recording holds what the live run processed, in order: the same lines, cut
+    kw = settings(rec)
+    pipe = Pipeline(kw.pop("config"), kw.pop("filters"), **kw)
+    lines = [estimate_line(e) for port, data, t in chunks(rec, pipe.inputs)
+             for e in pipe.feed(port, data, t)]
+    assert len(lines) > 10 and "".join(lines) == live[:len("".join(lines))]
+    res = subprocess.run([*NAVTWIN, "replay", d], capture_output=True, timeout=DEADLINE_S)
+    assert res.returncode == 0 and res.stdout.decode().startswith("".join(lines)), res.stderr
+    assert b"is incomplete" in res.stderr.splitlines()[0]
+
+
 # -- replay of broken recordings -----------------------------------------------------------
 
 @pytest.fixture
