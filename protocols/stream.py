@@ -16,6 +16,12 @@ truncated      a candidate cut short by the next start delimiter (API 2) or by
 malformed      integrity check passed, but the body does not fit its type's layout
 =============  ===============================================================
 
+Sizes. A failed candidate's size is its claimed size (bad_crc, bad_checksum, bad_length,
+malformed) or what was read of it (truncated: to the next ``7E`` in API mode 2, or the end
+of the stream; bad_escape: up to and including the bad pair), never what a chunk happened
+to hold, so the same bytes give the same events in any chunking. The candidate's bytes
+then join a garbage run.
+
 Resync rule. A candidate starts at a sync pattern (``A5 5A``, ``4E 4C``, ``7E``). When it
 fails, the decoder resumes the search one byte after the failed start (API mode 2: at the
 next bare ``7E``, which can only be a frame start), so every byte after a false start is
@@ -68,7 +74,7 @@ class Frame:
 class DecodeError:
     kind: str
     offset: int
-    size: int = 0  # bytes skipped (garbage runs); candidates report their claimed size
+    size: int = 0  # bytes in a garbage run; a failed candidate's size (see the module doc)
     format: str = ""
     source: int | None = None
 
@@ -308,25 +314,30 @@ class XBeeDecoder(LengthFramed):
             u, used = xbee.unescape_partial(seg)
             length = u[0] << 8 | u[1] if len(u) >= 2 else -1
             need = length + 3
+            # An error's size is what its judgement read, never "up to the next 7E", which
+            # a later chunk may still move: so chunking cannot change it.
             if length == 0 or length > self.max_frame_data:
-                kind = BAD_LENGTH  # judged before waiting, so a false length cannot grow the buffer
+                # judged before waiting, so a false length cannot grow the buffer
+                kind, size = BAD_LENGTH, length + 4  # the claimed size, as in API mode 1
             elif length < 0 or len(u) < need:
                 if used < len(seg) and not (more and used == len(seg) - 1):
-                    kind = BAD_ESCAPE  # (a 7D that is merely the last byte so far may complete)
+                    # (a 7D that is merely the last byte so far may complete); size: up to
+                    # and including the bad pair
+                    kind, size = BAD_ESCAPE, min(used + 3, stop - j)
                 elif more:
                     return j
                 else:
-                    kind = TRUNCATED
-            elif sum(u[2:need]) & 0xFF != 0xFF:
-                kind = BAD_CHECKSUM
+                    kind, size = TRUNCATED, stop - j
             else:
                 # raw extent: all that was unescaped when the frame is all of it, else count
                 end = j + 1 + (used if len(u) == need else
                                need + sum(u.count(e, 0, need) for e in _ESCAPED))
-                self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
-                i = end
-                continue
-            self._error(kind, base + j, stop - j)
+                if sum(u[2:need]) & 0xFF == 0xFF:
+                    self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
+                    i = end
+                    continue
+                kind, size = BAD_CHECKSUM, end - j
+            self._error(kind, base + j, size)
             self._garbage(base + j, stop - j)
             i = stop
 

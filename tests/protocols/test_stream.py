@@ -2,12 +2,16 @@
 import random
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from protocols import sins, xbee
 from protocols.stream import (BAD_CHECKSUM, BAD_CRC, BAD_ESCAPE, BAD_LENGTH, GARBAGE, MALFORMED,
                               TRUNCATED, DecodeError, Frame, XBeeDecoder, XBeeSinsChain,
                               nanoloc_decoder, sins_decoder)
 
+from .strategies import FORMATS, chunked, garbage_bytes
+from .test_properties import DECODERS
 from .vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP, XBEE_API1
 
 ROUTER = 0x0013A20040A1B2D4
@@ -144,3 +148,38 @@ def test_memory_is_bounded_whatever_length_fields_claim(make, limit):
         assert dec.buffered <= limit + chunk
     dec.flush()
     assert dec.buffered == 0
+
+
+# -- chunking never changes the result: every event, sizes included -----------------------------
+
+def _events(dec, chunks):
+    out = []
+    for c in chunks:
+        out += dec.feed(c)
+    out += dec.flush()
+    return [(e.offset, e.raw, e.fields) if isinstance(e, Frame) else (e.kind, e.offset, e.size)
+            for e in out]
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+@settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_same_bytes_same_events_in_any_chunking(fmt, data):
+    """Issue 7 point 9: in API mode 2 an error's size depended on where the input was cut."""
+    parts = data.draw(st.lists(st.one_of(FORMATS[fmt], garbage_bytes), min_size=1, max_size=10))
+    stream = b"".join(parts)
+    whole = _events(DECODERS[fmt](), [stream])
+    assert _events(DECODERS[fmt](), data.draw(chunked(stream))) == whole
+
+
+def test_a_bad_escape_has_the_same_size_wherever_the_input_is_cut():
+    """The issue's case: 47 bytes in one piece, 7 when cut at byte 109 (before the fix)."""
+    f = xbee.build(0x90, True, src64=ROUTER, src16=0x1234, options=1, data=b"S" * 34)
+    bad = b"\x7e\x00\x30\x41\x42\x7d\x00" + b"G" * 40  # 7D 00 is no escape
+    stream = f + f + bad + f
+    assert len(f + f) == 102
+    for chunks in ([stream], [stream[:109], stream[109:]], [bytes([b]) for b in stream]):
+        dec = XBeeDecoder(escaped=True)
+        ev = _events(dec, chunks)
+        assert ev[:2] == [(0, f, ev[0][2]), (51, f, ev[0][2])]
+        assert ev[2:] == [(BAD_ESCAPE, 102, 7), (GARBAGE, 102, 47), (149, f, ev[0][2])]
