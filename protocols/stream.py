@@ -14,6 +14,8 @@ bad_escape     API mode 2: ``7D`` not followed by an escaped byte
 truncated      a candidate cut short by the next start delimiter (API 2) or by
                the end of the stream
 malformed      integrity check passed, but the body does not fit its type's layout
+evicted        xbee-sins chain: the SINS stream of the least recently heard source,
+               ended to make room for a new one (size = bytes it still held)
 =============  ===============================================================
 
 Sizes. A failed candidate's size is its claimed size (bad_crc, bad_checksum, bad_length,
@@ -37,6 +39,7 @@ than one maximal candidate plus the last chunk fed, whatever a length field clai
 """
 from __future__ import annotations
 
+import functools
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
@@ -46,6 +49,9 @@ from .crc import crc16
 from .crcframe import HEADER, TRAILER
 from .fast import parser_for, plain
 
+# one compiled parser per layout, shared by every decoder (a chain makes one per source)
+parser_for = functools.cache(parser_for)
+
 GARBAGE = "garbage"
 BAD_CRC = "bad_crc"
 BAD_CHECKSUM = "bad_checksum"
@@ -53,7 +59,12 @@ BAD_LENGTH = "bad_length"
 BAD_ESCAPE = "bad_escape"
 TRUNCATED = "truncated"
 MALFORMED = "malformed"
-ERROR_KINDS = (GARBAGE, BAD_CRC, BAD_CHECKSUM, BAD_LENGTH, BAD_ESCAPE, TRUNCATED, MALFORMED)
+EVICTED = "evicted"
+ERROR_KINDS = (GARBAGE, BAD_CRC, BAD_CHECKSUM, BAD_LENGTH, BAD_ESCAPE, TRUNCATED, MALFORMED,
+               EVICTED)
+#: SINS streams an XBeeSinsChain keeps (one per source address); the lab has one router, so
+#: 64 leaves room for any real network while 100,000 forged addresses stay in bounded memory
+MAX_SOURCES = 64
 
 
 @dataclass(slots=True)
@@ -347,15 +358,21 @@ class XBeeSinsChain:
     payloads of 0x90 packets -> the SINS byte stream of each sending radio -> SINS frames.
 
     A SINS frame may straddle two 0x90 packets. Each source address has its own SINS
-    stream (and offsets within it). Other XBee frames (AT responses, modem status, TX
-    status) are passed through, as are the errors of both layers.
+    stream (and offsets within it), at most *max_sources* of them: a new source beyond that
+    ends the stream of the least recently heard one as the end of input would (its partial
+    frame truncated), reported as an ``evicted`` error and counted; if that source sends
+    again, its stream starts afresh at offset 0. Other XBee frames (AT responses, modem
+    status, TX status) are passed through, as are the errors of both layers.
     """
 
     format = "xbee-sins"
 
-    def __init__(self, escaped: bool = True, max_frame_data: int = 1024) -> None:
+    def __init__(self, escaped: bool = True, max_frame_data: int = 1024,
+                 max_sources: int = MAX_SOURCES) -> None:
         self.xbee = XBeeDecoder(escaped, max_frame_data)
-        self.sins: dict[int, CrcFramedDecoder] = {}
+        self.sins: dict[int, CrcFramedDecoder] = {}  # least recently heard first
+        self.max_sources = max_sources
+        self.evicted = 0
 
     def _route(self, events: list) -> list:
         out: list = []
@@ -376,12 +393,26 @@ class XBeeSinsChain:
     def _feed_sins(self, src: int | None, payloads: list, out: list) -> None:
         if not payloads:
             return
-        dec = self.sins.get(src)
+        dec = self.sins.pop(src, None)
         if dec is None:
-            dec = self.sins[src] = sins_decoder()
+            if len(self.sins) >= self.max_sources:
+                self._evict(out)
+            dec = sins_decoder()
+        self.sins[src] = dec  # now the most recently heard
         for s in dec.feed(b"".join(payloads)):
             s.source = src
             out.append(s)
+
+    def _evict(self, out: list) -> None:
+        src = next(iter(self.sins))
+        dec = self.sins.pop(src)
+        held = dec.buffered
+        events = dec.flush()
+        events.append(DecodeError(EVICTED, dec.bytes, held, dec.format))
+        for ev in events:
+            ev.source = src
+            out.append(ev)
+        self.evicted += 1
 
     def feed(self, data: bytes) -> list:
         return self._route(self.xbee.feed(data))
@@ -399,7 +430,8 @@ class XBeeSinsChain:
 
     def summary(self) -> dict:
         return {"format": self.format, "xbee": self.xbee.summary(),
-                "sins": {f"{src:016X}": d.summary() for src, d in self.sins.items()}}
+                "sins": {f"{src:016X}": d.summary() for src, d in self.sins.items()},
+                "sources_evicted": self.evicted}
 
 
 def decoder_for(fmt: str, *, escaped: bool = True):
