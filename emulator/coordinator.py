@@ -45,6 +45,12 @@ device model (its packetisation keeps the scenario's RO and NP).
 
 Power-up: modem status 0x00 (hardware reset) at t = 0, then 0x06 (coordinator started).
 DB (RSSI of the last packet) is a fixed -40 dBm (0x28): the link model has no RSSI.
+
+Serial transmit buffer: an RF packet whose frame does not fit in the ``SERIAL_TX_BUFFER``
+bytes still queued for the UART when it arrives is dropped whole and counted
+(``dropped_tx_buffer``), as the firmware does when the host line is slower than the RF
+data (xbee-api-facts.md section 5). Answers to the host are never dropped: they are small
+and one per request, so the host's own requests bound them.
 """
 from __future__ import annotations
 
@@ -68,6 +74,9 @@ DIGI_PROFILE = 0xC105
 DIGI_MANUFACTURER = 0x101E
 DIGI_DATA = (0xE8, 0xE8, 0x0011, DIGI_PROFILE)  # endpoints, cluster, profile of 0x91 data
 BAUD_CODES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
+# Serial transmit buffer. S2B's size is undocumented (the S1's 100 B does not apply): 512 B
+# holds two maximal escaped 0x90 frames or ten SINS packets, and drains in 0.53 s at 9600.
+SERIAL_TX_BUFFER = 512
 TEXT = 0  # Param.size of a text register
 
 
@@ -230,7 +239,7 @@ class Coordinator:
     """Coordinator state machine; pure function of its inputs and its generator.
 
     ``received`` and ``host`` return :class:`Output` items for the coordinator's UART;
-    ``render`` turns an item into the bytes of an API frame at the moment the UART starts
+    ``admit`` takes or drops an item when it reaches the serial transmit buffer; ``render`` turns an item into the bytes of an API frame at the moment the UART starts
     sending it (so AP changes apply to every frame sent after the change).
     """
 
@@ -243,6 +252,7 @@ class Coordinator:
     baud: int = field(init=False)
     reset_until_ns: int = field(default=-1, init=False)
     ignored: int = field(default=0, init=False)  # host frames the firmware does not handle
+    dropped_tx_buffer: int = field(default=0, init=False)  # RF packets the UART had no room for
     _prefix: dict = field(default_factory=dict, init=False)
 
     def __post_init__(self) -> None:
@@ -253,6 +263,20 @@ class Coordinator:
     def _sync_line(self) -> None:
         self.escaped = self.registers.values["AP"] == 2
         self.baud = baud_rate(self.registers.values["BD"])
+
+    def admit(self, t_ns: int, item, queued: int) -> int | None:
+        """An item reaching the serial transmit buffer at *t_ns*, with *queued* bytes ahead
+        of it: its size in bytes, or None when it is not sent (RF packet: no room, or the
+        radio is rebooting)."""
+        if isinstance(item, Reply):
+            return len(xbee.wrap(item.data, self.escaped))
+        if t_ns < self.reset_until_ns:
+            return None
+        size = len(xbee.wrap(self._rx_prefix(item) + item.data, self.escaped))
+        if queued + size > SERIAL_TX_BUFFER:
+            self.dropped_tx_buffer += 1
+            return None
+        return size
 
     def render(self, t_ns: int, item) -> bytes:
         """The API frame bytes of an output item, in the current API mode; b"" = nothing."""

@@ -6,8 +6,9 @@ starts at the later of its ready time and the end of the previous chunk, in read
 and a chunk is delivered to the PTY whole when its last byte would have arrived. The
 world's events are the ready times of the SINS and nanoLOC lines; on the ``xbee`` line the
 coordinator's frames (0x90 for each RF packet, answers to the host) queue the same way,
-so an answer never splits a frame in progress. Times are integer nanoseconds since the
-run started.
+so an answer never splits a frame in progress; its transmit buffer is bounded
+(``coordinator.SERIAL_TX_BUFFER``): an RF packet that arrives when it does not fit is
+dropped whole. Times are integer nanoseconds since the run started.
 
 Speeds. ``realtime`` keeps an absolute schedule: the chunk that ends at virtual time t is
 written at wall time t0 + t (no drift; a late write never shifts later ones). The loop
@@ -37,6 +38,7 @@ import os
 import select
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -105,18 +107,32 @@ class Wire:
         self.baud = baud
 
     @staticmethod
+    def admit(t_ns: int, item: bytes, queued: int) -> int:
+        return len(item)  # the board and the gateway never drop what they write
+
+    @staticmethod
     def render(t_ns: int, item: bytes) -> bytes:
         return item
 
 
 class Line:
-    """One port's UART: queued items in ready order, sent one chunk at a time."""
+    """One port's UART: items in ready order, taken into the device's transmit buffer when
+    ready, sent one chunk at a time.
+
+    ``queued`` = bytes in the buffer: items waiting plus the chunk in progress (counted
+    whole until its last byte has arrived). At its ready time an item goes to
+    ``device.admit(ready, item, queued)``, which gives its size or None to drop it (the
+    coordinator's bounded buffer); every step is taken in time order, so what is dropped
+    depends on the timeline only, not on when the loop polls.
+    """
 
     def __init__(self, name: str, device: Any) -> None:
         self.name = name
-        self.device = device  # .baud and .render(t_ns, item) -> bytes
-        self._pending: list = []
+        self.device = device  # .baud, .admit(t_ns, item, queued) and .render(t_ns, item)
+        self._pending: list = []  # heap of (ready, seq, item) not yet in the buffer
+        self._queue: deque = deque()  # (ready, item, size) in the buffer, in ready order
         self._seq = 0
+        self.queued = 0
         self.free_ns = 0
         self.current: Chunk | None = None
         self.chunks = 0
@@ -128,41 +144,65 @@ class Line:
 
     def next_ns(self) -> int | None:
         """When this line next has something to do: end of the chunk in progress or start
-        of the next one."""
+        of the next one (an item's arrival in the buffer waits for that)."""
         if self.current is not None:
             return self.current.end_ns
+        if self._queue:
+            return max(self._queue[0][0], self.free_ns)
         if self._pending:
             return max(self._pending[0][0], self.free_ns)
         return None
 
     def poll(self, now_ns: int, known_ns: int, end_ns: int) -> list[Chunk]:
-        """Chunks that have ended by *now_ns*; starts those due. An item starts only when all
-        items that could precede it are known (ready < *known_ns*) and before *end_ns*."""
+        """Chunks that have ended by *now_ns*; starts those due. An item enters the buffer
+        only when all items that could precede it are known (ready < *known_ns*), and
+        starts before *end_ns*."""
         out = []
+        pending, queue = self._pending, self._queue
+        limit = min(known_ns, end_ns)
         while True:
+            # the earliest step; on a tie a chunk ends before an item arrives, and an item
+            # arrives before the next chunk starts
             cur = self.current
+            t = pending[0][0] if pending and pending[0][0] < limit else END  # next arrival
             if cur is not None:
-                if cur.end_ns > now_ns:
-                    break
+                arrive = t < cur.end_ns
+                if not arrive:
+                    t = cur.end_ns
+            else:
+                start = END
+                if queue:
+                    start = max(queue[0][0], self.free_ns)
+                    if start >= end_ns:
+                        start = END
+                arrive = t <= start
+                if not arrive:
+                    t = start
+            if t == END or t > now_ns:
+                return out
+            if arrive:
+                ready, _, item = heapq.heappop(pending)
+                size = self.device.admit(ready, item, self.queued)
+                if size is not None:
+                    queue.append((ready, item, size))
+                    self.queued += size
+            elif cur is not None:
                 out.append(cur)
                 self.current = None
-            if not self._pending:
-                break
-            ready, _, item = self._pending[0]
-            start = max(ready, self.free_ns)
-            if start > now_ns or ready >= known_ns or start >= end_ns:
-                break
-            heapq.heappop(self._pending)
-            baud = self.device.baud  # before rendering: a BD change applies to later chunks
-            data = self.device.render(ready, item)
-            if not data:
-                continue
-            end = start + wire_ns(len(data), baud)
-            self.current = Chunk(self.name, start, end, data)
-            self.free_ns = end
-            self.chunks += 1
-            self.bytes += len(data)
-        return out
+                self.queued -= len(cur.data)
+            else:
+                ready, item, size = queue.popleft()
+                self.queued -= size
+                baud = self.device.baud  # before rendering: a BD change applies to later chunks
+                data = self.device.render(ready, item)
+                if not data:
+                    continue
+                end = t + wire_ns(len(data), baud)
+                self.current = Chunk(self.name, t, end, data)
+                self.queued += len(data)
+                self.free_ns = end
+                self.chunks += 1
+                self.bytes += len(data)
 
     def busy(self) -> bool:
         return self.current is not None
@@ -445,6 +485,8 @@ class Emulation:
         ports = {}
         for name, line in self.lines.items():
             entry = {"frames": line.chunks, "bytes": line.bytes}
+            if name == "xbee":  # RF packets the coordinator's serial transmit buffer had no room for
+                entry["dropped_tx_buffer"] = self.coordinator.dropped_tx_buffer
             if name in self.ports:
                 entry.update(self.ports[name].stats())
             ports[name] = entry

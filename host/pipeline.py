@@ -8,7 +8,8 @@ Ports (also the names of a host recording's files):
 
 =========  ==========================================================================
 xbee       the coordinator in API mode: 0x90 packets carry the SINS byte stream
-           (:class:`protocols.stream.XBeeSinsChain`); 0x88 DB answers give link quality
+           (:class:`protocols.stream.XBeeSinsChain`); 0x88 DB answers give link quality,
+           0x88 AP answers the coordinator's API mode (a mismatch is an event)
 sins       the SINS board's direct RS-232 line
 nanoloc    the anchors' gateway: one ranging report per exchange
 =========  ==========================================================================
@@ -48,7 +49,10 @@ from .estimator import Estimator
 
 INPUTS = ("xbee", "sins", "nanoloc")
 IMU_INPUTS = ("xbee", "sins")
-DB_PERIOD_S = 5.0  # AT DB query period, in arrival time
+DB_PERIOD_S = 5.0  # AT query period, in arrival time
+#: asked every DB_PERIOD_S: link quality, and the coordinator's API mode (another client's
+#: ATAP1 would switch it under the host)
+AT_QUERIES = (b"DB", b"AP")
 T_US_TICK_S = 1e-6
 
 
@@ -86,8 +90,11 @@ class Pipeline:
         self._next_db = 0.0
         self._frame_id = 0
         self._tx = bytearray()
+        self._events_out: list[dict] = []
         self.link_dbm: int | None = None
         self.modem_status: int | None = None
+        self.coordinator_api: int | None = None  # the AP the coordinator last answered
+        self._api_mismatch = False
         self.errors: dict[str, Counter] = {p: Counter() for p in self.inputs}
         self.counts: Counter = Counter()
         self.max_late_s = 0.0
@@ -101,7 +108,8 @@ class Pipeline:
         out: list = []
         self._events(port, self._decoders[port].feed(data), a, out)
         if port == "xbee" and a >= self._next_db:
-            self._query_db()
+            for command in AT_QUERIES:
+                self._query(command)
             self._next_db = a + self._db_period
         self._release(a - self._hold, out)
         return self._count(out)
@@ -115,9 +123,14 @@ class Pipeline:
         return self._count(out)
 
     def take_tx(self) -> bytes:
-        """Bytes the host should send to the coordinator (AT DB queries); cleared."""
+        """Bytes the host should send to the coordinator (AT DB and AP queries); cleared."""
         tx, self._tx = bytes(self._tx), bytearray()
         return tx
+
+    def take_events(self) -> list[dict]:
+        """Status events since the last call (the coordinator's API mode); cleared."""
+        events, self._events_out = self._events_out, []
+        return events
 
     # -- decoding ---------------------------------------------------------------------------
     def _events(self, port: str, events: list, a: float, out: list) -> None:
@@ -137,21 +150,52 @@ class Pipeline:
 
     def _xbee(self, ev: Frame) -> None:
         f = ev.fields
-        if ev.type == xbee.FrameType.AT_RESPONSE and f["command"] == b"DB":
+        command = f.get("command", b"").upper()  # any client's answer: "ap" is AP too
+        if ev.type == xbee.FrameType.AT_RESPONSE and command == b"DB":
             if f["status"] == xbee.AtStatus.OK and len(f["value"]) == 1:
                 self.link_dbm = -f["value"][0]
                 self.counts["db_answers"] += 1
+        elif ev.type == xbee.FrameType.AT_RESPONSE and command == b"AP":
+            if f["status"] == xbee.AtStatus.OK and len(f["value"]) == 1:
+                self._api_mode(f["value"][0])
+            elif f["status"] == xbee.AtStatus.OK and not f["value"]:
+                self._next_db = self._arrival  # someone set AP: ask what it is now
         elif ev.type == xbee.FrameType.MODEM_STATUS:
             self.modem_status = f["status"]
             self.counts["modem_status"] += 1
         elif ev.type != xbee.FrameType.RECEIVE_PACKET:
             self.counts["xbee_other"] += 1
 
-    def _query_db(self) -> None:
-        self._frame_id = self._frame_id % 255 + 1  # 0 would ask for no answer
-        self._tx += xbee.build(xbee.FrameType.AT_COMMAND, self.escaped, frame_id=self._frame_id,
-                               command=b"DB", parameter=b"")
-        self.counts["db_queries"] += 1
+    def _api_mode(self, mode: int) -> None:
+        """The coordinator answered AP = *mode*: an event when it starts or stops differing
+        from the mode this host decodes."""
+        self.coordinator_api = mode
+        host = 2 if self.escaped else 1
+        mismatch = mode != host
+        self.counts["api_mode_mismatch"] += mismatch
+        if mismatch == self._api_mismatch:
+            return
+        self._api_mismatch = mismatch
+        event = {"event": "api_mode_mismatch" if mismatch else "api_mode_ok",
+                 "coordinator_api": mode, "host_api": host}
+        if mismatch:
+            restart = {1: "restart the host with --api1 or ", 2: "restart the host without "
+                       "--api1 or "}.get(mode, "")
+            event["message"] = (f"coordinator switched to API {mode}; the host decodes API "
+                                f"{host}: {restart}send ATAP{host}")
+        self._events_out.append(event)
+
+    def _query(self, command: bytes) -> None:
+        # a frame ID whose request has no byte to escape: the request then reads the same
+        # in API mode 1 and 2, so the coordinator answers it in either mode
+        while True:
+            self._frame_id = self._frame_id % 255 + 1  # 0 would ask for no answer
+            frame = xbee.build(xbee.FrameType.AT_COMMAND, False, frame_id=self._frame_id,
+                               command=command, parameter=b"")
+            if xbee.escape(frame[1:]) == frame[1:]:
+                break
+        self._tx += frame
+        self.counts[f"{command.decode().lower()}_queries"] += 1
 
     # -- measurements ---------------------------------------------------------------------------
     def _imu(self, ev: Frame, a: float, out: list) -> None:
@@ -238,6 +282,7 @@ class Pipeline:
             "anchor_clock": self.range_clock.stats(),
             "link_dbm": self.link_dbm,
             "modem_status": self.modem_status,
+            "coordinator_api": self.coordinator_api,
             "estimates": dict(self.estimates),
             "filter_time": None if self.t == -math.inf else self.t,
         }

@@ -278,6 +278,8 @@ class Service:
         if self.recorder is not None:
             self.recorder.port(name).write(data, t_wall_ns=stamp)
         self._emit(self.pipeline.feed(name, data, stamp), name, t_read)
+        for event in self.pipeline.take_events():  # the coordinator's API mode changed
+            self._info("status", event)
         tx = self.pipeline.take_tx()
         if tx and self._readers["xbee"].write(tx) and self.recorder is not None:
             self.recorder.port(TX_PORT).write(tx, t_wall_ns=stamp)

@@ -66,7 +66,8 @@ def register_decode(sub) -> None:
     p = sub.add_parser("decode", help="decode a byte stream into JSON lines",
                        description="Decode SINS frames, XBee API frames, the SINS stream inside "
                        "XBee 0x90 packets, or nanoLOC reports. One JSON object per line per frame "
-                       "and per error, then a summary with counts by kind.")
+                       "and per run of consecutive errors of one kind (with its count), then a "
+                       "summary with counts by kind.")
     p.add_argument("source", nargs="?", default="-", metavar="SOURCE",
                    help="a file, - for stdin (default), a recording directory, or a serial port "
                         "or pyserial URL (socket://, rfc2217://, spy://, loop://)")

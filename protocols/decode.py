@@ -70,6 +70,32 @@ def error_record(ev: DecodeError) -> dict:
     return rec
 
 
+class ErrorRuns:
+    """Consecutive errors of one kind (and format and source) as one record, so a flood of
+    garbage gives a few lines, not one or two per byte: ``offset`` is the first error's,
+    ``size`` reaches to the furthest end of any of them, ``count`` (present when more than
+    one) says how many and ``last_offset`` where the last began. A frame ends the runs."""
+
+    def __init__(self) -> None:
+        self._runs: dict[tuple, list] = {}  # key -> [first error, last offset, end, count]
+
+    def add(self, ev: DecodeError) -> None:
+        run = self._runs.get(key := (ev.kind, ev.format, ev.source))
+        if run is None:
+            self._runs[key] = [ev, ev.offset, ev.offset + ev.size, 1]
+        else:
+            run[1], run[2], run[3] = ev.offset, max(run[2], ev.offset + ev.size), run[3] + 1
+
+    def close(self) -> Iterator[dict]:
+        """The records of the runs open so far, in the order they began."""
+        for first, last, end, count in self._runs.values():
+            rec = error_record(first)
+            if count > 1:
+                rec.update(size=end - first.offset, count=count, last_offset=last)
+            yield rec
+        self._runs.clear()
+
+
 def _is_serial(source: str) -> bool:
     if "://" in source:
         return True
@@ -125,15 +151,20 @@ def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud
 
 def decode(source: str, fmt: str, *, escaped: bool = True, with_hex: bool = False,
            gyro_range: int = 300, **read_kw) -> Iterator[dict]:
-    """Decode *source* as *fmt*: one dict per frame or error, then ``{"summary": {...}}``."""
+    """Decode *source* as *fmt*: one dict per frame and per run of errors (:class:`ErrorRuns`;
+    runs also end with each read, so a live port's errors are not held back), then
+    ``{"summary": {...}}`` (which counts every error)."""
     dec = decoder_for(fmt, escaped=escaped)
+    runs = ErrorRuns()
 
     def records(events):
         for ev in events:
             if isinstance(ev, Frame):
+                yield from runs.close()
                 yield frame_record(ev, gyro_range=gyro_range, with_hex=with_hex)
             else:
-                yield error_record(ev)
+                runs.add(ev)
+        yield from runs.close()
 
     for chunk in read_chunks(source, fmt=fmt, **read_kw):
         yield from records(dec.feed(chunk))

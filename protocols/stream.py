@@ -14,7 +14,15 @@ bad_escape     API mode 2: ``7D`` not followed by an escaped byte
 truncated      a candidate cut short by the next start delimiter (API 2) or by
                the end of the stream
 malformed      integrity check passed, but the body does not fit its type's layout
+evicted        xbee-sins chain: the SINS stream of the least recently heard source,
+               ended to make room for a new one (size = bytes it still held)
 =============  ===============================================================
+
+Sizes. A failed candidate's size is its claimed size (bad_crc, bad_checksum, bad_length,
+malformed) or what was read of it (truncated: to the next ``7E`` in API mode 2, or the end
+of the stream; bad_escape: up to and including the bad pair), never what a chunk happened
+to hold, so the same bytes give the same events in any chunking. The candidate's bytes
+then join a garbage run.
 
 Resync rule. A candidate starts at a sync pattern (``A5 5A``, ``4E 4C``, ``7E``). When it
 fails, the decoder resumes the search one byte after the failed start (API mode 2: at the
@@ -31,6 +39,7 @@ than one maximal candidate plus the last chunk fed, whatever a length field clai
 """
 from __future__ import annotations
 
+import functools
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
@@ -40,6 +49,9 @@ from .crc import crc16
 from .crcframe import HEADER, TRAILER
 from .fast import parser_for, plain
 
+# one compiled parser per layout, shared by every decoder (a chain makes one per source)
+parser_for = functools.cache(parser_for)
+
 GARBAGE = "garbage"
 BAD_CRC = "bad_crc"
 BAD_CHECKSUM = "bad_checksum"
@@ -47,7 +59,12 @@ BAD_LENGTH = "bad_length"
 BAD_ESCAPE = "bad_escape"
 TRUNCATED = "truncated"
 MALFORMED = "malformed"
-ERROR_KINDS = (GARBAGE, BAD_CRC, BAD_CHECKSUM, BAD_LENGTH, BAD_ESCAPE, TRUNCATED, MALFORMED)
+EVICTED = "evicted"
+ERROR_KINDS = (GARBAGE, BAD_CRC, BAD_CHECKSUM, BAD_LENGTH, BAD_ESCAPE, TRUNCATED, MALFORMED,
+               EVICTED)
+#: SINS streams an XBeeSinsChain keeps (one per source address); the lab has one router, so
+#: 64 leaves room for any real network while 100,000 forged addresses stay in bounded memory
+MAX_SOURCES = 64
 
 
 @dataclass(slots=True)
@@ -68,7 +85,7 @@ class Frame:
 class DecodeError:
     kind: str
     offset: int
-    size: int = 0  # bytes skipped (garbage runs); candidates report their claimed size
+    size: int = 0  # bytes in a garbage run; a failed candidate's size (see the module doc)
     format: str = ""
     source: int | None = None
 
@@ -308,25 +325,30 @@ class XBeeDecoder(LengthFramed):
             u, used = xbee.unescape_partial(seg)
             length = u[0] << 8 | u[1] if len(u) >= 2 else -1
             need = length + 3
+            # An error's size is what its judgement read, never "up to the next 7E", which
+            # a later chunk may still move: so chunking cannot change it.
             if length == 0 or length > self.max_frame_data:
-                kind = BAD_LENGTH  # judged before waiting, so a false length cannot grow the buffer
+                # judged before waiting, so a false length cannot grow the buffer
+                kind, size = BAD_LENGTH, length + 4  # the claimed size, as in API mode 1
             elif length < 0 or len(u) < need:
                 if used < len(seg) and not (more and used == len(seg) - 1):
-                    kind = BAD_ESCAPE  # (a 7D that is merely the last byte so far may complete)
+                    # (a 7D that is merely the last byte so far may complete); size: up to
+                    # and including the bad pair
+                    kind, size = BAD_ESCAPE, min(used + 3, stop - j)
                 elif more:
                     return j
                 else:
-                    kind = TRUNCATED
-            elif sum(u[2:need]) & 0xFF != 0xFF:
-                kind = BAD_CHECKSUM
+                    kind, size = TRUNCATED, stop - j
             else:
                 # raw extent: all that was unescaped when the frame is all of it, else count
                 end = j + 1 + (used if len(u) == need else
                                need + sum(u.count(e, 0, need) for e in _ESCAPED))
-                self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
-                i = end
-                continue
-            self._error(kind, base + j, stop - j)
+                if sum(u[2:need]) & 0xFF == 0xFF:
+                    self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
+                    i = end
+                    continue
+                kind, size = BAD_CHECKSUM, end - j
+            self._error(kind, base + j, size)
             self._garbage(base + j, stop - j)
             i = stop
 
@@ -336,15 +358,21 @@ class XBeeSinsChain:
     payloads of 0x90 packets -> the SINS byte stream of each sending radio -> SINS frames.
 
     A SINS frame may straddle two 0x90 packets. Each source address has its own SINS
-    stream (and offsets within it). Other XBee frames (AT responses, modem status, TX
-    status) are passed through, as are the errors of both layers.
+    stream (and offsets within it), at most *max_sources* of them: a new source beyond that
+    ends the stream of the least recently heard one as the end of input would (its partial
+    frame truncated), reported as an ``evicted`` error and counted; if that source sends
+    again, its stream starts afresh at offset 0. Other XBee frames (AT responses, modem
+    status, TX status) are passed through, as are the errors of both layers.
     """
 
     format = "xbee-sins"
 
-    def __init__(self, escaped: bool = True, max_frame_data: int = 1024) -> None:
+    def __init__(self, escaped: bool = True, max_frame_data: int = 1024,
+                 max_sources: int = MAX_SOURCES) -> None:
         self.xbee = XBeeDecoder(escaped, max_frame_data)
-        self.sins: dict[int, CrcFramedDecoder] = {}
+        self.sins: dict[int, CrcFramedDecoder] = {}  # least recently heard first
+        self.max_sources = max_sources
+        self.evicted = 0
 
     def _route(self, events: list) -> list:
         out: list = []
@@ -365,12 +393,26 @@ class XBeeSinsChain:
     def _feed_sins(self, src: int | None, payloads: list, out: list) -> None:
         if not payloads:
             return
-        dec = self.sins.get(src)
+        dec = self.sins.pop(src, None)
         if dec is None:
-            dec = self.sins[src] = sins_decoder()
+            if len(self.sins) >= self.max_sources:
+                self._evict(out)
+            dec = sins_decoder()
+        self.sins[src] = dec  # now the most recently heard
         for s in dec.feed(b"".join(payloads)):
             s.source = src
             out.append(s)
+
+    def _evict(self, out: list) -> None:
+        src = next(iter(self.sins))
+        dec = self.sins.pop(src)
+        held = dec.buffered
+        events = dec.flush()
+        events.append(DecodeError(EVICTED, dec.bytes, held, dec.format))
+        for ev in events:
+            ev.source = src
+            out.append(ev)
+        self.evicted += 1
 
     def feed(self, data: bytes) -> list:
         return self._route(self.xbee.feed(data))
@@ -388,7 +430,8 @@ class XBeeSinsChain:
 
     def summary(self) -> dict:
         return {"format": self.format, "xbee": self.xbee.summary(),
-                "sins": {f"{src:016X}": d.summary() for src, d in self.sins.items()}}
+                "sins": {f"{src:016X}": d.summary() for src, d in self.sins.items()},
+                "sources_evicted": self.evicted}
 
 
 def decoder_for(fmt: str, *, escaped: bool = True):

@@ -8,8 +8,8 @@ from digi.xbee.models.mode import OperatingMode
 from digi.xbee.packets.base import XBeeAPIPacket
 from digi.xbee.packets.factory import build_frame
 
-from emulator.coordinator import (ADDRESS_TIMEOUT_NS, MS, RESET_NS, START_NS, Coordinator, Remote,
-                                  identity_registers)
+from emulator.coordinator import (ADDRESS_TIMEOUT_NS, MS, RESET_NS, SERIAL_TX_BUFFER, START_NS,
+                                  Coordinator, Remote, identity_registers)
 from protocols import xbee
 
 RfPacket = namedtuple("RfPacket", "src64 src16 options data")
@@ -164,6 +164,21 @@ def test_explicit_rx_when_ao_is_1():
     assert type(p).__name__ == "ExplicitRXIndicatorPacket"
     assert (p.source_endpoint, p.dest_endpoint, p.cluster_id, p.profile_id, p.rf_data) == \
         (0xE8, 0xE8, 0x0011, 0xC105, b"abc")
+
+
+def test_rf_packets_that_do_not_fit_the_serial_transmit_buffer_are_dropped_whole():
+    c = make()
+    pkt = RfPacket(ROUTER64, 0x7D84, 0x01, b"\x7e" * 30)  # escapes count: sized as sent
+    size = len(c.render(0, pkt))
+    assert size >= 16 + 2 * 30  # 0x90 overhead + 30 escaped bytes
+    assert c.admit(0, pkt, SERIAL_TX_BUFFER - size) == size
+    assert c.admit(0, pkt, SERIAL_TX_BUFFER - size + 1) is None
+    assert c.dropped_tx_buffer == 1
+    # answers to the host are not RF packets: kept whatever is queued
+    (answer,) = c.host(0, at(b"VR"))
+    assert c.admit(answer.t_ns, answer.item, 10 * SERIAL_TX_BUFFER) == len(
+        c.render(answer.t_ns, answer.item))
+    assert c.dropped_tx_buffer == 1
 
 
 def tx(dest64=ROUTER64, dest16=0xFFFE, data=b"hello", fid=7, options=0):

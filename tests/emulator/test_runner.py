@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from emulator.clock import serial_queue
-from emulator.runner import SEC, Emulation, Line, Wire, parse_speed, wire_ns
+from emulator.coordinator import SERIAL_TX_BUFFER
+from emulator.runner import END, SEC, Emulation, Line, Wire, parse_speed, wire_ns
 from emulator.scenario import load_scenario
 from emulator.truth import read_truth_csv
 from emulator.world import World
@@ -79,11 +80,11 @@ def test_nothing_starts_at_or_after_the_end():
     assert line.next_ns() == SEC - 1 + wire_ns(30, 115200) and not line.busy()
 
 
-class _Rate:
+class _Rate(Wire):
     """A device whose rate changes after a marked item, like the coordinator after BD."""
 
     def __init__(self):
-        self.baud = 115200
+        super().__init__(115200)
 
     def render(self, t, item):
         if item == b"":
@@ -101,6 +102,23 @@ def test_rate_change_applies_to_the_following_chunks_and_empty_renders_are_skipp
     assert [c.data for c in out] == [b"BD", b"0123456789"]
     assert out[0].end_ns - out[0].start_ns == wire_ns(2, 115200)
     assert out[1].end_ns - out[1].start_ns == wire_ns(10, 9600) == 10_416_667
+
+
+class _Bounded(Wire):
+    """A device with a 10-byte transmit buffer."""
+
+    @staticmethod
+    def admit(t_ns, item, queued):
+        return None if queued + len(item) > 10 else len(item)
+
+
+def test_a_bounded_buffer_drops_what_does_not_fit_when_it_arrives():
+    line = Line("xbee", _Bounded(115200))
+    line.put(0, b"a" * 6)
+    line.put(1, b"b" * 5)  # "a" is still on the wire: 6 + 5 > 10
+    line.put(wire_ns(6, 115200), b"c" * 5)  # "a" has just arrived: room again
+    assert [c.data for c in line.poll(SEC, SEC, SEC)] == [b"a" * 6, b"c" * 5]
+    assert line.queued == 0
 
 
 @pytest.mark.parametrize("text,value", [("realtime", 1.0), ("max", None), ("10", 10.0),
@@ -240,3 +258,64 @@ def test_api_mode_1_scenario_sends_unescaped_frames(tmp_path):
     frames1 = XBeeDecoder(escaped=False).decode(raw)
     assert [(f.type, f.fields) for f in frames1] == [(f.type, f.fields) for f in frames2]
     assert len(raw) < len(escaped.read_bytes("xbee"))
+
+
+# -- the coordinator's bounded serial transmit buffer -----------------------------------------
+
+def drive(emu, host, step_ns=1_000_000):
+    """Run *emu* in virtual time with the host's bytes ``[(t_ns, data)]`` reaching the
+    coordinator at their times, as the PTY path passes them; polls every *step_ns*.
+    Returns each port's chunks and the most bytes ever queued on the xbee line."""
+    host = sorted(host)
+    chunks, most = {p: [] for p in PORTS}, 0
+    t = 0
+    while t < END:
+        t = t + step_ns if t < emu.end_ns else END  # then what is still on the wire
+        for ev in emu.world.advance(min(t, emu.end_ns)):
+            emu._enqueue(ev)
+        while host and host[0][0] <= t:
+            for out in emu.coordinator.host(*host.pop(0)):
+                emu.lines["xbee"].put(out.t_ns, out.item)
+        for name, line in emu.lines.items():
+            chunks[name] += line.poll(t, t, emu.end_ns)
+        most = max(most, emu.lines["xbee"].queued)
+    return chunks, most
+
+
+def bd(value, fid):
+    return xbee.build(0x08, True, frame_id=fid, command=b"BD", parameter=bytes((value,)))
+
+
+def test_a_slow_host_line_drops_rf_packets_and_answers_stay_prompt(office):
+    """Issue 7 point 8: ATBD3 (9600) with the RF data at ~4.6 kB/s, then ATBD7 10 s later.
+    The ATBD7 answer comes within a second, the queue stays within the buffer, and the SINS
+    data after it is fresh (compared with the same samples on the direct SINS line)."""
+    emu = Emulation(office, speed=None, ports=False, duration_s=16)
+    chunks, most = drive(emu, [(1 * SEC, bd(3, 1)), (11 * SEC, bd(7, 2))])
+    sins_at = {f.fields["seq"]: c.end_ns  # when the direct line delivered each sample
+               for c in chunks["sins"] for f in sins_decoder().decode(c.data)}
+    chain = XBeeSinsChain(escaped=True)
+    answers, ages = {}, []
+    for c in chunks["xbee"]:
+        for ev in chain.feed(c.data):
+            if ev.format == "xbee" and ev.type == 0x88:
+                answers[ev.fields["frame_id"]] = c.end_ns
+            elif ev.format == "sins" and 2 in answers:
+                ages.append(c.end_ns - sins_at[ev.fields["seq"]])
+    assert not [e for e in chain.flush() if isinstance(e, DecodeError)]
+    assert answers[2] - 11 * SEC < SEC
+    assert most <= SERIAL_TX_BUFFER + 16  # RF packets within the buffer, plus an answer
+    assert ages and max(ages[:20]) < SEC
+    dropped = emu.summary()["ports"]["xbee"]["dropped_tx_buffer"]
+    assert dropped == emu.coordinator.dropped_tx_buffer > 300  # most of the 10 s at 9600
+
+
+def test_what_a_slow_line_drops_does_not_depend_on_when_the_loop_polls(office):
+    host = [(1 * SEC, bd(3, 1))]
+    runs = []
+    for step in (1_000_000, 37_000_000):
+        emu = Emulation(office, speed=None, ports=False, duration_s=3)
+        chunks, _ = drive(emu, host, step)
+        runs.append(([(c.start_ns, c.data) for c in chunks["xbee"]],
+                     emu.coordinator.dropped_tx_buffer))
+    assert runs[0] == runs[1] and runs[0][1] > 50

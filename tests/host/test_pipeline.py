@@ -10,7 +10,7 @@ import pytest
 
 from host import config as host_config
 from host.bench import ROUTER64, synthetic_chunks
-from host.pipeline import Pipeline
+from host.pipeline import DB_PERIOD_S, Pipeline
 from protocols import adis16350, nanoloc, sins, xbee
 from protocols.stream import XBeeDecoder
 
@@ -209,10 +209,11 @@ def test_db_query_every_five_seconds_of_arrival_and_its_answer():
     tx2 = pipe.take_tx()
     frames = XBeeDecoder(escaped=True).decode(tx + tx2)
     assert [(f.type, f.fields["frame_id"], f.fields["command"]) for f in frames] == \
-        [(0x08, 1, b"DB"), (0x08, 2, b"DB")]
-    # python-xbee builds the same bytes for the same request
+        [(0x08, 1, b"DB"), (0x08, 2, b"AP"), (0x08, 3, b"DB"), (0x08, 4, b"AP")]
+    # python-xbee builds the same bytes for the same requests
     from xbee.frame import APIFrame
-    assert tx == APIFrame(b"\x08\x01DB", escaped=True).output()
+    assert tx == APIFrame(b"\x08\x01DB", escaped=True).output() + \
+        APIFrame(b"\x08\x02AP", escaped=True).output()
     answer = xbee.build(xbee.FrameType.AT_RESPONSE, True, frame_id=1, command=b"DB", status=0,
                         value=b"\x30")
     pipe.feed("xbee", answer, 5_100_000_000)
@@ -265,3 +266,89 @@ def test_a_sample_on_both_the_radio_and_the_direct_line_counts_once():
     pipe, est, _ = run(both, inputs=("xbee", "sins"))
     assert sum(c[0] == "imu" for c in est.calls) == 200
     assert pipe.imu_clock.duplicates == 200
+
+
+# -- the coordinator's API mode ------------------------------------------------------------------
+
+def _ap_answer(mode, fid=9, escaped=True):
+    return xbee.build(xbee.FrameType.AT_RESPONSE, escaped, frame_id=fid, command=b"AP", status=0,
+                      value=b"" if mode is None else bytes((mode,)))
+
+
+def test_at_queries_read_the_same_in_api_mode_1_and_2():
+    pipe = Pipeline(OFFICE, estimator=RecordingEstimator(), inputs=("xbee",))
+    tx = b""
+    for k in range(300):  # wraps the frame ID
+        pipe.feed("xbee", b"", k * 5_000_000_000)
+        tx += pipe.take_tx()
+    plain = XBeeDecoder(escaped=False).decode(tx)
+    assert [(f.fields["frame_id"], f.raw) for f in XBeeDecoder(escaped=True).decode(tx)] == \
+        [(f.fields["frame_id"], f.raw) for f in plain]
+    assert len(plain) == 600 and {f.fields["command"] for f in plain} == {b"DB", b"AP"}
+    ids = {f.fields["frame_id"] for f in plain}
+    assert 0 not in ids and {0x11, 0x13, 0x7D, 0x7E}.isdisjoint(ids) and len(ids) > 200
+
+
+@pytest.mark.parametrize("escaped,other", [(True, 1), (False, 2)])
+def test_an_ap_answer_that_differs_from_the_host_mode_is_said_once_and_counted(escaped, other):
+    pipe = Pipeline(OFFICE, estimator=RecordingEstimator(), inputs=("xbee",), escaped=escaped)
+    host = 2 if escaped else 1
+    pipe.feed("xbee", _ap_answer(host, escaped=escaped), 1)
+    assert pipe.take_events() == [] and pipe.coordinator_api == host  # as expected: silent
+    for k in range(3):
+        pipe.feed("xbee", _ap_answer(other, escaped=escaped), 10 + k)
+    (event,) = pipe.take_events()
+    assert (event["event"], event["coordinator_api"], event["host_api"]) == \
+        ("api_mode_mismatch", other, host)
+    fix = "--api1" if other == 1 else "without --api1"
+    assert f"switched to API {other}" in event["message"] and fix in event["message"]
+    assert f"send ATAP{host}" in event["message"]
+    assert pipe.counts["api_mode_mismatch"] == 3 and pipe.stats()["coordinator_api"] == other
+    pipe.feed("xbee", _ap_answer(host, escaped=escaped), 20)
+    assert [e["event"] for e in pipe.take_events()] == ["api_mode_ok"]
+
+
+def test_another_clients_ap_set_answer_makes_the_host_ask_at_once():
+    pipe = Pipeline(OFFICE, estimator=RecordingEstimator(), inputs=("xbee",))
+    pipe.feed("xbee", b"", 1)
+    pipe.take_tx()
+    pipe.feed("xbee", _ap_answer(None), 1_000_000_000)  # "AP set OK", no value
+    asked = XBeeDecoder(escaped=True).decode(pipe.take_tx())
+    assert [f.fields["command"] for f in asked] == [b"DB", b"AP"]
+
+
+def test_a_second_clients_atap1_is_seen_by_an_api2_host():
+    """Issue 7 point 9, with the emulator's coordinator in memory: a second client sends ATAP1
+    at 3 s (and reads the OK itself); the host learns it from its own periodic AP query and
+    says so; the second client's ATAP2 at 12 s puts things right, and the host says that."""
+    from emulator.runner import SEC, Emulation
+    from emulator.scenario import load_scenario
+
+    emu = Emulation(load_scenario("office"), speed=None, ports=False, duration_s=20)
+    coord, line = emu.coordinator, emu.lines["xbee"]
+    second = {3 * SEC: xbee.build(0x08, True, frame_id=0x42, command=b"AP", parameter=b"\x01"),
+              12 * SEC: xbee.build(0x08, False, frame_id=0x43, command=b"AP", parameter=b"\x02")}
+    pipe = Pipeline(OFFICE, estimator=RecordingEstimator(), inputs=("xbee",))
+    events, t, step = [], 0, 1_000_000
+    while t < emu.end_ns:
+        t += step
+        for ev in emu.world.advance(t):
+            emu._enqueue(ev)
+        for out in coord.host(t, second.pop(t, b"")):
+            line.put(out.t_ns, out.item)
+        for chunk in line.poll(t, t, emu.end_ns):
+            if chunk.data[4:5] in (b"\x42", b"\x43") and chunk.data[3] == 0x88:
+                continue  # the second client's answers: it reads them, not the host
+            pipe.feed("xbee", chunk.data, chunk.end_ns)
+            events += [(chunk.end_ns / SEC, e) for e in pipe.take_events()]
+            for out in coord.host(t, pipe.take_tx()):
+                line.put(out.t_ns, out.item)
+        for other in ("sins", "nanoloc"):
+            emu.lines[other].poll(t, t, emu.end_ns)
+    assert [(e["event"], e["coordinator_api"], e["host_api"]) for _, e in events] == \
+        [("api_mode_mismatch", 1, 2), ("api_mode_ok", 2, 2)]
+    (t_bad, bad), (t_ok, _) = events
+    assert 3 < t_bad < 3 + DB_PERIOD_S + 0.1 and 12 < t_ok < 12 + DB_PERIOD_S + 0.1
+    assert bad["message"] == ("coordinator switched to API 1; the host decodes API 2: restart "
+                              "the host with --api1 or send ATAP2")
+    assert pipe.counts["api_mode_mismatch"] >= 1 and pipe.counts["imu"] > 1500

@@ -96,10 +96,10 @@ def test_live_run_over_ptys_then_replay_gives_the_same_bytes(tmp_path):
     got = []
     replay(Recording(tmp_path / "rec"), lambda es: got.extend(map(estimate_line, es)))
     assert "".join(got) == live
-    # the host asked the coordinator for DB once (at the first chunk), and recorded it
+    # the host asked the coordinator for DB and AP once (at the first chunk), and recorded it
     rec = Recording(tmp_path / "rec")
     sent = XBeeDecoder(escaped=True).decode(rec.read_bytes(TX_PORT))
-    assert [(f.type, f.fields["command"]) for f in sent] == [(0x08, b"DB")]
+    assert [(f.type, f.fields["command"]) for f in sent] == [(0x08, b"DB"), (0x08, b"AP")]
     assert select.select([pairs["xbee"][0]], [], [], DEADLINE_S)[0], "nothing sent"
     received = os.read(pairs["xbee"][0], 1024)
     assert received == rec.read_bytes(TX_PORT)

@@ -118,3 +118,27 @@ def test_user_errors_are_one_line(args, needle, tmp_path):
 def test_not_a_recording(tmp_path):
     rc, _, err = navtwin("decode", "--format", "sins", str(tmp_path))
     assert rc == 2 and "recording.json" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("fmt,api,build", [
+    ("xbee", "--escaped", lambda k: xbee.build(0x8A, True, status=k)),
+    ("xbee", "--api1", lambda k: xbee.build(0x8A, False, status=k)),
+    ("sins", "--escaped", lambda k: sins.build_sample(k, [0x8000] * 11)),
+])
+def test_a_flood_of_7e_is_a_handful_of_lines_and_the_frames_after_it_decode(tmp_path, fmt, api,
+                                                                          build):
+    """Issue 7 point 9: 100 KB of 7E gave two JSON lines per byte."""
+    f = tmp_path / "flood.bin"
+    frames = [build(k) for k in range(5)]
+    f.write_bytes(b"\x7e" * 100_000 + b"".join(frames))
+    rc, lines, _ = navtwin("decode", "--format", fmt, api, str(f))
+    assert rc == 0 and len(lines) < 20
+    got = [x for x in lines if "error" not in x and "summary" not in x]
+    assert [x.get("status", x.get("seq")) for x in got] == list(range(5))
+    errors = [x for x in lines if "error" in x]
+    summary = lines[-1]["summary"]
+    # every error still counted by kind: the lines' counts add up to the summary's
+    for kind, n in summary["errors"].items():
+        assert sum(x.get("count", 1) for x in errors if x["error"] == kind) == n
+    garbage = [x for x in errors if x["error"] == "garbage"]
+    assert sum(x["size"] for x in garbage) == summary["error_bytes"]["garbage"] == 100_000

@@ -1,13 +1,18 @@
 """Streaming decoders: each error kind, resync, straddling, bounded memory."""
 import random
+import tracemalloc
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from protocols import sins, xbee
-from protocols.stream import (BAD_CHECKSUM, BAD_CRC, BAD_ESCAPE, BAD_LENGTH, GARBAGE, MALFORMED,
-                              TRUNCATED, DecodeError, Frame, XBeeDecoder, XBeeSinsChain,
-                              nanoloc_decoder, sins_decoder)
+from protocols.stream import (BAD_CHECKSUM, BAD_CRC, BAD_ESCAPE, BAD_LENGTH, EVICTED, GARBAGE,
+                              MALFORMED, MAX_SOURCES, TRUNCATED, DecodeError, Frame, XBeeDecoder,
+                              XBeeSinsChain, nanoloc_decoder, sins_decoder)
 
+from .strategies import FORMATS, chunked, garbage_bytes
+from .test_properties import DECODERS
 from .vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP, XBEE_API1
 
 ROUTER = 0x0013A20040A1B2D4
@@ -127,6 +132,50 @@ def test_chain_keeps_one_stream_per_source():
     assert [(f.source, f.fields["seq"]) for f in got] == [(1, 1), (2, 2)]
 
 
+def _rx(src64, data):
+    """A 0x90 frame, built without construct (fast enough for 100,000 of them)."""
+    return xbee.wrap(b"\x90" + src64.to_bytes(8, "big") + b"\xff\xfe\x01" + data, True)
+
+
+def test_chain_evicts_the_least_recently_heard_source_and_says_so():
+    a = sins.build_sample(1, [0] * 11)
+    chain = XBeeSinsChain(max_sources=2)
+    ev = chain.feed(_rx(1, a[:10]) + _rx(2, a[:5]) + _rx(1, a[10:]))  # 1 is now the most recent
+    assert [(f.source, f.fields["seq"]) for f in frames(ev)] == [(1, 1)]
+    ev = chain.feed(_rx(3, a))  # a third source: 2 goes, its 5 bytes reported as truncated
+    errors = [(e.kind, e.source, e.offset, e.size) for e in ev if isinstance(e, DecodeError)]
+    assert errors == [(TRUNCATED, 2, 0, 5), (GARBAGE, 2, 0, 5), (EVICTED, 2, 5, 5)]
+    assert [(f.source, f.fields["seq"]) for f in frames(ev)] == [(3, 1)]
+    assert list(chain.sins) == [1, 3] and chain.summary()["sources_evicted"] == 1
+    ev = chain.feed(_rx(2, a))  # 2 again: a fresh stream, at offset 0; 1 goes (nothing held)
+    assert [(f.source, f.offset) for f in frames(ev)] == [(2, 0)]
+    assert [(e.kind, e.source, e.size) for e in ev if isinstance(e, DecodeError)] == \
+        [(EVICTED, 1, 0)]
+
+
+def test_chain_memory_is_bounded_whatever_the_number_of_sources():
+    """Issue 7 point 9: 100,000 source addresses took one SINS decoder each (165 MB)."""
+    half = sins.build_sample(1, [0] * 11)[:14]  # every stream holds a partial frame
+    chain = XBeeSinsChain()
+
+    def sources(lo, hi):  # the number of evictions they cause
+        ev = []
+        for k in range(lo, hi, 1000):
+            ev += chain.feed(b"".join(_rx(0x0013A20000000000 + a, half) for a in range(k, k + 1000)))
+        return sum(isinstance(e, DecodeError) and e.kind == EVICTED for e in ev)
+
+    assert sources(0, 100_000) == chain.evicted == 100_000 - MAX_SOURCES
+    assert len(chain.sins) == MAX_SOURCES == 64
+    tracemalloc.start()  # 5,000 more (traced, so fewer): the memory stays where it was
+    try:
+        start = tracemalloc.get_traced_memory()[0]
+        sources(100_000, 105_000)
+        grown = tracemalloc.get_traced_memory()[0] - start
+    finally:
+        tracemalloc.stop()
+    assert grown < 500_000  # bytes; one decoder per source would be about 4 MB
+
+
 @pytest.mark.parametrize("make,limit", [
     (sins_decoder, 4 + 255 + 2),
     (nanoloc_decoder, 4 + 255 + 2),
@@ -144,3 +193,38 @@ def test_memory_is_bounded_whatever_length_fields_claim(make, limit):
         assert dec.buffered <= limit + chunk
     dec.flush()
     assert dec.buffered == 0
+
+
+# -- chunking never changes the result: every event, sizes included -----------------------------
+
+def _events(dec, chunks):
+    out = []
+    for c in chunks:
+        out += dec.feed(c)
+    out += dec.flush()
+    return [(e.offset, e.raw, e.fields) if isinstance(e, Frame) else (e.kind, e.offset, e.size)
+            for e in out]
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+@settings(max_examples=1000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_same_bytes_same_events_in_any_chunking(fmt, data):
+    """Issue 7 point 9: in API mode 2 an error's size depended on where the input was cut."""
+    parts = data.draw(st.lists(st.one_of(FORMATS[fmt], garbage_bytes), min_size=1, max_size=10))
+    stream = b"".join(parts)
+    whole = _events(DECODERS[fmt](), [stream])
+    assert _events(DECODERS[fmt](), data.draw(chunked(stream))) == whole
+
+
+def test_a_bad_escape_has_the_same_size_wherever_the_input_is_cut():
+    """The issue's case: 47 bytes in one piece, 7 when cut at byte 109 (before the fix)."""
+    f = xbee.build(0x90, True, src64=ROUTER, src16=0x1234, options=1, data=b"S" * 34)
+    bad = b"\x7e\x00\x30\x41\x42\x7d\x00" + b"G" * 40  # 7D 00 is no escape
+    stream = f + f + bad + f
+    assert len(f + f) == 102
+    for chunks in ([stream], [stream[:109], stream[109:]], [bytes([b]) for b in stream]):
+        dec = XBeeDecoder(escaped=True)
+        ev = _events(dec, chunks)
+        assert ev[:2] == [(0, f, ev[0][2]), (51, f, ev[0][2])]
+        assert ev[2:] == [(BAD_ESCAPE, 102, 7), (GARBAGE, 102, 47), (149, f, ev[0][2])]
