@@ -57,6 +57,10 @@ class Lines(io.TextIOBase):
     def status(self, since: float = 0.0) -> list[dict]:
         return [o["status"] for t, o in list(self.items) if t >= since and "status" in o]
 
+    def periodic(self, since: float = 0.0) -> list[dict]:
+        """The every-period status lines (not the events)."""
+        return [s for s in self.status(since) if "imu_per_s" in s]
+
     def events(self, since: float = 0.0) -> list[str]:
         return [s["event"] for s in self.status(since) if "event" in s]
 
@@ -101,7 +105,7 @@ def test_a_dead_emulators_link_is_never_followed_onto_a_reused_pty_and_a_restart
     run = Running(svc)
     recycled = None
     try:
-        wait_for(lambda: any(s.get("imu", 0) > 0 for s in status.status()), "IMU data")
+        wait_for(lambda: any(s["imu"] > 0 for s in status.periodic()), "IMU data")
         kill9(lab)
         wait_for(lambda: "port_down" in status.events(), "the host to see the hang-up")
         recycled = take_pts(pts)
@@ -123,7 +127,7 @@ def test_a_dead_emulators_link_is_never_followed_onto_a_reused_pty_and_a_restart
         assert "port_up" not in status.events(t_typed)
         gone = [s for s in status.status() if s.get("event") == "emulator_gone"]
         assert len(gone) == 1 and gone[0]["link_dir"] == str(d)
-        assert status.status()[-1]["ports"]["xbee"]["state"] == "emulator_gone"
+        assert status.periodic()[-1]["ports"]["xbee"]["state"] == "emulator_gone"
 
         t_restart = time.monotonic()
         lab = Lab(command("office", link_dir=d), ready_timeout=DEADLINE_S)
@@ -132,9 +136,9 @@ def test_a_dead_emulators_link_is_never_followed_onto_a_reused_pty_and_a_restart
                      "restarted emulator's link")
             t_up = time.monotonic()
             print(f"restart to port_up: {t_up - t_restart:.2f} s (emulator start included)")
-            imu_at_up = max(s.get("imu", 0) for s in status.status())
-            wait_for(lambda: any(s.get("imu", 0) > imu_at_up and s["ports"]["xbee"]["state"]
-                                 == "open" for s in status.status(t_up)), "IMU data again")
+            imu_at_up = max(s["imu"] for s in status.periodic())
+            wait_for(lambda: any(s["imu"] > imu_at_up and s["ports"]["xbee"]["state"] == "open"
+                                 for s in status.periodic(t_up)), "IMU data again")
         finally:
             lab.stop()
             lab.close()
@@ -236,7 +240,7 @@ class Host:
 
 def _host_on_lab(lab) -> Host:
     host = Host(lab.ports["xbee"])
-    wait_for(lambda: any(s.get("imu", 0) > 0 for s in host.lines.status()), "IMU data")
+    wait_for(lambda: any(s["imu"] > 0 for s in host.lines.periodic()), "IMU data")
     return host
 
 
@@ -272,7 +276,7 @@ def test_picocom_is_refused_while_the_host_has_the_port():
         host = _host_on_lab(lab)
         try:
             t0 = time.monotonic()
-            errors0 = host.lines.status()[-1]["errors"]
+            errors0 = host.lines.periodic()[-1]["errors"]
             outcomes = []
             for i in range(3):
                 if i:
@@ -298,5 +302,5 @@ def test_picocom_is_refused_while_the_host_has_the_port():
     assert all(rc == 1 and b"cannot lock" in err and not took
                for rc, err, took in outcomes), outcomes
     assert "port_down" not in host.lines.events()
-    assert host.lines.status()[-1]["errors"] == errors0  # picocom took no byte from the host
+    assert host.lines.periodic()[-1]["errors"] == errors0  # picocom took no byte from the host
     assert summary["reconnects"] == {"xbee": 0}
