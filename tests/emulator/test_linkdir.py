@@ -9,13 +9,13 @@ import threading
 import pytest
 
 from emulator.pty import LinkDir, LinkDirError
+from emulator.runner import PORTS
 from protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
 from .test_cli import one_line_error
 
 NAVTWIN = [sys.executable, "-m", "protocols"]
 DEADLINE_S = 60.0
-PORTS = ("sins", "xbee", "nanoloc")
 
 
 def emulate(link_dir):
