@@ -21,8 +21,11 @@ Line discipline of the emulated cable (peers-and-pty-facts.md section 5):
 
 :class:`LinkDir` is the directory of stable symlinks (``sins``, ``xbee``, ``nanoloc``) to
 the ``/dev/pts/N`` paths: created 0700, refused when owned by another user or writable by
-group or others, locked (``flock`` on ``.lock``) while an emulator uses it; links are
-replaced atomically, so links left by a dead run are simply overwritten.
+group or others, locked (``flock`` on :data:`protocols.linkdir.LOCK`, a regular file of
+ours opened without following a symlink) while an emulator uses it. Once it holds the lock
+it removes the links a dead run left (symlinks named like a port pointing into
+``/dev/pts/``), so while the lock is held the links are absent or this run's: the host
+follows a link only then. Anything else under a port's name is refused, never deleted.
 """
 from __future__ import annotations
 
@@ -32,10 +35,16 @@ import os
 import select
 import stat
 import termios
+import time
 import tty
+from collections.abc import Iterable
 from pathlib import Path
 
-LOCK = ".lock"
+from protocols.linkdir import LOCK
+
+PTS = "/dev/pts/"  # where every PTY slave an emulator links to lives
+LOCK_TRIES = 20  # a host's probe holds the lock shared for microseconds: retry ...
+LOCK_RETRY_S = 0.005  # ... this often before calling the directory in use
 
 
 class LinkDirError(ValueError):
@@ -51,11 +60,16 @@ def default_link_dir() -> Path:
 
 
 class LinkDir:
-    """A private directory of symlinks to PTY slaves, held by one emulator at a time."""
+    """A private directory of symlinks to PTY slaves, held by one emulator at a time.
 
-    def __init__(self, path: str | os.PathLike | None = None) -> None:
+    *names* are the ports this run will link: their stale links are removed (and anything
+    that is not a link of ours refused) before the caller creates its PTYs."""
+
+    def __init__(self, path: str | os.PathLike | None = None, names: Iterable[str] = ()) -> None:
         self.path = Path(path) if path is not None else default_link_dir()
         self._created = False
+        self._lock = -1
+        self.links: dict[str, str] = {}
         try:
             os.mkdir(self.path, 0o700)
             self._created = True
@@ -75,28 +89,76 @@ class LinkDir:
             raise LinkDirError(f"link directory {self.path} is writable by others "
                                f"(mode {stat.S_IMODE(st.st_mode):04o}); chmod 700 it or pass "
                                f"another --link-dir")
-        self._lock = os.open(self.path / LOCK, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
         try:
-            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            other = os.pread(self._lock, 32, 0).decode("ascii", "replace").strip() or "?"
-            os.close(self._lock)
-            raise LinkDirError(f"link directory {self.path} is in use by another emulator "
-                               f"(pid {other}); stop it or pass another --link-dir") from None
-        os.ftruncate(self._lock, 0)
-        os.pwrite(self._lock, f"{os.getpid()}\n".encode(), 0)
-        self.links: dict[str, str] = {}
+            self._take_lock()
+            for name in names:
+                if self._ours(name):
+                    (self.path / name).unlink()  # a dead run's: its PTY may be anyone's now
+        except BaseException:
+            self.close()
+            raise
+
+    def _refuse(self, name: str, what: str) -> LinkDirError:
+        return LinkDirError(f"{self.path / name} {what}; remove it or pass another --link-dir")
+
+    def _take_lock(self) -> None:
+        try:  # O_NOFOLLOW: a symlinked lock must not make us truncate the file it points at
+            fd = os.open(self.path / LOCK, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK
+                         | os.O_CLOEXEC, 0o600)
+        except OSError as e:
+            what = "is a symlink" if e.errno == errno.ELOOP else f"cannot be opened ({e.strerror})"
+            raise self._refuse(LOCK, what) from None
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or st.st_nlink != 1 or st.st_uid != os.getuid():
+                raise self._refuse(LOCK, "is not a regular file of yours")
+            for _ in range(LOCK_TRIES):
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    time.sleep(LOCK_RETRY_S)
+            else:
+                other = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
+                raise LinkDirError(f"link directory {self.path} is in use by another emulator "
+                                   f"(pid {other}); stop it or pass another --link-dir")
+        except BaseException:
+            os.close(fd)  # not ours: close() must leave the file where it is
+            raise
+        self._lock = fd
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+
+    def _ours(self, name: str) -> bool:
+        """Whether ``DIR/name`` is a link to a PTY (True) or absent (False); refuses the rest."""
+        path = self.path / name
+        try:
+            st = os.lstat(path)
+        except FileNotFoundError:
+            return False
+        if stat.S_ISLNK(st.st_mode):
+            target = os.readlink(path)
+            if target.startswith(PTS):
+                return True
+            raise self._refuse(name, f"is a link to {target}, not to a PTY")
+        kind = "a directory" if stat.S_ISDIR(st.st_mode) else \
+            "a regular file" if stat.S_ISREG(st.st_mode) else "not a link"
+        raise self._refuse(name, f"is {kind}, not a link navtwin made")
 
     def link(self, name: str, target: str) -> Path:
-        """Point ``DIR/name`` at *target*, atomically replacing any older link."""
+        """Point ``DIR/name`` at *target*, atomically replacing an older link to a PTY."""
+        self._ours(name)
         final = self.path / name
         tmp = self.path / f".{name}.{os.getpid()}.tmp"
         try:
-            tmp.unlink()
-        except FileNotFoundError:
-            pass
-        os.symlink(target, tmp)
-        os.replace(tmp, final)
+            try:
+                tmp.unlink()
+            except FileNotFoundError:
+                pass
+            os.symlink(target, tmp)
+            os.replace(tmp, final)
+        except OSError as e:
+            raise self._refuse(tmp.name, f"cannot be made ({e.strerror})") from None
         self.links[name] = target
         return final
 

@@ -274,20 +274,18 @@ class Emulation:
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
         self.links: dict[str, str] = {}
+        self.recorder: RecordingWriter | None = None
         try:
             if ports:
-                self.link_dir = LinkDir(link_dir)
-                for name in PORTS:
-                    self.ports[name] = PtyPort(name, bauds[name])
-                    self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
-            self.recorder = self._recorder(record) if record is not None else None
-        except RecordingWriteError as e:
-            self.close()
-            raise RunError(f"--record {e}") from None
-        except OSError as e:
-            self.close()
-            raise RunError(f"--record {record}: {e.strerror or e}; choose a directory you "
-                           f"can write") from None
+                self._publish(link_dir, bauds)
+            if record is not None:
+                try:
+                    self.recorder = self._recorder(record)
+                except RecordingWriteError as e:
+                    raise RunError(f"--record {e}") from None
+                except OSError as e:
+                    raise RunError(f"--record {record}: {e.strerror or e}; choose a directory "
+                                   f"you can write") from None
         except BaseException:
             self.close()
             raise
@@ -296,6 +294,17 @@ class Emulation:
         self.record_error: RecordingWriteError | None = None  # the write that ended the run
 
     # -- assembly -------------------------------------------------------------------------
+    def _publish(self, link_dir, bauds: dict[str, int]) -> None:
+        """The PTYs and their links; a failure is a one-line LinkDirError or RunError."""
+        self.link_dir = LinkDir(link_dir, PORTS)
+        for name in PORTS:
+            try:
+                self.ports[name] = PtyPort(name, bauds[name])
+            except OSError as e:
+                raise RunError(f"cannot create a pseudo-terminal for {name} ({e.strerror}); "
+                               f"close some terminals or raise kernel.pty.max") from None
+            self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
+
     def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
         radios = self.scenario.radios_for(self.seed)  # the router's MY, the network: from the seed
         coord = identity_registers(radios["coordinator"], CE=1)  # CE: see coordinator.py

@@ -23,7 +23,9 @@ def register(sub) -> None:
         "nanoLOC gateway, fuse IMU and ranges, and write one JSON line per estimate: "
         '{"t","filter","x","y","vx","vy","yaw","cov"}. A status line goes to stderr every few '
         "seconds; a port that disappears is reopened every 0.5 s while the filters keep their "
-        "state. SIGINT or SIGTERM ends the run with a summary line on stderr (exit 0).")
+        "state (an emulator's link only while that emulator runs). Ports are opened "
+        "exclusively (flock, as picocom does). SIGINT or SIGTERM ends the run with a summary "
+        "line on stderr (exit 0).")
     p.add_argument("--xbee", metavar="PORT", help=f"the coordinator in API mode: {PORT_HELP}")
     p.add_argument("--sins", metavar="PORT",
                    help="the SINS board's direct RS-232 line (same forms)")

@@ -15,14 +15,26 @@ the run: the recording is closed with what was written, the summary is still wri
 :attr:`Service.error` holds the one-line reason. A broken pipe on the output is not such a
 failure: it ends the run quietly (``BrokenPipeError``), as the reader is gone.
 
-A read that fails (device unplugged, PTY link gone, EIO, socket closed) closes the port;
-its reader reopens it every ``RETRY_S`` by wall clock until it is back. The pipeline keeps
-its state meanwhile: only which bytes arrive, not how they are processed, depends on it.
+Ports are opened exclusively (``flock``, as picocom, tio and minicom do), so a well-behaved
+second client is refused instead of splitting the bytes. A read that fails (device
+unplugged, PTY link gone, EIO, socket closed) closes the port; its reader reopens it every
+``RETRY_S`` by wall clock until it is back. A read that found no data although the line was
+readable, on a tty that is not hung up, means another reader took the bytes: it is counted
+(``contended``) and the port stays open. The pipeline keeps its state meanwhile: only which
+bytes arrive, not how they are processed, depends on it.
+
+An emulator's link (:mod:`protocols.linkdir`) is opened only while the emulator that made it
+holds its directory's lock: once it is gone the link's ``/dev/pts/N`` may be another
+program's terminal. The reader then says ``emulator_gone`` once and waits for an emulator to
+take the directory again.
 """
 from __future__ import annotations
 
+import errno
 import os
 import queue
+import select
+import termios
 import threading
 import time
 from pathlib import Path
@@ -31,6 +43,7 @@ from typing import Callable, TextIO
 import serial
 
 from protocols import __version__
+from protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter, write_failure
 
 from .config import HostConfig
@@ -53,22 +66,71 @@ class StartError(Exception):
     naming it and the fix."""
 
 
+class EmulatorGone(StartError):
+    """An emulator link whose emulator no longer holds the link directory's lock."""
+
+    def __init__(self, url: str, link_dir: Path) -> None:
+        super().__init__(f"{url}: the emulator that made this link is gone (nothing holds "
+                         f"{link_dir / LOCK}); start navtwin emulate --link-dir {link_dir}")
+        self.link_dir = link_dir
+
+
 def open_port(url: str, baud: int) -> serial.SerialBase:
-    return serial.serial_for_url(url, baudrate=baud, timeout=READ_TIMEOUT_S)
+    """Open *url*; an emulator link only while its emulator lives. Raises :class:`StartError`
+    for what the user must fix (the lock of another program, the emulator gone), pyserial's
+    or the OS's error otherwise."""
+    link_dir = navtwin_link_dir(url)
+    if link_dir is not None and not emulator_alive(link_dir):
+        raise EmulatorGone(url, link_dir)
+    try:  # exclusive: ignored by URLs other than device paths
+        return serial.serial_for_url(url, baudrate=baud, timeout=READ_TIMEOUT_S, exclusive=True)
+    except serial.SerialException as e:
+        if e.errno == errno.EWOULDBLOCK:  # pyserial's flock(LOCK_EX | LOCK_NB) was refused
+            raise StartError(f"{url}: another program has it open exclusively (picocom, tio, "
+                             f"minicom...); close that program") from None
+        raise
+
+
+def hung_up(ser: serial.SerialBase) -> bool:
+    """Whether *ser*'s line is gone: POLLHUP or EIO on a tty (a USB adapter unplugged, a PTY
+    whose master closed). True for what is not a tty: its error is not a second reader's."""
+    fd = getattr(ser, "fd", None)
+    if fd is None:
+        return True
+    try:
+        p = select.poll()
+        p.register(fd, select.POLLIN)
+        if any(ev & (select.POLLHUP | select.POLLERR | select.POLLNVAL) for _, ev in p.poll(0)):
+            return True
+        termios.tcgetattr(fd)
+    except (OSError, termios.error, ValueError):
+        return True
+    return False
 
 
 def read_chunk(ser: serial.SerialBase) -> bytes:
-    """What has arrived: waits up to the port's timeout for a first byte, then takes the
-    rest without waiting (``in_waiting`` is exact on ttys, 0/1 on sockets)."""
+    """What has arrived, waiting up to the port's timeout for it. On a tty everything waiting
+    is taken in one read once the line is readable, so a second reader woken by the same
+    bytes finds them gone instead of taking all but the first; a readable tty with nothing
+    waiting (another reader was first, or a hang-up) raises, as pyserial does. Elsewhere
+    (``in_waiting`` is 0/1 on sockets) the first byte is waited for and the rest taken
+    without waiting."""
+    fd = getattr(ser, "fd", None)
+    if fd is not None:
+        if not select.select([fd], [], [], ser.timeout)[0]:
+            return b""
+        if not (n := ser.in_waiting):
+            raise serial.SerialException("readable but no data waiting")
+        return ser.read(min(n, MAX_CHUNK))
     data = ser.read(1)
-    if data:
-        while len(data) < MAX_CHUNK and (n := ser.in_waiting):
-            data += ser.read(n)
+    while data and len(data) < MAX_CHUNK and (n := ser.in_waiting):
+        data += ser.read(n)
     return data
 
 
 class PortReader(threading.Thread):
-    """Owns one port: reads into the queue; on failure closes, reports, reopens."""
+    """Owns one port: reads into the queue; on failure closes, reports, reopens. Events go to
+    the queue as ``(event, port, body, read ns)``; data as ``("data", port, bytes, read ns)``."""
 
     def __init__(self, name: str, url: str, baud: int, ser: serial.SerialBase,
                  chunks: queue.SimpleQueue, stop: threading.Event) -> None:
@@ -78,9 +140,13 @@ class PortReader(threading.Thread):
         self._chunks = chunks
         self._quit = stop
         self._lock = threading.Lock()
-        self.state = "open"
+        self.state = "open"  # "open", "down", or "emulator_gone" (down, and not reopened)
         self.reconnects = 0
+        self.contended = 0  # reads that found the bytes taken by another reader
         self.tx_dropped = 0
+
+    def _event(self, event: str, **body) -> None:
+        self._chunks.put((event, self.port, body, time.monotonic_ns()))
 
     def run(self) -> None:
         try:
@@ -89,18 +155,28 @@ class PortReader(threading.Thread):
                 if ser is None:
                     try:
                         ser = open_port(self.url, self.baud)
-                    except (serial.SerialException, OSError, ValueError):
+                    except EmulatorGone as e:
+                        if self.state != "emulator_gone":
+                            self.state = "emulator_gone"
+                            self._event("emulator_gone", link_dir=str(e.link_dir))
+                        self._quit.wait(RETRY_S)
+                        continue
+                    except (serial.SerialException, OSError, ValueError, StartError):
+                        self.state = "down"
                         self._quit.wait(RETRY_S)
                         continue
                     with self._lock:
                         self._ser, self.state = ser, "open"
                     self.reconnects += 1
-                    self._chunks.put(("up", self.port, b"", time.monotonic_ns()))
+                    self._event("port_up")
                 try:
                     data = read_chunk(ser)
                 except (serial.SerialException, OSError) as e:
+                    if not hung_up(ser):
+                        self.contended += 1
+                        continue
                     self._close()
-                    self._chunks.put(("down", self.port, str(e).encode(), time.monotonic_ns()))
+                    self._event("port_down", error=str(e))
                     self._quit.wait(RETRY_S)
                     continue
                 if data:
@@ -185,6 +261,8 @@ class Service:
             for name, url in self.ports.items():
                 try:
                     opened[name] = open_port(url, self.baud)
+                except StartError as e:
+                    raise StartError(f"cannot open --{name} {e}") from None
                 except (serial.SerialException, OSError, ValueError) as e:
                     raise StartError(f"cannot open --{name} {url}: {e}; check the device path "
                                     f"or URL (socket://, rfc2217://, spy://)") from None
@@ -258,8 +336,7 @@ class Service:
             if kind == "data":
                 self._process(name, data, t_read)
             elif kind is not None:
-                self._info("status", {"event": f"port_{kind}", "port": name,
-                                      **({"error": data.decode()} if data else {})})
+                self._info("status", {"event": kind, "port": name, **data})
             now = time.monotonic_ns()
             if now >= next_status:
                 self._status(now)
@@ -315,7 +392,7 @@ class Service:
             frames = st["ports"][p]["frames"]
             rates[p] = {"state": r.state,
                         "frames_per_s": round((frames - self._prev.get(p, 0)) / dt, 1),
-                        "bytes": st["ports"][p]["bytes"]}
+                        "bytes": st["ports"][p]["bytes"], "contended": r.contended}
             self._prev[p] = frames
         imu, ranges = st["counts"].get("imu", 0), st["counts"].get("reports", 0)
         body = {"t_s": round((now - self._t0) / 1e9, 3), "ports": rates,
@@ -331,6 +408,7 @@ class Service:
     def summary(self) -> dict:
         return {"chunks": self.chunks, "lines": self.lines, "t0_monotonic_ns": self._t0,
                 "reconnects": {p: r.reconnects for p, r in self._readers.items()},
+                "contended": {p: r.contended for p, r in self._readers.items()},
                 "tx_dropped": sum(r.tx_dropped for r in self._readers.values()),
                 "latency": self.latency.overall(), **self.pipeline.stats(),
                 "estimator": self.pipeline.estimator.stats(),
