@@ -239,8 +239,9 @@ class Coordinator:
     """Coordinator state machine; pure function of its inputs and its generator.
 
     ``received`` and ``host`` return :class:`Output` items for the coordinator's UART;
-    ``admit`` takes or drops an item when it reaches the serial transmit buffer; ``render`` turns an item into the bytes of an API frame at the moment the UART starts
-    sending it (so AP changes apply to every frame sent after the change).
+    ``admit`` takes or drops an item when it reaches the serial transmit buffer; ``render``
+    turns an item into the bytes of an API frame at the moment the UART starts sending it
+    (so AP changes apply to every frame sent after the change).
     """
 
     registers: Registers

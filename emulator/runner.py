@@ -494,7 +494,7 @@ class Emulation:
         ports = {}
         for name, line in self.lines.items():
             entry = {"frames": line.chunks, "bytes": line.bytes}
-            if name == "xbee":  # RF packets the coordinator's serial transmit buffer had no room for
+            if name == "xbee":  # RF packets its serial transmit buffer had no room for
                 entry["dropped_tx_buffer"] = self.coordinator.dropped_tx_buffer
             if name in self.ports:
                 entry.update(self.ports[name].stats())

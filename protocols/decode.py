@@ -71,8 +71,8 @@ def error_record(ev: DecodeError) -> dict:
 
 
 class ErrorRuns:
-    """Consecutive errors of one kind (and format and source) as one record, so a flood of
-    garbage gives a few lines, not one or two per byte: ``offset`` is the first error's,
+    """Errors of one kind (and format and source) with no frame between them as one record,
+    so a flood of garbage gives a few lines, not one or two per byte: ``offset`` is the first's,
     ``size`` reaches to the furthest end of any of them, ``count`` (present when more than
     one) says how many and ``last_offset`` where the last began. A frame ends the runs."""
 

@@ -161,7 +161,8 @@ def test_chain_memory_is_bounded_whatever_the_number_of_sources():
     def sources(lo, hi):  # the number of evictions they cause
         ev = []
         for k in range(lo, hi, 1000):
-            ev += chain.feed(b"".join(_rx(0x0013A20000000000 + a, half) for a in range(k, k + 1000)))
+            ev += chain.feed(b"".join(_rx(0x0013A20000000000 + a, half)
+                                      for a in range(k, k + 1000)))
         return sum(isinstance(e, DecodeError) and e.kind == EVICTED for e in ev)
 
     assert sources(0, 100_000) == chain.evicted == 100_000 - MAX_SOURCES
