@@ -27,8 +27,9 @@ Recording. Each chunk a device emits is recorded, whether or not a client is att
 ``t_device_ns`` = when its first byte leaves the UART, ``t_wall_ns`` (paced runs only) =
 monotonic ns since the run started when it was written to the PTY. The recording, and
 truth.csv up to the virtual time reached, are flushed every ``FLUSH_S`` of wall time (when
-paced, in an idle gap, as world generation is, but never more than ``FLUSH_S`` late), so a
-killed run leaves a replayable prefix. A write that fails ends the run (``record_error``).
+paced, in an idle gap, as world generation is, but never more than ``FLUSH_S`` late; at max
+speed also every ``MAX_BLOCK_NS`` of virtual time), so a killed run leaves a replayable
+prefix. A write that fails ends the run (``record_error``).
 """
 from __future__ import annotations
 
@@ -413,9 +414,7 @@ class Emulation:
                                   and not any(l.busy() for l in self.lines.values())):
                 self.reached_ns = self.end_ns
                 break
-            if wall >= next_flush and (not paced or wall >= next_flush + FLUSH_NS
-                                       or t0 + int(target / self.speed) - wall
-                                       > 2 * self._flush_cost_ns + 2 * SPIN_NS):
+            if self.recorder is not None and self._flush_due(wall, next_flush, t0, target):
                 self._flush(self.recorder, self.reached_ns)
                 next_flush = time.monotonic_ns() + FLUSH_NS
                 if paced:
@@ -432,6 +431,13 @@ class Emulation:
             self._wait(deadline, min(next_check, next_progress))
         else:
             self.interrupted = True
+
+    def _flush_due(self, wall: int, next_flush: int, t0: int, target: int) -> bool:
+        if self.speed is None:  # also per block of virtual time: a failing disk loses one
+            return wall >= next_flush or self.reached_ns >= self._truth_ns + MAX_BLOCK_NS
+        idle_ns = t0 + int(target / self.speed) - wall  # until the next write is due
+        return wall >= next_flush and (wall >= next_flush + FLUSH_NS
+                                       or idle_ns > 2 * self._flush_cost_ns + 2 * SPIN_NS)
 
     def _wait(self, deadline: int, check_at: int) -> None:
         """Sleep until *deadline* (monotonic ns) or a client writes; spin the last SPIN_NS."""

@@ -2,7 +2,6 @@
 "--record follows a symlink"): what a killed run leaves replays, and is the full run's
 prefix; a write that fails ends the run with one line, exit 2 and a closed recording."""
 import json
-import os
 import resource
 import signal
 import subprocess
@@ -107,6 +106,21 @@ def test_emulate_record_on_a_full_filesystem_ends_with_one_line(tmp_path):
     assert done["done"] and "File too large" in done["recording_error"]
     rec = Recording(d)
     assert not rec.complete and "File too large" in rec.meta["write_error"]
+    code, lines, err = replay_lines(d)
+    assert code == 0 and lines and "is incomplete" in err, err
+
+
+def test_emulate_record_on_a_full_tmpfs_ends_with_one_line(small_fs, tmp_path):
+    d = small_fs / "rec"
+    res = subprocess.run([*NAVTWIN, "emulate", "--scenario", "office", "--duration", "60",
+                          "--speed", "max", "--link-dir", str(tmp_path / "links"), "--record",
+                          str(d), "--quiet"], capture_output=True, text=True, timeout=DEADLINE_S)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    line, = res.stderr.splitlines()
+    assert line.startswith(f"navtwin emulate: error: --record {d}/")
+    assert "No space left on device; the filesystem is full" in line
+    assert "No space left" in json.loads(res.stdout.splitlines()[-1])["recording_error"]
+    assert not Recording(d).complete
     code, lines, err = replay_lines(d)
     assert code == 0 and lines and "is incomplete" in err, err
 

@@ -153,6 +153,21 @@ def test_host_record_on_a_full_filesystem_ends_cleanly_and_replays(tmp_path):
     assert b"is incomplete" in res.stderr and b"Traceback" not in res.stderr
 
 
+def test_host_record_on_a_full_tmpfs_ends_cleanly_and_replays(small_fs):
+    d = small_fs / "rec"
+    host = Host(["--record", d, "--status-period", "60"], ["nanoloc"])
+    sent = host.feed([("nanoloc", bytes(range(256)) * 4, 0)] * 1300, pause_s=0.004)
+    code, _, err = host.finish()
+    assert code == 2, err
+    line = error_line(err)
+    assert line.startswith(f"navtwin host: error: --record {d}/nanoloc.bin: No space left on "
+                           f"device; the filesystem is full")
+    assert "nanoloc.bin" in summary_of(err)["error"]
+    rec = Recording(d)
+    got = rec.read_bytes("nanoloc")
+    assert not rec.complete and got and bytes(sent["nanoloc"]).startswith(got)
+
+
 def test_host_refuses_to_record_through_a_symlink(capsys, tmp_path):
     master, path = pty_pair()
     try:

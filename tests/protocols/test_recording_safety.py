@@ -180,7 +180,7 @@ def test_impossible_index_entries_are_errors_naming_file_and_line(tmp_path, line
     set_complete(d, False)  # impossible even for a crash: not forgiven as a truncated tail
     with pytest.raises(RecordingError) as e:
         Recording(d)
-    assert f"xbee.csv:3: " in one_line(e) and problem in str(e.value)
+    assert "xbee.csv:3: " in one_line(e) and problem in str(e.value)
 
 
 def test_a_wrong_header_is_an_error(tmp_path):
