@@ -39,14 +39,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from protocols.adis16350 import GYRO_LSB_DPS
 from protocols.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
                               RANGE_BIAS_M, RANGE_SCALE, number_problem)
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 DEFAULT = "office"
 FILTER_NAMES = ("sins", "wsn", "kf", "ekf", "ukf")  # the estimator's names, in output order
-GYRO_RANGES = tuple(GYRO_LSB_DPS)  # 300, 150, 75 deg/s
 _INF = math.inf
 #: The range of every number a [filters] table may set: (lo, hi, lo excluded). Beyond them the
 #: filters overflow (1e308), divide by zero (ukf_alpha 0) or never finish (output_period_s 1e-300).
@@ -258,9 +256,11 @@ def _parse(doc: dict, source: str, name: str) -> HostConfig:
                 raise ConfigError(f"[vehicle] router must be 16 hex digits (SH+SL), not {r!r}")
             kw["router"] = int(r, 16)
         if "gyro_range_dps" in veh:
-            if veh["gyro_range_dps"] not in GYRO_RANGES or isinstance(veh["gyro_range_dps"], bool):
-                raise ConfigError(f"[vehicle] gyro_range_dps must be one of 300, 150, 75, "
-                                  f"not {veh['gyro_range_dps']!r}")
+            from protocols.adis16350 import GYRO_LSB_DPS  # here: numpy is slow to import for --help
+
+            if veh["gyro_range_dps"] not in GYRO_LSB_DPS or isinstance(veh["gyro_range_dps"], bool):
+                raise ConfigError(f"[vehicle] gyro_range_dps must be one of "
+                                  f"{', '.join(map(str, GYRO_LSB_DPS))}, not {veh['gyro_range_dps']!r}")
             kw["gyro_range_dps"] = veh["gyro_range_dps"]
         if "hold_s" in timing:
             kw["hold_s"] = _number("[timing] hold_s", timing["hold_s"], 0.0, 1.0)
