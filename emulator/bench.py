@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from protocols.cli import Parser, number
 from protocols.recording import Recording
 from protocols.stream import Frame, sins_decoder
 
@@ -188,19 +189,21 @@ def benchmarks() -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m emulator.bench", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = p.add_subparsers(dest="what", required=True)
+    p = Parser(prog="python -m emulator.bench", description=__doc__,
+               formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="what", required=True, parser_class=Parser)
+    repeat = number(1, 1000, integer=True)
     j = sub.add_parser("jitter", help="SINS frame-period jitter on the sins port, real time")
-    j.add_argument("--seconds", type=float, default=60.0)
+    j.add_argument("--seconds", type=number(1, 3600), default=60.0, help="1 to 3600 (default 60)")
     j.add_argument("--scenario", default="office")
     s = sub.add_parser("speed", help="virtual-time generation speed")
     s.add_argument("--scenario", default="office")
-    s.add_argument("--repeat", type=int, default=3)
+    s.add_argument("--repeat", type=repeat, default=3, help="1 to 1000 (default 3)")
     d = sub.add_parser("digi-open", help="digi-xbee XBeeDevice.open() time on the coordinator")
-    d.add_argument("--repeat", type=int, default=10)
+    d.add_argument("--repeat", type=repeat, default=10, help="1 to 1000 (default 10)")
     k = sub.add_parser("soak", help="live soak: second reader, emulator restart, memory")
-    k.add_argument("--seconds", type=float, default=600.0)
+    k.add_argument("--seconds", type=number(30, 36000), default=600.0,
+                   help="30 to 36000 (default 600)")
     k.add_argument("--dir", help="keep the run here (default: a new temp dir)")
     args = p.parse_args(argv)
     if args.what == "jitter":

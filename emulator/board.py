@@ -37,5 +37,6 @@ class Board:
 
     def next_start(self, after_ns: int) -> int:
         """Start of the first frame at or after *after_ns* (the schedule is known ahead)."""
-        return int(self.clock.tick(int(self.clock.ticks_between(after_ns, after_ns + 2 * round(
+        lo = max(after_ns, self.clock.t0_ns)  # before the first frame (a late start_ms): it
+        return int(self.clock.tick(int(self.clock.ticks_between(lo, lo + 2 * round(
             self.clock.true_period_ns) + 2)[0])))

@@ -1,13 +1,21 @@
 """``navtwin emulate``: run a scenario on pseudo-terminals, optionally recording it."""
 from __future__ import annotations
 
+import argparse
 import json
 import signal
 import sys
 import threading
 from pathlib import Path
 
-from protocols.cli import UsageError, stop_on_signals
+from protocols.cli import UsageError, number, stop_on_signals
+from protocols.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
+
+#: --seed and --duration, shared with ``navtwin lab``.
+seed = number(*SEEDS, integer=True)
+SEED_HELP = f"random seed {span(*SEEDS)} (default: the scenario's)"
+duration = number(0, MAX_DURATION_S, above=True)
+DURATION_HELP = "seconds of scenario time to run, at most the scenario's length (default: all of it)"
 
 DESCRIPTION = """\
 Run the emulated lab: the SINS board, the lab computer's XBee coordinator (API mode) and the
@@ -23,13 +31,12 @@ def register(sub) -> None:
                        description=DESCRIPTION)
     p.add_argument("--scenario", required=True, metavar="NAME|FILE",
                    help="a shipped scenario name (e.g. office, corridor-outage) or a .toml file")
-    p.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
-    p.add_argument("--duration", type=float, metavar="S",
-                   help="seconds of scenario time to run (default: the whole scenario)")
-    p.add_argument("--speed", default="realtime", metavar="realtime|max|FACTOR",
+    p.add_argument("--seed", type=seed, help=SEED_HELP)
+    p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
+    p.add_argument("--speed", default="realtime", type=_speed, metavar="realtime|max|FACTOR",
                    help="realtime (default) keeps the devices' absolute schedule on the wall "
-                        "clock; a FACTOR runs it that many times faster; max as fast as possible. "
-                        "The bytes are the same at every speed")
+                        f"clock; a FACTOR {span(*SPEEDS)} runs it that many times faster; max "
+                        "as fast as possible. The bytes are the same at every speed")
     p.add_argument("--link-dir", metavar="DIR",
                    help="directory for the port links, created 0700 (default: "
                         "$XDG_RUNTIME_DIR/navtwin or /tmp/navtwin-UID)")
@@ -41,6 +48,15 @@ def register(sub) -> None:
                    help="with --record: replace the recording already in DIR")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_emulate)
+
+
+def _speed(text: str) -> float | None:
+    from .runner import RunError, parse_speed
+
+    try:
+        return parse_speed(text)
+    except RunError as e:
+        raise argparse.ArgumentTypeError(str(e).removeprefix("--speed ")) from None
 
 
 def _check_record_dir(path: str, overwrite: bool) -> None:
@@ -60,11 +76,10 @@ def _check_record_dir(path: str, overwrite: bool) -> None:
 
 def run_emulate(args) -> int:
     from .pty import LinkDirError
-    from .runner import Emulation, RunError, parse_speed
+    from .runner import Emulation, RunError
     from .scenario import ScenarioError, load_scenario
 
     try:
-        speed = parse_speed(args.speed)
         if args.record is not None:
             _check_record_dir(args.record, args.overwrite)
         scenario = load_scenario(args.scenario)
@@ -73,7 +88,7 @@ def run_emulate(args) -> int:
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     stop = threading.Event()
     try:
-        emu = Emulation(scenario, args.seed, speed=speed, duration_s=args.duration,
+        emu = Emulation(scenario, args.seed, speed=args.speed, duration_s=args.duration,
                         link_dir=args.link_dir, record=args.record, progress=progress)
     except (LinkDirError, RunError) as e:
         raise UsageError(str(e)) from None

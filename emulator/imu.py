@@ -84,7 +84,9 @@ class _Sensor:
         over = np.abs(raw) > self.full_scale
         raw = np.clip(raw, -self.full_scale, self.full_scale)
         if self.fir_state is None:  # the sensor ran before t = 0: start from steady state
-            self.fir_state = lfilter_zi(self.taps, [1.0])[:, None] * raw[0]
+            # (N = 1, SENS/AVG[2:0] = 0, is a 1-tap filter: no state, and lfilter_zi refuses it)
+            zi = lfilter_zi(self.taps, [1.0]) if len(self.taps) > 1 else np.empty(0)
+            self.fir_state = zi[:, None] * raw[0]
         out, self.fir_state = lfilter(self.taps, [1.0], raw, axis=0, zi=self.fir_state)
         return out, over.any(axis=1)
 

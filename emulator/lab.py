@@ -17,6 +17,7 @@ Everything lands in one run directory (private, 0700)::
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import signal
@@ -27,7 +28,7 @@ import threading
 import time
 from pathlib import Path
 
-from . import evaluate
+from . import cli, evaluate
 from .api import EmulatorError, emulate
 
 #: Host configs shipped for the scenarios' labs (host/configs): both corridors share a survey.
@@ -86,7 +87,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
             cmd = [sys.executable, "-m", "protocols", "host", "--xbee", lab.ports["xbee"],
                    "--nanoloc", lab.ports["nanoloc"], "--config", config,
                    "--record", str(d / "host"), "--out", str(d / "estimates.jsonl")]
-            if filters:
+            if filters is not None:
                 cmd += ["--filters", filters]
             with open(log, "wb") as f:
                 host = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
@@ -154,22 +155,28 @@ def register(sub) -> None:
         "000's figures, and a plot. Ctrl-C ends the run early and still reports.")
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
                    help="a shipped scenario (office, corridor, corridor-outage) or a TOML file")
-    p.add_argument("--seed", type=int, help="emulator seed (default: the scenario's)")
-    p.add_argument("--duration", type=float, metavar="S",
-                   help="seconds of the scenario to run (default: all of it)")
+    p.add_argument("--seed", type=cli.seed, help=cli.SEED_HELP)
+    p.add_argument("--duration", type=cli.duration, metavar="S", help=cli.DURATION_HELP)
     p.add_argument("--config", metavar="NAME|FILE",
                    help="the host's config (default: the scenario's lab, e.g. office)")
-    p.add_argument("--filters", metavar="LIST", help="the host's --filters (default: its config's)")
+    p.add_argument("--filters", metavar="LIST", type=_filter_list,
+                   help="the host's --filters, which checks the names (default: its config's)")
     p.add_argument("--dir", metavar="DIR", help="run directory (default: a new private temp dir)")
     p.add_argument("--no-plot", dest="plot", action="store_false", help="skip report.png")
     p.set_defaults(func=run)
 
 
+def _filter_list(text: str) -> str:
+    """Refuse an empty list here, before anything starts; the host judges the names."""
+    if not text.replace(",", "").strip():
+        raise argparse.ArgumentTypeError(f"{text!r}: no filter given; give a comma list of "
+                                         "the host's filters, or all")
+    return text
+
+
 def run(args) -> int:
     from protocols.cli import UsageError, stop_on_signals
 
-    if args.duration is not None and args.duration <= 0:
-        raise UsageError(f"--duration {args.duration}: must be positive")
     stop = threading.Event()
     try:
         with stop_on_signals(stop):

@@ -43,6 +43,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
+from protocols.limits import SPEEDS, span
 from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
 
 from .coordinator import Coordinator, Remote, identity_registers
@@ -69,7 +70,7 @@ class RunError(ValueError):
 
 
 def parse_speed(text: str | float) -> float | None:
-    """``realtime`` -> 1.0, ``max`` -> None, a positive number -> that factor."""
+    """``realtime`` -> 1.0, ``max`` -> None, a number in SPEEDS -> that factor."""
     if text == "realtime":
         return 1.0
     if text == "max":
@@ -79,8 +80,9 @@ def parse_speed(text: str | float) -> float | None:
     except ValueError:
         raise RunError(f"--speed {text!r} is not realtime, max or a number; "
                          f"use e.g. --speed realtime, --speed max or --speed 10") from None
-    if not 0 < factor < float("inf"):
-        raise RunError(f"--speed {text!r} must be a positive factor; use e.g. --speed 10")
+    if not SPEEDS[0] <= factor <= SPEEDS[1]:  # also refuses nan
+        raise RunError(f"--speed {text!r} must be a positive factor {span(*SPEEDS)}; use e.g. "
+                       "--speed 10, or --speed max")
     return factor
 
 

@@ -22,6 +22,10 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from protocols.adis16350 import GYRO_LSB_DPS
+from protocols.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
+                              MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS)
+
 from . import trajectory as geometry
 from .rng import stream
 from .schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
@@ -35,6 +39,12 @@ BD_RATES = {0: 1200, 1: 2400, 2: 4800, 3: 9600, 4: 19200, 5: 38400, 6: 57600, 7:
 BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400)
 
 
+#: The devices run in blocks of this much true time (world.py); the IMU model needs a sample
+#: in every block, so its sample period must not be longer.
+BLOCK_S = 1.0
+SMPL_TIME_BASES_S = (1.0 / 1638.4, 18.921e-3)  # ADIS16350 SMPL_PRD bit 7 = 0, 1
+
+
 class ScenarioError(ValueError):
     """A scenario that cannot be used; the message is one line naming the fix."""
 
@@ -46,16 +56,17 @@ def _ppm(doc: str):
 @dataclass(frozen=True)
 class Site:
     latitude_deg: float = key(34.316, "deg", "geodetic latitude: projects the earth rate",
-                              between(-90, 90))
+                              between(*LATITUDE_DEG))
     local_gravity: float = key(9.80665, "m/s^2", "local gravity magnitude (with centrifugal part)",
-                               between(9.7, 9.9, "use the local gravity, about 9.78 to 9.83"))
+                               between(*GRAVITY_M_S2, "use the local gravity, about 9.78 to 9.83"))
 
 
 @dataclass(frozen=True)
 class Area:
     size: tuple[float, float] = key(REQUIRED, "m", "extent along x and y; anchors and waypoints lie inside",
-                                    each(positive("give a positive width and depth")))
-    origin: tuple[float, float] = key((0.0, 0.0), "m", "the corner with the smallest x and y")
+                                    each(positive("give a positive width and depth", hi=MAX_COORD_M)))
+    origin: tuple[float, float] = key((0.0, 0.0), "m", "the corner with the smallest x and y",
+                                      each(between(-MAX_COORD_M, MAX_COORD_M)))
     x_azimuth_deg: float = key(90.0, "deg", "azimuth (clockwise from north) of +x; 90 = x east, y north",
                                between(0, 360))
 
@@ -66,20 +77,21 @@ class Area:
 
 @dataclass(frozen=True)
 class Anchor:
-    id: int = key(REQUIRED, "", "anchor id in the gateway reports", between(1, 254))
+    id: int = key(REQUIRED, "", "anchor id in the gateway reports", between(*ANCHOR_IDS))
     x: float = key(REQUIRED, "m", "antenna position x")
     y: float = key(REQUIRED, "m", "antenna position y")
-    z: float | None = key(None, "m", "antenna height; none = the tag's height (a planar layout)")
+    z: float | None = key(None, "m", "antenna height; none = the tag's height (a planar layout)",
+                          between(-MAX_HEIGHT_M, MAX_HEIGHT_M))
     ppm: float = _ppm("crystal offset of this anchor's clock (times tau1, tau4)")
     range_bias_m: float = key(0.0, "m", "c_i of 001 eq. 13: this anchor's constant range bias",
-                              between(-5, 5))
+                              between(*RANGE_BIAS_M))
 
 
 @dataclass(frozen=True)
 class Tag:
-    id: int = key(16, "", "tag id in the gateway reports", between(1, 254))
+    id: int = key(16, "", "tag id in the gateway reports", between(*ANCHOR_IDS))
     z: float = key(0.3, "m", "tag antenna height above the floor; the vehicle's truth z",
-                   non_negative())
+                   non_negative(hi=MAX_HEIGHT_M))
     ppm: float = _ppm("crystal offset of the tag's clock (times tau2, tau3)")
 
 
@@ -87,16 +99,17 @@ class Tag:
 class Trajectory:
     waypoints: tuple[tuple[float, float], ...] = key(
         REQUIRED, "m", "corners of the taped line; the first is the start, the first leg the start heading")
-    speed_m_s: float = key(REQUIRED, "m/s", "cruising speed along the line", positive("set a positive speed"))
+    speed_m_s: float = key(REQUIRED, "m/s", "cruising speed along the line", positive("set a positive speed up to 100 m/s", hi=100))
     closed: bool = key(True, "", "the line is a closed loop (it must run straight through the start)")
     loops: int = key(1, "", "laps of a closed loop before the vehicle stops", between(1, 1000))
-    alignment_s: float = key(5.0, "s", "stationary alignment period at the start", non_negative())
+    alignment_s: float = key(5.0, "s", "stationary alignment period at the start",
+                              non_negative(hi=MAX_DURATION_S))
     accel_m_s2: float = key(0.2, "m/s^2", "peak acceleration of the smooth start and stop",
-                            positive("set a positive acceleration"))
+                            positive("set a positive acceleration up to 100 m/s^2", hi=100))
     turn_radius_m: float = key(1.0, "m", "radius of the circular part of each turn",
-                               positive("set a positive turn radius"))
+                               positive("set a positive turn radius", hi=MAX_COORD_M))
     transition_m: float = key(0.5, "m", "length of the clothoid entering and leaving each turn "
-                              "(continuous curvature)", non_negative())
+                              "(continuous curvature)", non_negative(hi=MAX_COORD_M))
 
     def __post_init__(self):
         n = len(self.waypoints)
@@ -124,39 +137,44 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class Imu:
-    gyro_range_dps: int = key(300, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range", one_of(75, 150, 300))
+    gyro_range_dps: int = key(300, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range",
+                                one_of(*sorted(GYRO_LSB_DPS)))
     filter_taps: int = key(4, "", "SENS/AVG bits 2:0 = log2(N): Bartlett window taps N",
                            one_of(1, 2, 4, 8, 16, 32, 64))
     smpl_prd: int = key(1, "", "SMPL_PRD: internal sample period 0.61035 ms x (NS+1) (bit 7 = 18.921 ms "
                         "time base); 1 = 819.2 SPS", between(1, 255))
-    arw_deg_rt_hr: float = key(4.2, "deg/sqrt(h)", "gyro angle random walk", non_negative())
+    arw_deg_rt_hr: float = key(4.2, "deg/sqrt(h)", "gyro angle random walk", non_negative(hi=1000))
     gyro_bias_instability_dps: float = key(0.015, "deg/s", "gyro in-run bias (1 sigma of a Gauss-Markov "
-                                           "process)", non_negative())
-    gyro_bias_corr_s: float = key(100.0, "s", "correlation time of the gyro bias process", positive())
+                                           "process)", non_negative(hi=100))
+    gyro_bias_corr_s: float = key(100.0, "s", "correlation time of the gyro bias process",
+                              positive(hi=1_000_000))
     gyro_turn_on_bias_dps: float = key(0.1, "deg/s", "1 sigma of the constant bias drawn at power-on",
-                                       non_negative())
+                                       non_negative(hi=100))
     gyro_scale_factor_ppm: float = key(1000.0, "ppm", "1 sigma of each gyro's scale-factor error",
-                                       non_negative())
+                                       non_negative(hi=100_000))
     gyro_misalignment_deg: float = key(0.05, "deg", "1 sigma of each gyro axis' misalignment (per "
-                                       "off-diagonal term)", non_negative())
-    vrw_m_s_rt_hr: float = key(2.0, "m/s/sqrt(h)", "accelerometer velocity random walk", non_negative())
+                                       "off-diagonal term)", non_negative(hi=10))
+    vrw_m_s_rt_hr: float = key(2.0, "m/s/sqrt(h)", "accelerometer velocity random walk",
+                                   non_negative(hi=1000))
     accel_bias_instability_mg: float = key(0.7, "mg", "accelerometer in-run bias (1 sigma, Gauss-Markov)",
-                                           non_negative())
+                                           non_negative(hi=1000))
     accel_bias_corr_s: float = key(100.0, "s", "correlation time of the accelerometer bias process",
-                                   positive())
+                                   positive(hi=1_000_000))
     accel_turn_on_bias_mg: float = key(2.0, "mg", "1 sigma of the constant bias drawn at power-on",
-                                       non_negative())
+                                       non_negative(hi=1000))
     accel_scale_factor_ppm: float = key(1000.0, "ppm", "1 sigma of each accelerometer's scale-factor error",
-                                        non_negative())
+                                        non_negative(hi=100_000))
     accel_misalignment_deg: float = key(0.25, "deg", "1 sigma of each accelerometer axis' misalignment",
-                                        non_negative())
+                                        non_negative(hi=10))
     accel_range_g: float = key(10.0, "g", "accelerometer measurement range (beyond: saturation, EA)",
                                between(1, 20))
     temperature_c: float = key(25.0, "degC", "sensor temperature (X/Y/ZTEMP_OUT)", between(-40, 85))
-    temperature_noise_c: float = key(0.15, "degC", "1 sigma noise of each temperature word", non_negative())
+    temperature_noise_c: float = key(0.15, "degC", "1 sigma noise of each temperature word",
+                                     non_negative(hi=100))
     supply_v: float = key(5.0, "V", "supply voltage (SUPPLY_OUT; outside 4.75..5.25 V sets EA)",
                           between(4.0, 6.0))
-    supply_noise_v: float = key(0.002, "V", "1 sigma noise of the supply word", non_negative())
+    supply_noise_v: float = key(0.002, "V", "1 sigma noise of the supply word",
+                                non_negative(hi=1))
 
     def __post_init__(self):
         need = {150: 4, 75: 16}.get(self.gyro_range_dps, 1)
@@ -164,18 +182,28 @@ class Imu:
             raise Invalid("filter_taps", f"must be >= {need} at gyro_range_dps = {self.gyro_range_dps} "
                                          f"(got {self.filter_taps}; datasheet Table 21); "
                                          f"set filter_taps = {need} or more")
+        if self.sample_period_s > BLOCK_S:
+            raise Invalid("smpl_prd", f"{self.smpl_prd} gives a sample period of "
+                                      f"{self.sample_period_s:g} s, longer than the emulator's "
+                                      f"{BLOCK_S:g} s generation block; use smpl_prd <= "
+                                      f"{_slowest_smpl_prd()}")
 
     @property
     def sample_period_s(self) -> float:
-        base = 18.921e-3 if self.smpl_prd & 0x80 else 1.0 / 1638.4
+        base = SMPL_TIME_BASES_S[self.smpl_prd >> 7]
         return base * ((self.smpl_prd & 0x7F) + 1)
+
+
+def _slowest_smpl_prd() -> int:
+    """The largest SMPL_PRD whose sample period fits in BLOCK_S (time base bit 7 set)."""
+    return 0x80 + int(BLOCK_S / SMPL_TIME_BASES_S[1]) - 1
 
 
 @dataclass(frozen=True)
 class Board:
     baud: int = key(115200, "bit/s", "the DSP board's RS-232 rate (8N1)", one_of(*BAUDS))
     period_ms: float = key(10.0, "ms", "frame period in the board's own clock", between(1, 1000))
-    start_ms: float = key(1.0, "ms", "true time of the first frame", non_negative())
+    start_ms: float = key(1.0, "ms", "true time of the first frame", non_negative(hi=1_000_000))
     spi_read_us: float = key(500.0, "us", "the registers are read this long before a frame is written",
                              between(0, 5000))
 
@@ -199,29 +227,32 @@ class Ranging:
     cycle_ms: float = key(100.0, "ms", "TDMA cycle: every anchor ranges the tag once per cycle",
                           between(1, 10000))
     slot_ms: float = key(25.0, "ms", "slot length; anchor number i of slot_order starts at i x slot",
-                         positive())
+                         positive(hi=10000))
     slot_order: tuple[int, ...] = key((), "", "anchor ids in slot order; empty = the [[anchors]] order")
-    start_ms: float = key(5.0, "ms", "network time of the first cycle", non_negative())
-    scale: float = key(1.0, "", "f of 001 eq. 13: range scale factor", between(0.5, 1.5))
-    sigma0_m: float = key(0.1, "m", "range noise sigma(d) = sigma0_m + sigma_per_m x d", non_negative())
+    start_ms: float = key(5.0, "ms", "network time of the first cycle", non_negative(hi=1_000_000))
+    scale: float = key(1.0, "", "f of 001 eq. 13: range scale factor", between(*RANGE_SCALE))
+    sigma0_m: float = key(0.1, "m", "range noise sigma(d) = sigma0_m + sigma_per_m x d",
+                          non_negative(hi=100))
     sigma_per_m: float = key(0.01, "m/m", "growth of the range noise with distance (001 sect. 3)",
-                             non_negative())
+                             non_negative(hi=1))
     tag_reply_us: float = key(100.0, "us", "tag's reply delay, its own clock (tau2 nominal)",
                               between(1, 4000))
     anchor_reply_us: float = key(100.0, "us", "anchor's reply delay, its own clock (tau4 nominal)",
                                  between(1, 4000))
-    reply_jitter_ns: float = key(20.0, "ns", "1 sigma jitter of each reply delay", non_negative())
+    reply_jitter_ns: float = key(20.0, "ns", "1 sigma jitter of each reply delay",
+                                 non_negative(hi=1_000_000))
     leg_gap_us: float = key(300.0, "us", "from the end of the first round trip to the tag's second "
-                            "packet", non_negative())
+                            "packet", non_negative(hi=1_000_000))
     result_us: float = key(800.0, "us", "from the end of the second round trip to the result at the "
-                           "anchor (tag sends tau2, tau3)", non_negative())
+                           "anchor (tag sends tau2, tau3)", non_negative(hi=1_000_000))
     timeout_ms: float = key(6.0, "ms", "an anchor gives up on a silent tag after this (status 0x40)",
-                            positive())
+                            positive(hi=10000))
     timeout_prob: float = key(0.0, "", "probability that an exchange times out at random",
                               between(0, 1))
     rssi_1m_dbm: float = key(-45.0, "dBm", "RSSI(1 m) of 003 eq. 1", between(-120, 20))
     path_loss_exponent: float = key(2.0, "", "n of 003 eq. 1", between(1, 6))
-    shadowing_db: float = key(2.0, "dB", "sigma of the log-normal shadowing of 003 eq. 1", non_negative())
+    shadowing_db: float = key(2.0, "dB", "sigma of the log-normal shadowing of 003 eq. 1",
+                          non_negative(hi=100))
 
     def __post_init__(self):
         if len(set(self.slot_order)) != len(self.slot_order):
@@ -237,20 +268,21 @@ class Ranging:
 @dataclass(frozen=True)
 class Gateway:
     baud: int = key(115200, "bit/s", "the gateway's serial line (8N1)", one_of(*BAUDS))
-    latency_us: float = key(200.0, "us", "anchor result to gateway (wired)", non_negative())
+    latency_us: float = key(200.0, "us", "anchor result to gateway (wired)",
+                              non_negative(hi=1_000_000))
 
 
 @dataclass(frozen=True)
 class Link:
     latency_ms: float = key(3.0, "ms", "fixed part of the one-way delay (radio processing at both ends)",
-                            non_negative())
+                            non_negative(hi=10000))
     jitter_ms: float = key(2.24, "ms", "random CSMA backoff per attempt, uniform in [0, jitter_ms]",
-                           non_negative())
+                           non_negative(hi=10000))
     per_attempt_loss: float = key(0.01, "", "probability that one transmission attempt is lost",
                                   between(0, 1))
     max_retries: int = key(3, "", "MAC retries after a lost attempt; after them the packet is lost",
                            between(0, 15))
-    retry_ms: float = key(0.864, "ms", "ACK wait before a retry", non_negative())
+    retry_ms: float = key(0.864, "ms", "ACK wait before a retry", non_negative(hi=10000))
 
 
 def _radio(sl: int, ni: str, vr: int, ap: int, extra: dict | None = None):
@@ -293,8 +325,9 @@ class XBee:
 @dataclass(frozen=True, kw_only=True)
 class Fault:
     KINDS = {}
-    start_s: float = key(REQUIRED, "s", "start of the episode", non_negative())
-    end_s: float = key(REQUIRED, "s", "end of the episode (exclusive)", non_negative())
+    start_s: float = key(REQUIRED, "s", "start of the episode", non_negative(hi=MAX_DURATION_S))
+    end_s: float = key(REQUIRED, "s", "end of the episode (exclusive)",
+                       non_negative(hi=MAX_DURATION_S))
 
     def __post_init__(self):
         if self.end_s <= self.start_s:
@@ -310,16 +343,17 @@ class Fault:
 class AnchorOutage(Fault):
     """The anchor is silent: its exchanges time out (status 0x40 reports)."""
     KIND = "anchor_outage"
-    anchor: int = key(REQUIRED, "", "anchor id", between(1, 254))
+    anchor: int = key(REQUIRED, "", "anchor id", between(*ANCHOR_IDS))
 
 
 @dataclass(frozen=True, kw_only=True)
 class Nlos(Fault):
     """Non-line-of-sight: a positive range bias (exponential) and a weaker signal."""
     KIND = "nlos"
-    anchor: int = key(REQUIRED, "", "anchor id", between(1, 254))
-    bias_m: float = key(0.8, "m", "mean of the exponential NLOS range bias", non_negative())
-    attenuation_db: float = key(6.0, "dB", "extra path loss on the RSSI", non_negative())
+    anchor: int = key(REQUIRED, "", "anchor id", between(*ANCHOR_IDS))
+    bias_m: float = key(0.8, "m", "mean of the exponential NLOS range bias",
+                      non_negative(hi=100))
+    attenuation_db: float = key(6.0, "dB", "extra path loss on the RSSI", non_negative(hi=200))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -337,8 +371,9 @@ class Scenario:
 
     name: str = key(REQUIRED, "", "scenario name")
     description: str = key("", "", "one line shown by tools")
-    duration_s: float = key(REQUIRED, "s", "length of the run", positive("set a positive duration"))
-    seed: int = key(0, "", "default seed of the run's random streams", between(0, 2**63 - 1))
+    duration_s: float = key(REQUIRED, "s", "length of the run",
+                      between(0.001, MAX_DURATION_S, f"set a duration from 0.001 to {MAX_DURATION_S} s"))
+    seed: int = key(0, "", "default seed of the run's random streams", between(*SEEDS))
     site: Site = Site()
     area: Area = key(REQUIRED, "", "")
     anchors: tuple[Anchor, ...] = key(REQUIRED, "", "")

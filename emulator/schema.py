@@ -20,6 +20,8 @@ import typing
 from dataclasses import MISSING, dataclass
 from typing import Any, Callable
 
+from protocols.limits import show as _num, span
+
 
 class Invalid(ValueError):
     """A validation problem: *where* (e.g. ``[trajectory] speed_m_s``) and a one-line text."""
@@ -39,20 +41,20 @@ class Check:
     fix: str
 
 
-def positive(fix: str = "set a positive value") -> Check:
-    return Check(lambda v: v > 0, "must be > 0", fix)
+def positive(fix: str | None = None, hi: float = math.inf) -> Check:
+    """> 0 and <= *hi*: the upper bound keeps finite but absurd values (1e308 s) out of the
+    emulator's integer nanoseconds and its noise draws."""
+    return Check(lambda v: 0 < v <= hi, f"must be {span(0, hi, above=True)}",
+                 fix or ("set a positive value" if hi == math.inf
+                         else f"use a value above 0 and up to {_num(hi)}"))
 
 
-def non_negative(fix: str = "set 0 or a positive value") -> Check:
-    return Check(lambda v: v >= 0, "must be >= 0", fix)
-
-
-def _num(v) -> str:
-    return str(v) if isinstance(v, int) else f"{v:g}"
+def non_negative(fix: str | None = None, hi: float = math.inf) -> Check:
+    return between(0, hi, fix or "set 0 or a positive value")
 
 
 def between(lo: float, hi: float, fix: str | None = None) -> Check:
-    return Check(lambda v: lo <= v <= hi, f"must be in [{_num(lo)}, {_num(hi)}]",
+    return Check(lambda v: lo <= v <= hi, f"must be {span(lo, hi)}",
                  fix or f"use a value from {_num(lo)} to {_num(hi)}")
 
 
@@ -277,14 +279,15 @@ def _sections(obj, path: str, header: str) -> list[str]:
 
 
 # -- documentation -------------------------------------------------------------------------
-def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str]]:
-    """(key, unit, default, meaning) for every key of *cls* and its sub-tables; keys are
-    dotted paths, ``[]`` marking an array of tables (``anchors[].x``)."""
+def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
+    """(key, unit, default, valid values, meaning) for every key of *cls* and its sub-tables;
+    keys are dotted paths, ``[]`` marking an array of tables (``anchors[].x``)."""
     out = []
     kinds = getattr(cls, "KINDS", None)
     classes = list(kinds.values()) if kinds else [cls]
     if kinds:
-        out.append((prefix + "kind", "", "required", "one of " + ", ".join(f"`{k}`" for k in kinds)))
+        out.append((prefix + "kind", "", "required", ", ".join(f"`{k}`" for k in kinds),
+                    "the kind of entry"))
     seen = set()
     for c in classes:
         hints = typing.get_type_hints(c)
@@ -306,12 +309,13 @@ def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str]]:
                 if len(classes) > 1:
                     users = [k.KIND for k in classes if f.name in {g.name for g in dataclasses.fields(k)}]
                     doc = f"({', '.join(users)}) {doc}"
-                out.append((name, f.metadata.get("unit", ""), default, doc))
+                valid = "; ".join(c.must.replace("must be ", "") for c in f.metadata.get("checks", ()))
+                out.append((name, f.metadata.get("unit", ""), default, valid, doc))
     return out
 
 
 def markdown_table(cls) -> str:
-    lines = ["| key | unit | default | meaning |", "|---|---|---|---|"]
-    for name, unit, default, doc in rows(cls):
-        lines.append(f"| `{name}` | {unit} | `{default}` | {doc} |")
+    lines = ["| key | unit | default | valid | meaning |", "|---|---|---|---|---|"]
+    for name, unit, default, valid, doc in rows(cls):
+        lines.append(f"| `{name}` | {unit} | `{default}` | {valid} | {doc} |")
     return "\n".join(lines) + "\n"

@@ -28,7 +28,7 @@ from .imu import Adis16350
 from .nanoloc import NanolocNetwork
 from .radio import OPT_ACKNOWLEDGED, Link, Router
 from .rng import stream
-from .scenario import LinkLoss, Scenario
+from .scenario import BLOCK_S, LinkLoss, Scenario
 from .trajectory import Trajectory
 from .truth import truth_arrays
 
@@ -54,7 +54,7 @@ def _order(e: Event) -> tuple[int, int]:
 
 
 class World:
-    BLOCK_NS = 1_000_000_000
+    BLOCK_NS = round(BLOCK_S * 1e9)  # the IMU's sample period is checked against it
 
     def __init__(self, sc: Scenario, seed: int | None = None) -> None:
         self.scenario = sc

@@ -1,17 +1,20 @@
 """`navtwin host` and `navtwin replay`."""
 from __future__ import annotations
 
+import argparse
 import sys
 import threading
 import time
 
-from protocols.cli import UsageError
+from protocols.cli import BAUD_HELP, UsageError, baud, number
+from protocols.limits import MAX_DURATION_S, span
 from protocols.recording import Recording, RecordingError, write_failure
 
 from . import config as host_config
 from .config import ConfigError
 from .output import estimate_line, info_line, open_output
 
+STATUS_PERIODS = (0, 3600)
 PORT_HELP = ("a device path (/dev/ttyUSB0, an emulator PTY link) or a pyserial URL "
              "(socket://, rfc2217://, spy://)")
 
@@ -32,16 +35,18 @@ def register(sub) -> None:
     p.add_argument("--nanoloc", metavar="PORT", help="the anchors' gateway (same forms)")
     p.add_argument("--api1", dest="escaped", action="store_false", default=True,
                    help="the coordinator runs API mode 1 (AP=1); default API mode 2, escaped")
-    p.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
+    p.add_argument("--baud", type=baud, default=115200, help=BAUD_HELP)
     _common(p)
     p.add_argument("--record", metavar="DIR",
                    help="record every chunk read, with its arrival time, in a new directory, "
                         "not a symbolic link ('navtwin replay DIR' then gives the same output); "
                         "flushed every 0.5 s, so a killed run leaves a replayable recording")
-    p.add_argument("--duration", type=float, metavar="S",
-                   help="stop after S seconds of wall time (default: run until SIGINT/SIGTERM)")
-    p.add_argument("--status-period", type=float, default=2.0, metavar="S",
-                   help="seconds between status lines on stderr (default 2)")
+    p.add_argument("--duration", type=number(0, MAX_DURATION_S, above=True), metavar="S",
+                   help=f"stop after S seconds of wall time, S {span(0, MAX_DURATION_S, True)} "
+                        "(default: run until SIGINT/SIGTERM)")
+    p.add_argument("--status-period", type=number(*STATUS_PERIODS, above=True), default=2.0,
+                   metavar="S", help="seconds between status lines on stderr, "
+                                     f"{span(*STATUS_PERIODS, True)} (default 2)")
     p.set_defaults(func=run_host)
 
     r = sub.add_parser(
@@ -69,20 +74,26 @@ def _common(p, recorded: bool = False) -> None:
     p.add_argument("--config", metavar="NAME|FILE",
                    help=f"host config: {', '.join(host_config.shipped())} or a TOML file "
                         f"(default: {'the recorded config' if recorded else host_config.DEFAULT})")
-    p.add_argument("--filters", metavar="LIST",
+    p.add_argument("--filters", metavar="LIST", type=_filters,
                    help=f"comma list of {','.join(host_config.FILTER_NAMES)}, or all "
                         f"(default: {src})")
     p.add_argument("--out", default="-", metavar="FILE|-",
                    help="estimate lines (default - = stdout)")
 
 
+def _filters(text: str) -> tuple[str, ...]:
+    try:
+        return host_config.parse_filters(text)
+    except ConfigError as e:
+        raise argparse.ArgumentTypeError(str(e).removeprefix("--filters: ")) from None
+
+
 def _config_and_filters(args, default_config: bool):
     try:
         cfg = host_config.load(args.config) if (args.config or default_config) else None
-        filters = host_config.parse_filters(args.filters) if args.filters else None
     except ConfigError as e:
         raise UsageError(str(e)) from None
-    return cfg, filters
+    return cfg, args.filters
 
 
 def _open_out(spec: str):
@@ -117,10 +128,6 @@ def run_host(args) -> int:
     ports = {p: getattr(args, p) for p in INPUTS if getattr(args, p)}
     if not ports:
         raise UsageError("no input port; give --xbee PORT and/or --sins PORT, and --nanoloc PORT")
-    if args.duration is not None and args.duration <= 0:
-        raise UsageError(f"--duration {args.duration}: must be positive")
-    if args.status_period <= 0:
-        raise UsageError(f"--status-period {args.status_period}: must be positive")
     cfg, filters = _config_and_filters(args, default_config=True)
     out = _open_out(args.out)
     stop = threading.Event()

@@ -39,10 +39,41 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocols.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
+                              RANGE_BIAS_M, RANGE_SCALE, number_problem)
+
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 DEFAULT = "office"
 FILTER_NAMES = ("sins", "wsn", "kf", "ekf", "ukf")  # the estimator's names, in output order
-GYRO_RANGES = (300, 150, 75)
+_INF = math.inf
+#: The range of every number a [filters] table may set: (lo, hi, lo excluded). Beyond them the
+#: filters overflow (1e308), divide by zero (ukf_alpha 0) or never finish (output_period_s 1e-300).
+ESTIMATOR_RANGES = {
+    "altitude_m": (-1000, 10000, False),
+    "x_azimuth_deg": (0, 360, False),
+    "alignment_s": (0, 3600, True),
+    "output_period_s": (0.001, 60, False),
+    "range_sigma_m": (0, 100, True),
+    "range_scale": (*RANGE_SCALE, False),
+    "vrw_m_s_rt_hr": (0, 1000, True),
+    "arw_deg_rt_hr": (0, 1000, True),
+    "gyro_bias_instability_dps": (0, 100, False),
+    "accel_sigma_m_s2": (0, 100, True),
+    "tilt_inflation": (0, 1000, False),
+    "jerk_psd": (0, 10000, True),
+    "p0_sigma": (0, 100, True),  # each element
+    "stationary_sigma": (0, 100, True),
+    "range_bias_m": (*RANGE_BIAS_M, False),  # each anchor's
+    "gate_probability": (0, 1, True),  # below 1: the estimator refuses 1
+    "gate_reopen_s": (0, 3600, True),
+    "cycle_s": (0.001, 10, False),
+    "max_lag_s": (0, 60, False),
+    "max_range_m": (0, MAX_COORD_M, True),
+    "fix_margin_m": (0, MAX_COORD_M, False),
+    "ukf_alpha": (1e-4, 1, False),
+    "ukf_beta": (0, 10, False),
+    "ukf_kappa": (-3, 10, False),  # n + kappa > 0 for the UKF's n = 6; 3 - n = -3 is the usual
+}
 
 
 class ConfigError(ValueError):
@@ -142,18 +173,16 @@ _SECTIONS = {
 }
 
 
-def _number(where: str, value, *, lo: float = -math.inf, hi: float = math.inf) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{where} must be a number, not {value!r}")
-    if not lo <= value <= hi:
-        raise ConfigError(f"{where} = {value} is outside [{lo}, {hi}]")
-    return float(value)
+def _number(where: str, value, lo: float = -_INF, hi: float = _INF, above: bool = False,
+            integer: bool = False):
+    problem = number_problem(value, lo, hi, integer=integer, above=above)
+    if problem:
+        raise ConfigError(f"{where} {problem}, not {value!r}")
+    return value if integer else float(value)
 
 
 def _integer(where: str, value, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ConfigError(f"{where} must be an integer in {lo}..{hi}, not {value!r}")
-    return value
+    return _number(where, value, lo, hi, integer=True)
 
 
 def _estimator_fields() -> dict[str, str]:
@@ -168,9 +197,12 @@ def _estimator_fields() -> dict[str, str]:
 
 
 def parse_filters(spec, where: str = "--filters") -> tuple[str, ...]:
-    """``"all"`` or names (comma string or list) -> names in the estimator's order."""
-    names = spec.split(",") if isinstance(spec, str) else list(spec)
-    names = [n.strip() for n in names if str(n).strip()]
+    """``"all"`` or names (comma string or list of strings) -> names in the estimator's order."""
+    names = spec.split(",") if isinstance(spec, str) else spec
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ConfigError(f"{where} must be a list of filter names like "
+                          f'["kf", "ukf"], not {spec!r}')
+    names = [n.strip() for n in names if n.strip()]
     if names == ["all"]:
         return FILTER_NAMES
     bad = [n for n in names if n not in FILTER_NAMES]
@@ -200,20 +232,23 @@ def _parse(doc: dict, source: str, name: str) -> HostConfig:
     try:
         site, veh, timing = doc.get("site", {}), doc.get("vehicle", {}), doc.get("timing", {})
         if "latitude_deg" in site:
-            kw["latitude_deg"] = _number("[site] latitude_deg", site["latitude_deg"], lo=-90, hi=90)
+            kw["latitude_deg"] = _number("[site] latitude_deg", site["latitude_deg"], *LATITUDE_DEG)
         if "local_gravity" in site:
-            kw["gravity"] = _number("[site] local_gravity", site["local_gravity"], lo=9.7, hi=9.9)
+            kw["gravity"] = _number("[site] local_gravity", site["local_gravity"], *GRAVITY_M_S2)
         kw["anchors"] = _anchors(doc.get("anchors"))
         if "start" in veh:
             start = veh["start"]
             if not isinstance(start, list) or len(start) != 2:
                 raise ConfigError(f"[vehicle] start must be [x, y] in metres, not {start!r}")
-            kw["start"] = tuple(_number("[vehicle] start", v) for v in start)
-        for key in ("heading_deg", "tag_height"):
-            if key in veh:
-                kw[key] = _number(f"[vehicle] {key}", veh[key])
+            kw["start"] = tuple(_number("[vehicle] start", v, -MAX_COORD_M, MAX_COORD_M)
+                                for v in start)
+        if "heading_deg" in veh:
+            kw["heading_deg"] = _number("[vehicle] heading_deg", veh["heading_deg"], -360, 360)
+        if "tag_height" in veh:
+            kw["tag_height"] = _number("[vehicle] tag_height", veh["tag_height"], -MAX_HEIGHT_M,
+                                       MAX_HEIGHT_M)
         if "tag" in veh:
-            kw["tag"] = _integer("[vehicle] tag", veh["tag"], 1, 254)
+            kw["tag"] = _integer("[vehicle] tag", veh["tag"], *ANCHOR_IDS)
         if "router" in veh:
             r = veh["router"]
             if not (isinstance(r, str) and len(r) == 16
@@ -221,12 +256,14 @@ def _parse(doc: dict, source: str, name: str) -> HostConfig:
                 raise ConfigError(f"[vehicle] router must be 16 hex digits (SH+SL), not {r!r}")
             kw["router"] = int(r, 16)
         if "gyro_range_dps" in veh:
-            if veh["gyro_range_dps"] not in GYRO_RANGES or isinstance(veh["gyro_range_dps"], bool):
-                raise ConfigError(f"[vehicle] gyro_range_dps must be one of 300, 150, 75, "
-                                  f"not {veh['gyro_range_dps']!r}")
+            from protocols.adis16350 import GYRO_LSB_DPS  # here: numpy is slow to import for --help
+
+            if veh["gyro_range_dps"] not in GYRO_LSB_DPS or isinstance(veh["gyro_range_dps"], bool):
+                raise ConfigError(f"[vehicle] gyro_range_dps must be one of "
+                                  f"{', '.join(map(str, GYRO_LSB_DPS))}, not {veh['gyro_range_dps']!r}")
             kw["gyro_range_dps"] = veh["gyro_range_dps"]
         if "hold_s" in timing:
-            kw["hold_s"] = _number("[timing] hold_s", timing["hold_s"], lo=0.0, hi=1.0)
+            kw["hold_s"] = _number("[timing] hold_s", timing["hold_s"], 0.0, 1.0)
         if not isinstance(doc.get("filters", {}), dict):
             raise ConfigError("[filters] must be a table")
         filt = dict(doc.get("filters", {}))
@@ -234,13 +271,12 @@ def _parse(doc: dict, source: str, name: str) -> HostConfig:
             kw["filters"] = parse_filters(filt.pop("enabled"), "[filters] enabled")
         if filt:
             allowed = _estimator_fields()
-            for key, value in filt.items():
+            for key in filt:
                 if key not in allowed:
                     raise ConfigError(f"unknown key {key!r} in [filters]; use enabled, "
                                       f"{', '.join(sorted(allowed))}")
-                if allowed[key] in ("float", "int"):
-                    _number(f"[filters] {key}", value)
-            kw["estimator"] = {k: _estimator_value(v) for k, v in filt.items()}
+            kw["estimator"] = {k: _estimator_value(k, v, allowed[k], kw["anchors"])
+                               for k, v in filt.items()}
         config = HostConfig(**kw)
         try:  # the estimator's own checks judge its fields
             config.estimator_config()
@@ -251,14 +287,42 @@ def _parse(doc: dict, source: str, name: str) -> HostConfig:
     return config
 
 
-def _estimator_value(value):
-    """A TOML (or recording JSON) value as EstimatorConfig takes it: arrays become tuples,
-    tables keyed by anchor id get int keys."""
-    if isinstance(value, list):
-        return tuple(_estimator_value(v) for v in value)
-    if isinstance(value, dict):
-        return {int(k) if str(k).isdigit() else k: _estimator_value(v) for k, v in value.items()}
-    return value
+def _estimator_value(key: str, value, annotation: str, anchors: dict):
+    """A TOML (or recording JSON) value of EstimatorConfig field *key* as the estimator takes
+    it, checked against the field's type and ESTIMATOR_RANGES: arrays become tuples, tables
+    keyed by anchor id get int keys."""
+    where = f"[filters] {key}"
+    if annotation == "str":
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} must be a string in quotes, not {value!r}")
+        return value
+    if key == "reference_anchor":
+        if isinstance(value, bool) or value not in anchors:
+            raise ConfigError(f"{where} must be one of the [[anchors]] ids "
+                              f"{sorted(anchors)}, not {value!r}")
+        return value
+    if annotation == "float | None" and value is None:  # off; JSON null in a recording
+        return None
+    if annotation in ("float", "float | None"):
+        return _number(where, value, *ESTIMATOR_RANGES[key])
+    if annotation.startswith("tuple[float"):
+        n = annotation.count("float")
+        if not isinstance(value, list) or len(value) != n:
+            raise ConfigError(f"{where} must be a list of {n} numbers, not {value!r}")
+        return tuple(_number(f"{where}[{i}]", v, *ESTIMATOR_RANGES[key]) for i, v in enumerate(value))
+    if annotation == "Mapping[int, float]":  # per anchor: {1 = 0.3, 2 = 0.25}
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where} must be a table of anchor id = number like "
+                              f"{{1 = 0.3, 2 = 0.25}}, not {value!r}")
+        out = {}
+        for k, v in value.items():
+            aid = int(k) if str(k).isdigit() else None
+            if aid not in anchors:
+                raise ConfigError(f"{where} names anchor {k!r}, which is not in [[anchors]]; "
+                                  f"use the ids {sorted(anchors)}")
+            out[aid] = _number(f"{where} {aid}", v, *ESTIMATOR_RANGES[key])
+        return out
+    raise ConfigError(f"{where}: cannot be set in a config file; remove it")
 
 
 def _anchors(items) -> dict[int, tuple[float, float, float]]:
@@ -274,8 +338,9 @@ def _anchors(items) -> dict[int, tuple[float, float, float]]:
         for key in ("id", "x", "y"):
             if key not in a:
                 raise ConfigError(f"anchor #{n} has no {key!r}")
-        aid = _integer(f"anchor #{n} id", a["id"], 1, 254)
+        aid = _integer(f"anchor #{n} id", a["id"], *ANCHOR_IDS)
         if aid in out:
             raise ConfigError(f"anchor id {aid} appears twice; ids must be unique")
-        out[aid] = tuple(_number(f"anchor {aid} {k}", a.get(k, 0.0)) for k in ("x", "y", "z"))
+        out[aid] = (*(_number(f"anchor {aid} {k}", a[k], -MAX_COORD_M, MAX_COORD_M) for k in "xy"),
+                    _number(f"anchor {aid} z", a.get("z", 0.0), -MAX_HEIGHT_M, MAX_HEIGHT_M))
     return out

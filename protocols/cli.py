@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import threading
@@ -16,6 +17,7 @@ from contextlib import contextmanager
 from importlib.metadata import entry_points
 
 from . import __version__
+from .limits import BAUDS, number_problem, span
 
 
 class UsageError(Exception):
@@ -25,6 +27,29 @@ class UsageError(Exception):
 class Parser(argparse.ArgumentParser):
     def error(self, message):  # one line naming the problem and where to look for the fix
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def number(lo: float = -math.inf, hi: float = math.inf, *, integer: bool = False,
+           above: bool = False):
+    """An argparse ``type``: a finite number (an integer if *integer*) in [lo, hi], or
+    (lo, hi] if *above*; anything else is one line naming the value and the range."""
+    def parse(text: str):
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            value = text
+        problem = number_problem(value, lo, hi, integer=integer, above=above)
+        if problem:
+            raise argparse.ArgumentTypeError(f"{text}: {problem}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"  # argparse names it in messages
+    return parse
+
+
+#: ``--baud``: any integer rate in BAUDS (pyserial sets non-standard rates too).
+baud = number(*BAUDS, integer=True)
+BAUD_HELP = f"serial baud rate {span(*BAUDS)} (default 115200)"
 
 
 def _sigterm_as_interrupt(signum, frame):
@@ -77,7 +102,7 @@ def register_decode(sub) -> None:
     mode.add_argument("--escaped", dest="escaped", action="store_true", default=True,
                       help="XBee API mode 2, escaped (default)")
     mode.add_argument("--api1", dest="escaped", action="store_false", help="XBee API mode 1")
-    p.add_argument("--baud", type=int, default=115200, help="serial baud rate (default 115200)")
+    p.add_argument("--baud", type=baud, default=115200, help=BAUD_HELP)
     p.add_argument("--follow", action="store_true",
                    help="keep reading a port or a growing file until interrupted")
     p.add_argument("--port", help="which port of a recording directory (default: by format)")

@@ -41,6 +41,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
+from .limits import BAUDS, span
+
 FORMAT = "navtwin-recording"
 VERSION = 1
 META = "recording.json"
@@ -48,7 +50,6 @@ INDEX_HEADER = "offset,size,t_device_ns,t_wall_ns"
 FLUSH_S = 0.5  # callers flush at least this often: a kill loses at most ~1 s of wall time
 FLUSH_BYTES = 1 << 20  # buffered bytes (all files) that make the writer flush by itself
 MAX_CHUNK = 1 << 24  # no writer makes a chunk this big: a larger size is not a chunk
-BAUDS = range(50, 4_000_001)  # what a serial port can be set to (B50 .. B4000000)
 PORT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")  # a file stem in DIR, no path
 _MAX_INDEX_LINE = 100  # four integers and three commas
 _INT = re.compile(rb"[0-9]{1,19}")
@@ -356,9 +357,9 @@ def _check_meta(meta, where: Path) -> None:
             fail(f"port name {name!r} is not a plain file name")
         if not isinstance(port, dict):
             fail(f"port {name!r} is {type(port).__name__}, not an object")
-        baud = port.get("baud", BAUDS.start)
-        if type(baud) is not int or baud not in BAUDS:
-            fail(f"port {name!r} baud {baud!r} is not an integer in {BAUDS.start}..{BAUDS[-1]}")
+        baud = port.get("baud", BAUDS[0])
+        if type(baud) is not int or not BAUDS[0] <= baud <= BAUDS[1]:
+            fail(f"port {name!r} baud {baud!r} is not an integer {span(*BAUDS)}")
         api = port.get("api_mode", 1)
         if type(api) is not int or api not in (1, 2):
             fail(f"port {name!r} api_mode {api!r} is not 1 or 2")

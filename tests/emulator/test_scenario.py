@@ -78,7 +78,7 @@ def test_base_overrides_merge(tmp_path):
 
 
 BAD = [
-    ("[trajectory]\nspeed_m_s = -1\n", "[trajectory] speed_m_s must be > 0 (got -1 m/s); set a positive speed"),
+    ("[trajectory]\nspeed_m_s = -1\n", "[trajectory] speed_m_s must be in (0, 100] (got -1 m/s); set a positive speed up to 100 m/s"),
     ("[trajectory]\nsped_m_s = 1\n", "[trajectory] has an unknown key 'sped_m_s'; did you mean 'speed_m_s'?"),
     ("[trajectroy]\nspeed_m_s = 1\n", "unknown key 'trajectroy'; did you mean 'trajectory'?"),
     ('duration_s = "long"\n', "duration_s must be a number"),

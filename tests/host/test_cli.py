@@ -126,7 +126,7 @@ ANCHORS = "".join(f"[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n"
     ("[site\n", "not valid TOML"),
     ("[garage]\n" + ANCHORS, "unknown section [garage]"),
     ("[site]\nlatitude = 3\n" + ANCHORS, "unknown key 'latitude' in [site]"),
-    ("[site]\nlatitude_deg = 123\n" + ANCHORS, "outside [-90"),
+    ("[site]\nlatitude_deg = 123\n" + ANCHORS, "must be a number in [-90, 90], not 123"),
     ("[site]\n", "[[anchors]] missing"),
     (ANCHORS + "[[anchors]]\nid = 1\nx = 0\ny = 1\n", "anchor id 1 appears twice"),
     ("[[anchors]]\nid = 1\nx = 0\n", "anchor #1 has no 'y'"),

@@ -1,0 +1,58 @@
+"""Ranges that the command line, the scenario files and the host config all check.
+
+Written once here (``protocols`` imports nothing of ours, so the emulator and the host can
+both use it): a number is accepted only when it is finite and inside its range, so that no
+nan, inf or 1e300 reaches arithmetic that overflows, loops forever or hangs up a line.
+"""
+from __future__ import annotations
+
+import math
+
+#: nanoLOC node ids as the gateway reports them (anchors and tags).
+ANCHOR_IDS = (1, 254)
+#: The lab, in metres: plan coordinates and sizes (a room, a hall, a campus at most), heights.
+MAX_COORD_M = 100_000.0
+MAX_HEIGHT_M = 1000.0
+#: The site and the range model (c_i and f of paper 001 eq. 13), as surveyed or calibrated.
+LATITUDE_DEG = (-90, 90)
+GRAVITY_M_S2 = (9.7, 9.9)
+RANGE_BIAS_M = (-5, 5)
+RANGE_SCALE = (0.5, 1.5)
+#: Serial rates: 50 (the lowest termios rate; B0 would hang the line up) to 4 Mbit/s (the
+#: highest Linux rate; pyserial sets any rate between, as the XBee's BD accepts non-standard ones).
+BAUDS = (50, 4_000_000)
+#: Run seeds: TOML integers are 64-bit signed.
+SEEDS = (0, 2**63 - 1)
+#: ``--speed`` factors of the emulator (faster: ``--speed max``).
+SPEEDS = (0.01, 10000.0)
+#: Longest run, emulated or live, in seconds (about 115 days; ns counts stay far inside int64).
+MAX_DURATION_S = 10_000_000
+
+
+def show(v) -> str:
+    """A bound or value as messages write it: 1000000 stays an integer, 0.5 as %g."""
+    return str(v) if isinstance(v, int) else f"{v:g}"
+
+
+def span(lo, hi, above: bool = False) -> str:
+    """``in [lo, hi]`` (``in (lo, hi]`` when *above*); ``>= lo`` or ``> lo`` with no upper
+    bound; ``<= hi`` with no lower one."""
+    if hi == math.inf:
+        return f"{'>' if above else '>='} {show(lo)}"
+    if lo == -math.inf:
+        return f"<= {show(hi)}"
+    return f"in {'(' if above else '['}{show(lo)}, {show(hi)}]"
+
+
+def number_problem(value, lo=-math.inf, hi=math.inf, *, integer: bool = False,
+                   above: bool = False) -> str | None:
+    """Why *value* is not a finite number (an integer if *integer*) in [lo, hi] ((lo, hi] if
+    *above*), as ``must be ...``; None when it is."""
+    what = "an integer" if integer else "a number"
+    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+        return f"must be {what}"
+    if not math.isfinite(value):
+        return "must be a finite number"
+    if not ((lo < value) if above else (lo <= value)) or not value <= hi:
+        return f"must be {what} {span(lo, hi, above)}"
+    return None
