@@ -2,8 +2,6 @@
 "--record follows a symlink"): what a killed run leaves replays, and is the full run's
 prefix; a write that fails ends the run with one line, exit 2 and a closed recording."""
 import json
-import resource
-import signal
 import subprocess
 import sys
 import time
@@ -15,6 +13,7 @@ from emulator.runner import Emulation
 from emulator.scenario import load_scenario
 from protocols.cli import main
 from protocols.recording import Recording
+from ..fs_helpers import fsize_limit
 from protocols.stream import Frame, XBeeDecoder
 
 NAVTWIN = [sys.executable, "-m", "protocols"]
@@ -82,13 +81,6 @@ def test_replay_of_an_emulator_killed_with_sigkill(root, tmp_path):
     cut_s = recorded_until_ns(d) / 1e9 - 0.5
     prefix = [x for x in full if json.loads(x)["t"] < cut_s]
     assert len(prefix) > 100 and lines[:len(prefix)] == prefix
-
-
-def fsize_limit(nbytes):
-    def limit():
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes fail with EFBIG instead
-        resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, nbytes))
-    return limit
 
 
 def test_emulate_record_on_a_full_filesystem_ends_with_one_line(tmp_path):

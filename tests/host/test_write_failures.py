@@ -4,7 +4,6 @@ recording closed and replayable up to what was written; damage reported, never r
 silently; data files streamed."""
 import json
 import os
-import resource
 import select
 import shutil
 import signal
@@ -19,6 +18,7 @@ from host import config as host_config
 from host.bench import synthetic_chunks
 from protocols.cli import main
 from protocols.recording import Recording
+from ..fs_helpers import fsize_limit
 
 NAVTWIN = [sys.executable, "-m", "protocols"]
 DEADLINE_S = 60.0
@@ -123,13 +123,6 @@ def test_host_out_to_a_full_device_ends_with_one_line_and_a_summary(tmp_path):
     assert summary["chunks"] > 0
     rec = Recording(tmp_path / "rec")  # the recording of the run is closed and complete
     assert rec.complete and sum(len(c.data) for c in rec.chunks("xbee")) > 0
-
-
-def fsize_limit(nbytes):
-    def limit():
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes fail with EFBIG instead
-        resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, nbytes))
-    return limit
 
 
 def test_host_record_on_a_full_filesystem_ends_cleanly_and_replays(tmp_path):
