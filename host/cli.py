@@ -10,7 +10,7 @@ from protocols.recording import Recording, RecordingError
 
 from . import config as host_config
 from .config import ConfigError
-from .output import estimate_line, info_line, open_output
+from .output import KEYS, estimate_line, info_line, open_output
 
 PORT_HELP = ("a device path (/dev/ttyUSB0, an emulator PTY link) or a pyserial URL "
              "(socket://, rfc2217://, spy://)")
@@ -21,7 +21,7 @@ def register(sub) -> None:
         "host", help="run the lab computer's fusion service on live serial ports",
         description="Read the coordinator (API mode; or the SINS board's direct line) and the "
         "nanoLOC gateway, fuse IMU and ranges, and write one JSON line per estimate: "
-        '{"t","filter","x","y","vx","vy","yaw","cov"}. A status line goes to stderr every few '
+        "{" + ",".join(f'"{k}"' for k in KEYS) + "}. A status line goes to stderr every few "
         "seconds; a port that disappears is reopened every 0.5 s while the filters keep their "
         "state. SIGINT or SIGTERM ends the run with a summary line on stderr (exit 0).")
     p.add_argument("--xbee", metavar="PORT", help=f"the coordinator in API mode: {PORT_HELP}")

@@ -77,7 +77,8 @@ class Pipeline:
         self.range_clock = DeviceClock(32, T_US_TICK_S, strict=False)
         # the gateway's report counter: equal = a duplicate, any step back = a restart
         self._report_seq = Unwrapper(16, restart=0)
-        self._held: list[tuple] = []  # heap of (t, n, anchor, distance, rssi, status)
+        # heap of (t, n, anchor, distance, rssi, status); anchor None: the anchors restarted
+        self._held: list[tuple] = []
         self._n = 0
         self.t = -math.inf  # filter time
         self._arrival = 0.0
@@ -161,6 +162,7 @@ class Pipeline:
             elif ev.source != self._router:
                 self.counts["imu_other_router"] += 1
                 return
+        restarts = self.imu_clock.restarts
         t = self.imu_clock.time(ev.fields["seq"], a)
         if t is None:
             return
@@ -171,6 +173,8 @@ class Pipeline:
         self.counts["imu_alarm"] += s.ea
         self._release(t, out)
         self.t = max(t, self.t)
+        if self.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown
+            out += self.estimator.restart(t, "imu")
         out += self.estimator.imu(t, s.gyro_rad_s, s.accel_m_s2, nd_ok=nd_ok)
 
     def _range(self, f: dict, a: float, out: list) -> None:
@@ -184,7 +188,11 @@ class Pipeline:
                 self.counts["reports_duplicate"] += 1
                 return
             self.counts["reports_lost"] += step - 1
+        restarts = self.range_clock.restarts
         t = self.range_clock.time(f["t_us"], a)
+        if self.range_clock.restarts != restarts:  # the anchors restarted: in order, before t
+            self._schedule((t, self._n, None, None, None, None), out)
+            self._n += 1
         if f["anchor"] not in self.config.anchors:
             self.counts["reports_unknown_anchor"] += 1
             return
@@ -195,9 +203,12 @@ class Pipeline:
         else:
             distance = None
             self.counts["timeouts" if status & nanoloc.STATUS_TIMEOUT else "range_errors"] += 1
-        item = (t, self._n, f["anchor"], distance, f["rssi"], status)
+        self._schedule((t, self._n, f["anchor"], distance, f["rssi"], status), out)
         self._n += 1
-        if t > self.t:
+
+    def _schedule(self, item: tuple, out: list) -> None:
+        """Hold an anchor-clock item (a range, or a restart: anchor None) or apply it now."""
+        if item[0] > self.t:
             heapq.heappush(self._held, item)
         else:
             self._apply_range(item, out)
@@ -209,6 +220,10 @@ class Pipeline:
 
     def _apply_range(self, item: tuple, out: list) -> None:
         t, _, anchor, distance, rssi, status = item
+        if anchor is None:
+            self.t = max(t, self.t)
+            out += self.estimator.restart(t, "anchors")
+            return
         if t < self.t:
             self.counts["ranges_late"] += 1
             self.max_late_s = max(self.max_late_s, self.t - t)
