@@ -136,9 +136,10 @@ class EstimatorConfig:
         for name in ("gyro_bias_instability_dps", "tilt_inflation"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be a number >= 0 (got {getattr(self, name)}); set a value >= 0")
-        for name in ("p0_sigma", "stationary_sigma", "reinit_sigma"):
-            if not all(math.isfinite(v) and v > 0 for v in getattr(self, name)):
-                raise ValueError(f"{name} must hold positive numbers (got {getattr(self, name)}); set each > 0")
+        for name, n in (("p0_sigma", 3), ("stationary_sigma", 2), ("reinit_sigma", 2)):
+            value = getattr(self, name)
+            if len(value) != n or not all(math.isfinite(v) and v > 0 for v in value):
+                raise ValueError(f"{name} must hold {n} positive numbers (got {value}); set {n}, each > 0")
         if not 0 < self.gate_probability < 1:
             raise ValueError(f"gate_probability must be in (0, 1) (got {self.gate_probability}); use e.g. 0.9999")
         if len(self.anchors) < 3:

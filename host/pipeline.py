@@ -16,7 +16,9 @@ nanoloc    the anchors' gateway: one ranging report per exchange
 Time. Each SINS sample's host time comes from the board's counter and each range's from
 the anchor network's ``t_us``, both through :class:`host.clock.DeviceClock` (unwrapped,
 aligned to arrival times online, never stepping back). A sample counter seen on both
-``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate.
+``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate. A clock
+that begins a new epoch (its device restarted) is passed on as ``estimator.restart(t,
+"imu" | "anchors")`` in time order: just before the first sample, or range, of the epoch.
 
 Time order, with bounded latency (docs/host.md). Let T be the filter time: the latest
 measurement time given to the estimator. Every measurement is given with its own time.

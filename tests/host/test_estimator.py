@@ -72,6 +72,12 @@ def test_config_errors_name_the_field_and_the_fix():
         EstimatorConfig(output_period_s=0)
     with pytest.raises(ValueError, match="anchors: 2 given"):
         EstimatorConfig(anchors={1: (0, 0), 2: (1, 0)})
+    with pytest.raises(ValueError, match="extrapolated_after_s must be a positive number"):
+        EstimatorConfig(extrapolated_after_s=0.0)
+    with pytest.raises(ValueError, match=r"reinit_sigma must hold 2 positive numbers \(got \(1.0,\)\)"):
+        EstimatorConfig(reinit_sigma=(1.0,))
+    with pytest.raises(ValueError, match="device 'gps': use one of imu, anchors"):
+        Estimator().restart(1.0, "gps")
 
 
 def test_one_estimate_per_filter_per_period_in_config_order(default_run):
