@@ -38,7 +38,8 @@ between fixes and starts once two fixes exist. For sins: the initial covariance 
 growth that the accelerometer's velocity random walk alone causes (a lower bound: tilt and
 heading errors add to it). ``extrapolated``: the track's last aiding is more than
 ``extrapolated_after_s`` before t (kf/ekf/ukf: an accepted fix, TDOA or range update; wsn: a
-fix; sins: an IMU sample; the configured start counts as aiding at the first measurement).
+fix; sins: an IMU sample; the configured start counts as aiding at the first measurement),
+or a fusion track waits to re-initialise.
 
 Discontinuities (docs/filters.md). A fusion track that cannot explain what it measures
 starts again from the next WSN fix newer than the discontinuity (position and covariance of
@@ -515,7 +516,8 @@ class Estimator:
     def _snapshot(self, name: str, b: float, yaw: float) -> Estimate | None:
         if name in FUSION:
             x, P = self.model.propagate(self.filters[name].x, self.filters[name].P, b - self._t_predicted)
-            return _estimate(b, name, x[:2], x[2:4], yaw, P[:4, :4], self._stale(b, self._aided.get(name)))
+            stale = name in self._reinit or self._stale(b, self._aided.get(name))  # waiting: off
+            return _estimate(b, name, x[:2], x[2:4], yaw, P[:4, :4], stale)
         if name == "sins":
             return self._sins_snapshot(b, yaw)
         return self._wsn_snapshot(b)

@@ -10,7 +10,7 @@ Estimates: one JSON object per line, keys in this order, numbers as Python's ``r
 the pure WSN track; ``cov`` is the estimator's covariance of (x, y, vx, vy), row-major;
 ``extrapolated`` is true when the track had no aiding for the estimator's
 ``extrapolated_after_s`` before ``t`` (a position update for kf/ekf/ukf, a fix for wsn, an
-IMU sample for sins): the estimate is a prediction only.
+IMU sample for sins), or the track waits to re-initialise: the estimate is a prediction only.
 Status, progress and summary lines go to stderr as one JSON
 object each, ``{"status": {...}}``, ``{"progress": {...}}``, ``{"summary": {...}}``; they
 carry wall-clock figures (rates, latency) and are not part of the deterministic output.
