@@ -281,11 +281,13 @@ class Estimator:
             self._cycle(cycle)
         return self._end(t_s, out)
 
-    def restart(self, t_s: float, device: str) -> list[Estimate]:
+    def restart(self, t_s: float, device: str, uptime_s: float = 0.0) -> list[Estimate]:
         """``device`` (one of ``DEVICES``) restarted: its clock began a new epoch at t_s, so
         what the tracks hold need not be where the vehicle is. The fusion tracks start again
         from the next fix, the wsn track drops its velocity history; an IMU restart also
-        realigns the strapdown (the vehicle stands still after a power-up, like at the start)."""
+        realigns the strapdown (the vehicle stands still after a power-up, like at the start)
+        over the alignment_s since the power-up, ``uptime_s`` before t_s (its sample counter
+        says; the host may see the board only after a while), or from t_s if that is more."""
         if device not in DEVICES:
             raise ValueError(f"device {device!r}: use one of {', '.join(DEVICES)}")
         if not math.isfinite(t_s):
@@ -303,7 +305,8 @@ class Estimator:
                 self._count_reinit("sins", "restart")
             self.alignment = Alignment()
             self.sins = None
-            self._t_imu_first = self._t_aligned = self._last_sample = None
+            self._t_aligned = self._last_sample = None
+            self._t_imu_first = t_s - uptime_s if 0.0 <= uptime_s < self.cfg.alignment_s else None
             self._origin, self._origin_since = tuple(self.cfg.start), t_s
             self._origin_fixes = (np.zeros(2), 0)
         return self._end(t_s, out)

@@ -18,7 +18,8 @@ the anchor network's ``t_us``, both through :class:`host.clock.DeviceClock` (unw
 aligned to arrival times online, never stepping back). A sample counter seen on both
 ``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate. A clock
 that begins a new epoch (its device restarted) is passed on as ``estimator.restart(t,
-"imu" | "anchors")`` in time order: just before the first sample, or range, of the epoch.
+"imu" | "anchors")`` in time order: just before the first sample, or range, of the epoch
+(for the IMU with the board's uptime, its counter x 10 ms: it counts from power-up).
 
 Time order, with bounded latency (docs/host.md). Let T be the filter time: the latest
 measurement time given to the estimator. Every measurement is given with its own time.
@@ -175,8 +176,9 @@ class Pipeline:
         self.counts["imu_alarm"] += s.ea
         self._release(t, out)
         self.t = max(t, self.t)
-        if self.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown
-            out += self.estimator.restart(t, "imu")
+        if self.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown;
+            # it counts its samples from power-up, so this one says how long it has been up
+            out += self.estimator.restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S)
         out += self.estimator.imu(t, s.gyro_rad_s, s.accel_m_s2, nd_ok=nd_ok)
 
     def _range(self, f: dict, a: float, out: list) -> None:

@@ -41,8 +41,8 @@ class RecordingEstimator:
             self._ranges[anchor] = distance
         return self._out(t)
 
-    def restart(self, t, device) -> list:
-        self.calls.append(("restart", t, device))
+    def restart(self, t, device, uptime_s=0.0) -> list:
+        self.calls.append(("restart", t, device, uptime_s))
         return self._out(t)
 
     def stats(self) -> dict:
