@@ -12,7 +12,7 @@ from protocols.recording import Recording, RecordingError, write_failure
 
 from . import config as host_config
 from .config import ConfigError
-from .output import estimate_line, info_line, open_output
+from .output import KEYS, estimate_line, info_line, open_output
 
 STATUS_PERIODS = (0, 3600)
 PORT_HELP = ("a device path (/dev/ttyUSB0, an emulator PTY link) or a pyserial URL "
@@ -24,7 +24,7 @@ def register(sub) -> None:
         "host", help="run the lab computer's fusion service on live serial ports",
         description="Read the coordinator (API mode; or the SINS board's direct line) and the "
         "nanoLOC gateway, fuse IMU and ranges, and write one JSON line per estimate: "
-        '{"t","filter","x","y","vx","vy","yaw","cov"}. A status line goes to stderr every few '
+        "{" + ",".join(f'"{k}"' for k in KEYS) + "}. A status line goes to stderr every few "
         "seconds; a port that disappears is reopened every 0.5 s while the filters keep their "
         "state (an emulator's link only while that emulator runs). Ports are opened "
         "exclusively (flock, as picocom does). SIGINT or SIGTERM ends the run with a summary "

@@ -11,9 +11,12 @@ count; of the candidates ``last + d + n 2^bits`` (d = (r - r_last) mod 2^bits) t
 nearest to what the elapsed arrival time predicts, ``(a - a_last) / tick``, is taken. A
 count is therefore right across any number of wraps and any outage, as long as arrival
 times are good to half a wrap (327 s for the SINS counter, 35 min for ``t_us``). A count
-that differs from that prediction by more than ``restart`` ticks cannot come from a device
-that kept counting: it restarted, and a new epoch begins (a counter without a tick, such
-as the gateway's report number, restarts when it steps back by more than ``restart``). A new epoch
+that steps back, or comes early, by more than ``restart`` ticks against that prediction
+cannot come from a device that kept counting: it restarted, and a new epoch begins. A count
+that moves forward but less than predicted is late, not new: the bytes waited while the
+host or the line stalled (a restart that happens to land there, a chance of about its gap in
+half a wrap, goes unseen as such). A counter without a tick, such as the gateway's report
+number, restarts when it steps back by more than ``restart``. A new epoch
 re-anchors the device's times on arrival times, so even a wrong guess of a restart keeps
 the host timeline whole.
 
@@ -62,7 +65,9 @@ class Unwrapper:
             value = self.last + d + m * math.floor((expected - d) / m + 0.5)
             step = value - self.last
             off = step - expected if self.tick_s else max(-step, 0)
-            if self.restart is None or abs(off) <= self.restart:
+            # a count forward but behind the prediction came late (the host or the line
+            # stalled and the bytes waited): only a step back or a count early is a restart
+            if self.restart is None or abs(off) <= self.restart or 0 < step < expected:
                 if step > 0:
                     self.last, self._raw, self._arrival = value, raw, arrival_s
                 return value, step
@@ -173,6 +178,11 @@ class DeviceClock:
             t = max(t, self.last_t + MIN_STEP_S) if self.strict else max(t, self.last_t)
             self.last_t = t
         return t
+
+    @property
+    def restarts(self) -> int:
+        """New epochs after the first: the device restarted (or seemed to)."""
+        return self.counter.restarts
 
     def stats(self) -> dict:
         a = self.aligner

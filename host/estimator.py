@@ -36,7 +36,19 @@ until alignment ends), None for wsn; cov = the 4x4 covariance of (x, y, vx, vy),
 (finite difference) with its propagated covariance; the wsn track holds its last fix
 between fixes and starts once two fixes exist. For sins: the initial covariance plus the
 growth that the accelerometer's velocity random walk alone causes (a lower bound: tilt and
-heading errors add to it).
+heading errors add to it). ``extrapolated``: the track's last aiding is more than
+``extrapolated_after_s`` before t (kf/ekf/ukf: an accepted fix, TDOA or range update; wsn: a
+fix; sins: an IMU sample; the configured start counts as aiding at the first measurement),
+or a fusion track waits to re-initialise.
+
+Discontinuities (docs/filters.md). A fusion track that cannot explain what it measures
+starts again from the next WSN fix newer than the discontinuity (position and covariance of
+the fix, at rest with ``reinit_sigma`` on velocity and acceleration), counted by cause in
+``stats()["reinit"]``: ``restart`` (:meth:`Estimator.restart`: a device's clock began a new
+epoch), ``gated`` (every position update gated out for ``gate_reopen_s``). A restart also
+drops the wsn track's velocity history and, for the IMU, realigns the strapdown on the
+stationary start, placed at the mean of the fixes during the alignment (the configured start
+without any).
 """
 from __future__ import annotations
 
@@ -56,6 +68,8 @@ from .wsn import AnchorLayout, CycleGrouper, Fix, Solver, chi2_gate, tdoa_covari
 
 FILTER_NAMES = ("sins", "wsn", "kf", "ekf", "ukf")
 FUSION = ("kf", "ekf", "ukf")
+DEVICES = ("imu", "anchors")  # what can restart (Estimator.restart)
+POSITION_KINDS = frozenset(("fix", "tdoa", "range"))  # the updates that aid a track's position
 OFFICE_ANCHORS = {1: (1.3, 1.6, 0.0), 2: (10.8, 1.6, 0.0), 3: (10.8, 5.4, 0.0), 4: (1.3, 5.4, 0.0)}
 
 #: At rest: velocity and acceleration are zero (used while the alignment runs).
@@ -93,7 +107,9 @@ class EstimatorConfig:
     p0_sigma: tuple[float, float, float] = (0.2, 0.02, 0.1)  # initial position, velocity, accel
     stationary_sigma: tuple[float, float] = (0.01, 0.05)  # velocity, accel while aligning
     gate_probability: float = 0.9999  # chi-square innovation gate
-    gate_reopen_s: float = 2.0  # accept again after this long with every update gated out
+    gate_reopen_s: float = 2.0  # every update of one kind gated out this long: the track is off
+    reinit_sigma: tuple[float, float] = (1.0, 1.0)  # velocity (m/s), acceleration (m/s^2) of a re-init
+    extrapolated_after_s: float = 0.5  # no aiding for longer than this: an estimate is extrapolated
     wsn_method: str = "tdoa"  # pure-WSN and KF fixes: "toa" | "tdoa" (000 eqs. 12-13)
     tight: str = "tdoa"  # EKF/UKF range measurement: "tdoa" (per cycle) | "toa" (each range)
     reference_anchor: int = 1  # TDOA reference (000 eq. 12)
@@ -113,16 +129,18 @@ class EstimatorConfig:
             if getattr(self, name) not in ("toa", "tdoa"):
                 raise ValueError(f"{name}: {getattr(self, name)!r} is not a method; use 'toa' or 'tdoa'")
         for name in ("alignment_s", "output_period_s", "range_sigma_m", "range_scale", "vrw_m_s_rt_hr",
-                     "arw_deg_rt_hr", "accel_sigma_m_s2", "jerk_psd", "cycle_s", "max_range_m"):
+                     "arw_deg_rt_hr", "accel_sigma_m_s2", "jerk_psd", "cycle_s", "max_range_m",
+                     "gate_reopen_s", "extrapolated_after_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number (got {value}); set a value > 0")
         for name in ("gyro_bias_instability_dps", "tilt_inflation"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"{name} must be a number >= 0 (got {getattr(self, name)}); set a value >= 0")
-        for name in ("p0_sigma", "stationary_sigma"):
-            if not all(math.isfinite(v) and v > 0 for v in getattr(self, name)):
-                raise ValueError(f"{name} must hold positive numbers (got {getattr(self, name)}); set each > 0")
+        for name, n in (("p0_sigma", 3), ("stationary_sigma", 2), ("reinit_sigma", 2)):
+            value = getattr(self, name)
+            if len(value) != n or not all(math.isfinite(v) and v > 0 for v in value):
+                raise ValueError(f"{name} must hold {n} positive numbers (got {value}); set {n}, each > 0")
         if not 0 < self.gate_probability < 1:
             raise ValueError(f"gate_probability must be in (0, 1) (got {self.gate_probability}); use e.g. 0.9999")
         if len(self.anchors) < 3:
@@ -146,13 +164,15 @@ class Estimate:
     vy: float
     yaw: float | None
     cov: list[float]  # 4x4 covariance of (x, y, vx, vy), row-major
+    extrapolated: bool = False  # the track had no aiding for extrapolated_after_s before t
 
 
-def _estimate(t, name, p, v, yaw, cov4) -> Estimate:
+def _estimate(t, name, p, v, yaw, cov4, extrapolated: bool) -> Estimate:
     """p, v: sequences of 2; cov4: a 4x4 array, or its 16 floats row-major."""
     (x, y), (vx, vy) = np.asarray(p, float).tolist(), np.asarray(v, float).tolist()
     cov = cov4 if isinstance(cov4, list) else np.ravel(cov4).tolist()
-    return Estimate(float(t), name, x, y, vx, vy, None if yaw is None else float(yaw), cov)
+    return Estimate(float(t), name, x, y, vx, vy, None if yaw is None else float(yaw), cov,
+                    bool(extrapolated))
 
 
 class Estimator:
@@ -162,7 +182,6 @@ class Estimator:
         self.model = ConstantAcceleration(cfg.jerk_psd)
         self.fusion = [f for f in cfg.filters if f in FUSION]
         self.need_sins = any(f != "wsn" for f in cfg.filters)
-        self.need_fix = "wsn" in cfg.filters or "kf" in cfg.filters
         self.solver = Solver(self.layout, cfg.range_sigma_m, cfg.wsn_method, cfg.reference_anchor,
                              cfg.gate_probability, cfg.fix_margin_m)
         self.grouper = CycleGrouper(len(self.layout.ids), cfg.cycle_s)
@@ -172,6 +191,7 @@ class Estimator:
         self.sins: Strapdown | None = None
         self._t: float | None = None  # filter time: the latest measurement's
         self._t_predicted: float | None = None  # the fusion filters' state is predicted to here
+        self._t_first: float | None = None  # the first measurement's: the start is known then
         self._t_imu_first: float | None = None
         self._t_imu: float | None = None
         self._t_aligned: float | None = None
@@ -180,6 +200,13 @@ class Estimator:
         self._next_out = 0.0  # its time
         self._fixes: list[Fix] = []
         self._gated_since: dict[tuple[str, str], float] = {}  # first rejection of a run of them
+        self._origin = tuple(cfg.start)  # where the strapdown starts when its alignment ends
+        self._origin_since: float | None = None  # after an IMU restart: the fixes from then on,
+        self._origin_fixes = (np.zeros(2), 0)  # summed and counted, give it (at rest: their mean)
+        self._reinit: dict[str, float] = {}  # fusion track -> a fix newer than this restarts it
+        self._aided: dict[str, float] = {}  # fusion track -> time of its last position update
+        self.reinits: defaultdict[str, Counter] = defaultdict(Counter)  # track -> cause -> n
+        self.reinit_count = 0  # all of them: one int to watch for a new one
         self._tilt_growth = (cfg.tilt_inflation * cfg.gravity * cfg.tilt_rate_sigma) ** 2
         self._accel_var = cfg.accel_sigma_m_s2**2
         self._range_bias = {int(a): float(c) for a, c in cfg.range_bias_m.items()}
@@ -254,12 +281,42 @@ class Estimator:
             self._cycle(cycle)
         return self._end(t_s, out)
 
+    def restart(self, t_s: float, device: str, uptime_s: float = 0.0) -> list[Estimate]:
+        """``device`` (one of ``DEVICES``) restarted: its clock began a new epoch at t_s, so
+        what the tracks hold need not be where the vehicle is. The fusion tracks start again
+        from the next fix, the wsn track drops its velocity history; an IMU restart also
+        realigns the strapdown (the vehicle stands still after a power-up, like at the start)
+        over the alignment_s since the power-up, ``uptime_s`` before t_s (its sample counter
+        says; the host may see the board only after a while), or from t_s if that is more."""
+        if device not in DEVICES:
+            raise ValueError(f"device {device!r}: use one of {', '.join(DEVICES)}")
+        if not math.isfinite(t_s):
+            self.input_rejections["restart_implausible"] += 1
+            return []
+        out = self._begin(t_s)
+        self.grouper = CycleGrouper(len(self.layout.ids), self.cfg.cycle_s)  # no cycle spans it
+        if self._fixes and "wsn" in self.cfg.filters:
+            self._count_reinit("wsn", "restart")
+        self._fixes = []
+        for name in self.fusion:
+            self._discontinuity(name, "restart", t_s)
+        if device == "imu":
+            if "sins" in self.cfg.filters:
+                self._count_reinit("sins", "restart")
+            self.alignment = Alignment()
+            self.sins = None
+            self._t_aligned = self._last_sample = None
+            self._t_imu_first = t_s - uptime_s if 0.0 <= uptime_s < self.cfg.alignment_s else None
+            self._origin, self._origin_since = tuple(self.cfg.start), t_s
+            self._origin_fixes = (np.zeros(2), 0)
+        return self._end(t_s, out)
+
     # ---------------------------------------------------------------- processing
 
     def _begin(self, t: float) -> list[Estimate]:
         """Start the filters at the first measurement; emit the instants before t."""
         if self._t is None:
-            self._t = self._t_predicted = t
+            self._t = self._t_predicted = self._t_first = t
             self._k_out = math.ceil(t / self.cfg.output_period_s)
             self._next_out = self._k_out * self.cfg.output_period_s
             self._init_filters()
@@ -293,13 +350,41 @@ class Estimator:
             x0 = np.array([*p, *v, 0.0, 0.0])
         sp, sv, sa = c.p0_sigma
         P0 = np.diag([sp**2, sp**2, sv**2, sv**2, sa**2, sa**2])
-        make = {
-            "kf": lambda: KalmanFilter(x0, P0, self.model),
-            "ekf": lambda: ExtendedKalmanFilter(x0, P0, self.model),
-            "ukf": lambda: UnscentedKalmanFilter(x0, P0, self.model, c.ukf_alpha, c.ukf_beta, c.ukf_kappa),
-        }
         for name in ([only] if only else self.fusion):
-            self.filters[name] = make[name]()
+            self._new_filter(name, x0, P0)
+
+    def _new_filter(self, name: str, x0: np.ndarray, P0: np.ndarray) -> None:
+        c = self.cfg
+        if name == "kf":
+            f = KalmanFilter(x0, P0, self.model)
+        elif name == "ekf":
+            f = ExtendedKalmanFilter(x0, P0, self.model)
+        else:
+            f = UnscentedKalmanFilter(x0, P0, self.model, c.ukf_alpha, c.ukf_beta, c.ukf_kappa)
+        self.filters[name] = f
+        if self._gated_since:  # a new track has no run of rejections
+            self._gated_since = {k: v for k, v in self._gated_since.items() if k[0] != name}
+
+    def _count_reinit(self, name: str, cause: str) -> None:
+        self.reinits[name][cause] += 1
+        self.reinit_count += 1
+
+    def _discontinuity(self, name: str, cause: str, t: float) -> None:
+        """Fusion track ``name`` is off for ``cause``: it starts again from the next fix newer
+        than t (counted once per discontinuity, however many causes it has)."""
+        if name not in self._reinit:
+            self._count_reinit(name, cause)
+        self._reinit[name] = t
+
+    def _reinit_at(self, name: str, fix: Fix) -> None:
+        """Start fusion track ``name`` again at ``fix``: its position and covariance, at rest
+        but with ``reinit_sigma`` on velocity and acceleration (they are unknown)."""
+        sv, sa = self.cfg.reinit_sigma
+        P0 = np.diag([0.0, 0.0, sv**2, sv**2, sa**2, sa**2])
+        P0[:2, :2] = fix.cov
+        self._new_filter(name, np.array([*fix.p, 0.0, 0.0, 0.0, 0.0]), P0)
+        del self._reinit[name]
+        self._aided[name] = fix.t
 
     def _sins_step(self, t: float, gyro: tuple, accel: tuple) -> tuple | None:
         """Advance alignment or strapdown; the nav-frame horizontal acceleration once aligned."""
@@ -320,7 +405,7 @@ class Estimator:
     def _start_strapdown(self) -> None:
         c = self.cfg
         self.aligned = a = self.alignment.result(c.heading0_rad, math.radians(c.latitude_deg), c.x_azimuth_deg)
-        self.sins = Strapdown(position=c.start, q=a.q, gyro_bias=a.gyro_bias, latitude_deg=c.latitude_deg,
+        self.sins = Strapdown(position=self._origin, q=a.q, gyro_bias=a.gyro_bias, latitude_deg=c.latitude_deg,
                               gravity=c.gravity, altitude_m=c.altitude_m, x_azimuth_deg=c.x_azimuth_deg)
         self.sins.step(0.0, *self._last_sample)  # the interval to the next sample starts here
         self._t_aligned = self._t_imu
@@ -337,17 +422,24 @@ class Estimator:
         try:
             inn = f.update(z, R, meas, chi2_gate(meas.dim, self.cfg.gate_probability))
             if not inn.accepted:
-                if t - self._gated_since.setdefault((name, kind), t) <= self.cfg.gate_reopen_s:
+                gated_for = t - self._gated_since.setdefault((name, kind), t)
+                if gated_for > self.cfg.gate_reopen_s and kind not in POSITION_KINDS:
+                    # the acceleration gated out for so long: the track's acceleration is off
+                    self.rejections[name]["gate_reopened"] += 1
+                    f.update(z, R, meas)
+                else:
                     self.rejections[name]["gate"] += 1
+                    if gated_for > self.cfg.gate_reopen_s:
+                        # every position update gated out for so long: the track, not the WSN, is off
+                        self._discontinuity(name, "gated", t)
                     return
-                # Everything of this kind gated out for too long: the filter, not the sensor, is off.
-                self.rejections[name]["gate_reopened"] += 1
-                f.update(z, R, meas)
         except np.linalg.LinAlgError:
             self._reset(name)
             return
         if self._gated_since:
             self._gated_since.pop((name, kind), None)
+        if kind in POSITION_KINDS:
+            self._aided[name] = t
         self.updates[name][kind] += 1
 
     def _reset(self, name: str) -> None:
@@ -356,27 +448,34 @@ class Estimator:
         self._init_filters(only=name)
 
     def _cycle(self, cycle) -> None:
-        """A closed TDMA cycle: the WSN fix (wsn track, KF) and the TDOA update (EKF/UKF)."""
-        c = self.cfg
-        if self.need_fix:
-            fix = self.solver.fix(cycle.t, cycle.valid_anchors, cycle.distances)
-            if isinstance(fix, str):
-                self.rejections["wsn"][fix] += 1
-            else:
-                self.updates["wsn"]["fix"] += 1
-                if fix.dropped:
-                    self.rejections["wsn"]["outlier_dropped"] += 1
-                # two fixes with one time would give no velocity: keep the newer
-                older = [f for f in self._fixes[-1:] if f.t < fix.t]
-                self._fixes = [*older, fix]
-                if "kf" in self.fusion:
-                    self._update("kf", "fix", fix.p, fix.cov, position_fix(max(self._t - fix.t, 0.0)), fix.t)
-        if c.tight == "tdoa" and any(n != "kf" for n in self.fusion):
-            self._tdoa_update(cycle)
+        """A closed TDMA cycle: the WSN fix (wsn track, KF, re-initialisations, the SINS origin
+        after a restart) and the TDOA update (EKF/UKF). A track started again at this cycle's
+        fix takes no other update from it (the same ranges)."""
+        fix = self.solver.fix(cycle.t, cycle.valid_anchors, cycle.distances)
+        fresh: list[str] = []
+        if isinstance(fix, str):
+            self.rejections["wsn"][fix] += 1
+        else:
+            self.updates["wsn"]["fix"] += 1
+            if fix.dropped:
+                self.rejections["wsn"]["outlier_dropped"] += 1
+            # two fixes with one time would give no velocity: keep the newer
+            older = [f for f in self._fixes[-1:] if f.t < fix.t]
+            self._fixes = [*older, fix]
+            if self.sins is None and self._origin_since is not None and fix.t >= self._origin_since:
+                total, n = self._origin_fixes[0] + fix.p, self._origin_fixes[1] + 1
+                self._origin_fixes, self._origin = (total, n), tuple((total / n).tolist())
+            fresh = [n for n, since in self._reinit.items() if fix.t >= since]
+            for name in fresh:
+                self._reinit_at(name, fix)
+            if "kf" in self.fusion and "kf" not in fresh:
+                self._update("kf", "fix", fix.p, fix.cov, position_fix(max(self._t - fix.t, 0.0)), fix.t)
+        tight = [n for n in self.fusion if n != "kf" and n not in fresh]
+        if self.cfg.tight == "tdoa" and tight:
+            self._tdoa_update(cycle, tight)
 
-    def _tdoa_update(self, cycle) -> None:
+    def _tdoa_update(self, cycle, tight: list[str]) -> None:
         """Range differences to the reference anchor (000 eqs. 12-13), R = sigma^2 (I + 11^T)."""
-        tight = [n for n in self.fusion if n != "kf"]
         r = dict(zip(cycle.valid_anchors, cycle.distances))
         t_of = dict(zip(cycle.valid_anchors, cycle.valid_times))
         ref = self.cfg.reference_anchor if self.cfg.reference_anchor in r else min(r, default=None)
@@ -420,16 +519,22 @@ class Estimator:
     def _snapshot(self, name: str, b: float, yaw: float) -> Estimate | None:
         if name in FUSION:
             x, P = self.model.propagate(self.filters[name].x, self.filters[name].P, b - self._t_predicted)
-            return _estimate(b, name, x[:2], x[2:4], yaw, P[:4, :4])
+            stale = name in self._reinit or self._stale(b, self._aided.get(name))  # waiting: off
+            return _estimate(b, name, x[:2], x[2:4], yaw, P[:4, :4], stale)
         if name == "sins":
             return self._sins_snapshot(b, yaw)
         return self._wsn_snapshot(b)
+
+    def _stale(self, b: float, t_aided: float | None) -> bool:
+        """Whether an estimate at b, last aided at t_aided (None: never, only the configured
+        start at the first measurement), is extrapolated."""
+        return b - (self._t_first if t_aided is None else t_aided) > self.cfg.extrapolated_after_s
 
     def _sins_snapshot(self, b: float, yaw: float) -> Estimate:
         sp, sv, _ = self.cfg.p0_sigma
         pp, pv, vv = float(sp) ** 2, 0.0, float(sv) ** 2
         if self.sins is None:
-            p, v = self.cfg.start, (0.0, 0.0)
+            p, v = self._origin, (0.0, 0.0)
         else:
             dt = b - self._t_imu
             v = self.sins.v[:2]
@@ -439,7 +544,7 @@ class Estimator:
             q = (self.cfg.vrw_m_s_rt_hr / 60.0) ** 2
             pp, pv, vv = pp + q * (T**3 / 3), pv + q * (T**2 / 2), vv + q * T
         cov = [pp, 0.0, pv, 0.0, 0.0, pp, 0.0, pv, pv, 0.0, vv, 0.0, 0.0, pv, 0.0, vv]  # (x, y) alike
-        return _estimate(b, "sins", p, v, yaw, cov)
+        return _estimate(b, "sins", p, v, yaw, cov, self._stale(b, self._t_imu))
 
     def _wsn_snapshot(self, b: float) -> Estimate | None:
         if len(self._fixes) < 2:
@@ -451,7 +556,7 @@ class Estimator:
         cov[:2, :2] = f1.cov
         cov[:2, 2:] = cov[2:, :2] = f1.cov / dt
         cov[2:, 2:] = (f0.cov + f1.cov) / dt**2
-        return _estimate(b, "wsn", f1.p, v, None, cov)
+        return _estimate(b, "wsn", f1.p, v, None, cov, self._stale(b, f1.t))
 
     # ---------------------------------------------------------------- status
 
@@ -468,6 +573,8 @@ class Estimator:
             "rejections": {n: dict(sorted(self.rejections[n].items())) for n in self.cfg.filters
                            if n != "sins"},
             "estimates": {n: self.emitted[n] for n in self.cfg.filters},
+            "reinit": {n: dict(sorted(self.reinits[n].items())) for n in self.cfg.filters if self.reinits[n]},
+            "reinit_pending": [n for n in self.cfg.filters if n in self._reinit],
             "alignment": None if a is None else {
                 "samples": a.samples, "roll_rad": a.roll, "pitch_rad": a.pitch, "yaw_rad": a.yaw,
                 "gyro_bias_rad_s": [float(v) for v in a.gyro_bias],

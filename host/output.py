@@ -3,10 +3,14 @@
 Estimates: one JSON object per line, keys in this order, numbers as Python's ``repr``
 (``json.dumps``), so equal estimates give equal bytes::
 
-    {"t":12.34,"filter":"ukf","x":6.01,"y":1.79,"vx":0.0,"vy":0.0,"yaw":0.0,"cov":[[...],...]}
+    {"t":12.34,"filter":"ukf","x":6.01,"y":1.79,"vx":0.0,"vy":0.0,"yaw":0.0,"cov":[[...],...],
+     "extrapolated":false}
 
 ``t`` is host time in seconds since the run started (docs/host.md); ``yaw`` is null for
-the pure WSN track; ``cov`` is the estimator's covariance of (x, y, vx, vy), row-major.
+the pure WSN track; ``cov`` is the estimator's covariance of (x, y, vx, vy), row-major;
+``extrapolated`` is true when the track had no aiding for the estimator's
+``extrapolated_after_s`` before ``t`` (a position update for kf/ekf/ukf, a fix for wsn, an
+IMU sample for sins), or the track waits to re-initialise: the estimate is a prediction only.
 Status, progress and summary lines go to stderr as one JSON
 object each, ``{"status": {...}}``, ``{"progress": {...}}``, ``{"summary": {...}}``; they
 carry wall-clock figures (rates, latency) and are not part of the deterministic output.
@@ -20,7 +24,7 @@ from typing import TextIO
 
 import numpy as np
 
-KEYS = ("t", "filter", "x", "y", "vx", "vy", "yaw", "cov")
+KEYS = ("t", "filter", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
 
 
 def estimate_line(e) -> str:
@@ -28,7 +32,8 @@ def estimate_line(e) -> str:
     return json.dumps({"t": float(e.t), "filter": str(e.filter), "x": float(e.x), "y": float(e.y),
                        "vx": float(e.vx), "vy": float(e.vy),
                        "yaw": None if e.yaw is None else float(e.yaw),
-                       "cov": np.asarray(e.cov, dtype=float).tolist()},
+                       "cov": np.asarray(e.cov, dtype=float).tolist(),
+                       "extrapolated": bool(e.extrapolated)},
                       separators=(",", ":")) + "\n"
 
 

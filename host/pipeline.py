@@ -17,7 +17,10 @@ nanoloc    the anchors' gateway: one ranging report per exchange
 Time. Each SINS sample's host time comes from the board's counter and each range's from
 the anchor network's ``t_us``, both through :class:`host.clock.DeviceClock` (unwrapped,
 aligned to arrival times online, never stepping back). A sample counter seen on both
-``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate.
+``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate. A clock
+that begins a new epoch (its device restarted) is passed on as ``estimator.restart(t,
+"imu" | "anchors")`` in time order: just before the first sample, or range, of the epoch
+(for the IMU with the board's uptime, its counter x 10 ms: it counts from power-up).
 
 Time order, with bounded latency (docs/host.md). Let T be the filter time: the latest
 measurement time given to the estimator. Every measurement is given with its own time.
@@ -81,7 +84,8 @@ class Pipeline:
         self.range_clock = DeviceClock(32, T_US_TICK_S, strict=False)
         # the gateway's report counter: equal = a duplicate, any step back = a restart
         self._report_seq = Unwrapper(16, restart=0)
-        self._held: list[tuple] = []  # heap of (t, n, anchor, distance, rssi, status)
+        # heap of (t, n, anchor, distance, rssi, status); anchor None: the anchors restarted
+        self._held: list[tuple] = []
         self._n = 0
         self.t = -math.inf  # filter time
         self._arrival = 0.0
@@ -205,6 +209,7 @@ class Pipeline:
             elif ev.source != self._router:
                 self.counts["imu_other_router"] += 1
                 return
+        restarts = self.imu_clock.restarts
         t = self.imu_clock.time(ev.fields["seq"], a)
         if t is None:
             return
@@ -215,6 +220,9 @@ class Pipeline:
         self.counts["imu_alarm"] += s.ea
         self._release(t, out)
         self.t = max(t, self.t)
+        if self.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown;
+            # it counts its samples from power-up, so this one says how long it has been up
+            out += self.estimator.restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S)
         out += self.estimator.imu(t, s.gyro_rad_s, s.accel_m_s2, nd_ok=nd_ok)
 
     def _range(self, f: dict, a: float, out: list) -> None:
@@ -228,7 +236,11 @@ class Pipeline:
                 self.counts["reports_duplicate"] += 1
                 return
             self.counts["reports_lost"] += step - 1
+        restarts = self.range_clock.restarts
         t = self.range_clock.time(f["t_us"], a)
+        if self.range_clock.restarts != restarts:  # the anchors restarted: in order, before t
+            self._schedule((t, self._n, None, None, None, None), out)
+            self._n += 1
         if f["anchor"] not in self.config.anchors:
             self.counts["reports_unknown_anchor"] += 1
             return
@@ -239,9 +251,12 @@ class Pipeline:
         else:
             distance = None
             self.counts["timeouts" if status & nanoloc.STATUS_TIMEOUT else "range_errors"] += 1
-        item = (t, self._n, f["anchor"], distance, f["rssi"], status)
+        self._schedule((t, self._n, f["anchor"], distance, f["rssi"], status), out)
         self._n += 1
-        if t > self.t:
+
+    def _schedule(self, item: tuple, out: list) -> None:
+        """Hold an anchor-clock item (a range, or a restart: anchor None) or apply it now."""
+        if item[0] > self.t:
             heapq.heappush(self._held, item)
         else:
             self._apply_range(item, out)
@@ -253,6 +268,10 @@ class Pipeline:
 
     def _apply_range(self, item: tuple, out: list) -> None:
         t, _, anchor, distance, rssi, status = item
+        if anchor is None:
+            self.t = max(t, self.t)
+            out += self.estimator.restart(t, "anchors")
+            return
         if t < self.t:
             self.counts["ranges_late"] += 1
             self.max_late_s = max(self.max_late_s, self.t - t)

@@ -249,6 +249,8 @@ class Service:
         self._last_stamp = -1
         self._t0 = 0
         self._prev: dict = {}
+        self._reinit: dict = {}  # the estimator's re-init counts last reported
+        self._reinit_seen = 0  # and their total
         self.started = threading.Event()  # set once the ports are open and being read
 
     # -- setup ---------------------------------------------------------------------------
@@ -357,6 +359,8 @@ class Service:
         self._emit(self.pipeline.feed(name, data, stamp), name, t_read)
         for event in self.pipeline.take_events():  # the coordinator's API mode changed
             self._info("status", event)
+        if self.pipeline.estimator.reinit_count != self._reinit_seen:
+            self._reinit_event()
         tx = self.pipeline.take_tx()
         if tx and self._readers["xbee"].write(tx) and self.recorder is not None:
             self.recorder.port(TX_PORT).write(tx, t_wall_ns=stamp)
@@ -384,6 +388,18 @@ class Service:
             self.status.write(info_line(kind, body))
             self.status.flush()
 
+    def _reinit_event(self) -> None:
+        """A track re-initialised (a discontinuity, host.estimator): which, why, and the totals."""
+        st = self.pipeline.estimator.stats()
+        new = {}
+        for track, causes in st["reinit"].items():
+            diff = {c: n - self._reinit.get(track, {}).get(c, 0) for c, n in causes.items()}
+            if any(diff.values()):
+                new[track] = {c: n for c, n in diff.items() if n}
+        self._reinit, self._reinit_seen = st["reinit"], self.pipeline.estimator.reinit_count
+        self._info("status", {"event": "reinit", "filter_time": self.pipeline.t, "new": new,
+                              "reinit": st["reinit"], "pending": st["reinit_pending"]})
+
     def _status(self, now: int) -> None:
         st = self.pipeline.stats()
         dt = (now - self._prev.get("now", self._t0)) / 1e9
@@ -401,7 +417,7 @@ class Service:
                 "reports_per_s": round((ranges - self._prev.get("reports", 0)) / dt, 1),
                 "errors": {p: v["errors"] for p, v in st["ports"].items() if v["errors"]},
                 "link_dbm": st["link_dbm"], "latency": self.latency.period(),
-                "estimates": self.lines, "held": st["held"]}
+                "estimates": self.lines, "held": st["held"], "reinit": self._reinit}
         self._prev.update(now=now, imu=imu, reports=ranges)
         self._info("status", body)
 

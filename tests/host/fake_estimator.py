@@ -17,6 +17,7 @@ class RecordingEstimator:
         self._next = None
         self._ranges: dict[int, float] = {}
         self._az = 0.0
+        self.reinit_count = 0
 
     def _out(self, t: float) -> list:
         if self._next is None:
@@ -38,6 +39,10 @@ class RecordingEstimator:
         self.calls.append(("range", t, anchor, distance, rssi, status))
         if distance is not None:
             self._ranges[anchor] = distance
+        return self._out(t)
+
+    def restart(self, t, device, uptime_s=0.0) -> list:
+        self.calls.append(("restart", t, device, uptime_s))
         return self._out(t)
 
     def stats(self) -> dict:

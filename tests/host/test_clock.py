@@ -58,6 +58,24 @@ def test_a_count_far_ahead_of_the_elapsed_time_is_a_restart():
     assert step is None and value == 5000 and u.restarts == 1
 
 
+def test_a_count_behind_the_elapsed_time_came_late_and_is_no_restart():
+    u = Unwrapper(16, 0.01, restart=100)
+    u.unwrap(5000, 0.0)
+    # the host stalled 3 s: the next samples waited in the line and arrive together
+    assert u.unwrap(5001, 3.0) == (5001, 1) and u.restarts == 0
+    assert u.unwrap(5002, 3.0) == (5002, 1)
+
+
+def test_a_host_stall_keeps_the_device_times_and_the_epoch():
+    clock = DeviceClock(16, 0.01, strict=True)
+    times = [clock.time(k, 0.005 + 0.01 * k) for k in range(300)]
+    # 2 s without a read, then 2 s of samples at once, then live again
+    times += [clock.time(k, 5.0) for k in range(300, 500)]
+    times += [clock.time(k, 0.005 + 0.01 * k) for k in range(500, 600)]
+    assert clock.counter.restarts == 0 and clock.aligner.resets == 0
+    assert np.allclose(times, 0.005 + 0.01 * np.arange(600), atol=1e-3)
+
+
 def test_a_counter_without_tick_restarts_on_any_step_back():
     u = Unwrapper(16, restart=0)
     u.unwrap(7, 0.0)

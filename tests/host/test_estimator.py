@@ -1,6 +1,7 @@
 """The fusion core on synthetic lab data: outputs, accuracy against truth, bad input, outages."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import defaultdict
 
@@ -71,6 +72,12 @@ def test_config_errors_name_the_field_and_the_fix():
         EstimatorConfig(output_period_s=0)
     with pytest.raises(ValueError, match="anchors: 2 given"):
         EstimatorConfig(anchors={1: (0, 0), 2: (1, 0)})
+    with pytest.raises(ValueError, match="extrapolated_after_s must be a positive number"):
+        EstimatorConfig(extrapolated_after_s=0.0)
+    with pytest.raises(ValueError, match=r"reinit_sigma must hold 2 positive numbers \(got \(1.0,\)\)"):
+        EstimatorConfig(reinit_sigma=(1.0,))
+    with pytest.raises(ValueError, match="device 'gps': use one of imu, anchors"):
+        Estimator().restart(1.0, "gps")
 
 
 def test_one_estimate_per_filter_per_period_in_config_order(default_run):
@@ -240,3 +247,87 @@ def test_other_measurement_choices_also_track(tight, wsn):
     err = errors(out, ALIGN)
     for name in ("kf", "ekf", "ukf"):
         assert err[name].mean() < err["wsn"].mean() and err[name].max() < 0.5, name
+
+
+def restarted_run(first_s, gap_s, second_s, cfg=None, **kw):
+    """The lab restarted gap_s after a run of first_s (host time goes on): the vehicle back at
+    its start, at rest for the alignment, then the same trip; the devices' restarts are
+    told as the pipeline tells them, before their first new measurement. Returns the
+    estimator, the estimates and the restart time."""
+    t1 = first_s + gap_s
+    second = [(kind, (args[0] + t1, *args[1:])) for kind, args in synth_events(second_s, seed=2, **kw)]
+    calls = [*synth_events(first_s, seed=1, **kw), ("restart", (second[0][1][0], "imu")),
+             ("restart", (second[0][1][0], "anchors")), *second]
+    est, out = run(cfg, calls)
+    return est, out, t1
+
+
+def restarted_errors(out, t1, t_from, t_to=math.inf):
+    """Errors of the estimates in [t_from, t_to] against the restarted run's truth."""
+    return errors([dataclasses.replace(e, t=e.t - t1) for e in out if t_from <= e.t <= t_to])
+
+
+def test_a_device_restart_reinitialises_every_track_and_realigns_the_sins():
+    est, out, t1 = restarted_run(15.0, 6.0, 15.0)
+    s = est.stats()
+    assert s["reinit"] == {n: {"restart": 1} for n in FILTER_NAMES}  # both devices: one each
+    assert s["reinit_pending"] == [] and s["alignment"]["samples"] == ALIGN * 100
+    err = restarted_errors(out, t1, t1 + 0.5)
+    for name in ("kf", "ekf", "ukf"):
+        assert err[name].max() < 0.5, name
+    assert err["wsn"].max() < 1.0
+    # realigned at the start: the same few decimetres as after the first alignment
+    first = errors([e for e in out if e.t < 15.0], ALIGN, 15.0)
+    assert err["sins"].max() < 2 * first["sins"].max() + 0.1
+
+
+@pytest.mark.parametrize("gap_s", [0.2, 3.0])
+def test_estimates_of_a_restarted_track_before_its_first_fix_are_extrapolated(gap_s):
+    est, out, t1 = restarted_run(10.0, gap_s, 5.0)
+    gap = [e for e in out if 10.0 + 0.5 < e.t < t1]
+    assert all(e.extrapolated for e in gap if e.filter != "sins")
+    # the new run's first fix comes 0.08 s after the restart: until then the tracks wait
+    waiting = [e for e in out if t1 - 1e-9 <= e.t < t1 + 0.08 and e.filter in ("kf", "ekf", "ukf")]
+    assert len(waiting) == 3 and all(e.extrapolated for e in waiting)
+    assert all(not e.extrapolated for e in out if e.t >= t1 + 0.5)
+
+
+def test_a_track_gated_out_for_too_long_starts_again_at_the_next_fix():
+    # from 12 s on, every range says the vehicle is 3.2 m off where the IMU says it went
+    # (picked up and put down): the filters' own position updates are gated out
+    calls = synth_events(25.0)
+    moved = lambda p: p + np.array([2.5, 2.0])
+    for i, (kind, args) in enumerate(calls):
+        if kind == "range" and args[0] >= 12.0 and args[2] is not None:
+            t, a, _, rssi, status = args
+            d = math.dist(moved(office_truth(t).p[0]), OFFICE_ANCHORS[a][:2])
+            calls[i] = ("range", (t, a, d, rssi, status))
+    est, out = run(calls=calls)
+    s = est.stats()
+    for name in ("kf", "ekf", "ukf"):
+        assert s["reinit"][name] == {"gated": 1}, name
+        assert "gate_reopened" not in s["rejections"][name]
+    late = [e for e in out if e.t >= 15.0 and e.filter in ("kf", "ekf", "ukf")]
+    for e in late:
+        assert math.dist((e.x, e.y), moved(office_truth(e.t).p[0])) < 0.5, e
+
+
+def test_a_total_outage_marks_the_estimates_it_bridges_as_extrapolated():
+    gone = lambda t, a: 12.0 <= t < 16.0
+    _, out = run(drop=gone)
+    after = EstimatorConfig().extrapolated_after_s
+    for e in out:
+        if e.filter == "sins":
+            assert not e.extrapolated  # the IMU never stopped
+        elif 12.0 + after + 0.1 <= e.t < 16.0:
+            assert e.extrapolated, e
+        elif e.t < 12.0 + after or e.t >= 16.0 + 0.2:
+            assert not e.extrapolated, e
+
+
+def test_extrapolated_after_s_is_a_setting():
+    gone = lambda t, a: 12.0 <= t < 16.0
+    _, out = run(EstimatorConfig(alignment_s=ALIGN, range_sigma_m=0.15, extrapolated_after_s=2.0,
+                                 filters=("ekf",)), drop=gone)
+    marked = [e.t for e in out if e.extrapolated]
+    assert marked and 14.0 <= min(marked) < 14.2 and max(marked) < 16.2

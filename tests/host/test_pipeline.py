@@ -246,6 +246,16 @@ def test_devices_that_restart_start_new_clock_epochs_and_lose_nothing():
     assert all(b > a for a, b in zip(imu, imu[1:]))
     # the second epoch's times are its own arrival times again (to the link delay)
     assert imu[300] == pytest.approx(4.05 + 0.0085, abs=0.003)
+    # the estimator is told, once per device, just before the first measurement of its epoch
+    restarts = [i for i, c in enumerate(est.calls) if c[0] == "restart"]
+    assert sorted(est.calls[i][2] for i in restarts) == ["anchors", "imu"]
+    for i in restarts:
+        kind = "imu" if est.calls[i][2] == "imu" else "range"
+        nxt = next(c for c in est.calls[i + 1:] if c[0] == kind)
+        assert sum(c[0] == kind for c in est.calls[:i]) == (300 if kind == "imu" else 120)
+        assert nxt[1] == pytest.approx(est.calls[i][1], abs=0.05)
+    times = [c[1] for c in est.calls]
+    assert all(b >= a for a, b in zip(times, times[1:]))
 
 
 def test_api_mode_1_and_the_direct_line_give_the_same_samples():
