@@ -63,9 +63,11 @@ ESTIMATOR_RANGES = {
     "jerk_psd": (0, 10000, True),
     "p0_sigma": (0, 100, True),  # each element
     "stationary_sigma": (0, 100, True),
+    "reinit_sigma": (0, 100, True),
     "range_bias_m": (*RANGE_BIAS_M, False),  # each anchor's
     "gate_probability": (0, 1, True),  # below 1: the estimator refuses 1
     "gate_reopen_s": (0, 3600, True),
+    "extrapolated_after_s": (0, 3600, True),
     "cycle_s": (0.001, 10, False),
     "max_lag_s": (0, 60, False),
     "max_range_m": (0, MAX_COORD_M, True),
