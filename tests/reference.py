@@ -1,24 +1,28 @@
 """The reference estimates: what ``navtwin replay`` of an emulator recording gives, for each
-shipped scenario and three seeds, kept as digests in fixtures/reference/estimates.json.
+shipped scenario and three seeds, kept in fixtures/reference/estimates.npz.
 
 Restructuring must not change them (tests/test_reference.py). Where an output changes on
 purpose, regenerate the file in the same commit and say why in its message::
 
-    .venv/bin/python -m tests.reference --write
+    .venv/bin/python -m tests.reference
+
+The numbers are compared to 1e-9 (relative), not as bytes: another CPU's BLAS kernels may
+round the filters' matrix products differently in the last bit.
 """
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import sys
 import tempfile
-from collections import defaultdict
 from pathlib import Path
+
+import numpy as np
 
 SCENARIOS = ("office", "corridor", "corridor-outage")
 SEEDS = (1, 2, 3)
-PATH = Path(__file__).resolve().parent.parent / "fixtures" / "reference" / "estimates.json"
+FIELDS = ("t", "x", "y", "vx", "vy", "yaw")
+PATH = Path(__file__).resolve().parent.parent / "fixtures" / "reference" / "estimates.npz"
 
 
 def estimate_lines(scenario: str, seed: int) -> list[str]:
@@ -38,33 +42,34 @@ def estimate_lines(scenario: str, seed: int) -> list[str]:
     return lines
 
 
-def digest(lines: list[str]) -> dict:
-    """Line count and SHA-256 of all lines, and of each filter's lines (to say which moved)."""
-    by_filter: dict[str, list[str]] = defaultdict(list)
+def arrays(lines: list[str]) -> dict[str, np.ndarray]:
+    """Per filter: its estimates' fields (yaw NaN where null), variances and flags."""
+    by: dict[str, list[dict]] = {}
     for line in lines:
-        by_filter[json.loads(line)["filter"]].append(line)
+        e = json.loads(line)
+        by.setdefault(e["filter"], []).append(e)
+    out = {}
+    for name, es in by.items():
+        out[f"{name}.fields"] = np.array([[np.nan if e[k] is None else e[k] for k in FIELDS]
+                                          for e in es], dtype=float)
+        # the variances only: the whole 4x4 would treble the file for little more evidence
+        out[f"{name}.var"] = np.array([e["cov"][::5] for e in es], dtype=float)
+        out[f"{name}.extrapolated"] = np.array([e["extrapolated"] for e in es], dtype=bool)
+    return out
 
-    def sha(ls):
-        return hashlib.sha256("".join(ls).encode()).hexdigest()
 
-    return {"lines": len(lines), "sha256": sha(lines),
-            "filters": {f: {"lines": len(ls), "sha256": sha(ls)} for f, ls in sorted(by_filter.items())}}
-
-
-def compute() -> dict:
-    return {s: {str(seed): digest(estimate_lines(s, seed)) for seed in SEEDS} for s in SCENARIOS}
+def compute() -> dict[str, np.ndarray]:
+    return {f"{s}/{seed}/{k}": v for s in SCENARIOS for seed in SEEDS
+            for k, v in arrays(estimate_lines(s, seed)).items()}
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m tests.reference", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--write", action="store_true", help=f"write {PATH} (default: print)")
-    args = p.parse_args(argv)
-    text = json.dumps(compute(), indent=1, sort_keys=True) + "\n"
-    if args.write:
-        PATH.write_text(text)
-    else:
-        sys.stdout.write(text)
+    p.parse_args(argv)
+    PATH.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(PATH, **compute())
+    print(f"wrote {PATH} ({PATH.stat().st_size} bytes)")
     return 0
 
 
