@@ -38,7 +38,7 @@ from protocols.cli import Parser, number
 from protocols.recording import Recording
 from protocols.stream import Frame, sins_decoder
 
-from .runner import wire_ns
+from protocols.serial import wire_ns
 
 
 def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = None) -> dict:

@@ -9,7 +9,7 @@ import threading
 from pathlib import Path
 
 from protocols.cli import UsageError, number, stop_on_signals
-from protocols.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
+from common.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
 
 #: --seed and --duration, shared with ``navtwin lab``.
 seed = number(*SEEDS, integer=True)

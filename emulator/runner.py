@@ -43,8 +43,9 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from protocols.limits import SPEEDS, span
+from common.limits import SPEEDS, span
 from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
+from protocols.serial import wire_ns
 
 from .coordinator import Coordinator, Remote, identity_registers
 from .pty import LinkDir, PtyPort
@@ -88,11 +89,6 @@ def parse_speed(text: str | float) -> float | None:
 
 def speed_name(factor: float | None) -> str:
     return "max" if factor is None else "realtime" if factor == 1.0 else f"{factor:g}"
-
-
-def wire_ns(nbytes: int, baud: int) -> int:
-    """Time on the wire of *nbytes* at *baud*, 8N1 (10 bit times a byte)."""
-    return (nbytes * 10 * SEC + baud // 2) // baud
 
 
 @dataclass(slots=True)

@@ -23,12 +23,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocols.adis16350 import GYRO_LSB_DPS
-from protocols.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
+from common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
                               MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS)
 
 from . import trajectory as geometry
 from .rng import stream
-from .schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
+from common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
                      non_negative, one_of, positive)
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"

@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import fresnel
 
-from .schema import Invalid
+from common.schema import Invalid
 
 TWO_PI = 2.0 * math.pi
 

@@ -7,7 +7,7 @@ import threading
 import time
 
 from protocols.cli import BAUD_HELP, UsageError, baud, number
-from protocols.limits import MAX_DURATION_S, span
+from common.limits import MAX_DURATION_S, span
 from protocols.recording import Recording, RecordingError, write_failure
 
 from . import config as host_config

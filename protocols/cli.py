@@ -17,7 +17,8 @@ from contextlib import contextmanager
 from importlib.metadata import entry_points
 
 from . import __version__
-from .limits import BAUDS, number_problem, span
+from common.limits import number_problem, span
+from .serial import BAUDS
 
 
 class UsageError(Exception):

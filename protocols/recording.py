@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
-from .limits import BAUDS, span
+from .serial import BAUDS
 
 FORMAT = "navtwin-recording"
 VERSION = 1
@@ -359,7 +359,7 @@ def _check_meta(meta, where: Path) -> None:
             fail(f"port {name!r} is {type(port).__name__}, not an object")
         baud = port.get("baud", BAUDS[0])
         if type(baud) is not int or not BAUDS[0] <= baud <= BAUDS[1]:
-            fail(f"port {name!r} baud {baud!r} is not an integer {span(*BAUDS)}")
+            fail(f"port {name!r} baud {baud!r} is not an integer from {BAUDS[0]} to {BAUDS[1]}")
         api = port.get("api_mode", 1)
         if type(api) is not int or api not in (1, 2):
             fail(f"port {name!r} api_mode {api!r} is not 1 or 2")

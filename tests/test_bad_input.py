@@ -353,7 +353,7 @@ def test_the_slowest_valid_sample_rate_and_a_late_board_start_run(tmp_path):
 
 def test_every_estimator_number_has_a_range_and_docs_state_it():
     from host import config as host_config
-    from protocols.limits import span
+    from common.limits import span
 
     numeric = {k for k, t in host_config._estimator_fields().items() if "float" in t}
     assert numeric == set(host_config.ESTIMATOR_RANGES)

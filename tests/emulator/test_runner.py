@@ -6,7 +6,8 @@ import pytest
 
 from emulator.clock import serial_queue
 from emulator.coordinator import SERIAL_TX_BUFFER
-from emulator.runner import END, SEC, Emulation, Line, Wire, parse_speed, wire_ns
+from emulator.runner import END, SEC, Emulation, Line, Wire, parse_speed
+from protocols.serial import wire_ns
 from emulator.scenario import load_scenario
 from emulator.truth import read_truth_csv
 from emulator.world import World

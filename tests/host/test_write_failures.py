@@ -246,7 +246,7 @@ def test_replay_negative_baud(capsys, golden_copy):
     meta = json.loads((golden_copy / "recording.json").read_text())
     meta["ports"]["nanoloc"]["baud"] = -115200
     (golden_copy / "recording.json").write_text(json.dumps(meta))
-    assert "baud -115200 is not an integer in" in replay_error(capsys, golden_copy)
+    assert "baud -115200 is not an integer from 50 to 4000000" in replay_error(capsys, golden_copy)
 
 
 def test_replay_data_cut_in_half_under_an_intact_index(capsys, root, golden_copy):

@@ -18,9 +18,6 @@ LATITUDE_DEG = (-90, 90)
 GRAVITY_M_S2 = (9.7, 9.9)
 RANGE_BIAS_M = (-5, 5)
 RANGE_SCALE = (0.5, 1.5)
-#: Serial rates: 50 (the lowest termios rate; B0 would hang the line up) to 4 Mbit/s (the
-#: highest Linux rate; pyserial sets any rate between, as the XBee's BD accepts non-standard ones).
-BAUDS = (50, 4_000_000)
 #: Run seeds: TOML integers are 64-bit signed.
 SEEDS = (0, 2**63 - 1)
 #: ``--speed`` factors of the emulator (faster: ``--speed max``).
