@@ -10,8 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from protocols.sins import FRAME_SIZE, build_sample
+from protocols.serial import char_ns
 
-from .clock import Clock, char_ns
+from .clock import Clock
 
 
 class Board:

@@ -1,4 +1,5 @@
-"""Node clocks and serial-line timing, in integer nanoseconds of true time.
+"""Node clocks and serial queues, in integer nanoseconds of true time (8N1 byte timing:
+protocols.serial).
 
 A node whose crystal runs fast by ``ppm`` measures a true interval T as T (1 + ppm 1e-6);
 a schedule of ticks every P of its own clock therefore falls at true times
@@ -11,8 +12,6 @@ import math
 
 import numpy as np
 
-NS = 1_000_000_000
-BITS_PER_CHAR = 10  # 8N1: start + 8 data + stop
 
 
 class Clock:
@@ -41,11 +40,6 @@ class Clock:
         while self.tick(k1) < hi_ns:
             k1 += 1
         return np.arange(k0, k1, dtype=np.int64)
-
-
-def char_ns(baud: int) -> float:
-    """Duration of one 8N1 character on the line, ns."""
-    return BITS_PER_CHAR * NS / baud
 
 
 def serial_queue(ready: np.ndarray, durations: np.ndarray, busy_until: int) -> tuple[np.ndarray, np.ndarray]:

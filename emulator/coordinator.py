@@ -73,16 +73,10 @@ BROADCAST_PAYLOAD_EXTRA = 8  # a ZB broadcast carries 8 bytes more than NP
 DIGI_PROFILE = 0xC105
 DIGI_MANUFACTURER = 0x101E
 DIGI_DATA = (0xE8, 0xE8, 0x0011, DIGI_PROFILE)  # endpoints, cluster, profile of 0x91 data
-BAUD_CODES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
 # Serial transmit buffer. S2B's size is undocumented (the S1's 100 B does not apply): 512 B
 # holds two maximal escaped 0x90 frames or ten SINS packets, and drains in 0.53 s at 9600.
 SERIAL_TX_BUFFER = 512
 TEXT = 0  # Param.size of a text register
-
-
-def baud_rate(bd: int) -> int:
-    """The UART rate for a BD value (0-7 standard codes, 0x80-0xE1000 the rate itself)."""
-    return BAUD_CODES[bd] if bd < len(BAUD_CODES) else bd
 
 
 @dataclass(frozen=True)
@@ -263,7 +257,7 @@ class Coordinator:
     # -- UART side ------------------------------------------------------------------------
     def _sync_line(self) -> None:
         self.escaped = self.registers.values["AP"] == 2
-        self.baud = baud_rate(self.registers.values["BD"])
+        self.baud = xbee.baud_rate(self.registers.values["BD"])
 
     def admit(self, t_ns: int, item, queued: int) -> int | None:
         """An item reaching the serial transmit buffer at *t_ns*, with *queued* bytes ahead

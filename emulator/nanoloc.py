@@ -38,8 +38,9 @@ from __future__ import annotations
 import numpy as np
 
 from protocols.nanoloc import FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT, build_report
+from protocols.serial import char_ns
 
-from .clock import Clock, char_ns, serial_queue
+from .clock import Clock, serial_queue
 from .rng import stream
 from .scenario import AnchorOutage, Nlos
 

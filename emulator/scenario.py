@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocols.adis16350 import GYRO_LSB_DPS
+from protocols.xbee import BAUD_CODES, baud_rate
 from common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
                               MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS)
 
@@ -34,8 +35,6 @@ from common.schema import (REQUIRED, Check, Invalid, between, build, dump, each,
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 SCENARIO_NAMES = tuple(sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")))
 
-#: XBee BD register value -> baud rate.
-BD_RATES = {0: 1200, 1: 2400, 2: 4800, 3: 9600, 4: 19200, 5: 38400, 6: 57600, 7: 115200}
 BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400)
 
 
@@ -297,7 +296,7 @@ def _radio(sl: int, ni: str, vr: int, ap: int, extra: dict | None = None):
         "VR": key(vr, "", "firmware version", between(0, 0xFFFF), hex=4),
         "AP": key(ap, "", "API mode (0 = transparent)",
                   one_of(1, 2) if ap else one_of(0, fix="the router is transparent: set AP = 0")),
-        "BD": key(7, "", "interface rate code (7 = 115200)", one_of(*BD_RATES)),
+        "BD": key(7, "", "interface rate code (7 = 115200)", one_of(*range(len(BAUD_CODES)))),
         **(extra or {}),
     }
 
@@ -417,8 +416,8 @@ class Scenario:
             if getattr(f, "anchor", None) is not None and f.anchor not in ids:
                 raise Invalid(f"[[faults]] #{i + 1} anchor", f"{f.anchor} is not in [[anchors]]; "
                                                              "name an anchor id")
-        if BD_RATES[self.xbee.router.BD] != self.board.baud:
-            raise Invalid("[xbee.router] BD", f"{BD_RATES[self.xbee.router.BD]} bit/s differs from the "
+        if baud_rate(self.xbee.router.BD) != self.board.baud:
+            raise Invalid("[xbee.router] BD", f"{baud_rate(self.xbee.router.BD)} bit/s differs from the "
                                               f"board's {self.board.baud}; match [board] baud")
 
     # -- derived views ---------------------------------------------------------------------
@@ -438,7 +437,7 @@ class Scenario:
         """Serial settings of the three ports the emulated lab exposes."""
         c = self.xbee.coordinator
         return {"sins": {"baud": self.board.baud},
-                "xbee": {"baud": BD_RATES[c.BD], "api_mode": c.AP},
+                "xbee": {"baud": baud_rate(c.BD), "api_mode": c.AP},
                 "nanoloc": {"baud": self.gateway.baud}}
 
     @property

@@ -27,6 +27,15 @@ BROADCAST64 = 0x000000000000FFFF
 COORDINATOR64 = 0x0000000000000000
 UNKNOWN16 = 0xFFFE
 
+#: BD register: the standard interface rates by code 0-7; a larger BD value (0x80 up) is the
+#: rate itself (a non-standard rate).
+BAUD_CODES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200)
+
+
+def baud_rate(bd: int) -> int:
+    """The UART rate for a BD value (0-7 standard codes, 0x80-0xE1000 the rate itself)."""
+    return BAUD_CODES[bd] if bd < len(BAUD_CODES) else bd
+
 
 class FrameType:
     AT_COMMAND = 0x08

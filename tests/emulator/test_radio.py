@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from emulator.clock import char_ns
+from protocols.serial import char_ns
 from emulator.radio import ACK_NS, NS_PER_RF_BYTE, RF_OVERHEAD_BYTES, Link, Router
 from emulator.rng import stream
 from emulator.scenario import LinkLoss, load_scenario
