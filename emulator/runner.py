@@ -1,10 +1,9 @@
 """The emulated lab in time: the world's events on the ports' UARTs, in real or virtual time.
 
-Timeline. Every device writes to its port through a :class:`Line`, a model of its UART: a
-chunk of n bytes occupies n x 10 / baud seconds (8N1), chunks never overlap (a chunk
-starts at the later of its ready time and the end of the previous chunk, in ready order),
-and a chunk is delivered to the PTY whole when its last byte would have arrived. The
-world's events are the ready times of the SINS and nanoLOC lines; on the ``xbee`` line the
+Timeline. Every device writes to its port through an ``emulator.uart.Line``, a model of
+its UART (8N1 timing, chunks in ready order, delivered to the PTY whole when the last byte
+would have arrived; wrappers between device and line: :meth:`Emulation.wrap`). The world's
+events are the ready times of the SINS and nanoLOC lines; on the ``xbee`` line the
 coordinator's frames (0x90 for each RF packet, answers to the host) queue the same way,
 so an answer never splits a frame in progress; its transmit buffer is bounded
 (``coordinator.SERIAL_TX_BUFFER``): an RF packet that arrives when it does not fit is
@@ -34,25 +33,22 @@ prefix. A write that fails ends the run (``record_error``).
 from __future__ import annotations
 
 import gc
-import heapq
 import os
 import select
 import threading
 import time
-from collections import deque
-from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Callable
 
 from common.limits import SPEEDS, span
+from protocols.ports import NAMES as PORT_NAMES
 from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
-from protocols.serial import wire_ns
 
 from .coordinator import Coordinator, Remote, identity_registers
 from .pty import LinkDir, PtyPort
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
+from .uart import END, Chunk, Line, LineWrapper, Wire
 
-PORTS = ("sins", "xbee", "nanoloc")
 SEC = 1_000_000_000
 SPIN_NS = 250_000  # busy-wait for the last 0.25 ms before a deadline (select overshoots ~0.1 ms)
 CHECK_NS = 10_000_000  # how often detached ports are looked at for a new client
@@ -63,7 +59,6 @@ PREFILL_NS = SEC  # generated before the clock starts
 MAX_BLOCK_NS = SEC
 FLUSH_NS = int(FLUSH_S * SEC)
 TRUTH_STEP_NS = 10 * SEC  # truth rows made at a time: bounds memory when --speed max races ahead
-END = 1 << 62  # later than any event
 
 
 class RunError(ValueError):
@@ -89,122 +84,6 @@ def parse_speed(text: str | float) -> float | None:
 
 def speed_name(factor: float | None) -> str:
     return "max" if factor is None else "realtime" if factor == 1.0 else f"{factor:g}"
-
-
-@dataclass(slots=True)
-class Chunk:
-    port: str
-    start_ns: int  # first byte leaves the device's UART
-    end_ns: int  # last byte has arrived; the chunk is delivered now
-    data: bytes
-
-
-class Wire:
-    """A device that writes its bytes as they are (SINS board, nanoLOC gateway)."""
-
-    def __init__(self, baud: int) -> None:
-        self.baud = baud
-
-    @staticmethod
-    def admit(t_ns: int, item: bytes, queued: int) -> int:
-        return len(item)  # the board and the gateway never drop what they write
-
-    @staticmethod
-    def render(t_ns: int, item: bytes) -> bytes:
-        return item
-
-
-class Line:
-    """One port's UART: items in ready order, taken into the device's transmit buffer when
-    ready, sent one chunk at a time.
-
-    ``queued`` = bytes in the buffer: items waiting plus the chunk in progress (counted
-    whole until its last byte has arrived). At its ready time an item goes to
-    ``device.admit(ready, item, queued)``, which gives its size or None to drop it (the
-    coordinator's bounded buffer); every step is taken in time order, so what is dropped
-    depends on the timeline only, not on when the loop polls.
-    """
-
-    def __init__(self, name: str, device: Any) -> None:
-        self.name = name
-        self.device = device  # .baud, .admit(t_ns, item, queued) and .render(t_ns, item)
-        self._pending: list = []  # heap of (ready, seq, item) not yet in the buffer
-        self._queue: deque = deque()  # (ready, item, size) in the buffer, in ready order
-        self._seq = 0
-        self.queued = 0
-        self.free_ns = 0
-        self.current: Chunk | None = None
-        self.chunks = 0
-        self.bytes = 0
-
-    def put(self, t_ns: int, item: Any) -> None:
-        heapq.heappush(self._pending, (t_ns, self._seq, item))
-        self._seq += 1
-
-    def next_ns(self) -> int | None:
-        """When this line next has something to do: end of the chunk in progress or start
-        of the next one (an item's arrival in the buffer waits for that)."""
-        if self.current is not None:
-            return self.current.end_ns
-        if self._queue:
-            return max(self._queue[0][0], self.free_ns)
-        if self._pending:
-            return max(self._pending[0][0], self.free_ns)
-        return None
-
-    def poll(self, now_ns: int, known_ns: int, end_ns: int) -> list[Chunk]:
-        """Chunks that have ended by *now_ns*; starts those due. An item enters the buffer
-        only when all items that could precede it are known (ready < *known_ns*), and
-        starts before *end_ns*."""
-        out = []
-        pending, queue = self._pending, self._queue
-        limit = min(known_ns, end_ns)
-        while True:
-            # the earliest step; on a tie a chunk ends before an item arrives, and an item
-            # arrives before the next chunk starts
-            cur = self.current
-            t = pending[0][0] if pending and pending[0][0] < limit else END  # next arrival
-            if cur is not None:
-                arrive = t < cur.end_ns
-                if not arrive:
-                    t = cur.end_ns
-            else:
-                start = END
-                if queue:
-                    start = max(queue[0][0], self.free_ns)
-                    if start >= end_ns:
-                        start = END
-                arrive = t <= start
-                if not arrive:
-                    t = start
-            if t == END or t > now_ns:
-                return out
-            if arrive:
-                ready, _, item = heapq.heappop(pending)
-                size = self.device.admit(ready, item, self.queued)
-                if size is not None:
-                    queue.append((ready, item, size))
-                    self.queued += size
-            elif cur is not None:
-                out.append(cur)
-                self.current = None
-                self.queued -= len(cur.data)
-            else:
-                ready, item, size = queue.popleft()
-                self.queued -= size
-                baud = self.device.baud  # before rendering: a BD change applies to later chunks
-                data = self.device.render(ready, item)
-                if not data:
-                    continue
-                end = t + wire_ns(len(data), baud)
-                self.current = Chunk(self.name, t, end, data)
-                self.queued += len(data)
-                self.free_ns = end
-                self.chunks += 1
-                self.bytes += len(data)
-
-    def busy(self) -> bool:
-        return self.current is not None
 
 
 class Feed:
@@ -265,9 +144,9 @@ class Emulation:
                            f"length of scenario {scenario.name}; pass a duration in that range")
         self.progress = progress
         self.coordinator = self._coordinator(response_delay_ns)
-        bauds = {name: scenario.ports[name]["baud"] for name in PORTS}
+        bauds = {name: scenario.ports[name]["baud"] for name in PORT_NAMES}
         self.lines = {name: Line(name, self.coordinator if name == "xbee" else Wire(bauds[name]))
-                      for name in PORTS}
+                      for name in PORT_NAMES}
         for out in self.coordinator.power_up():
             self.lines["xbee"].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None
@@ -292,11 +171,18 @@ class Emulation:
         self.interrupted = False
         self.record_error: RecordingWriteError | None = None  # the write that ended the run
 
+    def wrap(self, port: str, wrapper: LineWrapper) -> None:
+        """Put *wrapper* between *port*'s device and its line (before :meth:`run`); it sees
+        every chunk the device sends (emulator.uart.LineWrapper)."""
+        if port not in self.lines:
+            raise RunError(f"no port {port!r} to wrap; use one of {', '.join(self.lines)}")
+        self.lines[port].wrap(wrapper)
+
     # -- assembly -------------------------------------------------------------------------
     def _publish(self, link_dir, bauds: dict[str, int]) -> None:
         """The PTYs and their links; a failure is a one-line LinkDirError or RunError."""
-        self.link_dir = LinkDir(link_dir, PORTS)
-        for name in PORTS:
+        self.link_dir = LinkDir(link_dir, PORT_NAMES)
+        for name in PORT_NAMES:
             try:
                 self.ports[name] = PtyPort(name, bauds[name])
             except OSError as e:
@@ -317,7 +203,7 @@ class Emulation:
         rec = RecordingWriter(directory, replace=True, meta={
             "source": "navtwin emulate", "scenario": self.scenario.name, "seed": self.seed,
             "speed": speed_name(self.speed), "duration_s": self.end_ns / SEC,
-            "ports": {name: dict(self.scenario.ports[name]) for name in PORTS},
+            "ports": {name: dict(self.scenario.ports[name]) for name in PORT_NAMES},
             "clocks": {"t_device_ns": "ns since the run started when the chunk's first byte "
                                       "leaves the device's UART",
                        "t_wall_ns": "monotonic ns since the run started when the chunk was "

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocols.adis16350 import GYRO_LSB_DPS
+from protocols.ports import NANOLOC, SINS
 from protocols.xbee import BAUD_CODES, baud_rate
 from common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
                               MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS)
@@ -200,7 +201,7 @@ def _slowest_smpl_prd() -> int:
 
 @dataclass(frozen=True)
 class Board:
-    baud: int = key(115200, "bit/s", "the DSP board's RS-232 rate (8N1)", one_of(*BAUDS))
+    baud: int = key(SINS.baud, "bit/s", "the DSP board's RS-232 rate (8N1)", one_of(*BAUDS))
     period_ms: float = key(10.0, "ms", "frame period in the board's own clock", between(1, 1000))
     start_ms: float = key(1.0, "ms", "true time of the first frame", non_negative(hi=1_000_000))
     spi_read_us: float = key(500.0, "us", "the registers are read this long before a frame is written",
@@ -266,7 +267,7 @@ class Ranging:
 
 @dataclass(frozen=True)
 class Gateway:
-    baud: int = key(115200, "bit/s", "the gateway's serial line (8N1)", one_of(*BAUDS))
+    baud: int = key(NANOLOC.baud, "bit/s", "the gateway's serial line (8N1)", one_of(*BAUDS))
     latency_us: float = key(200.0, "us", "anchor result to gateway (wired)",
                               non_negative(hi=1_000_000))
 

@@ -23,6 +23,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from protocols import ports
+
 from .board import Board
 from .imu import Adis16350
 from .nanoloc import NanolocNetwork
@@ -32,8 +34,10 @@ from .scenario import BLOCK_S, LinkLoss, Scenario
 from .trajectory import Trajectory
 from .truth import truth_arrays
 
-PORTS = ("sins", "nanoloc", "xbee")
-PORT_RANK = {p: i for i, p in enumerate(PORTS)}
+#: events at the same t_ns come in this port order, so the event list never depends on how
+#: the devices were generated
+EVENT_ORDER = (ports.SINS.name, ports.NANOLOC.name, ports.XBEE.name)
+EVENT_RANK = {p: i for i, p in enumerate(EVENT_ORDER)}
 
 
 class RfPacket(NamedTuple):
@@ -50,7 +54,7 @@ class Event(NamedTuple):
 
 
 def _order(e: Event) -> tuple[int, int]:
-    return e.t_ns, PORT_RANK[e.port]
+    return e.t_ns, EVENT_RANK[e.port]
 
 
 class World:

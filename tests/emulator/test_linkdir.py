@@ -9,7 +9,7 @@ import threading
 import pytest
 
 from emulator.pty import LinkDir, LinkDirError
-from emulator.runner import PORTS
+from protocols.ports import NAMES as PORTS
 from protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
 from .test_cli import one_line_error

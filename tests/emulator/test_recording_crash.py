@@ -12,13 +12,13 @@ from emulator import runner
 from emulator.runner import Emulation
 from emulator.scenario import load_scenario
 from protocols.cli import main
+from protocols.ports import NAMES as PORTS
 from protocols.recording import Recording
 from ..fs_helpers import fsize_limit
 from protocols.stream import Frame, XBeeDecoder
 
 NAVTWIN = [sys.executable, "-m", "protocols"]
 DEADLINE_S = 120.0
-PORTS = ("sins", "xbee", "nanoloc")
 
 
 def golden(root):

@@ -6,17 +6,18 @@ import pytest
 
 from emulator.clock import serial_queue
 from emulator.coordinator import SERIAL_TX_BUFFER
-from emulator.runner import END, SEC, Emulation, Line, Wire, parse_speed
+from emulator.runner import SEC, Emulation, parse_speed
+from emulator.uart import END, Line, Wire
 from protocols.serial import wire_ns
 from emulator.scenario import load_scenario
 from emulator.truth import read_truth_csv
 from emulator.world import World
 from protocols import xbee
+from protocols.ports import NAMES as PORTS
 from protocols.recording import Recording
 from protocols.stream import (DecodeError, Frame, XBeeDecoder, XBeeSinsChain, nanoloc_decoder,
                               sins_decoder)
 
-PORTS = ("sins", "xbee", "nanoloc")
 
 
 @pytest.fixture(scope="module")

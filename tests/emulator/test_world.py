@@ -5,7 +5,7 @@ import pytest
 
 from emulator.scenario import SCENARIO_NAMES, load_scenario
 from emulator.truth import FIELDS, read_truth_csv, write_truth_csv
-from emulator.world import PORTS, Event, RfPacket, World
+from emulator.world import EVENT_ORDER, Event, RfPacket, World
 
 from .world_helpers import port_bytes
 
@@ -51,10 +51,10 @@ def test_slicing_never_changes_the_events(office_events, slicing):
 
 def test_events_are_ordered_and_within_the_run(office_events):
     sc, events = office_events
-    keys = [(e.t_ns, PORTS.index(e.port)) for e in events]
+    keys = [(e.t_ns, EVENT_ORDER.index(e.port)) for e in events]
     assert keys == sorted(keys)
     assert all(0 <= e.t_ns < sc.duration_ns for e in events)
-    assert {e.port for e in events} == set(PORTS)
+    assert {e.port for e in events} == set(EVENT_ORDER)
     assert all(isinstance(e, Event) for e in events)
     assert all(isinstance(e.data, RfPacket) for e in events if e.port == "xbee")
     assert all(isinstance(e.data, bytes) for e in events if e.port != "xbee")
@@ -84,7 +84,7 @@ def test_every_shipped_scenario_runs(name):
     sc = load_scenario(name)
     w = World(sc)
     events = w.advance(3_000_000_000)
-    assert {e.port for e in events} == set(PORTS)
+    assert {e.port for e in events} == set(EVENT_ORDER)
 
 
 def test_truth_csv_round_trip(tmp_path):
