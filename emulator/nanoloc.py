@@ -35,6 +35,8 @@ on its serial line (wire-formats.md section 3).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from protocols.nanoloc import FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT, build_report
@@ -42,11 +44,22 @@ from protocols.serial import char_ns
 
 from .clock import Clock, serial_queue
 from .rng import stream
-from .scenario import AnchorOutage, Nlos
+from .faults import acting_on
 
 PS_PER_S = 1e12
 RSSI_NONE = -128  # dBm reported with a timeout: nothing was received
 U32 = 0xFFFFFFFF
+
+
+@dataclass(slots=True)
+class ExchangeEffects:
+    """What anchor faults (emulator.faults, ACTS_ON "anchor") change in a block's exchanges,
+    one entry per exchange; ``act`` changes the arrays in place."""
+
+    timeout: np.ndarray  # bool: the exchange times out
+    bias_m: np.ndarray  # extra range bias (on top of the anchor's range_bias_m)
+    attenuation_db: np.ndarray  # extra path loss on the RSSI
+    exponential: np.ndarray  # a standard exponential draw per exchange (the NLOS bias)
 
 
 class Anchor:
@@ -61,8 +74,7 @@ class Anchor:
         first = r.start_ms * 1e6 + slot * r.slot_ms * 1e6  # network time of its first exchange
         self.clock = Clock(network_ppm, r.cycle_ms * 1e6, round(first / (1 + network_ppm * 1e-6)))
         self.network_us0 = first / 1e3
-        self.outages = [f for f in sc.faults if isinstance(f, AnchorOutage) and f.anchor == spec.id]
-        self.nlos = [f for f in sc.faults if isinstance(f, Nlos) and f.anchor == spec.id]
+        self.faults = acting_on(sc.faults, "anchor", anchor=spec.id)
         self.rng = stream(seed, f"nanoloc.anchor.{spec.id}")
 
     def draw(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, np.ndarray]:
@@ -114,18 +126,13 @@ class NanolocNetwork:
         tag = self.trajectory.position(when.ravel()).reshape(m, 4, 3)
         d = np.linalg.norm(tag - where[:, None, :], axis=2)
         tof = d / SPEED_OF_LIGHT
-        eps = np.zeros(m)
-        attenuation = np.zeros(m)
-        timeout = z[:, 7] < r.timeout_prob
+        effect = ExchangeEffects(z[:, 7] < r.timeout_prob, np.zeros(m), np.zeros(m), z[:, 8])
         for i, a in enumerate(self.anchors):
             mine = idx == i
-            for f in a.nlos:
-                on = mine & f.active(t0)
-                eps[on] += f.bias_m * z[on, 8]
-                attenuation[on] += f.attenuation_db
-            for f in a.outages:
-                timeout |= mine & f.active(t0)
-        bias = np.array([a.bias for a in self.anchors])[idx] + eps
+            for f in a.faults:
+                f.act(effect, mine & f.active(t0))
+        timeout, attenuation = effect.timeout, effect.attenuation_db
+        bias = np.array([a.bias for a in self.anchors])[idx] + effect.bias_m
         sigma = r.sigma0_m + r.sigma_per_m * d
         det = (r.scale - 1) * tof + (bias / SPEED_OF_LIGHT)[:, None] + 2 * sigma / SPEED_OF_LIGHT * z[:, 2:6]
         rt1 = tof[:, 0] + det[:, 0] + p_t + tof[:, 1] + det[:, 1]

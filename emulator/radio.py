@@ -17,6 +17,7 @@ retries), IEEE 802.15.4-2006 (250 kbit/s, 54-symbol ACK wait), xbee-api-facts.md
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -70,12 +71,20 @@ class Router:
         return Packets(np.array(ready, dtype=np.int64), payloads)
 
 
+@dataclass(slots=True)
+class AttemptEffects:
+    """What link faults (emulator.faults, ACTS_ON "link") change: ``lost`` (packets x
+    attempts, bool), changed in place."""
+
+    lost: np.ndarray
+
+
 class Link:
     """One direction of the RF link with its own random stream."""
 
-    def __init__(self, spec, outages, rng: np.random.Generator) -> None:
+    def __init__(self, spec, faults, rng: np.random.Generator) -> None:
         self.spec = spec
-        self.outages = tuple(outages)  # faults with .active(t_ns)
+        self.faults = tuple(faults)  # emulator.faults acting on the link
         self.rng = rng
         self.busy_until = 0
 
@@ -85,9 +94,10 @@ class Link:
         s = self.spec
         n, tries = len(start_ns), s.max_retries + 1
         u = self.rng.random((n, 2 * tries))
-        lost = u[:, :tries] < s.per_attempt_loss
-        for fault in self.outages:
-            lost |= fault.active(start_ns)[:, None]
+        effect = AttemptEffects(u[:, :tries] < s.per_attempt_loss)
+        for fault in self.faults:
+            fault.act(effect, fault.active(start_ns))
+        lost = effect.lost
         backoff = np.rint(u[:, tries:] * s.jitter_ms * 1e6).astype(np.int64)
         air = ((sizes + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE)[:, None]
         attempt = backoff + air + np.where(lost, round(s.retry_ms * 1e6), ACK_NS)

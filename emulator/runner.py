@@ -44,6 +44,7 @@ from protocols.ports import NAMES as PORT_NAMES
 from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
 
 from .coordinator import Coordinator, Remote, identity_registers
+from .faults import acting_on
 from .pty import LinkDir, PtyPort
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
@@ -147,6 +148,8 @@ class Emulation:
         bauds = {name: scenario.ports[name]["baud"] for name in PORT_NAMES}
         self.lines = {name: Line(name, self.coordinator if name == "xbee" else Wire(bauds[name]))
                       for name in PORT_NAMES}
+        for n, fault in enumerate(acting_on(scenario.faults, "line")):
+            self.wrap(fault.port, fault.wrapper(stream(self.seed, f"faults.line.{n}")))
         for out in self.coordinator.power_up():
             self.lines["xbee"].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None

@@ -29,6 +29,7 @@ from common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, 
                               MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS)
 
 from . import trajectory as geometry
+from .faults import Fault
 from .rng import stream
 from common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
                      non_negative, one_of, positive)
@@ -320,49 +321,6 @@ Router = _table("Router", _radio(0x40A1B2D4, "SINS-ROUTER", 0x22A7, 0, {
 class XBee:
     coordinator: Coordinator = Coordinator()
     router: Router = Router()
-
-
-@dataclass(frozen=True, kw_only=True)
-class Fault:
-    KINDS = {}
-    start_s: float = key(REQUIRED, "s", "start of the episode", non_negative(hi=MAX_DURATION_S))
-    end_s: float = key(REQUIRED, "s", "end of the episode (exclusive)",
-                       non_negative(hi=MAX_DURATION_S))
-
-    def __post_init__(self):
-        if self.end_s <= self.start_s:
-            raise Invalid("end_s", f"must be after start_s (got {self.end_s:g} <= {self.start_s:g} s); "
-                                   "make end_s > start_s")
-
-    def active(self, t_ns):
-        """Whether true time(s) *t_ns* fall in the episode."""
-        return (t_ns >= self.start_s * 1e9) & (t_ns < self.end_s * 1e9)
-
-
-@dataclass(frozen=True, kw_only=True)
-class AnchorOutage(Fault):
-    """The anchor is silent: its exchanges time out (status 0x40 reports)."""
-    KIND = "anchor_outage"
-    anchor: int = key(REQUIRED, "", "anchor id", between(*ANCHOR_IDS))
-
-
-@dataclass(frozen=True, kw_only=True)
-class Nlos(Fault):
-    """Non-line-of-sight: a positive range bias (exponential) and a weaker signal."""
-    KIND = "nlos"
-    anchor: int = key(REQUIRED, "", "anchor id", between(*ANCHOR_IDS))
-    bias_m: float = key(0.8, "m", "mean of the exponential NLOS range bias",
-                      non_negative(hi=100))
-    attenuation_db: float = key(6.0, "dB", "extra path loss on the RSSI", non_negative(hi=200))
-
-
-@dataclass(frozen=True, kw_only=True)
-class LinkLoss(Fault):
-    """The XBee link is down: every RF packet in the window is lost."""
-    KIND = "link_loss"
-
-
-Fault.KINDS.update({c.KIND: c for c in (AnchorOutage, Nlos, LinkLoss)})
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -26,11 +26,12 @@ import numpy as np
 from protocols import ports
 
 from .board import Board
+from .faults import acting_on
 from .imu import Adis16350
 from .nanoloc import NanolocNetwork
 from .radio import OPT_ACKNOWLEDGED, Link, Router
 from .rng import stream
-from .scenario import BLOCK_S, LinkLoss, Scenario
+from .scenario import BLOCK_S, Scenario
 from .trajectory import Trajectory
 from .truth import truth_arrays
 
@@ -73,7 +74,7 @@ class World:
                              stream(self.seed, "imu"))
         self.board = Board(sc.board, sc.clocks.board_ppm, self.imu)
         self.router = Router(router["NP"], router["RO"], self.board.char_ns)
-        link_faults = [f for f in sc.faults if isinstance(f, LinkLoss)]
+        link_faults = acting_on(sc.faults, "link")
         self._uplink = Link(sc.link, link_faults, stream(self.seed, "xbee.link.router"))
         #: the host -> router direction (0x10, 0x17); its own stream, so host activity never
         #: changes the device byte streams

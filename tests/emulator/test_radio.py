@@ -8,7 +8,8 @@ import pytest
 from protocols.serial import char_ns
 from emulator.radio import ACK_NS, NS_PER_RF_BYTE, RF_OVERHEAD_BYTES, Link, Router
 from emulator.rng import stream
-from emulator.scenario import LinkLoss, load_scenario
+from emulator.faults import LinkLoss
+from emulator.scenario import load_scenario
 
 from .world_helpers import port_bytes, run, variant
 

@@ -1,0 +1,117 @@
+"""Fault kinds: the ``[[faults]]`` entries of a scenario, one class per kind, in a registry.
+
+A kind is a frozen dataclass of its settings (the schema: ``key(...)`` fields, checked on
+load and listed in docs/scenarios.md) with a class attribute ``KIND`` (its ``kind = "..."``
+name) and ``ACTS_ON`` (the model it acts on, one of :data:`MODELS`), registered with
+:func:`register`. Every episode has ``start_s`` and ``end_s``. A kind acts in one of two
+places:
+
+- on a device model (:class:`DeviceFault`): the model asks :func:`acting_on` for the faults
+  on it (an anchor by id, the RF link) and calls each one's ``act(effect, on)`` with the
+  model's effects of one block (``on``: which of the block's events fall in the episode);
+  the model defines what ``effect`` holds (emulator.nanoloc.ExchangeEffects,
+  emulator.radio.AttemptEffects);
+- on a port's UART line (:class:`LineFault`): ``wrapper(rng)`` gives an
+  emulator.uart.LineWrapper, which the Emulation puts between the port's device and its line;
+  it sees every chunk the device sends and may change, drop, delay or add bytes.
+
+Kinds of a user's package register through the entry-point group ``navtwin.faults`` (name =
+the kind, value = the class); they are loaded when emulator.faults is imported.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+
+from common.limits import MAX_DURATION_S
+from common.schema import REQUIRED, Invalid, key, non_negative, one_of
+from protocols.ports import NAMES as PORT_NAMES
+
+ENTRY_POINTS = "navtwin.faults"
+#: what a fault can act on: an anchor's exchanges, the XBee RF link, a port's UART line
+MODELS = ("anchor", "link", "line")
+
+
+class FaultError(ValueError):
+    """A fault kind that cannot be registered; one line naming the fix."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Fault:
+    """One episode of a fault; subclasses add their settings."""
+
+    KINDS = {}  # kind name -> class, in registration order (common.schema reads it)
+    KIND = ""
+    ACTS_ON = ""
+    start_s: float = key(REQUIRED, "s", "start of the episode", non_negative(hi=MAX_DURATION_S))
+    end_s: float = key(REQUIRED, "s", "end of the episode (exclusive)",
+                       non_negative(hi=MAX_DURATION_S))
+
+    def __post_init__(self):
+        if self.end_s <= self.start_s:
+            raise Invalid("end_s", f"must be after start_s (got {self.end_s:g} <= {self.start_s:g} s); "
+                                   "make end_s > start_s")
+
+    def active(self, t_ns):
+        """Whether true time(s) *t_ns* fall in the episode."""
+        return (t_ns >= self.start_s * 1e9) & (t_ns < self.end_s * 1e9)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DeviceFault(Fault):
+    """A fault that changes what a device model does (ACTS_ON "anchor" or "link")."""
+
+    def act(self, effect, on) -> None:
+        """Change the model's *effect* of one block where the boolean array *on* is set."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True, kw_only=True)
+class LineFault(Fault):
+    """A fault on the bytes of one port's line, between the device and the client."""
+
+    ACTS_ON = "line"
+    port: str = key(REQUIRED, "", "the port whose line it acts on", one_of(*PORT_NAMES))
+
+    def wrapper(self, rng):
+        """The emulator.uart.LineWrapper to install; *rng* is this fault's own stream."""
+        raise NotImplementedError
+
+
+def register(cls: type[Fault]) -> type[Fault]:
+    """Add kind *cls* to the registry (a class decorator); FaultError if it cannot be."""
+    if not (isinstance(cls, type) and issubclass(cls, (DeviceFault, LineFault))):
+        raise FaultError(f"{cls!r} is not a DeviceFault or LineFault subclass; derive the kind "
+                         "from emulator.faults.DeviceFault or LineFault")
+    if not cls.KIND or cls.ACTS_ON not in MODELS:
+        raise FaultError(f"{cls.__name__} needs KIND (its name) and ACTS_ON (one of "
+                         f"{', '.join(MODELS)}); set both class attributes")
+    known = Fault.KINDS.get(cls.KIND)
+    if known is not None and known is not cls:
+        raise FaultError(f"fault kind {cls.KIND!r} is taken by {known.__module__}."
+                         f"{known.__name__}; give {cls.__name__} another KIND")
+    Fault.KINDS[cls.KIND] = cls
+    return cls
+
+
+def unregister(kind: str) -> None:
+    """Remove a kind (tests that register a toy kind put the registry back with it)."""
+    del Fault.KINDS[kind]
+
+
+def load_entry_points() -> None:
+    """Register the kinds that installed packages declare in the ``navtwin.faults`` group."""
+    for ep in entry_points(group=ENTRY_POINTS):
+        cls = ep.load()
+        if getattr(cls, "KIND", None) != ep.name:
+            raise FaultError(f"entry point {ep.name} = {ep.value} ({ENTRY_POINTS}) names a class "
+                             f"of kind {getattr(cls, 'KIND', None)!r}; name the entry point "
+                             "after the class's KIND")
+        register(cls)
+
+
+def acting_on(faults, model: str, **which) -> list[Fault]:
+    """The faults of *faults* that act on *model*, with attributes equal to *which* (for
+    example ``anchor=3``), in scenario order."""
+    return [f for f in faults if f.ACTS_ON == model
+            and all(getattr(f, name, None) == v for name, v in which.items())]
