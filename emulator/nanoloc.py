@@ -91,13 +91,13 @@ class Anchor:
 class NanolocNetwork:
     """All anchors, the tag and the gateway's serial line."""
 
-    def __init__(self, sc, trajectory, seed: int) -> None:
+    def __init__(self, sc, tag, trajectory, seed: int) -> None:
         by_id = {a.id: a for a in sc.anchors}
         self.anchors = [Anchor(sc, by_id[a], i, sc.clocks.network_ppm, seed)
                         for i, a in enumerate(sc.slot_order)]
         self.r = sc.ranging
-        self.e_t = sc.tag.ppm * 1e-6
-        self.tag = sc.tag.id
+        self.e_t = tag.ppm * 1e-6
+        self.tag = tag.id
         self.trajectory = trajectory
         self.cycle_us = sc.ranging.cycle_ms * 1e3
         self.latency_ns = round(sc.gateway.latency_us * 1e3)

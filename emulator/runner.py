@@ -194,11 +194,11 @@ class Emulation:
             self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
 
     def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
-        radios = self.scenario.radios_for(self.seed)  # the router's MY, the network: from the seed
+        radios = self.world.radios  # the routers' MY, the network: from the seed
         coord = identity_registers(radios["coordinator"], CE=1)  # CE: see coordinator.py
-        router = Remote(identity_registers(radios["router"]))
+        routers = [Remote(identity_registers(r)) for r in self.scenario.routers_for(self.seed)]
         kw = {} if response_delay_ns is None else {"response_delay_ns": response_delay_ns}
-        return Coordinator(coord, [router], self.world.link, stream(self.seed, "coordinator"), **kw)
+        return Coordinator(coord, routers, self.world.link, stream(self.seed, "coordinator"), **kw)
 
     def _recorder(self, directory) -> RecordingWriter:
         # an existing recording in *directory* is replaced (the CLI checks that it is one,

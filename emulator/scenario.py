@@ -323,6 +323,28 @@ class XBee:
     router: Router = Router()
 
 
+@dataclass(frozen=True)
+class Vehicle:
+    """One vehicle: its taped line, nanoLOC tag, ADIS16350 on its DSP board, XBee router.
+
+    A ``[[vehicles]]`` table holds these tables (``[vehicles.trajectory]``, ...); without
+    one, the top-level tables of the same names are vehicle 1, and a ``[[vehicles]]`` entry
+    is read into them (so a scenario writes, and runs, the same either way).
+    """
+
+    trajectory: Trajectory = key(REQUIRED, "", "")
+    tag: Tag = Tag()
+    imu: Imu = Imu()
+    board: Board = Board()
+    router: Router = Router()
+
+
+#: a [[vehicles]] table -> the top-level key path it stands for (vehicle 1)
+VEHICLE_KEYS = {"trajectory": ("trajectory",), "tag": ("tag",), "imu": ("imu",),
+                "board": ("board",), "router": ("xbee", "router")}
+MAX_VEHICLES = 1  # many vehicles' ports and radios come later (issue 8 point 8)
+
+
 @dataclass(frozen=True, kw_only=True)
 class Scenario:
     """A validated scenario. Sections are the TOML tables; see the module docstring."""
@@ -388,6 +410,11 @@ class Scenario:
         return self.tag.z if anchor.z is None else anchor.z
 
     @property
+    def vehicles(self) -> tuple[Vehicle, ...]:
+        """The vehicles in order, vehicle 1 first (one today: the top-level tables)."""
+        return (Vehicle(self.trajectory, self.tag, self.imu, self.board, self.xbee.router),)
+
+    @property
     def duration_ns(self) -> int:
         return round(self.duration_s * 1e9)
 
@@ -403,6 +430,10 @@ class Scenario:
     def radios(self) -> dict:
         """AT values of the coordinator and the router (router MY joined with :attr:`seed`)."""
         return self.radios_for(self.seed)
+
+    def routers_for(self, seed: int) -> tuple[dict, ...]:
+        """AT values of each vehicle's router for a run with *seed*, in vehicle order."""
+        return (self.radios_for(seed)["router"],)
 
     def radios_for(self, seed: int) -> dict:
         """AT values of both radios for a run with *seed*: the network the coordinator formed
@@ -457,6 +488,7 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
         raise ScenarioError(f"{path.name}: not valid TOML: {e}; fix the syntax") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError(f"{path.name}: cannot read it ({e}); check the path") from None
+    data = _vehicles(data, path.name)
     base = data.pop("base", None)
     if base is None:
         return data
@@ -464,6 +496,40 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
         raise ScenarioError(f"{path.name}: base must be a scenario name or path in quotes; "
                             'write e.g. base = "office"')
     return _merge(_read(_resolve(base, path.parent), chain + (path.resolve(),)), data)
+
+
+def _vehicles(data: dict, source: str) -> dict:
+    """*data* with its ``[[vehicles]]`` entry read into the top-level tables it stands for
+    (VEHICLE_KEYS); a table set in both places is refused."""
+    vehicles = data.get("vehicles")
+    if vehicles is None:
+        return data
+    if not isinstance(vehicles, list) or not all(isinstance(v, dict) for v in vehicles):
+        raise ScenarioError(f"{source}: vehicles must be an array of tables; write each vehicle "
+                            "as [[vehicles]]")
+    if len(vehicles) > MAX_VEHICLES:
+        raise ScenarioError(f"{source}: [[vehicles]] lists {len(vehicles)} vehicles; this version "
+                            f"runs {MAX_VEHICLES}; keep one [[vehicles]] table")
+    out = {k: v for k, v in data.items() if k != "vehicles"}
+    for n, vehicle in enumerate(vehicles, 1):
+        for name, value in vehicle.items():
+            if name not in VEHICLE_KEYS:
+                known = ", ".join(VEHICLE_KEYS)
+                raise ScenarioError(f"{source}: [[vehicles]] #{n} has an unknown key '{name}'; "
+                                    f"known keys: {known}")
+            *parents, leaf = VEHICLE_KEYS[name]
+            table = out
+            for p in parents:
+                if not isinstance(table.get(p, {}), dict):
+                    raise ScenarioError(f"{source}: {p} must be a table; write it as [{p}]")
+                table[p] = dict(table.get(p, {}))
+                table = table[p]
+            if leaf in table:
+                top = ".".join(VEHICLE_KEYS[name])
+                raise ScenarioError(f"{source}: [{top}] is set at the top level and in "
+                                    f"[[vehicles]] #{n}; keep one of them")
+            table[leaf] = value
+    return out
 
 
 def load_scenario(ref: str | Path) -> Scenario:
@@ -475,6 +541,6 @@ def load_scenario(ref: str | Path) -> Scenario:
 def parse_scenario(data: dict, source: str = "scenario") -> Scenario:
     """Validate a parsed TOML dict (``base`` already resolved); *source* names it in errors."""
     try:
-        return build(Scenario, data)
+        return build(Scenario, _vehicles(data, source))
     except Invalid as e:
         raise ScenarioError(f"{source}: {e}".replace("\n", " ")) from None

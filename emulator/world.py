@@ -1,7 +1,8 @@
 """The emulated lab in virtual time: every device's output as timed events.
 
-``World(sc, seed)`` builds the vehicle, the ADIS16350 and its DSP board, the XBee router
-and link, and the nanoLOC network of scenario *sc*. ``advance(until_ns)`` returns, sorted by
+``World(sc, seed)`` builds the vehicles of scenario *sc* (:class:`Vehicle`: trajectory,
+ADIS16350 and DSP board, XBee router and uplink; one today), the coordinator's downlink and
+the nanoLOC network. ``advance(until_ns)`` returns, sorted by
 (t_ns, port order sins < nanoloc < xbee), every event with t_ns < until_ns not returned
 before:
 
@@ -58,6 +59,48 @@ def _order(e: Event) -> tuple[int, int]:
     return e.t_ns, EVENT_RANK[e.port]
 
 
+class Vehicle:
+    """One vehicle's devices: its trajectory, the ADIS16350 on its DSP board, and the XBee
+    router that packetises the board's stream onto its RF uplink.
+
+    Vehicle 1 draws from the streams "imu" and "xbee.link.router"; vehicle n > 1 from the
+    same names under "vehicle<n>.", so adding a vehicle never changes another's draws.
+    """
+
+    def __init__(self, sc: Scenario, spec, router: dict, number: int, seed: int) -> None:
+        self.number = number
+        self.spec = spec
+        self.src64 = (router["SH"] << 32) | router["SL"]
+        self.src16 = router["MY"]
+        self.trajectory = Trajectory(spec.trajectory, spec.tag.z)
+        self.imu = Adis16350(spec.imu, sc.site, sc.area, self.trajectory, sc.clocks.imu_ppm,
+                             self._stream(seed, "imu"))
+        self.board = Board(spec.board, sc.clocks.board_ppm, self.imu)
+        self.router = Router(router["NP"], router["RO"], self.board.char_ns)
+        self.uplink = Link(sc.link, acting_on(sc.faults, "link"),
+                           self._stream(seed, "xbee.link.router"))
+
+    def _stream(self, seed: int, name: str):
+        return stream(seed, name if self.number == 1 else f"vehicle{self.number}.{name}")
+
+    def block(self, lo: int, hi: int, more: bool) -> tuple[list[Event], list[Event]]:
+        """The board's SINS frames written in [lo, hi) and the RF packets they become
+        (*more*: the run goes on after *hi*, so an open packet waits for the next bytes)."""
+        self.imu.generate(lo, hi)
+        t_sins, frames = self.board.frames(lo, hi)
+        events = [Event(t, "sins", f) for t, f in zip(t_sins.tolist(), frames)]
+        next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
+        times = self.board.byte_times(t_sins).ravel()
+        packets = self.router.packetise(b"".join(frames), times, next_byte)
+        arrival, delivered = self.uplink.transmit(packets.ready_ns, [len(p) for p in packets.payloads])
+        return events, [Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p))
+                        for t, p, ok in zip(arrival.tolist(), packets.payloads, delivered.tolist()) if ok]
+
+    def device_truth(self) -> dict:
+        """What this vehicle's devices drew at power-on and its router's join."""
+        return {"imu": self.imu.errors(), "router_my": self.src16}
+
+
 class World:
     BLOCK_NS = round(BLOCK_S * 1e9)  # the IMU's sample period is checked against it
 
@@ -66,20 +109,14 @@ class World:
         self.seed = sc.seed if seed is None else seed
         self.duration_ns = sc.duration_ns
         self.radios = sc.radios_for(self.seed)
-        router = self.radios["router"]
-        self.src64 = (router["SH"] << 32) | router["SL"]
-        self.src16 = router["MY"]
-        self.trajectory = Trajectory(sc.trajectory, sc.tag.z)
-        self.imu = Adis16350(sc.imu, sc.site, sc.area, self.trajectory, sc.clocks.imu_ppm,
-                             stream(self.seed, "imu"))
-        self.board = Board(sc.board, sc.clocks.board_ppm, self.imu)
-        self.router = Router(router["NP"], router["RO"], self.board.char_ns)
-        link_faults = acting_on(sc.faults, "link")
-        self._uplink = Link(sc.link, link_faults, stream(self.seed, "xbee.link.router"))
+        self.vehicles = [Vehicle(sc, spec, router, n, self.seed) for n, (spec, router)
+                         in enumerate(zip(sc.vehicles, sc.routers_for(self.seed)), 1)]
         #: the host -> router direction (0x10, 0x17); its own stream, so host activity never
         #: changes the device byte streams
-        self.link = Link(sc.link, link_faults, stream(self.seed, "xbee.link.coordinator"))
-        self.nanoloc = NanolocNetwork(sc, self.trajectory, self.seed)
+        self.link = Link(sc.link, acting_on(sc.faults, "link"), stream(self.seed, "xbee.link.coordinator"))
+        # ranges vehicle 1's tag (ranging several tags is the TDMA of a later issue)
+        first = self.vehicles[0]
+        self.nanoloc = NanolocNetwork(sc, first.spec.tag, first.trajectory, self.seed)
         self._generated_ns = 0  # blocks before this are generated
         self._pending: list[Event] = []  # generated, not yet returned, in order
         self._times: list[int] = []  # their t_ns
@@ -90,20 +127,13 @@ class World:
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
         self._generated_ns = hi
-        self.imu.generate(lo, hi)
-        events = []
-        t_sins, frames = self.board.frames(lo, hi)
-        events += [Event(t, "sins", f) for t, f in zip(t_sins.tolist(), frames)]
+        sins, rf = [], []
+        for vehicle in self.vehicles:
+            s, r = vehicle.block(lo, hi, hi < self.duration_ns)
+            sins += s
+            rf += r
         t_nl, reports = self.nanoloc.reports(lo, hi)
-        events += [Event(t, "nanoloc", r) for t, r in zip(t_nl.tolist(), reports)]
-        more = hi < self.duration_ns
-        next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
-        times = self.board.byte_times(t_sins).ravel()
-        packets = self.router.packetise(b"".join(frames), times, next_byte)
-        arrival, delivered = self._uplink.transmit(packets.ready_ns, [len(p) for p in packets.payloads])
-        events += [Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p))
-                   for t, p, ok in zip(arrival.tolist(), packets.payloads, delivered.tolist()) if ok]
-        return events
+        return sins + [Event(t, "nanoloc", r) for t, r in zip(t_nl.tolist(), reports)] + rf
 
     def advance(self, until_ns: int) -> list[Event]:
         """Events with t_ns < until_ns not returned before, in (t_ns, port) order."""
@@ -129,9 +159,10 @@ class World:
 
     # -- truth ------------------------------------------------------------------------------
     def truth(self, t0_ns: int, t1_ns: int) -> np.ndarray:
-        """The true state every millisecond in [t0_ns, t1_ns) (emulator.truth.FIELDS)."""
-        return truth_arrays(self.trajectory, t0_ns, t1_ns)
+        """Vehicle 1's true state every millisecond in [t0_ns, t1_ns) (emulator.truth.FIELDS;
+        truth.csv is one vehicle's)."""
+        return truth_arrays(self.vehicles[0].trajectory, t0_ns, t1_ns)
 
     def device_truth(self) -> dict:
-        """What the devices drew at power-on and the router's join: evaluation only."""
-        return {"seed": self.seed, "imu": self.imu.errors(), "router_my": self.src16}
+        """What vehicle 1's devices drew at power-on and its router's join: evaluation only."""
+        return {"seed": self.seed, **self.vehicles[0].device_truth()}

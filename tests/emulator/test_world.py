@@ -149,5 +149,5 @@ def test_device_truth_is_plain_data():
     sc = load_scenario("office")
     w = World(sc, 3)
     info = json.loads(json.dumps(w.device_truth()))
-    assert info["router_my"] == sc.radios_for(3)["router"]["MY"] == w.src16
+    assert info["router_my"] == sc.radios_for(3)["router"]["MY"] == w.vehicles[0].src16
     assert len(info["imu"]["gyro"]["turn_on_bias"]) == 3 and len(info["imu"]["accel"]["matrix"]) == 3
