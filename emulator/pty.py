@@ -41,6 +41,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from protocols.linkdir import LOCK
+from protocols.ports import DEFAULT_BAUD
 
 PTS = "/dev/pts/"  # where every PTY slave an emulator links to lives
 LOCK_TRIES = 20  # a host's probe holds the lock shared for microseconds: retry ...
@@ -189,7 +190,7 @@ class LinkDir:
 class PtyPort:
     """The master side of one PTY in raw mode; see the module docstring for the policy."""
 
-    def __init__(self, name: str, baud: int = 115200) -> None:
+    def __init__(self, name: str, baud: int = DEFAULT_BAUD) -> None:
         self.name = name
         master, slave = os.openpty()
         self.pts = os.ttyname(slave)
