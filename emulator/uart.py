@@ -158,7 +158,7 @@ class Line:
                         raise ValueError(f"{type(wrapper).__name__} moved a {self.name} chunk "
                                          f"earlier ({start} < {t} ns); a line cannot send early")
                     t = start
-                if not data:
+                if not data or t >= end_ns:  # dropped, or held back past the end of the run
                     continue
                 end = t + wire_ns(len(data), baud)
                 self.current = Chunk(self.name, t, end, data)
