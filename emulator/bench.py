@@ -1,6 +1,6 @@
 """Benchmarks of the emulator runtime (not tests: they measure, they do not assert).
 
-``python -m emulator.bench jitter --seconds 60``
+``python -m cli.emulator_bench jitter --seconds 60``
     starts ``navtwin emulate --speed realtime`` (as a subprocess, like a user would), reads
     the ``sins`` port with pyserial and reports how regular the SINS frames arrive: p50, p99
     and max of |period - nominal| (nominal = 10 ms of the board's clock, from the scenario's
@@ -10,12 +10,12 @@
     which separates the emulator's jitter from the reader's wake-up latency; and, as the peer
     in the same run, the same reader measure on a bare PTY pair written on an exact schedule
     (``bare_pty``): the floor of the kernel's PTY path on this machine.
-``python -m emulator.bench speed [--scenario office]``
+``python -m cli.emulator_bench speed [--scenario office]``
     generates the whole scenario in virtual time (``--speed max``, no PTYs, no recording)
     and reports how many times faster than real time it ran.
-``python -m emulator.bench digi-open [--repeat 10]``
+``python -m cli.emulator_bench digi-open [--repeat 10]``
     times digi-xbee's ``XBeeDevice(port, 115200).open()`` on the coordinator's port.
-``python -m emulator.bench soak [--seconds 600]``
+``python -m cli.emulator_bench soak [--seconds 600]``
     the live lab for that long with a second reader and an emulator restart
     (:mod:`emulator.soak`): memory growth, IMU rate, recovery time per track.
 
@@ -23,18 +23,14 @@ Both print one JSON object.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import select
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from protocols.cli import Parser, number
 from protocols.recording import Recording
 from protocols.stream import Frame, sins_decoder
 
@@ -186,40 +182,3 @@ def benchmarks() -> dict:
 
     return {"emulator-speed": emulator_speed, "emulator-jitter": emulator_jitter,
             "digi-open": digi_xbee_open, "lab-soak": lab_soak}
-
-
-def main(argv: list[str] | None = None) -> int:
-    p = Parser(prog="python -m emulator.bench", description=__doc__,
-               formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = p.add_subparsers(dest="what", required=True, parser_class=Parser)
-    repeat = number(1, 1000, integer=True)
-    j = sub.add_parser("jitter", help="SINS frame-period jitter on the sins port, real time")
-    j.add_argument("--seconds", type=number(1, 3600), default=60.0, help="1 to 3600 (default 60)")
-    j.add_argument("--scenario", default="office")
-    s = sub.add_parser("speed", help="virtual-time generation speed")
-    s.add_argument("--scenario", default="office")
-    s.add_argument("--repeat", type=repeat, default=3, help="1 to 1000 (default 3)")
-    d = sub.add_parser("digi-open", help="digi-xbee XBeeDevice.open() time on the coordinator")
-    d.add_argument("--repeat", type=repeat, default=10, help="1 to 1000 (default 10)")
-    k = sub.add_parser("soak", help="live soak: second reader, emulator restart, memory")
-    k.add_argument("--seconds", type=number(30, 36000), default=600.0,
-                   help="30 to 36000 (default 600)")
-    k.add_argument("--dir", help="keep the run here (default: a new temp dir)")
-    args = p.parse_args(argv)
-    if args.what == "jitter":
-        result = jitter(args.seconds, args.scenario)
-    elif args.what == "speed":
-        result = speed(args.scenario, repeat=args.repeat)
-    elif args.what == "soak":
-        from .soak import soak
-
-        result = soak(args.seconds, directory=args.dir,
-                      progress=lambda m: print(m, file=sys.stderr, flush=True))
-    else:
-        result = digi_open(args.repeat)
-    print(json.dumps(result))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

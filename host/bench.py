@@ -1,7 +1,7 @@
 """Benchmarks of the host, and the synthetic lab they run on.
 
-    python -m host.bench latency [--seconds 20] [--filters all]
-    python -m host.bench replay [DIR] [--seconds 60] [--filters all]
+    python -m cli.host_bench latency [--seconds 20] [--filters all]
+    python -m cli.host_bench replay [DIR] [--seconds 60] [--filters all]
 
 ``latency``: the host service runs in-process on two PTY pairs (coordinator and gateway);
 this process writes the synthetic lab's chunks to the masters at their arrival times and
@@ -20,11 +20,8 @@ seeded generator per stream (named spawn keys).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
-import sys
 import tempfile
 import threading
 import time
@@ -212,25 +209,3 @@ def benchmarks() -> dict:
         return bench_replay(host_config.load(), host_config.FILTER_NAMES, 10.0 if quick else 60.0)
 
     return {"host-latency": host_latency, "host-replay": host_replay}
-
-
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m host.bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("which", choices=("latency", "replay"))
-    p.add_argument("directory", nargs="?", help="replay: a recording (default: synthetic)")
-    p.add_argument("--seconds", type=float, help="synthetic lab length (latency 20, replay 60)")
-    p.add_argument("--filters", default="all", help="comma list or all (default all)")
-    p.add_argument("--config", default=None, help="host config (default office)")
-    args = p.parse_args(argv)
-    cfg = host_config.load(args.config)
-    filters = host_config.parse_filters(args.filters)
-    if args.which == "latency":
-        result = bench_latency(cfg, filters, args.seconds or 20.0)
-    else:
-        result = bench_replay(cfg, filters, args.seconds or 60.0, args.directory)
-    print(json.dumps(result))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

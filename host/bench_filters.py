@@ -1,6 +1,6 @@
 """Microseconds per step of each filter, the strapdown and the whole estimator.
 
-    python -m host.bench_filters [--steps N] [--json]
+    python -m cli.filters_bench [--steps N] [--json]
 
 A step is what the estimator does per measurement: predict over the interval, then one
 update. ``sins`` is one strapdown step; ``estimator/imu`` is one 100 Hz IMU sample through
@@ -10,8 +10,6 @@ runs the same cases: ``pytest tests/host/test_filters_bench.py --benchmark-only`
 """
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from collections.abc import Callable
 
@@ -98,22 +96,3 @@ def measure(steps: int = 2000, repeats: int = 5) -> dict[str, float]:
             runs.append((time.perf_counter() - t0) / steps * 1e6)
         result[name] = float(np.median(runs))
     return result
-
-
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m host.bench_filters", description=__doc__.splitlines()[0])
-    p.add_argument("--steps", type=int, default=2000, help="steps per timing run (default 2000)")
-    p.add_argument("--json", action="store_true", help="one JSON object instead of a table")
-    args = p.parse_args(argv)
-    res = measure(args.steps)
-    if args.json:
-        print(json.dumps(res))
-    else:
-        for name, us in res.items():
-            print(f"{name:14s} {us:8.1f} us/step")
-        print(f"estimator: {1e6 / (100 * res['estimator/imu']):.0f}x real time (100 IMU samples/s)")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

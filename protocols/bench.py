@@ -1,18 +1,15 @@
-"""``navtwin bench``: benchmarks with peers measured in the same run.
+"""The decoders' benchmarks, with peers measured in the same run (``navtwin bench decode``).
 
-Benchmarks are registered in the ``navtwin.benchmarks`` entry-point group: each entry point is
-a callable returning ``{name: fn}``, where ``fn(quick: bool) -> dict`` runs one benchmark and
-returns its figures. This module holds the decode benchmarks, and the adapters that run the
-two peer XBee libraries' own read paths over bytes in memory (digi-xbee 1.5.0 and python-xbee
-2.3.2 are test-extra dependencies, imported only here).
+:func:`decode_benchmarks` is this package's entry in the ``navtwin.benchmarks`` group (the
+registry is :mod:`cli.bench`): library functions that return figures, over protocols alone.
+This module also holds the adapters that run the two peer XBee libraries' own read paths over
+bytes in memory (digi-xbee 1.5.0 and python-xbee 2.3.2 are test-extra dependencies, imported
+only here).
 """
 from __future__ import annotations
 
-import json
 import statistics
-import sys
 import time
-from importlib.metadata import entry_points
 
 from . import nanoloc, sins, xbee
 from .stream import XBeeDecoder, XBeeSinsChain, nanoloc_decoder, sins_decoder
@@ -159,40 +156,3 @@ def bench_decode(quick: bool = False) -> dict:
 
 def decode_benchmarks() -> dict:
     return {"decode": bench_decode}
-
-
-# -- CLI --------------------------------------------------------------------------------------
-
-def available() -> dict:
-    found = {}
-    for ep in sorted(entry_points(group="navtwin.benchmarks"), key=lambda e: e.name):
-        found.update(ep.load()())
-    return found
-
-
-def register(sub) -> None:
-    p = sub.add_parser("bench", help="run benchmarks, with peers measured in the same run",
-                       description="Run benchmarks and print one JSON object per benchmark. "
-                       "Figures are medians; ratios compare with a peer measured in the same run.")
-    p.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all); "
-                   "--list shows them")
-    p.add_argument("--list", action="store_true", help="list the benchmarks and exit")
-    p.add_argument("--quick", action="store_true", help="smaller workloads, for a smoke run")
-    p.set_defaults(func=run)
-
-
-def run(args) -> int:
-    from .cli import UsageError
-
-    benches = available()
-    if args.list:
-        for name, fn in benches.items():
-            print(f"{name}\t{(fn.__doc__ or '').strip().splitlines()[0]}")
-        return 0
-    unknown = [n for n in args.names if n not in benches]
-    if unknown:
-        raise UsageError(f"unknown benchmark {unknown[0]!r}; choose from {', '.join(benches)}")
-    for name in args.names or benches:
-        print(f"running {name} ...", file=sys.stderr, flush=True)
-        print(json.dumps({"bench": name, **benches[name](args.quick)}), flush=True)
-    return 0

@@ -239,7 +239,7 @@ def _env(cwd: Path) -> dict[str, str]:
 
 
 def navtwin(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "protocols", *argv], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "cli", *argv], cwd=cwd,
                           env={**os.environ, **_env(cwd)}, stdin=subprocess.DEVNULL,
                           capture_output=True, text=True, timeout=120)
 
@@ -248,7 +248,7 @@ def navtwin(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
 #: (its own process group, stdin /dev/null), as ``navtwin`` would; prints {name: exit status}.
 DRIVER = r"""
 import json, os, signal, sys, tempfile, time, traceback
-from protocols.cli import build_parser, main
+from cli.main import build_parser, main
 build_parser()  # every command's module imported before the forks, and what they load late:
 import emulator.runner, emulator.scenario, host.estimator, host.replay, host.service  # noqa
 status = {}

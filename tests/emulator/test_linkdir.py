@@ -14,7 +14,7 @@ from protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
 from .test_cli import one_line_error
 
-NAVTWIN = [sys.executable, "-m", "protocols"]
+NAVTWIN = [sys.executable, "-m", "cli"]
 DEADLINE_S = 60.0
 
 

@@ -11,13 +11,13 @@ import pytest
 from emulator import runner
 from emulator.runner import Emulation
 from emulator.scenario import load_scenario
-from protocols.cli import main
+from cli.main import main
 from protocols.ports import NAMES as PORTS
 from protocols.recording import Recording
 from ..fs_helpers import fsize_limit
 from protocols.stream import Frame, XBeeDecoder
 
-NAVTWIN = [sys.executable, "-m", "protocols"]
+NAVTWIN = [sys.executable, "-m", "cli"]
 DEADLINE_S = 120.0
 
 

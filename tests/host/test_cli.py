@@ -6,7 +6,7 @@ import pytest
 
 from host import config as host_config
 from host.config import ConfigError
-from protocols.cli import main
+from cli.main import main
 
 
 def run_cli(capsys, *argv) -> tuple[int, str, str]:

@@ -215,7 +215,7 @@ class Host:
     """``navtwin host --xbee LINK`` with its status lines collected as they come."""
 
     def __init__(self, link: str) -> None:
-        self.p = subprocess.Popen([sys.executable, "-m", "protocols", "host", "--xbee", link,
+        self.p = subprocess.Popen([sys.executable, "-m", "cli", "host", "--xbee", link,
                                    "--filters", "kf", "--status-period", "1", "--out",
                                    os.devnull], stderr=subprocess.PIPE, text=True)
         self.lines = Lines()

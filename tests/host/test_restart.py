@@ -244,7 +244,7 @@ class Lines:
 
 
 def emulate(link_dir: Path, record_dir: Path | None, duration: float | None) -> tuple[subprocess.Popen, Lines]:
-    args = [sys.executable, "-m", "protocols", "emulate", "--scenario", "office", "--speed",
+    args = [sys.executable, "-m", "cli", "emulate", "--scenario", "office", "--speed",
             "realtime", "--link-dir", str(link_dir)]
     if record_dir is not None:
         args += ["--record", str(record_dir)]

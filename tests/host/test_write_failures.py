@@ -16,11 +16,11 @@ import pytest
 
 from host import config as host_config
 from host.bench import synthetic_chunks
-from protocols.cli import main
+from cli.main import main
 from protocols.recording import Recording
 from ..fs_helpers import fsize_limit
 
-NAVTWIN = [sys.executable, "-m", "protocols"]
+NAVTWIN = [sys.executable, "-m", "cli"]
 DEADLINE_S = 60.0
 OFFICE = host_config.load("office")
 
@@ -280,7 +280,7 @@ def test_replay_of_a_sparse_3_gib_data_file_streams(golden_copy):
     os.truncate(golden_copy / "xbee.bin", 3 << 30)  # the index names its first 47 KB
     # VmHWM, not ru_maxrss: Linux keeps ru_maxrss across exec, so it would count the
     # forking test process's own memory
-    code = ("import re, sys; from protocols.cli import main; rc = main(sys.argv[1:]); "
+    code = ("import re, sys; from cli.main import main; rc = main(sys.argv[1:]); "
             "print(re.search(r'VmHWM:\\s+(\\d+)', open('/proc/self/status').read())[1], "
             "file=sys.stderr); sys.exit(rc)")
     res = subprocess.run([sys.executable, "-c", code, "replay", str(golden_copy), "--out",

@@ -14,7 +14,7 @@ from protocols import recording, sins, xbee
 
 from .vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP
 
-NAVTWIN = [sys.executable, "-m", "protocols"]
+NAVTWIN = [sys.executable, "-m", "cli"]
 
 
 def navtwin(*args, stdin=None):

@@ -8,8 +8,9 @@ import sys
 import threading
 from pathlib import Path
 
-from protocols.cli import UsageError, number, stop_on_signals
 from common.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
+
+from .main import UsageError, number, stop_on_signals
 
 #: --seed and --duration, shared with ``navtwin lab``.
 seed = number(*SEEDS, integer=True)
@@ -51,7 +52,7 @@ def register(sub) -> None:
 
 
 def _speed(text: str) -> float | None:
-    from .runner import RunError, parse_speed
+    from emulator.runner import RunError, parse_speed
 
     try:
         return parse_speed(text)
@@ -75,9 +76,9 @@ def _check_record_dir(path: str, overwrite: bool) -> None:
 
 
 def run_emulate(args) -> int:
-    from .pty import LinkDirError
-    from .runner import Emulation, RunError
-    from .scenario import ScenarioError, load_scenario
+    from emulator.pty import LinkDirError
+    from emulator.runner import Emulation, RunError
+    from emulator.scenario import ScenarioError, load_scenario
 
     try:
         if args.record is not None:

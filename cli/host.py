@@ -1,18 +1,18 @@
-"""`navtwin host` and `navtwin replay`."""
+"""``navtwin host``: the arguments of :class:`host.service.Service`; and the options it shares
+with ``navtwin replay`` (:mod:`cli.replay`): config, filters and the estimate output."""
 from __future__ import annotations
 
 import argparse
 import sys
 import threading
-import time
 
-from protocols.cli import BAUD_HELP, UsageError, baud, number
 from common.limits import MAX_DURATION_S, span
-from protocols.recording import Recording, RecordingError, write_failure
+from host import config as host_config
+from host.config import ConfigError
+from host.output import KEYS, open_output
+from protocols.recording import write_failure
 
-from . import config as host_config
-from .config import ConfigError
-from .output import KEYS, estimate_line, info_line, open_output
+from .main import BAUD_HELP, UsageError, baud, number, stop_on_signals
 
 STATUS_PERIODS = (0, 3600)
 PORT_HELP = ("a device path (/dev/ttyUSB0, an emulator PTY link) or a pyserial URL "
@@ -36,7 +36,7 @@ def register(sub) -> None:
     p.add_argument("--api1", dest="escaped", action="store_false", default=True,
                    help="the coordinator runs API mode 1 (AP=1); default API mode 2, escaped")
     p.add_argument("--baud", type=baud, default=115200, help=BAUD_HELP)
-    _common(p)
+    common_options(p)
     p.add_argument("--record", metavar="DIR",
                    help="record every chunk read, with its arrival time, in a new directory, "
                         "not a symbolic link ('navtwin replay DIR' then gives the same output); "
@@ -47,29 +47,10 @@ def register(sub) -> None:
     p.add_argument("--status-period", type=number(*STATUS_PERIODS, above=True), default=2.0,
                    metavar="S", help="seconds between status lines on stderr, "
                                      f"{span(*STATUS_PERIODS, True)} (default 2)")
-    p.set_defaults(func=run_host)
-
-    r = sub.add_parser(
-        "replay", help="run the host's pipeline over a recording",
-        description="Feed a recording through the host's pipeline and write the estimate lines. "
-        "A recording made by 'navtwin host --record' gives exactly the live run's lines (its "
-        "config, filters and API mode are in the recording; --config and --filters override "
-        "them). An emulator recording "
-        "('navtwin emulate --record') is run with arrival = the time each chunk's last byte "
-        "leaves the UART: a deterministic offline run, not equal to any live run.")
-    r.add_argument("directory", metavar="DIR", help="the recording directory")
-    r.add_argument("--salvage", action="store_true",
-                   help="replay the intact prefix of a recording that is marked complete but "
-                        "whose tail is damaged (an incomplete one, from a killed run, always "
-                        "replays its intact prefix)")
-    _common(r, recorded=True)
-    r.add_argument("--api1", dest="escaped", action="store_const", const=False, default=None,
-                   help="the coordinator in an emulator recording ran API mode 1 "
-                        "(default: as its meta says, else 2)")
-    r.set_defaults(func=run_replay)
+    p.set_defaults(func=run)
 
 
-def _common(p, recorded: bool = False) -> None:
+def common_options(p, recorded: bool = False) -> None:
     src = "the recorded run's" if recorded else "the config's"
     p.add_argument("--config", metavar="NAME|FILE",
                    help=f"host config: {', '.join(host_config.shipped())} or a TOML file "
@@ -88,7 +69,7 @@ def _filters(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(str(e).removeprefix("--filters: ")) from None
 
 
-def _config_and_filters(args, default_config: bool):
+def config_and_filters(args, default_config: bool):
     try:
         cfg = host_config.load(args.config) if (args.config or default_config) else None
     except ConfigError as e:
@@ -96,14 +77,14 @@ def _config_and_filters(args, default_config: bool):
     return cfg, args.filters
 
 
-def _open_out(spec: str):
+def open_out(spec: str):
     try:
         return open_output(spec)
     except OSError as e:
         raise UsageError(f"--out {spec}: {e.strerror}; choose a writable file or -") from None
 
 
-def _close_out(out) -> str | None:
+def close_out(out) -> str | None:
     """Close (or flush, for stdout) the estimate output; the failure, if any, as one line."""
     try:
         out.flush() if out is sys.stdout else out.close()
@@ -119,17 +100,15 @@ def _close_out(out) -> str | None:
     return None
 
 
-def run_host(args) -> int:
-    from .pipeline import INPUTS
-    from protocols.cli import stop_on_signals
-
-    from .service import OutputError, Service, StartError
+def run(args) -> int:
+    from host.pipeline import INPUTS
+    from host.service import OutputError, Service, StartError
 
     ports = {p: getattr(args, p) for p in INPUTS if getattr(args, p)}
     if not ports:
         raise UsageError("no input port; give --xbee PORT and/or --sins PORT, and --nanoloc PORT")
-    cfg, filters = _config_and_filters(args, default_config=True)
-    out = _open_out(args.out)
+    cfg, filters = config_and_filters(args, default_config=True)
+    out = open_out(args.out)
     stop = threading.Event()
     error = None
     try:
@@ -142,57 +121,10 @@ def run_host(args) -> int:
         raise UsageError(str(e)) from None
     finally:
         # the run's own write error comes first; closing may fail on what was left buffered
-        error = _close_out(out)
+        error = close_out(out)
     if service.error is not None:
         where = "--out" if isinstance(service.error, OutputError) else "--record"
         raise UsageError(f"{where} {service.error}")
     if error:
         raise UsageError(error)
-    return 0
-
-
-def run_replay(args) -> int:
-    from .replay import replay
-
-    cfg, filters = _config_and_filters(args, default_config=False)
-    try:
-        rec = Recording(args.directory, salvage=args.salvage)
-    except RecordingError as e:
-        raise UsageError(str(e)) from None
-    if (note := rec.skipped_line()) is not None:
-        print(f"navtwin replay: {note}", file=sys.stderr)
-    out = _open_out(args.out)
-    t0 = time.monotonic()
-    shown = [t0]
-
-    def emit(estimates: list) -> None:
-        out.write("".join(map(estimate_line, estimates)))
-
-    def progress(fraction: float) -> None:
-        now = time.monotonic()
-        if now - shown[0] >= 2.0:
-            shown[0] = now
-            sys.stderr.write(info_line("progress", {"done": round(fraction, 3),
-                                                    "elapsed_s": round(now - t0, 1)}))
-
-    error = None
-    try:
-        pipe = replay(rec, emit, progress=progress, config=cfg, filters=filters,
-                      escaped=args.escaped)
-    except BrokenPipeError:
-        raise
-    except OSError as e:  # the data files are read through RecordingError: this is --out
-        error = f"--out {write_failure(args.out, e)}"
-    except (RecordingError, ConfigError) as e:
-        error = str(e)
-    finally:
-        error = error or _close_out(out)
-    if error:
-        raise UsageError(error)
-    stats = pipe.stats()
-    sys.stderr.write(info_line("summary", {"recording": str(rec.directory),
-                                           "complete": rec.complete,
-                                           **({"skipped": rec.skipped} if rec.skipped else {}),
-                                           "elapsed_s": round(time.monotonic() - t0, 3),
-                                           **stats, "estimator": pipe.estimator.stats()}))
     return 0

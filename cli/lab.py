@@ -1,0 +1,54 @@
+"""``navtwin lab``: the arguments of :func:`emulator.lab.run_lab`, and its report as a table."""
+from __future__ import annotations
+
+import argparse
+import threading
+
+from .emulate import DURATION_HELP, SEED_HELP, duration, seed
+from .main import UsageError, stop_on_signals
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "lab", help="run the emulated lab with the host on it, and report its accuracy",
+        description="Start 'navtwin emulate' (real time, recording) and 'navtwin host' on its "
+        "PTYs, each as its own process, and when the scenario ends compare the host's estimates "
+        "with the emulator's truth.csv: mean and max position error per filter beside paper "
+        "000's figures, and a plot. Ctrl-C ends the run early and still reports.")
+    p.add_argument("--scenario", default="office", metavar="NAME|FILE",
+                   help="a shipped scenario (office, corridor, corridor-outage) or a TOML file")
+    p.add_argument("--seed", type=seed, help=SEED_HELP)
+    p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
+    p.add_argument("--config", metavar="NAME|FILE",
+                   help="the host's config (default: the scenario's lab, e.g. office)")
+    p.add_argument("--filters", metavar="LIST", type=_filter_list,
+                   help="the host's --filters, which checks the names (default: its config's)")
+    p.add_argument("--dir", metavar="DIR", help="run directory (default: a new private temp dir)")
+    p.add_argument("--no-plot", dest="plot", action="store_false", help="skip report.png")
+    p.set_defaults(func=run)
+
+
+def _filter_list(text: str) -> str:
+    """Refuse an empty list here, before anything starts; the host judges the names."""
+    if not text.replace(",", "").strip():
+        raise argparse.ArgumentTypeError(f"{text!r}: no filter given; give a comma list of "
+                                         "the host's filters, or all")
+    return text
+
+
+def run(args) -> int:
+    from emulator import evaluate
+    from emulator.lab import LabError, run_lab
+
+    stop = threading.Event()
+    try:
+        with stop_on_signals(stop):
+            report = run_lab(args.scenario, seed=args.seed, duration=args.duration,
+                             config=args.config, filters=args.filters, directory=args.dir,
+                             stop=stop, plot=args.plot)
+    except LabError as e:
+        raise UsageError(str(e)) from None
+    print(evaluate.table(report["errors"]) if report["errors"] else "no estimates to compare")
+    print(f"\nrun directory: {report['dir']}" + (f"\nplot: {report['plot']}" if report.get("plot")
+                                                  else ""))
+    return 0

@@ -1,0 +1,100 @@
+"""The ``navtwin`` console script: one parser, subcommands registered by entry points.
+
+Each subcommand is registered in the ``navtwin.commands`` entry-point group
+(``pyproject.toml``), so this dispatcher imports none of them by name and a user's package can
+add one. A subcommand module provides ``register(subparsers)``, which adds its parser and sets
+``func(args) -> int``; it reports bad input by raising :class:`UsageError`.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import threading
+from contextlib import contextmanager
+from importlib.metadata import entry_points
+
+from common.limits import number_problem, span
+from protocols import __version__
+from protocols.serial import BAUDS
+
+
+class UsageError(Exception):
+    """A problem with what the user asked for: printed as one line, exit status 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line naming the problem and where to look for the fix
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def number(lo: float = -math.inf, hi: float = math.inf, *, integer: bool = False,
+           above: bool = False):
+    """An argparse ``type``: a finite number (an integer if *integer*) in [lo, hi], or
+    (lo, hi] if *above*; anything else is one line naming the value and the range."""
+    def parse(text: str):
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            value = text
+        problem = number_problem(value, lo, hi, integer=integer, above=above)
+        if problem:
+            raise argparse.ArgumentTypeError(f"{text}: {problem}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"  # argparse names it in messages
+    return parse
+
+
+#: ``--baud``: any integer rate in BAUDS (pyserial sets non-standard rates too).
+baud = number(*BAUDS, integer=True)
+BAUD_HELP = f"serial baud rate {span(*BAUDS)} (default 115200)"
+
+
+@contextmanager
+def stop_on_signals(stop: threading.Event, signals=(signal.SIGINT, signal.SIGTERM)):
+    """While active, *signals* set *stop*: a long-running command ends at its next check
+    (between chunks, never inside one) and still flushes and summarises."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {s: signal.signal(s, lambda *_: stop.set()) for s in signals}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def _sigterm_as_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = Parser(prog="navtwin", description="Firmware-in-the-loop emulator of a SINS/WSN "
+                    "positioning lab, and the lab computer's fusion service.")
+    parser.add_argument("--version", action="version", version=f"navtwin {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    for ep in sorted(entry_points(group="navtwin.commands"), key=lambda e: e.name):
+        ep.load()(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
+    try:
+        return args.func(args) or 0
+    except UsageError as e:
+        print(f"navtwin {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 0
+    except BrokenPipeError:  # e.g. piped into head
+        sys.stderr.close()
+        return 0

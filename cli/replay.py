@@ -1,0 +1,81 @@
+"""``navtwin replay``: the arguments of :func:`host.replay.replay`, its estimate lines, and
+its progress and summary lines on stderr."""
+from __future__ import annotations
+
+import sys
+import time
+
+from host.config import ConfigError
+from host.output import estimate_line, info_line
+from protocols.recording import Recording, RecordingError, write_failure
+
+from .host import close_out, common_options, config_and_filters, open_out
+from .main import UsageError
+
+
+def register(sub) -> None:
+    r = sub.add_parser(
+        "replay", help="run the host's pipeline over a recording",
+        description="Feed a recording through the host's pipeline and write the estimate lines. "
+        "A recording made by 'navtwin host --record' gives exactly the live run's lines (its "
+        "config, filters and API mode are in the recording; --config and --filters override "
+        "them). An emulator recording "
+        "('navtwin emulate --record') is run with arrival = the time each chunk's last byte "
+        "leaves the UART: a deterministic offline run, not equal to any live run.")
+    r.add_argument("directory", metavar="DIR", help="the recording directory")
+    r.add_argument("--salvage", action="store_true",
+                   help="replay the intact prefix of a recording that is marked complete but "
+                        "whose tail is damaged (an incomplete one, from a killed run, always "
+                        "replays its intact prefix)")
+    common_options(r, recorded=True)
+    r.add_argument("--api1", dest="escaped", action="store_const", const=False, default=None,
+                   help="the coordinator in an emulator recording ran API mode 1 "
+                        "(default: as its meta says, else 2)")
+    r.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from host.replay import replay
+
+    cfg, filters = config_and_filters(args, default_config=False)
+    try:
+        rec = Recording(args.directory, salvage=args.salvage)
+    except RecordingError as e:
+        raise UsageError(str(e)) from None
+    if (note := rec.skipped_line()) is not None:
+        print(f"navtwin replay: {note}", file=sys.stderr)
+    out = open_out(args.out)
+    t0 = time.monotonic()
+    shown = [t0]
+
+    def emit(estimates: list) -> None:
+        out.write("".join(map(estimate_line, estimates)))
+
+    def progress(fraction: float) -> None:
+        now = time.monotonic()
+        if now - shown[0] >= 2.0:
+            shown[0] = now
+            sys.stderr.write(info_line("progress", {"done": round(fraction, 3),
+                                                    "elapsed_s": round(now - t0, 1)}))
+
+    error = None
+    try:
+        pipe = replay(rec, emit, progress=progress, config=cfg, filters=filters,
+                      escaped=args.escaped)
+    except BrokenPipeError:
+        raise
+    except OSError as e:  # the data files are read through RecordingError: this is --out
+        error = f"--out {write_failure(args.out, e)}"
+    except (RecordingError, ConfigError) as e:
+        error = str(e)
+    finally:
+        error = error or close_out(out)
+    if error:
+        raise UsageError(error)
+    stats = pipe.stats()
+    sys.stderr.write(info_line("summary", {"recording": str(rec.directory),
+                                           "complete": rec.complete,
+                                           **({"skipped": rec.skipped} if rec.skipped else {}),
+                                           "elapsed_s": round(time.monotonic() - t0, 3),
+                                           **stats, "estimator": pipe.estimator.stats()}))
+    return 0

@@ -1,0 +1,124 @@
+"""The layers' import rules, read from every module's imports with ``ast`` (lazy imports inside
+functions included): a package imports only the layers below it, nothing but the command line
+imports the command line, and the command line (argument parsing) lives in ``cli`` alone.
+
+An import is counted by the package it lands in, however it is written: ``protocols.x``,
+``navtwin.protocols.x`` (the installed namespace) and a relative import that resolves there
+are the same package.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+NAMESPACE = "navtwin"
+
+#: Which of our packages each package may import (besides itself). cli may import anything;
+#: every package of ours must be listed, so a new one needs a decision here.
+ALLOWED = {
+    "protocols": set(),
+    "common": {"protocols"},
+    "emulator": {"protocols", "common"},
+    "host": {"protocols", "common"},
+    "lab": {"protocols", "common", "emulator", "host"},
+    "cli": {"protocols", "common", "emulator", "host", "lab"},
+}
+
+
+def packages() -> list[str]:
+    """Our top-level packages: the repository's folders with an ``__init__.py``, tests aside."""
+    return sorted(p.parent.name for p in ROOT.glob("*/__init__.py") if p.parent.name != "tests")
+
+
+def imported_packages(source: str, module: str, ours: set[str]) -> list[tuple[int, str]]:
+    """``(line, package)`` for each import in *source* (the text of dotted *module*, e.g.
+    ``emulator.lab`` or ``emulator``'s ``__init__`` as ``emulator.__init__``) that lands in
+    one of *ours*; an import of the bare namespace counts as ``navtwin``."""
+    package = module.split(".")[:-1]  # the package a relative import starts from
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                up = len(package) - (node.level - 1)
+                base = package[:up] if up > 0 else []  # above the top: the sibling packages
+                parts = base + (node.module.split(".") if node.module else [])
+                # "from . import x" / "from .. import host": the names may be the packages
+                targets = [".".join(parts)] if parts else [a.name for a in node.names]
+            else:
+                targets = [node.module]
+        else:
+            continue
+        for target in targets:
+            parts = target.split(".")
+            if parts[0] == NAMESPACE:
+                parts = parts[1:] or [NAMESPACE]
+            if parts[0] in ours or parts[0] == NAMESPACE:
+                found.append((node.lineno, parts[0]))
+    return found
+
+
+def modules(package: str):
+    for path in sorted((ROOT / package).rglob("*.py")):
+        rel = path.relative_to(ROOT).with_suffix("")
+        yield path, ".".join(rel.parts)
+
+
+def violations(package: str) -> list[str]:
+    ours = set(packages())
+    allowed = ALLOWED[package] | {package}
+    return [f"{path.relative_to(ROOT)}:{line} imports {target}"
+            for path, module in modules(package)
+            for line, target in imported_packages(path.read_text(), module, ours)
+            if target not in allowed]
+
+
+def test_every_package_has_a_layer():
+    assert set(packages()) <= set(ALLOWED), "add the new package to ALLOWED (and docs)"
+
+
+@pytest.mark.parametrize("package", packages())
+def test_imports_follow_the_layers(package):
+    assert violations(package) == [], f"{package} may import only {sorted(ALLOWED[package])}"
+
+
+def test_nothing_but_cli_imports_cli():
+    ours = set(packages())
+    found = [f"{path.relative_to(ROOT)}:{line}" for package in ours - {"cli"}
+             for path, module in modules(package)
+             for line, target in imported_packages(path.read_text(), module, ours)
+             if target == "cli"]
+    assert found == []
+
+
+def test_argument_parsing_lives_in_cli():
+    """A main or a subcommand's parser outside cli is a command line in a library layer."""
+    found = [f"{path.relative_to(ROOT)}:{node.lineno}" for package in set(packages()) - {"cli"}
+             for path, _ in modules(package)
+             for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, (ast.Import, ast.ImportFrom))
+             and "argparse" in ([a.name for a in node.names] if isinstance(node, ast.Import)
+                                else [node.module])]
+    assert found == [], "move the command line into cli/"
+
+
+@pytest.mark.parametrize("source, module, expected", [
+    ("import protocols.xbee", "host.pipeline", ["protocols"]),
+    ("from navtwin.host import config", "emulator.x", ["host"]),
+    ("import navtwin.cli.main as m", "lab.x", ["cli"]),
+    ("import navtwin", "protocols.x", ["navtwin"]),
+    ("from . import stream", "protocols.decode", ["protocols"]),
+    ("from .runner import wire_ns", "emulator.__init__", ["emulator"]),
+    ("from ..sins import x", "host.filters.kf", ["host"]),
+    ("from ..host import config", "emulator.world", ["host"]),  # once under navtwin/
+    ("from .. import cli", "lab.run", ["cli"]),
+    ("def f():\n    from cli.main import UsageError", "host.x", ["cli"]),
+    ("import numpy, serial\nfrom pathlib import Path", "host.x", []),
+])
+def test_imports_are_resolved_however_written(source, module, expected):
+    ours = {"protocols", "common", "emulator", "host", "lab", "cli"}
+    assert [p for _, p in imported_packages(source, module, ours)] == expected

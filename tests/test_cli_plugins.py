@@ -1,0 +1,69 @@
+"""A user's package adds a subcommand and a benchmark through the entry-point groups, with no
+edit of navtwin: what ``pip install`` of a package declaring them would give."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+PLUGIN = '''
+from cli.main import UsageError
+
+
+def register(sub):
+    p = sub.add_parser("greet", help="say hello to an anchor")
+    p.add_argument("anchor", type=int)
+    p.set_defaults(func=run)
+
+
+def run(args):
+    if args.anchor < 1:
+        raise UsageError(f"anchor {args.anchor}: anchors are numbered from 1")
+    print(f"hello anchor {args.anchor}")
+    return 0
+
+
+def benchmarks():
+    def toy(quick=False):
+        """user: a benchmark from outside navtwin"""
+        return {"quick": quick}
+
+    return {"user-toy": toy}
+'''
+
+ENTRY_POINTS = """\
+[navtwin.commands]
+greet = labext:register
+
+[navtwin.benchmarks]
+labext = labext:benchmarks
+"""
+
+
+def navtwin(tmp_path: Path, *argv: str) -> subprocess.CompletedProcess:
+    (tmp_path / "labext.py").write_text(PLUGIN)
+    info = tmp_path / "labext-1.0.dist-info"
+    info.mkdir(exist_ok=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: labext\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text(ENTRY_POINTS)
+    path = os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), str(tmp_path)) if p)
+    return subprocess.run([sys.executable, "-m", "cli", *argv], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": path}, timeout=60)
+
+
+def test_a_user_package_adds_a_subcommand(tmp_path):
+    assert "greet" in navtwin(tmp_path, "--help").stdout
+    p = navtwin(tmp_path, "greet", "3")
+    assert (p.returncode, p.stdout) == (0, "hello anchor 3\n")
+    p = navtwin(tmp_path, "greet", "0")
+    assert (p.returncode, p.stderr) == (2, "navtwin greet: error: anchor 0: anchors are "
+                                            "numbered from 1\n")
+
+
+def test_a_user_package_adds_a_benchmark(tmp_path):
+    p = navtwin(tmp_path, "bench", "--list")
+    assert "user-toy\tuser: a benchmark from outside navtwin" in p.stdout.splitlines()
+    p = navtwin(tmp_path, "bench", "user-toy", "--quick")
+    assert json.loads(p.stdout) == {"bench": "user-toy", "quick": True}
