@@ -15,9 +15,6 @@
     and reports how many times faster than real time it ran.
 ``python -m emulator.bench digi-open [--repeat 10]``
     times digi-xbee's ``XBeeDevice(port, 115200).open()`` on the coordinator's port.
-``python -m emulator.bench soak [--seconds 600]``
-    the live lab for that long with a second reader and an emulator restart
-    (:mod:`emulator.soak`): memory growth, IMU rate, recovery time per track.
 
 Both print one JSON object.
 """
@@ -178,14 +175,8 @@ def benchmarks() -> dict:
         """emulator: digi-xbee XBeeDevice.open() on the coordinator (goal < 1.5 s)"""
         return digi_open(3 if quick else 10)
 
-    def lab_soak(quick: bool = False) -> dict:
-        """emulator+host: live soak, second reader and an emulator restart (RSS growth, recovery)"""
-        from .soak import soak
-
-        return soak(120.0 if quick else 600.0)
-
     return {"emulator-speed": emulator_speed, "emulator-jitter": emulator_jitter,
-            "digi-open": digi_xbee_open, "lab-soak": lab_soak}
+            "digi-open": digi_xbee_open}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -201,20 +192,11 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--repeat", type=repeat, default=3, help="1 to 1000 (default 3)")
     d = sub.add_parser("digi-open", help="digi-xbee XBeeDevice.open() time on the coordinator")
     d.add_argument("--repeat", type=repeat, default=10, help="1 to 1000 (default 10)")
-    k = sub.add_parser("soak", help="live soak: second reader, emulator restart, memory")
-    k.add_argument("--seconds", type=number(30, 36000), default=600.0,
-                   help="30 to 36000 (default 600)")
-    k.add_argument("--dir", help="keep the run here (default: a new temp dir)")
     args = p.parse_args(argv)
     if args.what == "jitter":
         result = jitter(args.seconds, args.scenario)
     elif args.what == "speed":
         result = speed(args.scenario, repeat=args.repeat)
-    elif args.what == "soak":
-        from .soak import soak
-
-        result = soak(args.seconds, directory=args.dir,
-                      progress=lambda m: print(m, file=sys.stderr, flush=True))
     else:
         result = digi_open(args.repeat)
     print(json.dumps(result))

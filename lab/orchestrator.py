@@ -1,0 +1,143 @@
+"""The lab orchestrator (``navtwin lab``): the emulated lab with the host on it, and how well
+the host did.
+
+Both sides run as the programs users run: ``navtwin emulate`` (real time, recording) through
+:func:`emulator.api.emulate`, and ``navtwin host`` on its PTYs as its own process, exactly as
+it would run on the lab computer's real ports. They share nothing but the ports; the host's
+estimates and the emulator's ``truth.csv`` are files, compared when the scenario ends and
+shown beside paper 000's figures, as a table and a plot.
+
+Everything lands in one run directory (private, 0700)::
+
+    DIR/emulator/       the emulator's recording: port bytes, truth.csv, scenario.toml
+    DIR/host/           the host's recording ('navtwin replay DIR/host' gives the same lines)
+    DIR/estimates.jsonl the host's estimate lines
+    DIR/host.log        the host's status lines and its final summary
+    DIR/report.json     errors per filter, with the paper's figures
+    DIR/report.png      tracks and errors over time (with matplotlib)
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from emulator.api import EmulatorError, emulate
+from emulator.scenario import load_scenario
+from host.replay import config_for
+
+from . import evaluate
+
+HOST_STOP_S = 30.0
+
+
+class LabError(RuntimeError):
+    """The run directory cannot be used, or a side failed: one line."""
+
+
+def run_dir(path: str | os.PathLike | None) -> Path:
+    if path is None:
+        return Path(tempfile.mkdtemp(prefix="navtwin-lab-"))  # mode 0700
+    d = Path(path)
+    if d.exists() and (not d.is_dir() or any(d.iterdir())):
+        raise LabError(f"--dir {d}: exists and is not an empty directory; choose a new one")
+    d.mkdir(mode=0o700, parents=True, exist_ok=True)
+    os.chmod(d, 0o700)
+    return d
+
+
+def _log_lines(path: Path) -> list[dict]:
+    out = []
+    for line in path.read_text(errors="replace").splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            out.append({"text": line})
+    return out
+
+
+def _wait_log(path: Path, pred, timeout: float) -> bool:
+    """Poll the host's log until a line satisfies *pred* (True) or *timeout* passes."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if any(pred(x) for x in _log_lines(path)):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def run_lab(scenario: str = "office", *, seed: int | None = None, duration: float | None = None,
+            config: str | None = None, filters: str | None = None, directory=None,
+            stop: threading.Event | None = None, status=sys.stderr, plot: bool = True) -> dict:
+    """Run the lab; returns the report (errors per filter, paths, both summaries)."""
+    stop = stop or threading.Event()
+    config = config or config_for(Path(scenario).stem)  # the scenario's lab, as replay finds it
+    if config is None:
+        raise LabError(f"no host config for scenario {scenario!r}; give --config NAME|FILE")
+    d = run_dir(directory)
+    log = d / "host.log"
+    try:
+        with emulate(scenario, seed=seed, speed="realtime", duration=duration,
+                     link_dir=d / "links", record=d / "emulator") as lab:
+            cmd = [sys.executable, "-m", "protocols", "host", "--xbee", lab.ports["xbee"],
+                   "--nanoloc", lab.ports["nanoloc"], "--config", config,
+                   "--record", str(d / "host"), "--out", str(d / "estimates.jsonl")]
+            if filters is not None:
+                cmd += ["--filters", filters]
+            with open(log, "wb") as f:
+                host = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                        stderr=f)
+            print(json.dumps({"lab": "running", "dir": str(d), **{k: lab.info[k] for k in (
+                "scenario", "seed", "duration_s", "ports")}}), file=status, flush=True)
+            try:
+                while lab.running() and host.poll() is None and not stop.is_set():
+                    stop.wait(2.0)
+                    last = [x["status"] for x in _log_lines(log)[-3:] if "status" in x]
+                    if last:
+                        print(json.dumps({"host": last[-1]}), file=status, flush=True)
+                done = lab.stop()
+                # the emulator's ports are gone once it has ended: a host that has read all
+                # they held reports them down; then it is told to stop
+                _wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down", 10.0)
+            finally:
+                if host.poll() is None:
+                    host.send_signal(signal.SIGTERM)
+                host.wait(timeout=HOST_STOP_S)
+    except EmulatorError as e:
+        raise LabError(f"the emulator failed: {str(e).strip().splitlines()[-1]}") from None
+    summaries = [x["summary"] for x in _log_lines(log) if "summary" in x]
+    if not summaries:
+        tail = _log_lines(log)[-1:] or [{"text": "no output"}]
+        raise LabError(f"the host failed: {tail[0].get('text', tail[0])}; see {log}")
+    return _report(d, summaries[-1], done, plot)
+
+
+def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
+    truth_path = d / "emulator" / "truth.csv"
+    report = {"dir": str(d), "host": {k: host_summary.get(k) for k in ("chunks", "lines", "latency")},
+              "emulator": done, "errors": {}, "paper_mean_m": evaluate.PAPER_MEAN_ERROR_M}
+    if done.get("t0_monotonic_ns") and host_summary.get("t0_monotonic_ns") and truth_path.is_file():
+        # scenario time = host time + (host start - emulator start), both on CLOCK_MONOTONIC
+        offset = (host_summary["t0_monotonic_ns"] - done["t0_monotonic_ns"]) / 1e9
+        truth = evaluate.load_truth(truth_path)
+        estimates = evaluate.load_estimates(d / "estimates.jsonl")
+        report["time_offset_s"] = offset
+        report["errors"] = evaluate.position_errors(truth, estimates, offset)
+        if plot:
+            try:
+                report["plot"] = str(evaluate.plot(truth, estimates, d / "report.png", offset,
+                                                   _anchors(d / "emulator" / "scenario.toml")))
+            except ImportError:
+                report["plot"] = None  # matplotlib is in the 'plot' extra
+    (d / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    return report
+
+
+def _anchors(scenario_toml: Path) -> dict:
+    return {a.id: (a.x, a.y) for a in load_scenario(scenario_toml).anchors}
