@@ -8,13 +8,14 @@ from pathlib import Path
 import pytest
 
 from host import config as host_config
-from host.bench import synthetic_chunks, write_host_recording
+from host.bench import write_host_recording
 from host.output import estimate_line
 from host.pipeline import Pipeline
 from host.replay import chunks, replay, settings
 from protocols import sins
 from protocols.recording import Recording, RecordingWriter
 
+from . import lab_bytes
 from .fake_estimator import RecordingEstimator
 
 OFFICE = host_config.load("office")
@@ -32,7 +33,7 @@ def direct_lines(chunks_, filters=host_config.FILTER_NAMES, config=OFFICE) -> st
 
 @pytest.fixture(scope="module")
 def host_recording(tmp_path_factory):
-    data = list(synthetic_chunks(OFFICE, 8.0, seed=11))
+    data = list(lab_bytes.office(8.0, 11))
     path = write_host_recording(tmp_path_factory.mktemp("rec") / "run", OFFICE,
                                 host_config.FILTER_NAMES, data)
     return path, data
@@ -105,7 +106,7 @@ def test_emulator_recording_ties_are_made_strictly_increasing(tmp_path):
 
 
 def test_replay_runs_an_emulator_recording_through_the_pipeline(tmp_path):
-    data = list(synthetic_chunks(OFFICE, 2.0, seed=12))
+    data = list(lab_bytes.office(2.0, 12))
     # as the emulator would record it: device time = first byte out = last byte - wire time
     by_port: dict = {}
     for port, chunk, t in data:
