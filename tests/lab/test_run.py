@@ -17,3 +17,9 @@ def test_in_memory_run_takes_the_filters_and_duration_it_is_given():
     estimates, _ = run_in_memory("office", seed=1, filters=("wsn",), duration=5.0)
     assert estimates and {e.filter for e in estimates} == {"wsn"}
     assert max(e.t for e in estimates) < 5.5
+
+
+def test_the_lab_registers_its_benchmarks():
+    from lab.bench import benchmarks
+
+    assert {"host-latency", "host-replay", "lab-in-memory", "lab-soak"} <= set(benchmarks())
