@@ -14,6 +14,7 @@ from host.pipeline import Pipeline
 from host.replay import chunks, replay, settings
 from protocols import sins
 from protocols.recording import Recording, RecordingWriter
+from protocols.serial import wire_ns
 
 from . import lab_bytes
 from .fake_estimator import RecordingEstimator
@@ -110,7 +111,7 @@ def test_replay_runs_an_emulator_recording_through_the_pipeline(tmp_path):
     # as the emulator would record it: device time = first byte out = last byte - wire time
     by_port: dict = {}
     for port, chunk, t in data:
-        by_port.setdefault(port, []).append((t - round(len(chunk) * 10 * 1e9 / 115200), chunk))
+        by_port.setdefault(port, []).append((t - wire_ns(len(chunk), 115200), chunk))
     rec = _emulator_recording(tmp_path / "emu", by_port)
     est = RecordingEstimator()
     replay(rec, lambda es: None, estimator=est)
