@@ -24,20 +24,11 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--repeat", type=repeat, default=3, help="1 to 1000 (default 3)")
     d = sub.add_parser("digi-open", help="digi-xbee XBeeDevice.open() time on the coordinator")
     d.add_argument("--repeat", type=repeat, default=10, help="1 to 1000 (default 10)")
-    k = sub.add_parser("soak", help="live soak: second reader, emulator restart, memory")
-    k.add_argument("--seconds", type=number(30, 36000), default=600.0,
-                   help="30 to 36000 (default 600)")
-    k.add_argument("--dir", help="keep the run here (default: a new temp dir)")
     args = p.parse_args(argv)
     if args.what == "jitter":
         result = bench.jitter(args.seconds, args.scenario)
     elif args.what == "speed":
         result = bench.speed(args.scenario, repeat=args.repeat)
-    elif args.what == "soak":
-        from emulator.soak import soak
-
-        result = soak(args.seconds, directory=args.dir,
-                      progress=lambda m: print(m, file=sys.stderr, flush=True))
     else:
         result = bench.digi_open(args.repeat)
     print(json.dumps(result))

@@ -15,9 +15,6 @@
     and reports how many times faster than real time it ran.
 ``python -m cli.emulator_bench digi-open [--repeat 10]``
     times digi-xbee's ``XBeeDevice(port, 115200).open()`` on the coordinator's port.
-``python -m cli.emulator_bench soak [--seconds 600]``
-    the live lab for that long with a second reader and an emulator restart
-    (:mod:`emulator.soak`): memory growth, IMU rate, recovery time per track.
 
 Both print one JSON object.
 """
@@ -174,11 +171,5 @@ def benchmarks() -> dict:
         """emulator: digi-xbee XBeeDevice.open() on the coordinator (goal < 1.5 s)"""
         return digi_open(3 if quick else 10)
 
-    def lab_soak(quick: bool = False) -> dict:
-        """emulator+host: live soak, second reader and an emulator restart (RSS growth, recovery)"""
-        from .soak import soak
-
-        return soak(120.0 if quick else 600.0)
-
     return {"emulator-speed": emulator_speed, "emulator-jitter": emulator_jitter,
-            "digi-open": digi_xbee_open, "lab-soak": lab_soak}
+            "digi-open": digi_xbee_open}

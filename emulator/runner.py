@@ -29,6 +29,9 @@ truth.csv up to the virtual time reached, are flushed every ``FLUSH_S`` of wall 
 paced, in an idle gap, as world generation is, but never more than ``FLUSH_S`` late; at max
 speed also every ``MAX_BLOCK_NS`` of virtual time), so a killed run leaves a replayable
 prefix. A write that fails ends the run (``record_error``).
+
+Sink. ``sink`` (a callable) is given every chunk as it is delivered, with its device times:
+the in-memory run (``lab.run``) takes the lab's bytes from here, with no PTY and no file.
 """
 from __future__ import annotations
 
@@ -123,14 +126,16 @@ class Emulation:
 
     ``Emulation(...)`` creates the ports and links (so clients can open them at once);
     :meth:`run` plays the timeline and returns the summary; :meth:`close` removes the
-    links. With ``ports=False`` nothing is published (recording-only runs and tests).
+    links. With ``ports=False`` nothing is published (recording-only runs, in-memory runs
+    through ``sink``, and tests).
     """
 
     def __init__(self, scenario, seed: int | None = None, *, speed: float | None = 1.0,
                  duration_s: float | None = None, link_dir: str | os.PathLike | None = None,
                  record: str | os.PathLike | None = None, ports: bool = True,
                  response_delay_ns: int | None = None,
-                 progress: Callable[[str], None] | None = None) -> None:
+                 progress: Callable[[str], None] | None = None,
+                 sink: Callable[[Chunk], None] | None = None) -> None:
         from .world import World
 
         self.scenario = scenario
@@ -144,6 +149,7 @@ class Emulation:
             raise RunError(f"--duration {duration_s:g} is outside (0, {full / SEC:g}] s, the "
                            f"length of scenario {scenario.name}; pass a duration in that range")
         self.progress = progress
+        self.sink = sink
         self.coordinator = self._coordinator(response_delay_ns)
         bauds = {name: scenario.ports[name]["baud"] for name in PORT_NAMES}
         self.lines = {name: Line(name, self.coordinator if name == "xbee" else Wire(bauds[name]))
@@ -376,6 +382,8 @@ class Emulation:
             port.write(chunk.data)
         if self.recorder is not None:
             self.recorder.port(chunk.port).write(chunk.data, chunk.start_ns, wall_ns)
+        if self.sink is not None:
+            self.sink(chunk)
 
     def _report(self, elapsed_ns: int) -> None:
         v = self.reached_ns / SEC

@@ -60,19 +60,20 @@ class Latency:
         self._period.append(ns)
         self._all.append(ns)
 
-    @staticmethod
-    def _summary(values) -> dict:
-        if not len(values):
-            return {"n": 0}
-        ms = np.asarray(values, dtype=float) / 1e6
-        p50, p99 = np.percentile(ms, [50, 99])
-        return {"n": int(ms.size), "p50_ms": round(float(p50), 3), "p99_ms": round(float(p99), 3),
-                "max_ms": round(float(ms.max()), 3)}
-
     def period(self) -> dict:
         """Since the last call."""
-        out, self._period = self._summary(self._period), []
+        out, self._period = percentiles_ms(self._period), []
         return out
 
     def overall(self) -> dict:
-        return self._summary(self._all)
+        return percentiles_ms(self._all)
+
+
+def percentiles_ms(ns) -> dict:
+    """Count, p50, p99 and max (ms, to the microsecond) of latencies in ns."""
+    if not len(ns):
+        return {"n": 0}
+    ms = np.asarray(ns, dtype=float) / 1e6
+    p50, p99 = np.percentile(ms, [50, 99])
+    return {"n": int(ms.size), "p50_ms": round(float(p50), 3), "p99_ms": round(float(p99), 3),
+            "max_ms": round(float(ms.max()), 3)}

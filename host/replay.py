@@ -6,20 +6,21 @@ chunks in stamp order through a :class:`host.pipeline.Pipeline` built from that 
 exactly the live run's estimate lines, byte for byte (the pipeline never reads a clock).
 
 An emulator recording (``navtwin emulate --record DIR``) has device times but no arrival
-times. Arrival is then synthesised as the time the chunk's last byte leaves the UART,
-``t_device_ns + size x 10 / baud`` (8N1), made strictly increasing across ports in the
-order ``xbee``, ``sins``, ``nanoloc`` for equal times. Of the two SINS paths the radio
-(``xbee``) is used when recorded. That is a deterministic offline run of the host on the
-emulated lab; it equals no live run (a live host adds the PTY and scheduling delays).
+times. Arrival is then synthesised by :func:`host.arrival.arrivals`: the time the chunk's
+last byte leaves the UART (8N1), made strictly increasing across ports. Of the two SINS paths
+the radio (``xbee``) is used when recorded (:func:`emulator_settings`). That is a deterministic
+offline run of the host on the emulated lab; it equals no live run (a live host adds the PTY
+and scheduling delays). The in-memory run (:func:`lab.run.run_in_memory`) uses the same
+rules without the recording, and gives the same lines.
 """
 from __future__ import annotations
 
-import heapq
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 
 from protocols.recording import Recording, RecordingError
 
 from . import config as host_config
+from .arrival import arrivals
 from .config import HostConfig
 from .pipeline import INPUTS, Pipeline
 from .service import HOST_SOURCE
@@ -52,17 +53,34 @@ def settings(rec: Recording, *, config: HostConfig | None = None,
         return {"config": cfg, "filters": filters or tuple(h["filters"]),
                 "inputs": tuple(h["inputs"]),
                 "escaped": h["escaped"] if escaped is None else escaped}
-    inputs = [p for p in INPUTS if p in rec.ports]
+    ports = rec.meta.get("ports", {})
+    if not any(p in rec.ports for p in INPUTS):
+        raise RecordingError(f"{rec.directory}: none of the ports {', '.join(INPUTS)} is recorded")
+    return emulator_settings(str(rec.meta.get("scenario", "")),
+                             {p: ports.get(p, {}) for p in rec.ports},
+                             config=config, filters=filters, escaped=escaped)
+
+
+def config_for(scenario: str) -> str | None:
+    """The shipped host config of a scenario's lab: its name, or the name its own starts with
+    followed by ``-`` (``corridor-outage`` -> ``corridor``); None if there is none."""
+    return next((n for n in host_config.shipped() if scenario == n or scenario.startswith(n + "-")),
+                None)
+
+
+def emulator_settings(scenario: str, ports: Mapping[str, dict], *, config: HostConfig | None = None,
+                      filters: tuple[str, ...] | None = None,
+                      escaped: bool | None = None) -> dict:
+    """Pipeline keyword arguments for a run of the emulator's *scenario* whose *ports* (name ->
+    its settings, e.g. ``api_mode``) are at hand: the lab computer's inputs among them (the
+    radio's SINS path rather than the direct line), the scenario's shipped config (or the
+    default one) and the coordinator's API mode, unless overridden."""
+    inputs = [p for p in INPUTS if p in ports]
     if "xbee" in inputs and "sins" in inputs:
         inputs.remove("sins")
-    if not inputs:
-        raise RecordingError(f"{rec.directory}: none of the ports {', '.join(INPUTS)} is recorded")
     if config is None:
-        name = str(rec.meta.get("scenario", ""))
-        known = host_config.shipped()
-        match = next((n for n in known if name == n or name.startswith(n + "-")), None)
-        config = host_config.load(match)
-    api = rec.meta.get("ports", {}).get("xbee", {}).get("api_mode", 2)
+        config = host_config.load(config_for(scenario))
+    api = ports.get("xbee", {}).get("api_mode", 2)
     return {"config": config, "filters": filters or config.filters, "inputs": tuple(inputs),
             "escaped": (api == 2) if escaped is None else escaped}
 
@@ -74,21 +92,16 @@ def chunks(rec: Recording, inputs: tuple[str, ...]) -> Iterator[tuple[str, bytes
             yield c.port, c.data, c.t_wall_ns
         return
     bauds = {p: rec.meta.get("ports", {}).get(p, {}).get("baud", 115200) for p in inputs}
-    order = {p: i for i, p in enumerate(INPUTS)}
+    yield from arrivals({p: _device_times(rec, p) for p in inputs}, bauds)
 
-    def arrivals(port: str):
-        ns_per_byte = 10 * 1_000_000_000 / bauds[port]
-        for c in rec.chunks(port):
-            t = c.t_device_ns if c.t_device_ns is not None else c.t_wall_ns
-            if t is None:
-                raise RecordingError(f"{rec.directory}: port {port!r} chunk at offset {c.offset} "
-                                     f"has no time; cannot replay it")
-            yield t + round(len(c.data) * ns_per_byte), order[port], c.offset, c.port, c.data
 
-    last = -1
-    for t, _, _, port, data in heapq.merge(*(arrivals(p) for p in inputs)):
-        last = max(t, last + 1)
-        yield port, data, last
+def _device_times(rec: Recording, port: str) -> Iterator[tuple[bytes, int]]:
+    for c in rec.chunks(port):
+        t = c.t_device_ns if c.t_device_ns is not None else c.t_wall_ns
+        if t is None:
+            raise RecordingError(f"{rec.directory}: port {port!r} chunk at offset {c.offset} "
+                                 f"has no time; cannot replay it")
+        yield c.data, t
 
 
 def replay(rec: Recording, emit: Callable[[list], None], *,
@@ -99,8 +112,16 @@ def replay(rec: Recording, emit: Callable[[list], None], *,
     kw = settings(rec, **overrides)
     pipe = Pipeline(kw.pop("config"), kw.pop("filters"), estimator=estimator, **kw)
     total = sum(rec.sizes[p] for p in pipe.inputs) or 1
+    return drive(pipe, chunks(rec, pipe.inputs), emit, progress, total)
+
+
+def drive(pipe: Pipeline, chunks: Iterable[tuple[str, bytes, int]],
+          emit: Callable[[list], None], progress: Callable[[float], None] | None = None,
+          total: int = 1) -> Pipeline:
+    """Feed *pipe* the ``(port, bytes, arrival ns)`` *chunks*, then finish it, calling *emit*
+    with each batch of estimates; *progress* gets the fraction done of *total* bytes."""
     done = 0
-    for n, (port, data, t_ns) in enumerate(chunks(rec, pipe.inputs)):
+    for n, (port, data, t_ns) in enumerate(chunks):
         out = pipe.feed(port, data, t_ns)
         if out:
             emit(out)

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 
 from host import config as host_config
-from host.bench import synthetic_chunks
+
+from . import lab_bytes
 
 pytestmark = [pytest.mark.pty, pytest.mark.slow]
 
 NAVTWIN = str(Path(sys.executable).with_name("navtwin"))
-OFFICE = host_config.load("office")
 DEADLINE_S = 120.0
 
 
@@ -110,7 +110,7 @@ def test_host_process_on_fed_ptys_stops_on_signal_and_replays_byte_for_byte(tmp_
         os.close(slave)
     host = _host(paths, tmp_path)
     t0 = time.monotonic_ns()
-    for port, data, t_ns in synthetic_chunks(OFFICE, 6.0, seed=31):
+    for port, data, t_ns in lab_bytes.office(6.0, 31):
         delay = (t0 + t_ns - time.monotonic_ns()) / 1e9
         if delay > 0:
             time.sleep(delay)  # pacing the feeder like the devices; nothing waits on it

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from host import config as host_config
-from host.bench import ROUTER64, synthetic_chunks
+from .synthetic import ROUTER64, synthetic_chunks
 from host.pipeline import DB_PERIOD_S, Pipeline
 from protocols import adis16350, nanoloc, sins, xbee
 from protocols.stream import XBeeDecoder

@@ -8,13 +8,15 @@ from pathlib import Path
 import pytest
 
 from host import config as host_config
-from host.bench import synthetic_chunks, write_host_recording
+from host.bench import write_host_recording
 from host.output import estimate_line
 from host.pipeline import Pipeline
 from host.replay import chunks, replay, settings
 from protocols import sins
 from protocols.recording import Recording, RecordingWriter
+from protocols.serial import wire_ns
 
+from . import lab_bytes
 from .fake_estimator import RecordingEstimator
 
 OFFICE = host_config.load("office")
@@ -32,7 +34,7 @@ def direct_lines(chunks_, filters=host_config.FILTER_NAMES, config=OFFICE) -> st
 
 @pytest.fixture(scope="module")
 def host_recording(tmp_path_factory):
-    data = list(synthetic_chunks(OFFICE, 8.0, seed=11))
+    data = list(lab_bytes.office(8.0, 11))
     path = write_host_recording(tmp_path_factory.mktemp("rec") / "run", OFFICE,
                                 host_config.FILTER_NAMES, data)
     return path, data
@@ -105,11 +107,11 @@ def test_emulator_recording_ties_are_made_strictly_increasing(tmp_path):
 
 
 def test_replay_runs_an_emulator_recording_through_the_pipeline(tmp_path):
-    data = list(synthetic_chunks(OFFICE, 2.0, seed=12))
+    data = list(lab_bytes.office(2.0, 12))
     # as the emulator would record it: device time = first byte out = last byte - wire time
     by_port: dict = {}
     for port, chunk, t in data:
-        by_port.setdefault(port, []).append((t - round(len(chunk) * 10 * 1e9 / 115200), chunk))
+        by_port.setdefault(port, []).append((t - wire_ns(len(chunk), 115200), chunk))
     rec = _emulator_recording(tmp_path / "emu", by_port)
     est = RecordingEstimator()
     replay(rec, lambda es: None, estimator=est)

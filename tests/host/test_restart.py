@@ -35,7 +35,7 @@ from protocols.recording import Recording
 
 runner = pytest.importorskip("emulator.runner")
 scenario = pytest.importorskip("emulator.scenario")
-evaluate = pytest.importorskip("emulator.evaluate")
+evaluate = pytest.importorskip("lab.evaluate")
 
 RUN_S = 40.0
 RECOVER_S = 10.0  # after the restart: every track must be back by then

@@ -15,7 +15,6 @@ import time
 import pytest
 
 from host import config as host_config
-from host.bench import synthetic_chunks
 from host.output import estimate_line
 from host.replay import replay
 from host.service import TX_PORT, Service
@@ -23,6 +22,7 @@ from protocols import adis16350, sins
 from protocols.recording import Recording
 from protocols.stream import XBeeDecoder
 
+from . import lab_bytes
 from .fake_estimator import RecordingEstimator
 
 pytestmark = pytest.mark.pty
@@ -86,7 +86,7 @@ def test_live_run_over_ptys_then_replay_gives_the_same_bytes(tmp_path):
                   out=out, record=tmp_path / "rec", status=status, status_period_s=0.5)
     run = Running(svc)
     wait_for(svc.started.is_set, "the service to open its ports")
-    total = paced_write(synthetic_chunks(OFFICE, 3.0, seed=21),
+    total = paced_write(lab_bytes.office(3.0, 21),
                         {p: m for p, (m, _) in pairs.items()})
     wait_for(lambda: svc.bytes == total, "the service to process every byte")
     summary = run.stop()

@@ -14,15 +14,13 @@ import time
 
 import pytest
 
-from host import config as host_config
-from host.bench import synthetic_chunks
 from cli.main import main
 from protocols.recording import Recording
 from ..fs_helpers import fsize_limit
+from . import lab_bytes
 
 NAVTWIN = [sys.executable, "-m", "cli"]
 DEADLINE_S = 60.0
-OFFICE = host_config.load("office")
 
 
 def run_cli(capsys, *argv) -> tuple[int, str, str]:
@@ -113,7 +111,7 @@ def summary_of(err: str) -> dict:
 def test_host_out_to_a_full_device_ends_with_one_line_and_a_summary(tmp_path):
     host = Host(["--out", "/dev/full", "--record", tmp_path / "rec", "--status-period", "60"],
                 ["xbee", "nanoloc"])
-    host.feed(synthetic_chunks(OFFICE, 30.0, seed=3))
+    host.feed(lab_bytes.office(30.0, 3))
     code, _, err = host.finish()
     assert code == 2, err
     line = error_line(err)
@@ -183,7 +181,7 @@ def test_replay_of_a_host_killed_with_sigkill(tmp_path):
 
     d = tmp_path / "rec"
     host = Host(["--record", d, "--status-period", "60"], ["xbee", "nanoloc"])
-    host.feed(synthetic_chunks(OFFICE, 60.0, seed=5), pause_s=0.001)
+    host.feed(lab_bytes.office(60.0, 5), pause_s=0.001)
     deadline = time.monotonic() + DEADLINE_S
     while (d / "xbee.csv").read_bytes().count(b"\n") < 300:  # flushed as the host runs
         assert host.proc.poll() is None and time.monotonic() < deadline, host.err

@@ -1,4 +1,5 @@
-"""``navtwin lab``: the emulated lab with the host on it, and how well the host did.
+"""The lab orchestrator (``navtwin lab``): the emulated lab with the host on it, and how well
+the host did.
 
 Both sides run as the programs users run: ``navtwin emulate`` (real time, recording) through
 :func:`emulator.api.emulate`, and ``navtwin host`` on its PTYs as its own process, exactly as
@@ -27,11 +28,12 @@ import threading
 import time
 from pathlib import Path
 
-from . import evaluate
-from .api import EmulatorError, emulate
+from emulator.api import EmulatorError, emulate
+from emulator.scenario import load_scenario
+from host.replay import config_for
 
-#: Host configs shipped for the scenarios' labs (host/configs): both corridors share a survey.
-HOST_CONFIG = {"office": "office", "corridor": "corridor", "corridor-outage": "corridor"}
+from . import evaluate
+
 HOST_STOP_S = 30.0
 
 
@@ -75,7 +77,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
             stop: threading.Event | None = None, status=sys.stderr, plot: bool = True) -> dict:
     """Run the lab; returns the report (errors per filter, paths, both summaries)."""
     stop = stop or threading.Event()
-    config = config or HOST_CONFIG.get(Path(scenario).stem)
+    config = config or config_for(Path(scenario).stem)  # the scenario's lab, as replay finds it
     if config is None:
         raise LabError(f"no host config for scenario {scenario!r}; give --config NAME|FILE")
     d = run_dir(directory)
@@ -83,7 +85,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
     try:
         with emulate(scenario, seed=seed, speed="realtime", duration=duration,
                      link_dir=d / "links", record=d / "emulator") as lab:
-            cmd = [sys.executable, "-m", "cli", "host", "--xbee", lab.ports["xbee"],
+            cmd = [sys.executable, "-m", "protocols", "host", "--xbee", lab.ports["xbee"],
                    "--nanoloc", lab.ports["nanoloc"], "--config", config,
                    "--record", str(d / "host"), "--out", str(d / "estimates.jsonl")]
             if filters is not None:
@@ -138,6 +140,4 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
 
 
 def _anchors(scenario_toml: Path) -> dict:
-    from .scenario import load_scenario
-
     return {a.id: (a.x, a.y) for a in load_scenario(scenario_toml).anchors}

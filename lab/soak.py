@@ -1,6 +1,6 @@
 """The live soak: the lab for many minutes with the misuse of ordinary days, measured.
 
-``python -m cli.emulator_bench soak --seconds 600`` (or ``navtwin bench lab-soak``) runs
+``python -m cli.lab_bench soak --seconds 600`` (or ``navtwin bench lab-soak``) runs
 ``navtwin emulate`` in real time on a long office scenario (the loop driven again and again)
 and ``navtwin host`` on its PTYs, each its own process as users run them, and meanwhile:
 
@@ -32,8 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
+from emulator.api import Lab, command
+
 from . import evaluate
-from .api import Lab, command
 
 WARMUP_S = 60.0  # memory is compared from here: imports, buffers and caches are in place
 HOLD_S = 5.0  # an error must stay under its threshold this long to count as recovered

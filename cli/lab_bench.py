@@ -1,0 +1,65 @@
+"""``python -m cli.lab_bench``: the lab's benchmarks (:mod:`lab.bench`) with their own
+settings, one JSON object on stdout."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from host import config as host_config
+from host.bench import bench_replay
+from lab import bench
+from lab.bench import in_memory, latency, office_replay
+
+from .main import Parser, number
+
+
+def _filters(text: str) -> tuple[str, ...]:
+    try:
+        return host_config.parse_filters(text)
+    except host_config.ConfigError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = Parser(prog="python -m cli.lab_bench", description=bench.__doc__,
+               formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="what", required=True, parser_class=Parser)
+    filters = {"type": _filters, "default": host_config.FILTER_NAMES,
+               "help": "comma list or all (default all)"}
+    lat = sub.add_parser("latency", help="the host on PTYs: last byte -> estimate line")
+    lat.add_argument("--seconds", type=number(1, 3600), default=20.0, help="1 to 3600 (default 20)")
+    lat.add_argument("--filters", **filters)
+    rep = sub.add_parser("replay", help="replay speed of a recording")
+    rep.add_argument("directory", nargs="?", help="a host or emulator recording "
+                     "(default: a host recording of the office lab)")
+    rep.add_argument("--seconds", type=number(1, 3600), default=60.0,
+                     help="length of the default recording, 1 to 3600 (default 60)")
+    rep.add_argument("--filters", **filters)
+    mem = sub.add_parser("in-memory", help="seeds/s in memory vs recorded and replayed")
+    mem.add_argument("--scenario", default="office")
+    mem.add_argument("--seeds", type=number(1, 1000, integer=True), default=3,
+                     help="1 to 1000 (default 3)")
+    k = sub.add_parser("soak", help="live soak: second reader, emulator restart, memory")
+    k.add_argument("--seconds", type=number(30, 36000), default=600.0,
+                   help="30 to 36000 (default 600)")
+    k.add_argument("--dir", help="keep the run here (default: a new temp dir)")
+    args = p.parse_args(argv)
+    if args.what == "latency":
+        result = latency(args.seconds, args.filters)
+    elif args.what == "replay":
+        result = (bench_replay(args.directory, args.filters) if args.directory
+                  else office_replay(args.seconds, args.filters))
+    elif args.what == "in-memory":
+        result = in_memory(args.scenario, args.seeds)
+    else:
+        from lab.soak import soak
+
+        result = soak(args.seconds, directory=args.dir,
+                      progress=lambda m: print(m, file=sys.stderr, flush=True))
+    print(json.dumps(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

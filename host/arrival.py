@@ -1,0 +1,34 @@
+"""When a device's chunk reaches the lab computer, for runs that have device times only.
+
+The emulator times each chunk by when its first byte leaves the device's UART. The lab
+computer has it when its last byte has arrived: ``t_device_ns + wire_ns(size, baud)`` (8N1,
+:func:`protocols.serial.wire_ns`). Across ports the chunks are taken in that order, ties in
+the order ``xbee``, ``sins``, ``nanoloc`` (then each port's own order), and the stamps are made
+strictly increasing. ``navtwin replay`` of an emulator recording and the in-memory run
+(:func:`lab.run.run_in_memory`) both stamp with :func:`arrivals`, so they give the same lines.
+"""
+from __future__ import annotations
+
+import heapq
+from collections.abc import Iterable, Iterator, Mapping
+
+from protocols.serial import wire_ns
+
+from .pipeline import INPUTS
+
+
+def arrivals(streams: Mapping[str, Iterable[tuple[bytes, int]]],
+             bauds: Mapping[str, int]) -> Iterator[tuple[str, bytes, int]]:
+    """``(port, bytes, arrival ns)`` in processing order, from each port's ``(bytes,
+    t_device_ns)`` in device order (ports among ``INPUTS``) and its rate in *bauds*."""
+    order = {p: i for i, p in enumerate(INPUTS)}
+
+    def timed(port: str):
+        baud = bauds[port]
+        for k, (data, t_ns) in enumerate(streams[port]):
+            yield t_ns + wire_ns(len(data), baud), order[port], k, port, data
+
+    last = -1
+    for t, _, _, port, data in heapq.merge(*(timed(p) for p in streams)):
+        last = max(t, last + 1)
+        yield port, data, last

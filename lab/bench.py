@@ -1,0 +1,90 @@
+"""Benchmarks that need both sides: the host on the emulated lab's bytes, the in-memory run,
+and the live soak (not tests: they measure, they do not assert).
+
+    python -m cli.lab_bench latency [--seconds 20] [--filters all]
+    python -m cli.lab_bench replay [DIR] [--seconds 60] [--filters all]
+    python -m cli.lab_bench in-memory [--scenario office] [--seeds 3]
+    python -m cli.lab_bench soak [--seconds 600] [--dir DIR]
+
+``latency``: :func:`host.bench.bench_latency` fed the office lab's first --seconds, made in
+memory (:func:`lab.run.lab_chunks`). ``replay``: :func:`host.bench.bench_replay` over DIR (a
+host or emulator recording), by default over a host recording of the office lab's first
+--seconds. ``in-memory``: seeds per second of the whole scenario through the host, in memory
+(:func:`lab.run.run_in_memory`) against ``navtwin emulate --speed max --record`` then
+``navtwin replay`` (the disk in between). ``soak``: :func:`lab.soak.soak`. Each prints one
+JSON object.
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+from emulator.runner import Emulation
+from emulator.scenario import load_scenario
+from host import config as host_config
+from host.bench import bench_latency, bench_replay, write_host_recording
+from host.replay import replay
+from protocols.recording import Recording
+
+from .run import lab_chunks, run_in_memory
+
+
+def latency(seconds: float = 20.0, filters=host_config.FILTER_NAMES, seed: int = 1) -> dict:
+    """The host service on PTYs, fed the office lab at its arrival times."""
+    kw, chunks = lab_chunks("office", seed, duration=seconds, filters=tuple(filters))
+    return bench_latency(kw["config"], kw["filters"], list(chunks), seconds)
+
+
+def office_replay(seconds: float = 60.0, filters=host_config.FILTER_NAMES, seed: int = 1) -> dict:
+    """Replay speed of a host recording of the office lab's first *seconds*."""
+    kw, chunks = lab_chunks("office", seed, duration=seconds, filters=tuple(filters))
+    with tempfile.TemporaryDirectory(prefix="navtwin-bench-") as tmp:
+        rec = write_host_recording(Path(tmp) / "rec", kw["config"], kw["filters"], chunks,
+                                   escaped=kw["escaped"])
+        return bench_replay(rec)
+
+
+def in_memory(scenario: str = "office", seeds: int = 3) -> dict:
+    """Seeds per second of *scenario* through the host: in memory, and recorded then replayed."""
+    sc = load_scenario(scenario)
+    t = time.perf_counter()
+    for seed in range(1, seeds + 1):
+        run_in_memory(sc, seed)
+    memory_s = time.perf_counter() - t
+    with tempfile.TemporaryDirectory(prefix="navtwin-bench-") as tmp:
+        t = time.perf_counter()
+        for seed in range(1, seeds + 1):
+            rec = Path(tmp) / f"seed{seed}"
+            with Emulation(sc, seed, speed=None, ports=False, record=rec) as emu:
+                emu.run()
+            replay(Recording(rec), lambda es: None)
+        disk_s = time.perf_counter() - t
+    return {"benchmark": "lab-in-memory", "scenario": sc.name, "seeds": seeds,
+            "virtual_s": sc.duration_s, "in_memory_seeds_per_s": round(seeds / memory_s, 3),
+            "record_replay_seeds_per_s": round(seeds / disk_s, 3),
+            "speedup": round(disk_s / memory_s, 2)}
+
+
+def benchmarks() -> dict:
+    """The lab's benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks)."""
+    def host_latency(quick: bool = False) -> dict:
+        """host: last byte on the PTY -> estimate line, office lab, all filters (goal p99 <= 2 ms)"""
+        return latency(5.0 if quick else 20.0)
+
+    def host_replay(quick: bool = False) -> dict:
+        """host: replay speed of a host recording of the office lab, all filters (goal >= 100x)"""
+        return office_replay(10.0 if quick else 60.0)
+
+    def lab_in_memory(quick: bool = False) -> dict:
+        """emulator+host: office seeds/s in memory vs emulate --record then replay (goal: faster)"""
+        return in_memory("office", 1 if quick else 3)
+
+    def lab_soak(quick: bool = False) -> dict:
+        """emulator+host: live soak, second reader and an emulator restart (RSS growth, recovery)"""
+        from .soak import soak
+
+        return soak(120.0 if quick else 600.0)
+
+    return {"host-latency": host_latency, "host-replay": host_replay,
+            "lab-in-memory": lab_in_memory, "lab-soak": lab_soak}

@@ -1,0 +1,25 @@
+"""The in-memory run gives exactly what recording the emulator and replaying it gives."""
+import pytest
+
+from host.output import estimate_line
+from lab.run import run_in_memory
+from tests.reference import estimate_lines
+
+
+@pytest.mark.parametrize("scenario", ["office", "corridor-outage"])
+def test_in_memory_run_equals_emulate_record_then_replay(scenario):
+    estimates, pipe = run_in_memory(scenario, seed=2)
+    assert [estimate_line(e) for e in estimates] == estimate_lines(scenario, 2)
+    assert pipe.stats()["ports"]["nanoloc"]["frames"] > 0
+
+
+def test_in_memory_run_takes_the_filters_and_duration_it_is_given():
+    estimates, _ = run_in_memory("office", seed=1, filters=("wsn",), duration=5.0)
+    assert estimates and {e.filter for e in estimates} == {"wsn"}
+    assert max(e.t for e in estimates) < 5.5
+
+
+def test_the_lab_registers_its_benchmarks():
+    from lab.bench import benchmarks
+
+    assert {"host-latency", "host-replay", "lab-in-memory", "lab-soak"} <= set(benchmarks())
