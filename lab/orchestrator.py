@@ -85,7 +85,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
     try:
         with emulate(scenario, seed=seed, speed="realtime", duration=duration,
                      link_dir=d / "links", record=d / "emulator") as lab:
-            cmd = [sys.executable, "-m", "protocols", "host", "--xbee", lab.ports["xbee"],
+            cmd = [sys.executable, "-m", "cli", "host", "--xbee", lab.ports["xbee"],
                    "--nanoloc", lab.ports["nanoloc"], "--config", config,
                    "--record", str(d / "host"), "--out", str(d / "estimates.jsonl")]
             if filters is not None:
