@@ -1,4 +1,5 @@
-"""Bytes -> time-stamped measurements -> estimator, as a pure function of the input.
+"""Bytes -> time-stamped measurement records (host.measurements) -> estimator, as a pure
+function of the input.
 
 The input is the sequence of chunks ``(port, bytes, arrival ns since start)`` in the
 order the host processed them (live) or recorded them (replay). Nothing here reads a
@@ -18,8 +19,8 @@ Time. Each SINS sample's host time comes from the board's counter and each range
 the anchor network's ``t_us``, both through :class:`host.clock.DeviceClock` (unwrapped,
 aligned to arrival times online, never stepping back). A sample counter seen on both
 ``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate. A clock
-that begins a new epoch (its device restarted) is passed on as ``estimator.restart(t,
-"imu" | "anchors")`` in time order: just before the first sample, or range, of the epoch
+that begins a new epoch (its device restarted) is passed on as a ``Restart(t, "imu" |
+"anchors")`` record (host.measurements) in time order: just before the first sample, or range, of the epoch
 (for the IMU with the board's uptime, its counter x 10 ms: it counts from power-up).
 
 Time order, with bounded latency (docs/host.md). Let T be the filter time: the latest
@@ -49,6 +50,7 @@ from protocols.stream import DecodeError, Frame, XBeeSinsChain, nanoloc_decoder,
 from .clock import DeviceClock, Unwrapper
 from .config import HostConfig
 from .estimator import Estimator
+from .measurements import Exchange, ImuSample, Restart
 
 INPUTS = ("xbee", "sins", "nanoloc")
 IMU_INPUTS = ("xbee", "sins")
@@ -222,8 +224,8 @@ class Pipeline:
         self.t = max(t, self.t)
         if self.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown;
             # it counts its samples from power-up, so this one says how long it has been up
-            out += self.estimator.restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S)
-        out += self.estimator.imu(t, s.gyro_rad_s, s.accel_m_s2, nd_ok=nd_ok)
+            out += self.estimator.feed(Restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S))
+        out += self.estimator.feed(ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok))
 
     def _range(self, f: dict, a: float, out: list) -> None:
         self.counts["reports"] += 1
@@ -270,13 +272,13 @@ class Pipeline:
         t, _, anchor, distance, rssi, status = item
         if anchor is None:
             self.t = max(t, self.t)
-            out += self.estimator.restart(t, "anchors")
+            out += self.estimator.feed(Restart(t, "anchors"))
             return
         if t < self.t:
             self.counts["ranges_late"] += 1
             self.max_late_s = max(self.max_late_s, self.t - t)
         self.t = max(t, self.t)
-        out += self.estimator.range(t, anchor, distance, rssi, status)
+        out += self.estimator.feed(Exchange(t, anchor, distance, rssi, status))
 
     def _count(self, out: list) -> list:
         for e in out:

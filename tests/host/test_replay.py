@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from host.tracks import BUILT_IN
 from host import config as host_config
 from host.bench import synthetic_chunks, write_host_recording
 from host.output import estimate_line
@@ -21,7 +22,7 @@ OFFICE = host_config.load("office")
 NAVTWIN = str(Path(sys.executable).with_name("navtwin"))
 
 
-def direct_lines(chunks_, filters=host_config.FILTER_NAMES, config=OFFICE) -> str:
+def direct_lines(chunks_, filters=BUILT_IN, config=OFFICE) -> str:
     pipe = Pipeline(config, filters)
     out = []
     for c in chunks_:
@@ -34,7 +35,7 @@ def direct_lines(chunks_, filters=host_config.FILTER_NAMES, config=OFFICE) -> st
 def host_recording(tmp_path_factory):
     data = list(synthetic_chunks(OFFICE, 8.0, seed=11))
     path = write_host_recording(tmp_path_factory.mktemp("rec") / "run", OFFICE,
-                                host_config.FILTER_NAMES, data)
+                                BUILT_IN, data)
     return path, data
 
 
@@ -45,7 +46,7 @@ def test_replay_of_a_host_recording_equals_the_pipeline_run(host_recording):
     replay(Recording(path), lambda es: got.extend(map(estimate_line, es)))
     assert "".join(got) == expected
     filters = {json.loads(line)["filter"] for line in expected.splitlines()}
-    assert filters == set(host_config.FILTER_NAMES)
+    assert filters == set(BUILT_IN)
 
 
 def test_navtwin_replay_prints_the_same_bytes(host_recording, tmp_path):
