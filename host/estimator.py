@@ -152,9 +152,12 @@ class EstimatorConfig(Tuning):
     settings: Mapping[str, object] = field(default_factory=dict)  # track name -> its Settings
 
     def __post_init__(self):
-        known = tracks.names()
-        unknown = [f for f in self.filters if f not in known]
+        unknown = [f for f in self.filters if f not in tracks.BUILT_IN]
+        if unknown:  # only then ask the registry and the entry points (a scan of sys.path)
+            known = tracks.names()
+            unknown = [f for f in unknown if f not in known]
         if unknown or not self.filters:
+            known = tracks.names()
             raise ValueError(f"filters: unknown {unknown or 'empty list'}; use some of {','.join(known)}")
         # the schema's checks, the ones the host config applies (the same rule, once)
         build(Tuning, {f.name: list(v) if isinstance(v, tuple) else v for f in fields(Tuning)

@@ -4,9 +4,9 @@ import os
 
 import pytest
 
-from host.tracks import BUILT_IN
 from host import config as host_config
 from host.config import ConfigError
+from host.tracks import BUILT_IN
 from protocols.cli import main
 
 

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from host.tracks import BUILT_IN
 from host import config as host_config
 from host.bench import synthetic_chunks
+from host.tracks import BUILT_IN
 
 pytestmark = [pytest.mark.pty, pytest.mark.slow]
 

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from host.tracks import BUILT_IN
 from host import config as host_config
 from host.bench import synthetic_chunks, write_host_recording
 from host.output import estimate_line
 from host.pipeline import Pipeline
 from host.replay import chunks, replay, settings
+from host.tracks import BUILT_IN
 from protocols import sins
 from protocols.recording import Recording, RecordingWriter
 

@@ -14,12 +14,12 @@ import time
 
 import pytest
 
-from host.tracks import BUILT_IN
 from host import config as host_config
 from host.bench import synthetic_chunks
 from host.output import estimate_line
 from host.replay import replay
 from host.service import TX_PORT, Service
+from host.tracks import BUILT_IN
 from protocols import adis16350, sins
 from protocols.recording import Recording
 from protocols.stream import XBeeDecoder
