@@ -399,7 +399,7 @@ class Estimator:
                 total, n = self._origin_fixes[0] + fix.p, self._origin_fixes[1] + 1
                 self._origin_fixes, self.origin = (total, n), tuple((total / n).tolist())
             for track in self.tracks:
-                since = getattr(track, "reinit_since", None)
+                since = track.reinit_since
                 if since is not None and fix.t >= since:
                     track.reinit_at(fix)
             for take in self._fix:

@@ -20,8 +20,9 @@ the anchor network's ``t_us``, both through :class:`host.clock.DeviceClock` (unw
 aligned to arrival times online, never stepping back). A sample counter seen on both
 ``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate. A clock
 that begins a new epoch (its device restarted) is passed on as a ``Restart(t, "imu" |
-"anchors")`` record (host.measurements) in time order: just before the first sample, or range, of the epoch
-(for the IMU with the board's uptime, its counter x 10 ms: it counts from power-up).
+"anchors")`` record (host.measurements) in time order: just before the first sample, or
+range, of the epoch (for the IMU with the board's uptime, its counter x 10 ms: it counts
+from power-up).
 
 Time order, with bounded latency (docs/host.md). Let T be the filter time: the latest
 measurement time given to the estimator. Every measurement is given with its own time.
@@ -86,7 +87,7 @@ class Pipeline:
         self.range_clock = DeviceClock(32, T_US_TICK_S, strict=False)
         # the gateway's report counter: equal = a duplicate, any step back = a restart
         self._report_seq = Unwrapper(16, restart=0)
-        # heap of (t, n, anchor, distance, rssi, status); anchor None: the anchors restarted
+        # heap of (t, n, Exchange | Restart): the anchor clock's records, in time order
         self._held: list[tuple] = []
         self._n = 0
         self.t = -math.inf  # filter time
@@ -241,7 +242,7 @@ class Pipeline:
         restarts = self.range_clock.restarts
         t = self.range_clock.time(f["t_us"], a)
         if self.range_clock.restarts != restarts:  # the anchors restarted: in order, before t
-            self._schedule((t, self._n, None, None, None, None), out)
+            self._schedule((t, self._n, Restart(t, "anchors")), out)
             self._n += 1
         if f["anchor"] not in self.config.anchors:
             self.counts["reports_unknown_anchor"] += 1
@@ -253,11 +254,11 @@ class Pipeline:
         else:
             distance = None
             self.counts["timeouts" if status & nanoloc.STATUS_TIMEOUT else "range_errors"] += 1
-        self._schedule((t, self._n, f["anchor"], distance, f["rssi"], status), out)
+        self._schedule((t, self._n, Exchange(t, f["anchor"], distance, f["rssi"], status)), out)
         self._n += 1
 
     def _schedule(self, item: tuple, out: list) -> None:
-        """Hold an anchor-clock item (a range, or a restart: anchor None) or apply it now."""
+        """Hold an anchor-clock record (an exchange or the anchors' restart) or apply it now."""
         if item[0] > self.t:
             heapq.heappush(self._held, item)
         else:
@@ -269,16 +270,12 @@ class Pipeline:
             self._apply_range(heapq.heappop(held), out)
 
     def _apply_range(self, item: tuple, out: list) -> None:
-        t, _, anchor, distance, rssi, status = item
-        if anchor is None:
-            self.t = max(t, self.t)
-            out += self.estimator.feed(Restart(t, "anchors"))
-            return
-        if t < self.t:
+        t, _, record = item
+        if t < self.t and type(record) is Exchange:
             self.counts["ranges_late"] += 1
             self.max_late_s = max(self.max_late_s, self.t - t)
         self.t = max(t, self.t)
-        out += self.estimator.feed(Exchange(t, anchor, distance, rssi, status))
+        out += self.estimator.feed(record)
 
     def _count(self, out: list) -> list:
         for e in out:

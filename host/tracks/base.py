@@ -10,7 +10,7 @@ A track is a class with a ``name`` (its ``filter`` in the output and its section
 * :meth:`estimate`: what it emits at an output instant (an Estimate, or None before it has
   one), with ``extrapolated`` set from its last aiding;
 * :meth:`restart`: its reset when a device restarts (a discontinuity), counted with
-  :meth:`count_reinit`;
+  :meth:`count_reinit`; a track that starts again from a WSN fix sets ``reinit_since``;
 * its stats: ``updates`` and ``rejections`` (Counters by kind or reason) and ``reinits``.
 
 The estimator (``est``) owns what several tracks share: the time base (``est.t``), the
@@ -82,10 +82,18 @@ class Track:
     def restart(self, device: str, t: float) -> None:
         """``device`` restarted at t: what the track holds need not be where the vehicle is."""
 
+    #: Set to the time of a discontinuity by a track that starts again from the first WSN
+    #: fix newer than it: the estimator then calls :meth:`reinit_at` with that fix.
+    reinit_since: float | None = None
+
+    def reinit_at(self, fix) -> None:
+        """Start again at *fix* (a host.wsn.Fix) and clear ``reinit_since``."""
+        raise NotImplementedError
+
     @property
     def pending(self) -> bool:
         """Waiting to re-initialise."""
-        return False
+        return self.reinit_since is not None
 
     def estimate(self, b: float, yaw: float) -> Estimate | None:
         raise NotImplementedError

@@ -82,10 +82,6 @@ class FusionTrack(Track):
             self.count_reinit(cause)
         self.reinit_since = t
 
-    @property
-    def pending(self) -> bool:
-        return self.reinit_since is not None
-
     def reinit_at(self, fix: Fix) -> None:
         """Start again at ``fix``: its position and covariance, at rest but with
         ``reinit_sigma`` on velocity and acceleration (they are unknown). The track takes no
