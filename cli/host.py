@@ -8,6 +8,7 @@ import threading
 
 from common.limits import MAX_DURATION_S, span
 from host import config as host_config
+from host import tracks
 from host.config import ConfigError
 from host.output import KEYS, open_output
 from protocols.recording import write_failure
@@ -56,7 +57,7 @@ def common_options(p, recorded: bool = False) -> None:
                    help=f"host config: {', '.join(host_config.shipped())} or a TOML file "
                         f"(default: {'the recorded config' if recorded else host_config.DEFAULT})")
     p.add_argument("--filters", metavar="LIST", type=_filters,
-                   help=f"comma list of {','.join(host_config.FILTER_NAMES)}, or all "
+                   help=f"comma list of {','.join(tracks.names())}, or all "
                         f"(default: {src})")
     p.add_argument("--out", default="-", metavar="FILE|-",
                    help="estimate lines (default - = stdout)")

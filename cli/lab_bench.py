@@ -7,6 +7,7 @@ import json
 import sys
 
 from host import config as host_config
+from host import tracks
 from host.bench import bench_replay
 from lab import bench
 from lab.bench import in_memory, latency, office_replay
@@ -25,7 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     p = Parser(prog="python -m cli.lab_bench", description=bench.__doc__,
                formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="what", required=True, parser_class=Parser)
-    filters = {"type": _filters, "default": host_config.FILTER_NAMES,
+    filters = {"type": _filters, "default": tracks.BUILT_IN,
                "help": "comma list or all (default all)"}
     lat = sub.add_parser("latency", help="the host on PTYs: last byte -> estimate line")
     lat.add_argument("--seconds", type=number(1, 3600), default=20.0, help="1 to 3600 (default 20)")

@@ -31,11 +31,11 @@ import math
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
 
+from common.earth import EARTH_RATE
 from protocols import adis16350 as adis
 
 from .clock import Clock
 
-EARTH_RATE = 7.2916e-5  # rad/s
 MG = 1e-3 * adis.STANDARD_GRAVITY  # m/s^2 per mg
 SUPPLY_LIMITS_V = (4.75, 5.25)  # STATUS bits 0 and 1
 

@@ -15,9 +15,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .estimator import OFFICE_ANCHORS, Estimator, EstimatorConfig
+from .estimator import Estimator, EstimatorConfig
 from .filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter, Ranges,
                       UnscentedKalmanFilter, position_fix)
+from .measurements import Exchange, ImuSample
 from .sins import Strapdown, quat_from_euler
 from .wsn import AnchorLayout, tdoa_covariance
 
@@ -29,7 +30,7 @@ P0 = np.diag([0.2, 0.2, 0.05, 0.05, 0.1, 0.1]) ** 2
 def cases() -> dict[str, Callable[[], object]]:
     """name -> a callable doing one step on fresh state (deterministic inputs)."""
     model = ConstantAcceleration(0.5)
-    layout = AnchorLayout(OFFICE_ANCHORS)
+    layout = AnchorLayout(EstimatorConfig().anchors)
     z_acc, r_acc = np.array([0.05, -0.02]), 1.5**2 * np.eye(2)
     toa = Ranges(layout, (2,))
     z_toa, r_toa = toa.h(X0) + 0.1, np.array([[0.16]])
@@ -65,9 +66,10 @@ def cases() -> dict[str, Callable[[], object]]:
 
 def _estimator_step() -> Callable[[], object]:
     """One IMU sample (and 0.4 exchanges) of a parked vehicle through all five filters."""
-    est = Estimator(EstimatorConfig(alignment_s=0.5))
+    cfg = EstimatorConfig(alignment_s=0.5)
+    est = Estimator(cfg)
     rng = np.random.default_rng(0)
-    layout = AnchorLayout(OFFICE_ANCHORS)
+    layout = AnchorLayout(cfg.anchors)
     ranges = layout.ranges(np.array([[6.0, 1.8]]), np.arange(4))
     state = {"k": 0}
 
@@ -75,10 +77,10 @@ def _estimator_step() -> Callable[[], object]:
         k = state["k"]
         state["k"] = k + 1
         t = k * DT
-        est.imu(t, rng.normal(0, 0.01, 3), np.array([0.0, 0.0, 9.7952]) + rng.normal(0, 0.3, 3))
+        est.feed(ImuSample(t, rng.normal(0, 0.01, 3), np.array([0.0, 0.0, 9.7952]) + rng.normal(0, 0.3, 3)))
         if k % 10 in (0, 2, 5, 7):  # four exchanges per 100 ms
             a = (k // 10 * 4 + (0, 2, 5, 7).index(k % 10)) % 4
-            est.range(t + 0.005, a + 1, ranges[a] + rng.normal(0, 0.3), -60, 0x0F)
+            est.feed(Exchange(t + 0.005, a + 1, ranges[a] + rng.normal(0, 0.3), -60, 0x0F))
     for _ in range(100):  # through the alignment first
         one()
     return one

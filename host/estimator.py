@@ -1,148 +1,167 @@
-"""The fusion core: IMU samples and range exchanges in, one estimate per filter per period out.
+"""The fusion core: measurement records in (host.measurements), one estimate per track per
+output period out.
 
-Filters (``FILTER_NAMES``):
+The tracks (host.tracks: ``sins``, ``wsn``, ``kf``, ``ekf``, ``ukf`` and any registered one)
+are plug-ins; the Estimator names none of them. It keeps what they share, and dispatches:
 
-=====  =====================================================================================
-sins   pure strapdown track (host.sins): coarse alignment on the stationary start, then
-       mechanization at the IMU rate (000 eqs. 1-5)
-wsn    pure WSN track (host.wsn): one TDOA (``wsn_method="toa"``: TOA) fix per TDMA cycle
-       (000 eqs. 6-13)
-kf     linear KF, loosely coupled: predicts at each IMU sample, measures the SINS nav-frame
-       acceleration and each WSN position fix
-ekf    EKF, tightly coupled: same prediction and acceleration; measures each cycle's range
-       differences to anchor 1 (``tight="toa"``: each range at its own time)
-ukf    UKF: as the EKF, through sigma points
-=====  =====================================================================================
+* the time base: ``t`` (the filter time, the latest measurement's) and ``t_predicted``
+  (the fusion tracks are predicted to the filter time lazily, all at once: :meth:`sync`);
+* the output instants k * output_period_s;
+* the alignment and the strapdown (``sins``, ``aligned``), and from them each IMU sample's
+  Motion product (the nav-frame acceleration as a measurement, or at rest while aligning);
+* the WSN: exchanges grouped into TDMA cycles, each cycle's fix (``fixes``: the last two)
+  or FixRefused, and the Range (``tight = "toa"``) or Tdoa (``"tdoa"``) product;
+* device restarts (Restart records): each track's reset, the strapdown's realignment, and
+  the re-initialisation of the tracks waiting for a fix newer than their discontinuity.
 
-Time. ``t_s`` is the measurement time (host time base, seconds). The fusion filters keep
-one time, the latest measurement's (they are predicted to it lazily, before their next
-update or output: one predict then spans the exchanges that updated none of them); a
-measurement older than that (the two streams are merged by the caller) is applied with its
-lag through the motion model (host.filters.model) if the lag is at most ``max_lag_s``, else
-rejected as ``late``. The SINS needs its IMU samples strictly in order; an IMU sample not
-after the previous one is rejected.
+Each record and product goes to the tracks whose :meth:`Track.handlers` take its type, in
+``cfg.filters`` order; a record type that the estimator does not process itself goes
+straight to its takers (a new sensor needs no edit here).
+
+Time. A record's ``t`` is the measurement time (host time base, seconds). A measurement
+older than the filter time (the two streams are merged by the caller) is applied with its
+lag (host.tracks.fusion). The SINS needs its IMU samples strictly in order; an IMU sample
+not after the previous one is rejected.
 
 Output. Estimates are emitted at the instants k * output_period_s of the measurement time
-base: an estimate at t_k reflects every measurement with t_s <= t_k, the fusion state
-predicted from its last measurement to t_k. They are returned by the ``imu`` / ``range``
-call that first passes t_k (nothing comes out before the first measurement), one per
-configured filter in ``cfg.filters`` order. The Estimator is a pure function of its call
-sequence: no wall clock, no randomness.
+base: an estimate at t_k reflects every measurement with t_s <= t_k. They are returned by
+the :meth:`Estimator.feed` call that first passes t_k (nothing comes out before the first
+measurement), one per configured track in ``cfg.filters`` order. The Estimator is a pure
+function of its call sequence: no wall clock, no randomness.
 
 Estimate fields: x, y (m), vx, vy (m/s) in the area frame; yaw (rad, 0 along area +x,
-counter-clockwise) from the SINS attitude for sins/kf/ekf/ukf (the configured initial heading
-until alignment ends), None for wsn; cov = the 4x4 covariance of (x, y, vx, vy), row-major,
-16 floats. For wsn: the fix's CRLB covariance and the velocity of the last two fixes
-(finite difference) with its propagated covariance; the wsn track holds its last fix
-between fixes and starts once two fixes exist. For sins: the initial covariance plus the
-growth that the accelerometer's velocity random walk alone causes (a lower bound: tilt and
-heading errors add to it). ``extrapolated``: the track's last aiding is more than
-``extrapolated_after_s`` before t (kf/ekf/ukf: an accepted fix, TDOA or range update; wsn: a
-fix; sins: an IMU sample; the configured start counts as aiding at the first measurement),
-or a fusion track waits to re-initialise.
+counter-clockwise) from the SINS attitude (the configured initial heading until alignment
+ends), None for wsn; cov = the 4x4 covariance of (x, y, vx, vy), row-major, 16 floats.
+``extrapolated``: the track's last aiding is more than ``extrapolated_after_s`` before t
+(the configured start counts as aiding at the first measurement), or the track waits to
+re-initialise.
 
-Discontinuities (docs/filters.md). A fusion track that cannot explain what it measures
-starts again from the next WSN fix newer than the discontinuity (position and covariance of
-the fix, at rest with ``reinit_sigma`` on velocity and acceleration), counted by cause in
-``stats()["reinit"]``: ``restart`` (:meth:`Estimator.restart`: a device's clock began a new
-epoch), ``gated`` (every position update gated out for ``gate_reopen_s``). A restart also
-drops the wsn track's velocity history and, for the IMU, realigns the strapdown on the
-stationary start, placed at the mean of the fixes during the alignment (the configured start
-without any).
+Discontinuities (docs/filters.md). A restart (a device's clock began a new epoch) resets
+every track (:meth:`Track.restart`) and, for the IMU, realigns the strapdown on the
+stationary start, placed at the mean of the fixes during the alignment (the configured
+start without any). Counted by track and cause in ``stats()["reinit"]``.
 """
 from __future__ import annotations
 
 import math
-from collections import Counter, defaultdict
+from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_SCALE
+from common.schema import Check, between, build, each, key, one_of, positive
 from protocols.nanoloc import STATUS_TIMEOUT, is_complete
 
-from .filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter,
-                      Linear, Ranges, UnscentedKalmanFilter, position_fix)
+from . import tracks
+from .filters import ACCELERATION, ConstantAcceleration, Linear, Ranges
+from .measurements import Exchange, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
 from .sins import Alignment, AlignmentResult, Strapdown
-from .wsn import AnchorLayout, CycleGrouper, Fix, Solver, chi2_gate, tdoa_covariance
+from .tracks.base import Estimate, Track
+from .wsn import AnchorLayout, CycleGrouper, Fix, Solver, tdoa_covariance
 
-FILTER_NAMES = ("sins", "wsn", "kf", "ekf", "ukf")
-FUSION = ("kf", "ekf", "ukf")
-DEVICES = ("imu", "anchors")  # what can restart (Estimator.restart)
-POSITION_KINDS = frozenset(("fix", "tdoa", "range"))  # the updates that aid a track's position
-OFFICE_ANCHORS = {1: (1.3, 1.6, 0.0), 2: (10.8, 1.6, 0.0), 3: (10.8, 5.4, 0.0), 4: (1.3, 5.4, 0.0)}
+__all__ = ["DEVICES", "Estimate", "Estimator", "EstimatorConfig", "Tuning"]
+
+DEVICES = ("imu", "anchors")  # what can restart (a Restart record)
 
 #: At rest: velocity and acceleration are zero (used while the alignment runs).
 STATIONARY = Linear(np.hstack([np.zeros((4, 2)), np.eye(4)]))
 
 
-@dataclass(frozen=True)
-class EstimatorConfig:
-    """Everything the estimator needs; the defaults are 000's office lab."""
+def _methods() -> Check:
+    return one_of("toa", "tdoa")
 
-    anchors: Mapping[int, tuple[float, ...]] = field(default_factory=lambda: dict(OFFICE_ANCHORS))
+
+@dataclass(frozen=True)
+class Tuning:
+    """The estimator's shared settings (the host config's [filters] keys; docs/host.md).
+    Beyond their ranges the filters overflow (1e308), divide by zero or never finish
+    (output_period_s 1e-300). The defaults are 000's office lab."""
+
+    altitude_m: float = key(0.0, "m", "site altitude (gravity and earth rate)", between(-1000, 10000))
+    x_azimuth_deg: float = key(90.0, "deg", "azimuth of the area's +x, clockwise from north "
+                               "(90: x east)", between(0, 360))
+    alignment_s: float = key(5.0, "s", "stationary period from the first IMU sample",
+                             positive(hi=3600))
+    output_period_s: float = key(0.1, "s", "estimates at k times this", between(0.001, 60))
+    range_sigma_m: float = key(0.4, "m", "one exchange's distance, 1 sigma", positive(hi=100))
+    range_scale: float = key(1.0, "", "f of 001: distance = (reported - c_i) / f",
+                             between(*RANGE_SCALE))
+    arw_deg_rt_hr: float = key(4.2, "deg/sqrt(h)", "gyro angle random walk (ADIS16350)",
+                               positive(hi=1000))
+    gyro_bias_instability_dps: float = key(0.015, "deg/s", "gyro in-run bias stability "
+                                           "(ADIS16350)", between(0, 100))
+    # SINS acceleration as a measurement (docs/filters.md): sigma^2 = accel_sigma_m_s2^2 +
+    # (tilt_inflation g s T)^2, s = the tilt rate the alignment leaves, T = time since it
+    accel_sigma_m_s2: float = key(1.0, "m/s^2", "SINS acceleration measurement, 1 sigma",
+                                  positive(hi=100))
+    tilt_inflation: float = key(10.0, "", "growth of that sigma with the tilt error",
+                                between(0, 1000))
+    jerk_psd: float = key(0.5, "m^2/s^5", "constant-acceleration model's white jerk",
+                          positive(hi=10000))
+    p0_sigma: tuple[float, float, float] = key((0.2, 0.02, 0.1), "m, m/s, m/s^2",
+                                               "initial position, velocity, acceleration sigma",
+                                               each(positive(hi=100)))
+    stationary_sigma: tuple[float, float] = key((0.01, 0.05), "m/s, m/s^2", "velocity, "
+                                                "acceleration while aligning", each(positive(hi=100)))
+    reinit_sigma: tuple[float, float] = key((1.0, 1.0), "m/s, m/s^2", "velocity, acceleration "
+                                            "of a re-initialisation", each(positive(hi=100)))
+    gate_probability: float = key(0.9999, "", "chi-square innovation gate",
+                                  Check(lambda v: 0 < v < 1, "must be in (0, 1)", "use e.g. 0.9999"))
+    gate_reopen_s: float = key(2.0, "s", "every update of one kind gated out this long: the "
+                               "track is off", positive(hi=3600))
+    extrapolated_after_s: float = key(0.5, "s", "no aiding for longer: an estimate is "
+                                      "extrapolated", positive(hi=3600))
+    wsn_method: str = key("tdoa", "", "pure-WSN and KF fixes (000 eqs. 12-13)", _methods())
+    tight: str = key("tdoa", "", "EKF/UKF range measurement: per cycle (tdoa) or each range "
+                     "(toa)", _methods())
+    reference_anchor: int = key(1, "", "TDOA reference (000 eq. 12), an anchor id",
+                                between(*ANCHOR_IDS))
+    cycle_s: float = key(0.1, "s", "TDMA cycle: exchanges grouped within this window",
+                         between(0.001, 10))
+    max_lag_s: float = key(0.5, "s", "oldest measurement a fusion track applies",
+                           between(0, 60))
+    max_range_m: float = key(100.0, "m", "longer distances are implausible",
+                             positive(hi=MAX_COORD_M))
+    fix_margin_m: float | None = key(2.0, "m", "WSN fixes beyond the anchors' box grown by "
+                                     "this are refused", between(0, MAX_COORD_M))
+
+
+def _office_anchors() -> dict[int, tuple[float, float, float]]:
+    """The office lab's survey, written once: in host/configs/office.toml."""
+    from .config import load  # here: the config imports this module
+
+    return dict(load("office").anchors)
+
+
+@dataclass(frozen=True)
+class EstimatorConfig(Tuning):
+    """Everything the estimator needs: the shared settings, what the host config's other
+    sections say (site, anchors, vehicle), the tracks and their own settings."""
+
+    anchors: Mapping[int, tuple[float, ...]] = field(default_factory=lambda: _office_anchors())
     tag_height: float = 0.0  # m, same datum as the anchors' z
     latitude_deg: float = 34.316
     gravity: float = 9.7952  # m/s^2, local
-    altitude_m: float = 0.0
-    x_azimuth_deg: float = 90.0  # azimuth of the area's +x, clockwise from north (90: x east)
-    filters: tuple[str, ...] = FILTER_NAMES
     start: tuple[float, float] = (6.0, 1.8)  # m, where the vehicle rests during alignment
     heading0_rad: float = 0.0  # initial heading (MEMS gyros cannot gyrocompass)
-    alignment_s: float = 5.0  # stationary period from the first IMU sample
     gyro_range_dps: int = 300  # ADIS16350 range: the service's word scale; counts overrange
-    output_period_s: float = 0.1
-    # noise and tuning
-    range_sigma_m: float = 0.4  # one exchange's distance, 1 sigma
     range_bias_m: Mapping[int, float] = field(default_factory=dict)  # c_i of 001: calibrated delays
-    range_scale: float = 1.0  # f of 001: distance = (reported - c_i) / f
-    vrw_m_s_rt_hr: float = 2.0  # ADIS16350 velocity random walk (the sins track's covariance)
-    arw_deg_rt_hr: float = 4.2  # ADIS16350 angle random walk
-    gyro_bias_instability_dps: float = 0.015  # ADIS16350 in-run bias stability
-    # SINS acceleration as a measurement (docs/filters.md): sigma^2 = accel_sigma_m_s2^2 +
-    # (tilt_inflation g s T)^2, s = the tilt rate the alignment leaves, T = time since it
-    accel_sigma_m_s2: float = 1.0
-    tilt_inflation: float = 10.0
-    jerk_psd: float = 0.5  # m^2/s^5, constant-acceleration model's white jerk
-    p0_sigma: tuple[float, float, float] = (0.2, 0.02, 0.1)  # initial position, velocity, accel
-    stationary_sigma: tuple[float, float] = (0.01, 0.05)  # velocity, accel while aligning
-    gate_probability: float = 0.9999  # chi-square innovation gate
-    gate_reopen_s: float = 2.0  # every update of one kind gated out this long: the track is off
-    reinit_sigma: tuple[float, float] = (1.0, 1.0)  # velocity (m/s), acceleration (m/s^2) of a re-init
-    extrapolated_after_s: float = 0.5  # no aiding for longer than this: an estimate is extrapolated
-    wsn_method: str = "tdoa"  # pure-WSN and KF fixes: "toa" | "tdoa" (000 eqs. 12-13)
-    tight: str = "tdoa"  # EKF/UKF range measurement: "tdoa" (per cycle) | "toa" (each range)
-    reference_anchor: int = 1  # TDOA reference (000 eq. 12)
-    cycle_s: float = 0.1  # TDMA cycle: exchanges grouped within this window
-    max_lag_s: float = 0.5
-    max_range_m: float = 100.0
-    fix_margin_m: float | None = 2.0  # WSN fixes beyond the anchors' box grown by this are refused
-    ukf_alpha: float = 1.0
-    ukf_beta: float = 2.0
-    ukf_kappa: float | None = None  # None: 3 - n
+    filters: tuple[str, ...] = tuple(tracks.BUILT_IN)
+    settings: Mapping[str, object] = field(default_factory=dict)  # track name -> its Settings
 
     def __post_init__(self):
-        unknown = [f for f in self.filters if f not in FILTER_NAMES]
+        unknown = [f for f in self.filters if f not in tracks.BUILT_IN]
+        if unknown:  # only then ask the registry and the entry points (a scan of sys.path)
+            known = tracks.names()
+            unknown = [f for f in unknown if f not in known]
         if unknown or not self.filters:
-            raise ValueError(f"filters: unknown {unknown or 'empty list'}; use some of {','.join(FILTER_NAMES)}")
-        for name in ("wsn_method", "tight"):
-            if getattr(self, name) not in ("toa", "tdoa"):
-                raise ValueError(f"{name}: {getattr(self, name)!r} is not a method; use 'toa' or 'tdoa'")
-        for name in ("alignment_s", "output_period_s", "range_sigma_m", "range_scale", "vrw_m_s_rt_hr",
-                     "arw_deg_rt_hr", "accel_sigma_m_s2", "jerk_psd", "cycle_s", "max_range_m",
-                     "gate_reopen_s", "extrapolated_after_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number (got {value}); set a value > 0")
-        for name in ("gyro_bias_instability_dps", "tilt_inflation"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise ValueError(f"{name} must be a number >= 0 (got {getattr(self, name)}); set a value >= 0")
-        for name, n in (("p0_sigma", 3), ("stationary_sigma", 2), ("reinit_sigma", 2)):
-            value = getattr(self, name)
-            if len(value) != n or not all(math.isfinite(v) and v > 0 for v in value):
-                raise ValueError(f"{name} must hold {n} positive numbers (got {value}); set {n}, each > 0")
-        if not 0 < self.gate_probability < 1:
-            raise ValueError(f"gate_probability must be in (0, 1) (got {self.gate_probability}); use e.g. 0.9999")
+            known = tracks.names()
+            raise ValueError(f"filters: unknown {unknown or 'empty list'}; use some of {','.join(known)}")
+        # the schema's checks, the ones the host config applies (the same rule, once)
+        build(Tuning, {f.name: list(v) if isinstance(v, tuple) else v for f in fields(Tuning)
+                       if (v := getattr(self, f.name)) is not None})
         if len(self.anchors) < 3:
             raise ValueError(f"anchors: {len(self.anchors)} given; a 2-D fix needs at least 3, list them all")
 
@@ -154,59 +173,42 @@ class EstimatorConfig:
         return math.sqrt(arw**2 / self.alignment_s + math.radians(self.gyro_bias_instability_dps) ** 2)
 
 
-@dataclass(frozen=True, slots=True)
-class Estimate:
-    t: float
-    filter: str
-    x: float
-    y: float
-    vx: float
-    vy: float
-    yaw: float | None
-    cov: list[float]  # 4x4 covariance of (x, y, vx, vy), row-major
-    extrapolated: bool = False  # the track had no aiding for extrapolated_after_s before t
-
-
-def _estimate(t, name, p, v, yaw, cov4, extrapolated: bool) -> Estimate:
-    """p, v: sequences of 2; cov4: a 4x4 array, or its 16 floats row-major."""
-    (x, y), (vx, vy) = np.asarray(p, float).tolist(), np.asarray(v, float).tolist()
-    cov = cov4 if isinstance(cov4, list) else np.ravel(cov4).tolist()
-    return Estimate(float(t), name, x, y, vx, vy, None if yaw is None else float(yaw), cov,
-                    bool(extrapolated))
-
-
 class Estimator:
     def __init__(self, cfg: EstimatorConfig | None = None):
         self.cfg = cfg = cfg or EstimatorConfig()
         self.layout = AnchorLayout(cfg.anchors, cfg.tag_height)
         self.model = ConstantAcceleration(cfg.jerk_psd)
-        self.fusion = [f for f in cfg.filters if f in FUSION]
-        self.need_sins = any(f != "wsn" for f in cfg.filters)
         self.solver = Solver(self.layout, cfg.range_sigma_m, cfg.wsn_method, cfg.reference_anchor,
                              cfg.gate_probability, cfg.fix_margin_m)
         self.grouper = CycleGrouper(len(self.layout.ids), cfg.cycle_s)
-        self.filters: dict[str, KalmanFilter | UnscentedKalmanFilter] = {}
+        self.tracks: list[Track] = [tracks.get(n)(self, cfg.settings.get(n)) for n in cfg.filters]
+        takers: dict[type, list] = {}
+        for track in self.tracks:
+            for kind, handler in track.handlers().items():
+                takers.setdefault(kind, []).append(handler)
+        self._takers = takers
+        self._motion, self._range, self._tdoa, self._fix, self._refused = (
+            takers.get(k, []) for k in (Motion, Range, Tdoa, Fix, FixRefused))
+        self._predicting = [track for track in self.tracks if hasattr(track, "predict")]
+        self._own = {ImuSample: self._imu, Exchange: self._exchange, Restart: self._restart}
+        self.need_sins = any(track.uses_strapdown for track in self.tracks)
         self.alignment = Alignment()
         self.aligned: AlignmentResult | None = None
         self.sins: Strapdown | None = None
-        self._t: float | None = None  # filter time: the latest measurement's
-        self._t_predicted: float | None = None  # the fusion filters' state is predicted to here
-        self._t_first: float | None = None  # the first measurement's: the start is known then
+        self.t: float | None = None  # filter time: the latest measurement's
+        self.t_predicted: float | None = None  # the fusion tracks are predicted to here
+        self.t_first: float | None = None  # the first measurement's: the start is known then
         self._t_imu_first: float | None = None
-        self._t_imu: float | None = None
-        self._t_aligned: float | None = None
+        self.t_imu: float | None = None
+        self.t_aligned: float | None = None
         self._last_sample: tuple[tuple, tuple] | None = None  # (gyro, accel)
         self._k_out = 0  # next output instant: k * output_period_s
         self._next_out = 0.0  # its time
-        self._fixes: list[Fix] = []
-        self._gated_since: dict[tuple[str, str], float] = {}  # first rejection of a run of them
-        self._origin = tuple(cfg.start)  # where the strapdown starts when its alignment ends
+        self.fixes: list[Fix] = []  # the last two
+        self.origin = tuple(cfg.start)  # where the strapdown starts when its alignment ends
         self._origin_since: float | None = None  # after an IMU restart: the fixes from then on,
         self._origin_fixes = (np.zeros(2), 0)  # summed and counted, give it (at rest: their mean)
-        self._reinit: dict[str, float] = {}  # fusion track -> a fix newer than this restarts it
-        self._aided: dict[str, float] = {}  # fusion track -> time of its last position update
-        self.reinits: defaultdict[str, Counter] = defaultdict(Counter)  # track -> cause -> n
-        self.reinit_count = 0  # all of them: one int to watch for a new one
+        self.reinit_count = 0  # every re-initialisation: one int to watch for a new one
         self._tilt_growth = (cfg.tilt_inflation * cfg.gravity * cfg.tilt_rate_sigma) ** 2
         self._accel_var = cfg.accel_sigma_m_s2**2
         self._range_bias = {int(a): float(c) for a, c in cfg.range_bias_m.items()}
@@ -217,46 +219,52 @@ class Estimator:
         self._gyro_limit = math.radians(cfg.gyro_range_dps)
         self.counts: Counter = Counter()
         self.input_rejections: Counter = Counter()
-        self.updates: defaultdict[str, Counter] = defaultdict(Counter)
-        self.rejections: defaultdict[str, Counter] = defaultdict(Counter)
         self.emitted: Counter = Counter()
 
     # ---------------------------------------------------------------- inputs
 
-    def imu(self, t_s: float, gyro_rad_s, accel_m_s2, nd_ok: bool = True) -> list[Estimate]:
-        """One IMU sample (body axes: x forward, y left, z up) at measurement time t_s;
-        ``nd_ok`` False (ND clear: the registers were not updated) skips it."""
+    def feed(self, record) -> list[Estimate]:
+        """One measurement record (host.measurements), in time order; the estimates of the
+        output instants it passes."""
+        own = self._own.get(type(record))
+        return own(record) if own is not None else self._other(record)
+
+    def _imu(self, rec: ImuSample) -> list[Estimate]:
         self.counts["imu"] += 1
+        t_s = rec.t
         # plain floats: the strapdown's arithmetic is faster on them than on small arrays
-        gyro = tuple(map(float, gyro_rad_s))
-        accel = tuple(map(float, accel_m_s2))
+        gyro = tuple(map(float, rec.gyro))
+        accel = tuple(map(float, rec.accel))
         if not (math.isfinite(t_s) and all(map(math.isfinite, gyro)) and all(map(math.isfinite, accel))):
             self.input_rejections["imu_implausible"] += 1
             return []
-        if not nd_ok:  # a repeated register read: the next sample covers the interval
+        if not rec.nd_ok:  # a repeated register read: the next sample covers the interval
             self.input_rejections["imu_stale"] += 1
             return []
-        if self._t_imu is not None and t_s <= self._t_imu:
+        if self.t_imu is not None and t_s <= self.t_imu:
             self.input_rejections["imu_out_of_order"] += 1
             return []
         if max(map(abs, gyro)) >= self._gyro_limit:
             self.counts["imu_overrange"] += 1  # saturated, still the best reading there is
         out = self._begin(t_s)
         acceleration = self._sins_step(t_s, gyro, accel)
-        if acceleration is None:
-            kind, z, R, meas = "stationary", self._at_rest, self._r_stationary, STATIONARY
-        else:
-            T = t_s - self._t_aligned
-            kind, z, meas = "accel", np.array(acceleration[:2]), ACCELERATION
-            R = (self._accel_var + self._tilt_growth * T * T) * self._i2
-        for name in self.fusion:
-            self._update(name, kind, z, R, meas, t_s)
+        if self._motion:
+            if acceleration is None:
+                m = Motion(t_s, "stationary", self._at_rest, self._r_stationary, STATIONARY)
+            else:
+                T = t_s - self.t_aligned
+                R = (self._accel_var + self._tilt_growth * T * T) * self._i2
+                m = Motion(t_s, "accel", np.array(acceleration[:2]), R, ACCELERATION)
+            for take in self._motion:
+                take(m)
+        for take in self._takers.get(ImuSample, ()):
+            take(rec)
         return self._end(t_s, out)
 
-    def range(self, t_s: float, anchor: int, distance_m: float | None, rssi_dbm: int = 0,
-              status: int = 0x0F) -> list[Estimate]:
-        """One exchange report; ``distance_m`` None when the exchange did not complete."""
+    def _exchange(self, rec: Exchange) -> list[Estimate]:
+        """One exchange report; ``distance`` None when the exchange did not complete."""
         self.counts["exchanges"] += 1
+        t_s, anchor, distance_m, status = rec.t, rec.anchor, rec.distance, rec.status
         if anchor not in self.layout:
             self.input_rejections["unknown_anchor"] += 1
             return []
@@ -271,23 +279,25 @@ class Estimator:
             self.input_rejections["range_implausible"] += 1
         else:
             d = (float(distance_m) - self._range_bias.get(anchor, 0.0)) / self.cfg.range_scale
-            if self.cfg.tight == "toa":
-                meas = Ranges(self.layout, (anchor,), (max(self._t - t_s, 0.0),))
-                for name in self.fusion:
-                    if name != "kf":
-                        self._update(name, "range", np.array([d]),
-                                     np.array([[self.cfg.range_sigma_m**2]]), meas, t_s)
+            if self.cfg.tight == "toa" and self._range:
+                m = Range(t_s, np.array([d]), np.array([[self.cfg.range_sigma_m**2]]),
+                          Ranges(self.layout, (anchor,), (max(self.t - t_s, 0.0),)))
+                for take in self._range:
+                    take(m)
         for cycle in self.grouper.add(t_s, anchor, d):
             self._cycle(cycle)
+        for take in self._takers.get(Exchange, ()):
+            take(rec)
         return self._end(t_s, out)
 
-    def restart(self, t_s: float, device: str, uptime_s: float = 0.0) -> list[Estimate]:
-        """``device`` (one of ``DEVICES``) restarted: its clock began a new epoch at t_s, so
-        what the tracks hold need not be where the vehicle is. The fusion tracks start again
-        from the next fix, the wsn track drops its velocity history; an IMU restart also
-        realigns the strapdown (the vehicle stands still after a power-up, like at the start)
-        over the alignment_s since the power-up, ``uptime_s`` before t_s (its sample counter
-        says; the host may see the board only after a while), or from t_s if that is more."""
+    def _restart(self, rec: Restart) -> list[Estimate]:
+        """``device`` (one of ``DEVICES``) restarted: its clock began a new epoch at t, so
+        what the tracks hold need not be where the vehicle is; each track resets. An IMU
+        restart also realigns the strapdown (the vehicle stands still after a power-up, like
+        at the start) over the alignment_s since the power-up, ``uptime_s`` before t (its
+        sample counter says; the host may see the board only after a while), or from t if
+        that is more."""
+        t_s, device = rec.t, rec.device
         if device not in DEVICES:
             raise ValueError(f"device {device!r}: use one of {', '.join(DEVICES)}")
         if not math.isfinite(t_s):
@@ -295,96 +305,57 @@ class Estimator:
             return []
         out = self._begin(t_s)
         self.grouper = CycleGrouper(len(self.layout.ids), self.cfg.cycle_s)  # no cycle spans it
-        if self._fixes and "wsn" in self.cfg.filters:
-            self._count_reinit("wsn", "restart")
-        self._fixes = []
-        for name in self.fusion:
-            self._discontinuity(name, "restart", t_s)
+        for track in self.tracks:
+            track.restart(device, t_s)
+        self.fixes = []
         if device == "imu":
-            if "sins" in self.cfg.filters:
-                self._count_reinit("sins", "restart")
             self.alignment = Alignment()
             self.sins = None
-            self._t_aligned = self._last_sample = None
-            self._t_imu_first = t_s - uptime_s if 0.0 <= uptime_s < self.cfg.alignment_s else None
-            self._origin, self._origin_since = tuple(self.cfg.start), t_s
+            self.t_aligned = self._last_sample = None
+            self._t_imu_first = t_s - rec.uptime_s if 0.0 <= rec.uptime_s < self.cfg.alignment_s else None
+            self.origin, self._origin_since = tuple(self.cfg.start), t_s
             self._origin_fixes = (np.zeros(2), 0)
         return self._end(t_s, out)
+
+    def _other(self, rec) -> list[Estimate]:
+        """A record the estimator does not process: straight to the tracks that take it."""
+        takers = self._takers.get(type(rec))
+        if takers is None:
+            raise TypeError(f"no track takes {type(rec).__name__} records; enable one that does")
+        if not math.isfinite(rec.t):
+            self.input_rejections[f"{type(rec).__name__}_implausible"] += 1
+            return []
+        out = self._begin(rec.t)
+        for take in takers:
+            take(rec)
+        return self._end(rec.t, out)
 
     # ---------------------------------------------------------------- processing
 
     def _begin(self, t: float) -> list[Estimate]:
-        """Start the filters at the first measurement; emit the instants before t."""
-        if self._t is None:
-            self._t = self._t_predicted = self._t_first = t
+        """Start the tracks at the first measurement; emit the instants before t."""
+        if self.t is None:
+            self.t = self.t_predicted = self.t_first = t
             self._k_out = math.ceil(t / self.cfg.output_period_s)
             self._next_out = self._k_out * self.cfg.output_period_s
-            self._init_filters()
+            for track in self.tracks:
+                track.start(t)
         out = self._emit(t, through=False) if self._next_out < t else []
-        self._t = max(self._t, t)
+        self.t = max(self.t, t)
         return out
 
-    def _predict(self) -> None:
-        """Predict the fusion filters to the filter time. Lazily, before their next update:
+    def sync(self) -> None:
+        """Predict the fusion tracks to the filter time. Lazily, before their next update:
         over measurements that update none of them (most exchanges), F(dt1 + dt2) =
         F(dt2) F(dt1) and the Q likewise make one predict the same as several."""
-        dt = self._t - self._t_predicted
-        for name in self.fusion:
-            try:
-                self.filters[name].predict(dt)
-            except np.linalg.LinAlgError:
-                self._reset(name)
-        self._t_predicted = self._t
+        dt = self.t - self.t_predicted
+        for track in self._predicting:
+            track.predict(dt)
+        self.t_predicted = self.t
 
     def _end(self, t: float, out: list[Estimate]) -> list[Estimate]:
         """out and the estimates of the output instants up to t."""
         return out + self._emit(t, through=True) if self._next_out <= t else out
-
-    def _init_filters(self, only: str | None = None) -> None:
-        c = self.cfg
-        if only is None:
-            x0 = np.array([*c.start, 0.0, 0.0, 0.0, 0.0])
-        else:  # a reset: the latest WSN fix, else the SINS
-            p = self._fixes[-1].p if self._fixes else self.sins.p[:2] if self.sins else c.start
-            v = self.sins.v[:2] if self.sins else (0.0, 0.0)
-            x0 = np.array([*p, *v, 0.0, 0.0])
-        sp, sv, sa = c.p0_sigma
-        P0 = np.diag([sp**2, sp**2, sv**2, sv**2, sa**2, sa**2])
-        for name in ([only] if only else self.fusion):
-            self._new_filter(name, x0, P0)
-
-    def _new_filter(self, name: str, x0: np.ndarray, P0: np.ndarray) -> None:
-        c = self.cfg
-        if name == "kf":
-            f = KalmanFilter(x0, P0, self.model)
-        elif name == "ekf":
-            f = ExtendedKalmanFilter(x0, P0, self.model)
-        else:
-            f = UnscentedKalmanFilter(x0, P0, self.model, c.ukf_alpha, c.ukf_beta, c.ukf_kappa)
-        self.filters[name] = f
-        if self._gated_since:  # a new track has no run of rejections
-            self._gated_since = {k: v for k, v in self._gated_since.items() if k[0] != name}
-
-    def _count_reinit(self, name: str, cause: str) -> None:
-        self.reinits[name][cause] += 1
-        self.reinit_count += 1
-
-    def _discontinuity(self, name: str, cause: str, t: float) -> None:
-        """Fusion track ``name`` is off for ``cause``: it starts again from the next fix newer
-        than t (counted once per discontinuity, however many causes it has)."""
-        if name not in self._reinit:
-            self._count_reinit(name, cause)
-        self._reinit[name] = t
-
-    def _reinit_at(self, name: str, fix: Fix) -> None:
-        """Start fusion track ``name`` again at ``fix``: its position and covariance, at rest
-        but with ``reinit_sigma`` on velocity and acceleration (they are unknown)."""
-        sv, sa = self.cfg.reinit_sigma
-        P0 = np.diag([0.0, 0.0, sv**2, sv**2, sa**2, sa**2])
-        P0[:2, :2] = fix.cov
-        self._new_filter(name, np.array([*fix.p, 0.0, 0.0, 0.0, 0.0]), P0)
-        del self._reinit[name]
-        self._aided[name] = fix.t
 
     def _sins_step(self, t: float, gyro: tuple, accel: tuple) -> tuple | None:
         """Advance alignment or strapdown; the nav-frame horizontal acceleration once aligned."""
@@ -398,83 +369,47 @@ class Estimator:
                     self._last_sample = (gyro, accel)
                     return None
                 self._start_strapdown()
-            return self.sins.step(t - self._t_imu, gyro, accel)[:2]
+            return self.sins.step(t - self.t_imu, gyro, accel)[:2]
         finally:
-            self._t_imu = t
+            self.t_imu = t
 
     def _start_strapdown(self) -> None:
         c = self.cfg
         self.aligned = a = self.alignment.result(c.heading0_rad, math.radians(c.latitude_deg), c.x_azimuth_deg)
-        self.sins = Strapdown(position=self._origin, q=a.q, gyro_bias=a.gyro_bias, latitude_deg=c.latitude_deg,
+        self.sins = Strapdown(position=self.origin, q=a.q, gyro_bias=a.gyro_bias, latitude_deg=c.latitude_deg,
                               gravity=c.gravity, altitude_m=c.altitude_m, x_azimuth_deg=c.x_azimuth_deg)
         self.sins.step(0.0, *self._last_sample)  # the interval to the next sample starts here
-        self._t_aligned = self._t_imu
-
-    def _update(self, name: str, kind: str, z, R, meas, t: float) -> None:
-        """One gated update of filter ``name``; counts the outcome by kind or reason."""
-        lag = self._t - t
-        if lag > self.cfg.max_lag_s:
-            self.rejections[name]["late"] += 1
-            return
-        if self._t_predicted < self._t:
-            self._predict()
-        f = self.filters[name]
-        try:
-            inn = f.update(z, R, meas, chi2_gate(meas.dim, self.cfg.gate_probability))
-            if not inn.accepted:
-                gated_for = t - self._gated_since.setdefault((name, kind), t)
-                if gated_for > self.cfg.gate_reopen_s and kind not in POSITION_KINDS:
-                    # the acceleration gated out for so long: the track's acceleration is off
-                    self.rejections[name]["gate_reopened"] += 1
-                    f.update(z, R, meas)
-                else:
-                    self.rejections[name]["gate"] += 1
-                    if gated_for > self.cfg.gate_reopen_s:
-                        # every position update gated out for so long: the track, not the WSN, is off
-                        self._discontinuity(name, "gated", t)
-                    return
-        except np.linalg.LinAlgError:
-            self._reset(name)
-            return
-        if self._gated_since:
-            self._gated_since.pop((name, kind), None)
-        if kind in POSITION_KINDS:
-            self._aided[name] = t
-        self.updates[name][kind] += 1
-
-    def _reset(self, name: str) -> None:
-        """A covariance lost positive definiteness (never seen; rounding can do it)."""
-        self.rejections[name]["numerical_reset"] += 1
-        self._init_filters(only=name)
+        self.t_aligned = self.t_imu
 
     def _cycle(self, cycle) -> None:
-        """A closed TDMA cycle: the WSN fix (wsn track, KF, re-initialisations, the SINS origin
-        after a restart) and the TDOA update (EKF/UKF). A track started again at this cycle's
-        fix takes no other update from it (the same ranges)."""
+        """A closed TDMA cycle: the WSN fix (re-initialisations of the tracks waiting for
+        one, the SINS origin after a restart, then the tracks that take fixes), and the
+        TDOA product."""
         fix = self.solver.fix(cycle.t, cycle.valid_anchors, cycle.distances)
-        fresh: list[str] = []
         if isinstance(fix, str):
-            self.rejections["wsn"][fix] += 1
+            refused = FixRefused(cycle.t, fix)
+            for take in self._refused:
+                take(refused)
+            fix = None
         else:
-            self.updates["wsn"]["fix"] += 1
-            if fix.dropped:
-                self.rejections["wsn"]["outlier_dropped"] += 1
             # two fixes with one time would give no velocity: keep the newer
-            older = [f for f in self._fixes[-1:] if f.t < fix.t]
-            self._fixes = [*older, fix]
+            older = [f for f in self.fixes[-1:] if f.t < fix.t]
+            self.fixes = [*older, fix]
             if self.sins is None and self._origin_since is not None and fix.t >= self._origin_since:
                 total, n = self._origin_fixes[0] + fix.p, self._origin_fixes[1] + 1
-                self._origin_fixes, self._origin = (total, n), tuple((total / n).tolist())
-            fresh = [n for n, since in self._reinit.items() if fix.t >= since]
-            for name in fresh:
-                self._reinit_at(name, fix)
-            if "kf" in self.fusion and "kf" not in fresh:
-                self._update("kf", "fix", fix.p, fix.cov, position_fix(max(self._t - fix.t, 0.0)), fix.t)
-        tight = [n for n in self.fusion if n != "kf" and n not in fresh]
-        if self.cfg.tight == "tdoa" and tight:
-            self._tdoa_update(cycle, tight)
+                self._origin_fixes, self.origin = (total, n), tuple((total / n).tolist())
+            for track in self.tracks:
+                since = track.reinit_since
+                if since is not None and fix.t >= since:
+                    track.reinit_at(fix)
+            for take in self._fix:
+                take(fix)
+        if self.cfg.tight == "tdoa" and self._tdoa:
+            m = self._tdoa_product(cycle, fix)
+            for take in self._tdoa:
+                take(m)
 
-    def _tdoa_update(self, cycle, tight: list[str]) -> None:
+    def _tdoa_product(self, cycle, fix: Fix | None) -> Tdoa:
         """Range differences to the reference anchor (000 eqs. 12-13), R = sigma^2 (I + 11^T)."""
         r = dict(zip(cycle.valid_anchors, cycle.distances))
         t_of = dict(zip(cycle.valid_anchors, cycle.valid_times))
@@ -483,22 +418,19 @@ class Estimator:
         # take 4 sigma of the difference's noise (it is tight on the line through the two)
         slack = 4.0 * math.sqrt(2.0) * self.cfg.range_sigma_m
         others = []
+        implausible = 0
         for a in r:
             if a != ref and abs(r[a] - r[ref]) <= self.layout.baseline(a, ref) + slack:
                 others.append(a)
             elif a != ref:
-                for name in tight:
-                    self.rejections[name]["implausible"] += 1
+                implausible += 1
         if len(others) < 2:
-            for name in tight:
-                self.rejections[name]["too_few"] += 1
-            return
+            return Tdoa(cycle.t, implausible, fix=fix)
         keep = [ref, *others]
         z = np.array([r[a] - r[ref] for a in others])
-        meas = Ranges(self.layout, keep, [max(self._t - t_of[a], 0.0) for a in keep], reference=ref)
+        meas = Ranges(self.layout, keep, [max(self.t - t_of[a], 0.0) for a in keep], reference=ref)
         R = tdoa_covariance(self.cfg.range_sigma_m, len(others))
-        for name in tight:
-            self._update(name, "tdoa", z, R, meas, cycle.t)
+        return Tdoa(cycle.t, implausible, z, R, meas, fix)
 
     # ---------------------------------------------------------------- output
 
@@ -507,74 +439,36 @@ class Estimator:
         out = []
         while (b := self._next_out) < t or (through and b == t):
             yaw = self.sins.yaw if self.sins is not None else self.cfg.heading0_rad
-            for name in self.cfg.filters:
-                e = self._snapshot(name, b, yaw)
+            for track in self.tracks:
+                e = track.estimate(b, yaw)
                 if e is not None:
                     out.append(e)
-                    self.emitted[name] += 1
+                    self.emitted[track.name] += 1
             self._k_out += 1
             self._next_out = self._k_out * self.cfg.output_period_s
         return out
 
-    def _snapshot(self, name: str, b: float, yaw: float) -> Estimate | None:
-        if name in FUSION:
-            x, P = self.model.propagate(self.filters[name].x, self.filters[name].P, b - self._t_predicted)
-            stale = name in self._reinit or self._stale(b, self._aided.get(name))  # waiting: off
-            return _estimate(b, name, x[:2], x[2:4], yaw, P[:4, :4], stale)
-        if name == "sins":
-            return self._sins_snapshot(b, yaw)
-        return self._wsn_snapshot(b)
-
-    def _stale(self, b: float, t_aided: float | None) -> bool:
+    def stale(self, b: float, t_aided: float | None) -> bool:
         """Whether an estimate at b, last aided at t_aided (None: never, only the configured
         start at the first measurement), is extrapolated."""
-        return b - (self._t_first if t_aided is None else t_aided) > self.cfg.extrapolated_after_s
-
-    def _sins_snapshot(self, b: float, yaw: float) -> Estimate:
-        sp, sv, _ = self.cfg.p0_sigma
-        pp, pv, vv = float(sp) ** 2, 0.0, float(sv) ** 2
-        if self.sins is None:
-            p, v = self._origin, (0.0, 0.0)
-        else:
-            dt = b - self._t_imu
-            v = self.sins.v[:2]
-            p = self.sins.p[:2] + v * dt
-            # velocity random walk q per axis: P_pp = q T^3/3, P_pv = q T^2/2, P_vv = q T
-            T = b - self._t_aligned
-            q = (self.cfg.vrw_m_s_rt_hr / 60.0) ** 2
-            pp, pv, vv = pp + q * (T**3 / 3), pv + q * (T**2 / 2), vv + q * T
-        cov = [pp, 0.0, pv, 0.0, 0.0, pp, 0.0, pv, pv, 0.0, vv, 0.0, 0.0, pv, 0.0, vv]  # (x, y) alike
-        return _estimate(b, "sins", p, v, yaw, cov, self._stale(b, self._t_imu))
-
-    def _wsn_snapshot(self, b: float) -> Estimate | None:
-        if len(self._fixes) < 2:
-            return None
-        f0, f1 = self._fixes
-        dt = f1.t - f0.t
-        v = (f1.p - f0.p) / dt
-        cov = np.empty((4, 4))  # [[C1, C1/dt], [C1/dt, (C0 + C1)/dt^2]]
-        cov[:2, :2] = f1.cov
-        cov[:2, 2:] = cov[2:, :2] = f1.cov / dt
-        cov[2:, 2:] = (f0.cov + f1.cov) / dt**2
-        return _estimate(b, "wsn", f1.p, v, None, cov, self._stale(b, f1.t))
+        return b - (self.t_first if t_aided is None else t_aided) > self.cfg.extrapolated_after_s
 
     # ---------------------------------------------------------------- status
 
     def stats(self) -> dict:
-        """Counts: inputs, input rejections, updates and rejections per filter by kind/reason,
-        estimates emitted, and the alignment result."""
+        """Counts: inputs, input rejections, updates and rejections per aided track by
+        kind/reason, estimates emitted, re-initialisations, and the alignment result."""
         a = self.aligned
         return {
             "imu_samples": self.counts["imu"],
             "imu_overrange": self.counts["imu_overrange"],
             "exchanges": self.counts["exchanges"],
             "input_rejections": dict(sorted(self.input_rejections.items())),
-            "updates": {n: dict(sorted(self.updates[n].items())) for n in self.cfg.filters if n != "sins"},
-            "rejections": {n: dict(sorted(self.rejections[n].items())) for n in self.cfg.filters
-                           if n != "sins"},
-            "estimates": {n: self.emitted[n] for n in self.cfg.filters},
-            "reinit": {n: dict(sorted(self.reinits[n].items())) for n in self.cfg.filters if self.reinits[n]},
-            "reinit_pending": [n for n in self.cfg.filters if n in self._reinit],
+            "updates": {t.name: dict(sorted(t.updates.items())) for t in self.tracks if t.aided},
+            "rejections": {t.name: dict(sorted(t.rejections.items())) for t in self.tracks if t.aided},
+            "estimates": {t.name: self.emitted[t.name] for t in self.tracks},
+            "reinit": {t.name: dict(sorted(t.reinits.items())) for t in self.tracks if t.reinits},
+            "reinit_pending": [t.name for t in self.tracks if t.pending],
             "alignment": None if a is None else {
                 "samples": a.samples, "roll_rad": a.roll, "pitch_rad": a.pitch, "yaw_rad": a.yaw,
                 "gyro_bias_rad_s": [float(v) for v in a.gyro_bias],

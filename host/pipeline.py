@@ -1,4 +1,5 @@
-"""Bytes -> time-stamped measurements -> estimator, as a pure function of the input.
+"""Bytes -> time-stamped measurement records (host.measurements) -> estimator, as a pure
+function of the input.
 
 The input is the sequence of chunks ``(port, bytes, arrival ns since start)`` in the
 order the host processed them (live) or recorded them (replay). Nothing here reads a
@@ -18,9 +19,10 @@ Time. Each SINS sample's host time comes from the board's counter and each range
 the anchor network's ``t_us``, both through :class:`host.clock.DeviceClock` (unwrapped,
 aligned to arrival times online, never stepping back). A sample counter seen on both
 ``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate. A clock
-that begins a new epoch (its device restarted) is passed on as ``estimator.restart(t,
-"imu" | "anchors")`` in time order: just before the first sample, or range, of the epoch
-(for the IMU with the board's uptime, its counter x 10 ms: it counts from power-up).
+that begins a new epoch (its device restarted) is passed on as a ``Restart(t, "imu" |
+"anchors")`` record (host.measurements) in time order: just before the first sample, or
+range, of the epoch (for the IMU with the board's uptime, its counter x 10 ms: it counts
+from power-up).
 
 Time order, with bounded latency (docs/host.md). Let T be the filter time: the latest
 measurement time given to the estimator. Every measurement is given with its own time.
@@ -49,6 +51,7 @@ from protocols.stream import DecodeError, Frame, XBeeSinsChain, nanoloc_decoder,
 from .clock import DeviceClock, Unwrapper
 from .config import HostConfig
 from .estimator import Estimator
+from .measurements import Exchange, ImuSample, Restart
 
 INPUTS = ("xbee", "sins", "nanoloc")
 IMU_INPUTS = ("xbee", "sins")
@@ -84,7 +87,7 @@ class Pipeline:
         self.range_clock = DeviceClock(32, T_US_TICK_S, strict=False)
         # the gateway's report counter: equal = a duplicate, any step back = a restart
         self._report_seq = Unwrapper(16, restart=0)
-        # heap of (t, n, anchor, distance, rssi, status); anchor None: the anchors restarted
+        # heap of (t, n, Exchange | Restart): the anchor clock's records, in time order
         self._held: list[tuple] = []
         self._n = 0
         self.t = -math.inf  # filter time
@@ -222,8 +225,8 @@ class Pipeline:
         self.t = max(t, self.t)
         if self.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown;
             # it counts its samples from power-up, so this one says how long it has been up
-            out += self.estimator.restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S)
-        out += self.estimator.imu(t, s.gyro_rad_s, s.accel_m_s2, nd_ok=nd_ok)
+            out += self.estimator.feed(Restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S))
+        out += self.estimator.feed(ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok))
 
     def _range(self, f: dict, a: float, out: list) -> None:
         self.counts["reports"] += 1
@@ -239,7 +242,7 @@ class Pipeline:
         restarts = self.range_clock.restarts
         t = self.range_clock.time(f["t_us"], a)
         if self.range_clock.restarts != restarts:  # the anchors restarted: in order, before t
-            self._schedule((t, self._n, None, None, None, None), out)
+            self._schedule((t, self._n, Restart(t, "anchors")), out)
             self._n += 1
         if f["anchor"] not in self.config.anchors:
             self.counts["reports_unknown_anchor"] += 1
@@ -251,11 +254,11 @@ class Pipeline:
         else:
             distance = None
             self.counts["timeouts" if status & nanoloc.STATUS_TIMEOUT else "range_errors"] += 1
-        self._schedule((t, self._n, f["anchor"], distance, f["rssi"], status), out)
+        self._schedule((t, self._n, Exchange(t, f["anchor"], distance, f["rssi"], status)), out)
         self._n += 1
 
     def _schedule(self, item: tuple, out: list) -> None:
-        """Hold an anchor-clock item (a range, or a restart: anchor None) or apply it now."""
+        """Hold an anchor-clock record (an exchange or the anchors' restart) or apply it now."""
         if item[0] > self.t:
             heapq.heappush(self._held, item)
         else:
@@ -267,16 +270,12 @@ class Pipeline:
             self._apply_range(heapq.heappop(held), out)
 
     def _apply_range(self, item: tuple, out: list) -> None:
-        t, _, anchor, distance, rssi, status = item
-        if anchor is None:
-            self.t = max(t, self.t)
-            out += self.estimator.restart(t, "anchors")
-            return
-        if t < self.t:
+        t, _, record = item
+        if t < self.t and type(record) is Exchange:
             self.counts["ranges_late"] += 1
             self.max_late_s = max(self.max_late_s, self.t - t)
         self.t = max(t, self.t)
-        out += self.estimator.range(t, anchor, distance, rssi, status)
+        out += self.estimator.feed(record)
 
     def _count(self, out: list) -> list:
         for e in out:

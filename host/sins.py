@@ -44,7 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-EARTH_RATE = 7.2916e-5  # rad/s, as 000 sect. 3.3
+from common.earth import EARTH_RATE
+
 WGS84_A = 6378137.0  # m
 WGS84_E2 = 6.69437999014e-3
 

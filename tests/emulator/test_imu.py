@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from emulator.imu import EARTH_RATE, Adis16350, bartlett_taps
+from common.earth import EARTH_RATE
+from emulator.imu import Adis16350, bartlett_taps
 from emulator.scenario import load_scenario
 from emulator.trajectory import Trajectory
 from protocols import adis16350 as adis

@@ -7,6 +7,7 @@ mean something without the real filters; ``calls`` lets tests check times and or
 from __future__ import annotations
 
 from host.estimator import Estimate
+from host.measurements import Exchange, ImuSample
 
 
 class RecordingEstimator:
@@ -30,20 +31,17 @@ class RecordingEstimator:
         return [Estimate(t, f, x, self._az, 0.0, 0.0, 0.0, ((1.0, 0.0), (0.0, 1.0)))
                 for f in self.filters]
 
-    def imu(self, t, gyro, accel, nd_ok=True) -> list:
-        self.calls.append(("imu", t, tuple(gyro), tuple(accel), nd_ok))
-        self._az += accel[2]
-        return self._out(t)
-
-    def range(self, t, anchor, distance, rssi, status) -> list:
-        self.calls.append(("range", t, anchor, distance, rssi, status))
-        if distance is not None:
-            self._ranges[anchor] = distance
-        return self._out(t)
-
-    def restart(self, t, device, uptime_s=0.0) -> list:
-        self.calls.append(("restart", t, device, uptime_s))
-        return self._out(t)
+    def feed(self, r) -> list:
+        if isinstance(r, ImuSample):
+            self.calls.append(("imu", r.t, tuple(r.gyro), tuple(r.accel), r.nd_ok))
+            self._az += r.accel[2]
+        elif isinstance(r, Exchange):
+            self.calls.append(("range", r.t, r.anchor, r.distance, r.rssi, r.status))
+            if r.distance is not None:
+                self._ranges[r.anchor] = r.distance
+        else:
+            self.calls.append(("restart", r.t, r.device, r.uptime_s))
+        return self._out(r.t)
 
     def stats(self) -> dict:
         return {"calls": len(self.calls)}

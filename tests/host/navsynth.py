@@ -115,3 +115,10 @@ def exchanges(traj_fn, anchors, *, duration, sigma, rng: np.random.Generator, cy
             out.append((float(ts[j]), a, d + rng.normal(0.0, sigma)))
         k += 1
     return out
+
+
+def record(kind: str, args: tuple):
+    """The measurement record of a synthetic call ("imu" | "range" | "restart", its args)."""
+    from host.measurements import Exchange, ImuSample, Restart
+
+    return {"imu": ImuSample, "range": Exchange, "restart": Restart}[kind](*args)

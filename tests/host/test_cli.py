@@ -7,6 +7,7 @@ import pytest
 from host import config as host_config
 from host.config import ConfigError
 from cli.main import main
+from host.tracks import BUILT_IN
 
 
 def run_cli(capsys, *argv) -> tuple[int, str, str]:
@@ -88,7 +89,7 @@ def test_office_config_is_the_survey_of_scenarios_md():
         1: (1.3, 1.6), 2: (10.8, 1.6), 3: (10.8, 5.4), 4: (1.3, 5.4)}
     assert cfg.start == (6.0, 1.8) and cfg.heading_deg == 0.0
     assert cfg.latitude_deg == 34.316 and cfg.gravity == 9.7952
-    assert cfg.filters == host_config.FILTER_NAMES
+    assert cfg.filters == BUILT_IN
 
 
 def test_corridor_config_starts_at_the_origin():
@@ -99,8 +100,10 @@ def test_corridor_config_starts_at_the_origin():
 def test_config_round_trips_through_its_dict():
     cfg = host_config.load("office")
     assert host_config.from_dict(cfg.to_dict()) == cfg
-    with_extras = host_config.from_dict({**cfg.to_dict(), "tag": 16, "router": "0013A20040A1B2D4",
-                                         "estimator": {"alignment_s": 3.0}})
+    d = cfg.to_dict()
+    with_extras = host_config.from_dict({**d, "vehicle": {**d["vehicle"], "tag": 16,
+                                                          "router": "0013A20040A1B2D4"},
+                                         "filters": {"alignment_s": 3.0, "ukf": {"alpha": 0.5}}})
     assert host_config.from_dict(with_extras.to_dict()) == with_extras
 
 
@@ -125,16 +128,16 @@ ANCHORS = "".join(f"[[anchors]]\nid = {i}\nx = {x}\ny = {y}\n"
 @pytest.mark.parametrize("text, words", [
     ("[site\n", "not valid TOML"),
     ("[garage]\n" + ANCHORS, "unknown section [garage]"),
-    ("[site]\nlatitude = 3\n" + ANCHORS, "unknown key 'latitude' in [site]"),
-    ("[site]\nlatitude_deg = 123\n" + ANCHORS, "must be a number in [-90, 90], not 123"),
+    ("[site]\nlatitude = 3\n" + ANCHORS, "[site] has an unknown key 'latitude'"),
+    ("[site]\nlatitude_deg = 123\n" + ANCHORS, "latitude_deg must be in [-90, 90] (got 123"),
     ("[site]\n", "[[anchors]] missing"),
     (ANCHORS + "[[anchors]]\nid = 1\nx = 0\ny = 1\n", "anchor id 1 appears twice"),
-    ("[[anchors]]\nid = 1\nx = 0\n", "anchor #1 has no 'y'"),
-    (ANCHORS + "[vehicle]\nstart = [1]\n", "start must be [x, y]"),
+    ("[[anchors]]\nid = 1\nx = 0\n", "anchor 1 y is missing"),
+    (ANCHORS + "[vehicle]\nstart = [1]\n", "start must be a list of 2 numbers"),
     (ANCHORS + "[vehicle]\ngyro_range_dps = 100\n", "one of 300, 150, 75"),
     (ANCHORS + "[vehicle]\nrouter = 'xyz'\n", "16 hex digits"),
     (ANCHORS + "[filters]\nenabled = ['kf', 'pf']\n", "unknown filter 'pf'"),
-    (ANCHORS + "[filters]\nsmoothing = 3\n", "unknown key 'smoothing' in [filters]"),
+    (ANCHORS + "[filters]\nsmoothing = 3\n", "[filters] has an unknown key 'smoothing'"),
     (ANCHORS + "[filters]\nalignment_s = 'long'\n", "alignment_s must be a number"),
 ])
 def test_bad_config_files_get_one_line_naming_key_and_fix(tmp_path, capsys, pty_path, text, words):

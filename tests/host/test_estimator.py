@@ -8,9 +8,13 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
-from host.estimator import FILTER_NAMES, Estimate, Estimator, EstimatorConfig
+from host.estimator import Estimate, Estimator, EstimatorConfig
+from host.measurements import Exchange, ImuSample, Restart
+from host.tracks import BUILT_IN
 
-from .navsynth import GRAVITY, OFFICE_ANCHORS, ellipse, exchanges, noisy_imu, perfect_imu
+from .navsynth import GRAVITY, OFFICE_ANCHORS, ellipse, exchanges, noisy_imu, perfect_imu, record
+
+FILTER_NAMES = BUILT_IN
 
 ALIGN = 3.0
 
@@ -45,7 +49,7 @@ def run(cfg=None, calls=None, **kw):
     est = Estimator(cfg or EstimatorConfig(alignment_s=ALIGN, range_sigma_m=0.15))
     out = []
     for kind, args in calls if calls is not None else synth_events(**{"seconds": 30.0, **kw}):
-        out += getattr(est, kind)(*args)
+        out += est.feed(record(kind, args))
     return est, out
 
 
@@ -66,18 +70,18 @@ def default_run():
 def test_config_errors_name_the_field_and_the_fix():
     with pytest.raises(ValueError, match=r"filters: unknown \['pf'\]; use some of sins,wsn,kf,ekf,ukf"):
         EstimatorConfig(filters=("kf", "pf"))
-    with pytest.raises(ValueError, match="tight: 'rss' is not a method; use 'toa' or 'tdoa'"):
+    with pytest.raises(ValueError, match="tight must be one of 'toa', 'tdoa' \\(got 'rss'\\); use one of 'toa', 'tdoa'"):
         EstimatorConfig(tight="rss")
-    with pytest.raises(ValueError, match="output_period_s must be a positive number"):
+    with pytest.raises(ValueError, match=r"output_period_s must be in \[0.001, 60\] \(got 0"):
         EstimatorConfig(output_period_s=0)
     with pytest.raises(ValueError, match="anchors: 2 given"):
         EstimatorConfig(anchors={1: (0, 0), 2: (1, 0)})
-    with pytest.raises(ValueError, match="extrapolated_after_s must be a positive number"):
+    with pytest.raises(ValueError, match=r"extrapolated_after_s must be in \(0, 3600\] \(got 0"):
         EstimatorConfig(extrapolated_after_s=0.0)
-    with pytest.raises(ValueError, match=r"reinit_sigma must hold 2 positive numbers \(got \(1.0,\)\)"):
+    with pytest.raises(ValueError, match=r"reinit_sigma must be a list of 2 numbers \(got \[1\]\)"):
         EstimatorConfig(reinit_sigma=(1.0,))
     with pytest.raises(ValueError, match="device 'gps': use one of imu, anchors"):
-        Estimator().restart(1.0, "gps")
+        Estimator().feed(Restart(1.0, "gps"))
 
 
 def test_one_estimate_per_filter_per_period_in_config_order(default_run):
@@ -156,16 +160,16 @@ def test_total_wsn_outage_coasts_on_the_sins_and_recovers():
 def test_bad_input_is_counted_not_fatal():
     est = Estimator(EstimatorConfig(alignment_s=1.0))
     g, f = np.zeros(3), np.array([0.0, 0.0, GRAVITY])
-    est.imu(0.0, g, f)
-    est.imu(0.01, g, f, nd_ok=False)
-    est.imu(0.01, [np.nan, 0, 0], f)
-    est.imu(0.0, g, f)  # not after the previous sample
-    est.range(0.02, 9, 5.0, -60, 0x0F)
-    est.range(0.03, 1, -1.0, -60, 0x0F)
-    est.range(0.04, 1, 1e6, -60, 0x0F)
-    est.range(0.05, 2, None, -90, 0x40)
-    est.range(0.06, 3, 4.0, -60, 0x80)
-    est.imu(0.02, g, f)
+    est.feed(ImuSample(0.0, g, f))
+    est.feed(ImuSample(0.01, g, f, nd_ok=False))
+    est.feed(ImuSample(0.01, [np.nan, 0, 0], f))
+    est.feed(ImuSample(0.0, g, f))  # not after the previous sample
+    est.feed(Exchange(0.02, 9, 5.0, -60, 0x0F))
+    est.feed(Exchange(0.03, 1, -1.0, -60, 0x0F))
+    est.feed(Exchange(0.04, 1, 1e6, -60, 0x0F))
+    est.feed(Exchange(0.05, 2, None, -90, 0x40))
+    est.feed(Exchange(0.06, 3, 4.0, -60, 0x80))
+    est.feed(ImuSample(0.02, g, f))
     s = est.stats()
     assert s["input_rejections"] == {"imu_implausible": 1, "imu_out_of_order": 1, "imu_stale": 1,
                                      "incomplete": 1, "outage": 1, "range_implausible": 2, "unknown_anchor": 1}
@@ -179,10 +183,10 @@ def test_late_measurements_use_their_lag_or_are_refused():
     ranges = [c for c in calls if c[0] == "range"]
     est = Estimator(cfg)
     for kind, args in imus:  # all IMU first: every range arrives after the filters' time
-        est.imu(*args)
+        est.feed(ImuSample(*args))
     for kind, args in ranges[-5:]:  # lag < 0.5 s
-        est.range(*args)
-    est.range(*ranges[0][1])  # almost 6 s old
+        est.feed(Exchange(*args))
+    est.feed(Exchange(*ranges[0][1]))  # almost 6 s old
     s = est.stats()
     assert s["updates"]["ekf"]["range"] == 5 and s["updates"]["ukf"]["range"] == 5
     assert s["rejections"]["ekf"] == {"late": 1} and s["rejections"]["ukf"] == {"late": 1}

@@ -22,6 +22,8 @@ from host.estimator import Estimator, EstimatorConfig
 from protocols import adis16350, nanoloc
 from protocols.stream import nanoloc_decoder, sins_decoder
 
+from .navsynth import record
+
 world = pytest.importorskip("emulator.world")
 scenario = pytest.importorskip("emulator.scenario")
 
@@ -70,7 +72,7 @@ def run(w, calls, cfg):
     est = Estimator(cfg)
     out = []
     for kind, args in calls:
-        out += getattr(est, kind)(*args)
+        out += est.feed(record(kind, args))
     truth = w.truth(0, w.duration_ns)
     t = truth["t"] * 1e-9
     err = {}

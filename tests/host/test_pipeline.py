@@ -179,7 +179,8 @@ def test_corrupt_bytes_are_counted_and_the_next_frames_used():
 
 def test_ranges_of_other_tags_and_unknown_anchors_are_not_used():
     est = RecordingEstimator()
-    cfg = host_config.from_dict({**OFFICE.to_dict(), "tag": 0x10})
+    d = OFFICE.to_dict()
+    cfg = host_config.from_dict({**d, "vehicle": {**d["vehicle"], "tag": 0x10}})
     pipe = Pipeline(cfg, estimator=est, inputs=("nanoloc",))
     pipe.feed(*_report(0, 0, 0.001, anchor=1))
     pipe.feed(*_report(1, 25_000, 0.026, anchor=9))

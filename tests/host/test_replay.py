@@ -12,6 +12,7 @@ from host.bench import write_host_recording
 from host.output import estimate_line
 from host.pipeline import Pipeline
 from host.replay import chunks, replay, settings
+from host.tracks import BUILT_IN
 from protocols import sins
 from protocols.recording import Recording, RecordingWriter
 from protocols.serial import wire_ns
@@ -23,7 +24,7 @@ OFFICE = host_config.load("office")
 NAVTWIN = str(Path(sys.executable).with_name("navtwin"))
 
 
-def direct_lines(chunks_, filters=host_config.FILTER_NAMES, config=OFFICE) -> str:
+def direct_lines(chunks_, filters=BUILT_IN, config=OFFICE) -> str:
     pipe = Pipeline(config, filters)
     out = []
     for c in chunks_:
@@ -36,7 +37,7 @@ def direct_lines(chunks_, filters=host_config.FILTER_NAMES, config=OFFICE) -> st
 def host_recording(tmp_path_factory):
     data = list(lab_bytes.office(8.0, 11))
     path = write_host_recording(tmp_path_factory.mktemp("rec") / "run", OFFICE,
-                                host_config.FILTER_NAMES, data)
+                                BUILT_IN, data)
     return path, data
 
 
@@ -47,7 +48,7 @@ def test_replay_of_a_host_recording_equals_the_pipeline_run(host_recording):
     replay(Recording(path), lambda es: got.extend(map(estimate_line, es)))
     assert "".join(got) == expected
     filters = {json.loads(line)["filter"] for line in expected.splitlines()}
-    assert filters == set(host_config.FILTER_NAMES)
+    assert filters == set(BUILT_IN)
 
 
 def test_navtwin_replay_prints_the_same_bytes(host_recording, tmp_path):

@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 
 from host import replay as host_replay
-from host.estimator import FILTER_NAMES
+from host.tracks import BUILT_IN as FILTER_NAMES
 from host.pipeline import Pipeline
 from protocols.recording import Recording
 

@@ -1,0 +1,93 @@
+"""Typed measurement records: what the pipeline gives the estimator (host.estimator), and
+the products the estimator derives from them for the fusion tracks (host.tracks).
+
+Records (:class:`Estimator.feed` takes one at a time, in time order as the pipeline merges
+them; ``t`` is the host time base, seconds):
+
+===========  ===========================================================================
+ImuSample    one SINS sample: gyro (rad/s) and accel (m/s^2) in body axes (x forward,
+             y left, z up); ``nd_ok`` False: the registers were not updated (a repeat)
+Exchange     one ranging report of the anchors' gateway: ``distance`` (m) None when the
+             exchange did not complete; rssi (dBm) and status as reported
+Restart      a device's clock began a new epoch (``device``: "imu" or "anchors");
+             ``uptime_s``: how long the device has been up (the IMU's sample counter)
+===========  ===========================================================================
+
+Products (made once by the estimator, given to each track that takes them):
+
+===========  ===========================================================================
+Motion       the SINS's horizontal nav-frame acceleration as a linear measurement of the
+             fusion state (``kind`` "accel"), or at rest while the alignment runs
+             ("stationary")
+Range        one corrected exchange distance as a range measurement (``tight = "toa"``)
+Tdoa         one closed TDMA cycle's range differences to the reference anchor
+             (``tight = "tdoa"``); ``meas`` None when too few anchors remain
+host.wsn.Fix        a WSN position fix of a closed TDMA cycle
+FixRefused   a closed cycle that gave no fix, and why
+===========  ===========================================================================
+
+A new kind of measurement (RSSI, magnetometer, position fix, ...) is a new record here, a
+branch of the pipeline that builds it, and the tracks that take it; the estimator passes
+a record it does not process itself straight to those tracks.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True, slots=True)
+class ImuSample:
+    t: float
+    gyro: Any  # 3 rad/s
+    accel: Any  # 3 m/s^2
+    nd_ok: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class Exchange:
+    t: float
+    anchor: int
+    distance: float | None
+    rssi: int = 0
+    status: int = 0x0F
+
+
+@dataclass(frozen=True, slots=True)
+class Restart:
+    t: float
+    device: str
+    uptime_s: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Motion:
+    t: float
+    kind: str  # "accel" | "stationary"
+    z: Any
+    R: Any
+    meas: Any  # host.filters.model.Linear
+
+
+@dataclass(frozen=True, slots=True)
+class Range:
+    t: float
+    z: Any
+    R: Any
+    meas: Any  # host.filters.model.Ranges
+
+
+@dataclass(frozen=True, slots=True)
+class Tdoa:
+    t: float
+    implausible: int  # anchors dropped: a difference beyond their separation
+    z: Any = None
+    R: Any = None
+    meas: Any = None  # None: fewer than two differences remain
+    fix: Any = None  # host.wsn.Fix of the same cycle, if it gave one
+
+
+@dataclass(frozen=True, slots=True)
+class FixRefused:
+    t: float
+    reason: str

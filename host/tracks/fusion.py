@@ -1,0 +1,158 @@
+"""What the fusion tracks (kf, ekf, ukf) share: a filter on the constant-acceleration
+state x = [x, y, vx, vy, ax, ay] (host.filters), gated updates, re-initialisation.
+
+Time. The fusion tracks keep one predicted time, the estimator's (``est.t_predicted``):
+before an update the estimator predicts every fusion track to the filter time at once
+(:meth:`Estimator.sync`), so one predict spans the exchanges that updated none of them. A
+measurement older than the filter time is applied with its lag through the motion model
+if the lag is at most ``max_lag_s``, else rejected as ``late``.
+
+Gating (docs/filters.md). An update whose innovation fails the chi-square gate
+(``gate_probability``) is rejected; every acceleration update gated out for
+``gate_reopen_s`` is applied ungated (the track's acceleration is off), every position
+update gated out that long makes the track start again (a discontinuity, cause
+``gated``) from the next WSN fix newer than it: the fix's position and covariance, at rest
+with ``reinit_sigma`` on velocity and acceleration. A device restart does the same (cause
+``restart``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from host.measurements import Motion, Range, Tdoa
+from host.wsn import Fix, chi2_gate
+
+from .base import Track, estimate
+
+POSITION_KINDS = frozenset(("fix", "tdoa", "range"))  # the updates that aid a track's position
+
+
+class FusionTrack(Track):
+    uses_strapdown = True
+
+    def __init__(self, est, settings=None) -> None:
+        super().__init__(est, settings)
+        self.filter = None
+        self.reinit_since: float | None = None  # a fix newer than this starts the track again
+        self._reinit_fix: Fix | None = None  # the fix it last started again at
+        self._aided: float | None = None  # time of its last position update
+        self._gated_since: dict[str, float] = {}  # kind -> first rejection of a run of them
+
+    def make_filter(self, x0: np.ndarray, P0: np.ndarray):
+        """The track's filter at (x0, P0) on the estimator's motion model."""
+        raise NotImplementedError
+
+    def handlers(self) -> dict:
+        return {Motion: self.motion}
+
+    # -- life -------------------------------------------------------------------------------
+    def _new_filter(self, x0: np.ndarray, P0: np.ndarray) -> None:
+        self.filter = self.make_filter(x0, P0)
+        self._gated_since = {}  # a new track has no run of rejections
+
+    def _p0(self) -> np.ndarray:
+        sp, sv, sa = self.est.cfg.p0_sigma
+        return np.diag([sp**2, sp**2, sv**2, sv**2, sa**2, sa**2])
+
+    def start(self, t: float) -> None:
+        self._new_filter(np.array([*self.est.cfg.start, 0.0, 0.0, 0.0, 0.0]), self._p0())
+
+    def predict(self, dt: float) -> None:
+        try:
+            self.filter.predict(dt)
+        except np.linalg.LinAlgError:
+            self._reset()
+
+    def _reset(self) -> None:
+        """A covariance lost positive definiteness (never seen; rounding can do it): start
+        again at the latest WSN fix, else the SINS."""
+        est = self.est
+        self.rejections["numerical_reset"] += 1
+        p = est.fixes[-1].p if est.fixes else est.sins.p[:2] if est.sins else est.cfg.start
+        v = est.sins.v[:2] if est.sins else (0.0, 0.0)
+        self._new_filter(np.array([*p, *v, 0.0, 0.0]), self._p0())
+
+    def restart(self, device: str, t: float) -> None:
+        self._discontinuity("restart", t)
+
+    def _discontinuity(self, cause: str, t: float) -> None:
+        """Off for ``cause``: start again from the next fix newer than t (counted once per
+        discontinuity, however many causes it has)."""
+        if self.reinit_since is None:
+            self.count_reinit(cause)
+        self.reinit_since = t
+
+    def reinit_at(self, fix: Fix) -> None:
+        """Start again at ``fix``: its position and covariance, at rest but with
+        ``reinit_sigma`` on velocity and acceleration (they are unknown). The track takes no
+        other update from this fix's cycle (the same ranges)."""
+        sv, sa = self.est.cfg.reinit_sigma
+        P0 = np.diag([0.0, 0.0, sv**2, sv**2, sa**2, sa**2])
+        P0[:2, :2] = fix.cov
+        self._new_filter(np.array([*fix.p, 0.0, 0.0, 0.0, 0.0]), P0)
+        self.reinit_since, self._reinit_fix = None, fix
+        self._aided = fix.t
+
+    # -- updates ----------------------------------------------------------------------------
+    def motion(self, m: Motion) -> None:
+        self._update(m.kind, m.z, m.R, m.meas, m.t)
+
+    def _update(self, kind: str, z, R, meas, t: float) -> None:
+        """One gated update; counts the outcome by kind or reason."""
+        est = self.est
+        cfg = est.cfg
+        if est.t - t > cfg.max_lag_s:
+            self.rejections["late"] += 1
+            return
+        if est.t_predicted < est.t:
+            est.sync()
+        f = self.filter
+        try:
+            inn = f.update(z, R, meas, chi2_gate(meas.dim, cfg.gate_probability))
+            if not inn.accepted:
+                gated_for = t - self._gated_since.setdefault(kind, t)
+                if gated_for > cfg.gate_reopen_s and kind not in POSITION_KINDS:
+                    # the acceleration gated out for so long: the track's acceleration is off
+                    self.rejections["gate_reopened"] += 1
+                    f.update(z, R, meas)
+                else:
+                    self.rejections["gate"] += 1
+                    if gated_for > cfg.gate_reopen_s:
+                        # every position update gated out for so long: the track, not the WSN, is off
+                        self._discontinuity("gated", t)
+                    return
+        except np.linalg.LinAlgError:
+            self._reset()
+            return
+        if self._gated_since:
+            self._gated_since.pop(kind, None)
+        if kind in POSITION_KINDS:
+            self._aided = t
+        self.updates[kind] += 1
+
+    # -- output -----------------------------------------------------------------------------
+    def estimate(self, b: float, yaw: float):
+        est = self.est
+        x, P = est.model.propagate(self.filter.x, self.filter.P, b - est.t_predicted)
+        stale = self.pending or est.stale(b, self._aided)  # waiting: off
+        return estimate(b, self.name, x[:2], x[2:4], yaw, P[:4, :4], stale)
+
+
+class TightTrack(FusionTrack):
+    """Tightly coupled: measures the ranges themselves, each cycle's differences to the
+    reference anchor (``tight = "tdoa"``) or each range at its own time (``"toa"``)."""
+
+    def handlers(self) -> dict:
+        return {**super().handlers(), Range: self.range, Tdoa: self.tdoa}
+
+    def range(self, m: Range) -> None:
+        self._update("range", m.z, m.R, m.meas, m.t)
+
+    def tdoa(self, m: Tdoa) -> None:
+        if m.fix is not None and m.fix is self._reinit_fix:
+            return
+        self.rejections["implausible"] += m.implausible
+        if m.meas is None:
+            self.rejections["too_few"] += 1
+            return
+        self._update("tdoa", m.z, m.R, m.meas, m.t)

@@ -1,0 +1,49 @@
+"""``sins``: the pure strapdown track (host.sins): coarse alignment on the stationary start,
+then mechanization at the IMU rate (000 eqs. 1-5). The estimator runs the strapdown (the
+fusion tracks use it too); this track reports it.
+
+Covariance: the initial one (``p0_sigma``) plus the growth that the accelerometer's
+velocity random walk alone causes (a lower bound: tilt and heading errors add to it).
+Extrapolated: no IMU sample for ``extrapolated_after_s``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from common.schema import key, positive
+
+from .base import Track, estimate
+
+
+@dataclass(frozen=True)
+class SinsSettings:
+    vrw_m_s_rt_hr: float = key(2.0, "m/s/sqrt(h)", "accelerometer velocity random walk "
+                               "(ADIS16350): the track's covariance", positive(hi=1000))
+
+
+class SinsTrack(Track):
+    name = "sins"
+    Settings = SinsSettings
+    uses_strapdown = True
+    aided = False
+
+    def restart(self, device: str, t: float) -> None:
+        if device == "imu":
+            self.count_reinit("restart")
+
+    def estimate(self, b: float, yaw: float):
+        est = self.est
+        sp, sv, _ = est.cfg.p0_sigma
+        pp, pv, vv = float(sp) ** 2, 0.0, float(sv) ** 2
+        if est.sins is None:
+            p, v = est.origin, (0.0, 0.0)
+        else:
+            dt = b - est.t_imu
+            v = est.sins.v[:2]
+            p = est.sins.p[:2] + v * dt
+            # velocity random walk q per axis: P_pp = q T^3/3, P_pv = q T^2/2, P_vv = q T
+            T = b - est.t_aligned
+            q = (self.settings.vrw_m_s_rt_hr / 60.0) ** 2
+            pp, pv, vv = pp + q * (T**3 / 3), pv + q * (T**2 / 2), vv + q * T
+        cov = [pp, 0.0, pv, 0.0, 0.0, pp, 0.0, pv, pv, 0.0, vv, 0.0, 0.0, pv, 0.0, vv]  # (x, y) alike
+        return estimate(b, self.name, p, v, yaw, cov, est.stale(b, est.t_imu))
