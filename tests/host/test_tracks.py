@@ -12,10 +12,12 @@ import pytest
 
 from host import config as host_config
 from host import tracks
-from host.bench import synthetic_chunks, write_host_recording
+from host.bench import write_host_recording
 from host.output import estimate_line
 from host.replay import replay
 from protocols.recording import Recording
+
+from . import lab_bytes
 
 OFFICE = host_config.load("office")
 
@@ -89,7 +91,7 @@ def test_a_registered_track_runs_in_replay_with_its_own_config_section(registere
     filters = host_config.parse_filters("wsn,toy,kf")
     assert filters == ("wsn", "kf", "toy")  # registered tracks follow the built-in ones
     rec = write_host_recording(tmp_path / "rec", config, filters,
-                               synthetic_chunks(config, 6.0, seed=3))
+                               lab_bytes.office(6.0, seed=3))
     got = lines(rec)  # the recorded config, with its [filters.toy], read back
     assert got["toy"], "the toy track emitted nothing"
     wsn = {e["t"]: e for e in got["wsn"]}
@@ -118,7 +120,7 @@ def test_an_entry_point_track_runs_in_replay(tmp_path, monkeypatch):
     (dist / "entry_points.txt").write_text(f"[{tracks.GROUP}]\ntoy_ep = navtwin_toy_ep:Toy\n")
     assert "toy_ep" in tracks.names()
     rec = write_host_recording(tmp_path / "rec", OFFICE, ("kf",),
-                               synthetic_chunks(OFFICE, 4.0, seed=5))
+                               lab_bytes.office(4.0, seed=5))
     got = lines(rec, filters=host_config.parse_filters("kf,toy_ep"))
     assert set(got) == {"kf", "toy_ep"} and got["toy_ep"]
 
