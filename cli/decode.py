@@ -1,4 +1,4 @@
-"""``navtwin decode``: the arguments of :func:`protocols.decode.decode`, and its records as
+"""``navtwin decode``: the arguments of :func:`navtwin.protocols.decode.decode`, and its records as
 JSON lines."""
 from __future__ import annotations
 
@@ -36,8 +36,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from protocols.decode import decode
-    from protocols.recording import RecordingError
+    from navtwin.protocols.decode import decode
+    from navtwin.protocols.recording import RecordingError
 
     stop = threading.Event()
     try:

@@ -8,7 +8,7 @@ import sys
 import threading
 from pathlib import Path
 
-from common.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
+from navtwin.common.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
 
 from .main import UsageError, number, stop_on_signals
 
@@ -52,7 +52,7 @@ def register(sub) -> None:
 
 
 def _speed(text: str) -> float | None:
-    from emulator.runner import RunError, parse_speed
+    from navtwin.emulator.runner import RunError, parse_speed
 
     try:
         return parse_speed(text)
@@ -76,9 +76,9 @@ def _check_record_dir(path: str, overwrite: bool) -> None:
 
 
 def run_emulate(args) -> int:
-    from emulator.pty import LinkDirError
-    from emulator.runner import Emulation, RunError
-    from emulator.scenario import ScenarioError, load_scenario
+    from navtwin.emulator.pty import LinkDirError
+    from navtwin.emulator.runner import Emulation, RunError
+    from navtwin.emulator.scenario import ScenarioError, load_scenario
 
     try:
         if args.record is not None:

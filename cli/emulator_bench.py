@@ -1,4 +1,4 @@
-"""``python -m cli.emulator_bench``: the emulator's benchmarks (:mod:`emulator.bench`) with
+"""``python -m navtwin.cli.emulator_bench``: the emulator's benchmarks (:mod:`navtwin.emulator.bench`) with
 their own settings, one JSON object on stdout."""
 from __future__ import annotations
 
@@ -6,13 +6,13 @@ import argparse
 import json
 import sys
 
-from emulator import bench
+from navtwin.emulator import bench
 
 from .main import Parser, number
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = Parser(prog="python -m cli.emulator_bench", description=bench.__doc__,
+    p = Parser(prog="python -m navtwin.cli.emulator_bench", description=bench.__doc__,
                formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="what", required=True, parser_class=Parser)
     repeat = number(1, 1000, integer=True)

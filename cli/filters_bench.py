@@ -1,15 +1,15 @@
-"""``python -m cli.filters_bench``: microseconds per step of each filter
-(:mod:`host.bench_filters`), as a table or one JSON object."""
+"""``python -m navtwin.cli.filters_bench``: microseconds per step of each filter
+(:mod:`navtwin.host.bench_filters`), as a table or one JSON object."""
 from __future__ import annotations
 
 import argparse
 import json
 
-from host import bench_filters
+from navtwin.host import bench_filters
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m cli.filters_bench", description=bench_filters.__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m navtwin.cli.filters_bench", description=bench_filters.__doc__.splitlines()[0])
     p.add_argument("--steps", type=int, default=2000, help="steps per timing run (default 2000)")
     p.add_argument("--json", action="store_true", help="one JSON object instead of a table")
     args = p.parse_args(argv)

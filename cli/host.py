@@ -1,17 +1,17 @@
-"""``navtwin host``: the arguments of :class:`host.service.Service`; and the options it shares
-with ``navtwin replay`` (:mod:`cli.replay`): config, filters and the estimate output."""
+"""``navtwin host``: the arguments of :class:`navtwin.host.service.Service`; and the options it shares
+with ``navtwin replay`` (:mod:`navtwin.cli.replay`): config, filters and the estimate output."""
 from __future__ import annotations
 
 import argparse
 import sys
 import threading
 
-from common.limits import MAX_DURATION_S, span
-from host import config as host_config
-from host import tracks
-from host.config import ConfigError
-from host.output import KEYS, open_output
-from protocols.recording import write_failure
+from navtwin.common.limits import MAX_DURATION_S, span
+from navtwin.host import config as host_config
+from navtwin.host import tracks
+from navtwin.host.config import ConfigError
+from navtwin.host.output import KEYS, open_output
+from navtwin.protocols.recording import write_failure
 
 from .main import BAUD_HELP, UsageError, baud, number, stop_on_signals
 
@@ -102,8 +102,8 @@ def close_out(out) -> str | None:
 
 
 def run(args) -> int:
-    from host.pipeline import INPUTS
-    from host.service import OutputError, Service, StartError
+    from navtwin.host.pipeline import INPUTS
+    from navtwin.host.service import OutputError, Service, StartError
 
     ports = {p: getattr(args, p) for p in INPUTS if getattr(args, p)}
     if not ports:

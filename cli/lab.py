@@ -1,4 +1,4 @@
-"""``navtwin lab``: the arguments of :func:`lab.orchestrator.run_lab`, and its report as a table."""
+"""``navtwin lab``: the arguments of :func:`navtwin.lab.orchestrator.run_lab`, and its report as a table."""
 from __future__ import annotations
 
 import argparse
@@ -37,8 +37,8 @@ def _filter_list(text: str) -> str:
 
 
 def run(args) -> int:
-    from lab import evaluate
-    from lab.orchestrator import LabError, run_lab
+    from navtwin.lab import evaluate
+    from navtwin.lab.orchestrator import LabError, run_lab
 
     stop = threading.Event()
     try:

@@ -1,4 +1,4 @@
-"""``python -m cli.lab_bench``: the lab's benchmarks (:mod:`lab.bench`) with their own
+"""``python -m navtwin.cli.lab_bench``: the lab's benchmarks (:mod:`navtwin.lab.bench`) with their own
 settings, one JSON object on stdout."""
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import argparse
 import json
 import sys
 
-from host import config as host_config
-from host import tracks
-from host.bench import bench_replay
-from lab import bench
-from lab.bench import in_memory, latency, office_replay
+from navtwin.host import config as host_config
+from navtwin.host import tracks
+from navtwin.host.bench import bench_replay
+from navtwin.lab import bench
+from navtwin.lab.bench import in_memory, latency, office_replay
 
 from .main import Parser, number
 
@@ -23,7 +23,7 @@ def _filters(text: str) -> tuple[str, ...]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = Parser(prog="python -m cli.lab_bench", description=bench.__doc__,
+    p = Parser(prog="python -m navtwin.cli.lab_bench", description=bench.__doc__,
                formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="what", required=True, parser_class=Parser)
     filters = {"type": _filters, "default": tracks.BUILT_IN,
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     elif args.what == "in-memory":
         result = in_memory(args.scenario, args.seeds)
     else:
-        from lab.soak import soak
+        from navtwin.lab.soak import soak
 
         result = soak(args.seconds, directory=args.dir,
                       progress=lambda m: print(m, file=sys.stderr, flush=True))

@@ -15,9 +15,9 @@ import threading
 from contextlib import contextmanager
 from importlib.metadata import entry_points
 
-from common.limits import number_problem, span
-from protocols import __version__
-from protocols.serial import BAUDS
+from navtwin.common.limits import number_problem, span
+from navtwin.protocols import __version__
+from navtwin.protocols.serial import BAUDS
 
 
 class UsageError(Exception):

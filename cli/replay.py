@@ -1,13 +1,13 @@
-"""``navtwin replay``: the arguments of :func:`host.replay.replay`, its estimate lines, and
+"""``navtwin replay``: the arguments of :func:`navtwin.host.replay.replay`, its estimate lines, and
 its progress and summary lines on stderr."""
 from __future__ import annotations
 
 import sys
 import time
 
-from host.config import ConfigError
-from host.output import estimate_line, info_line
-from protocols.recording import Recording, RecordingError, write_failure
+from navtwin.host.config import ConfigError
+from navtwin.host.output import estimate_line, info_line
+from navtwin.protocols.recording import Recording, RecordingError, write_failure
 
 from .host import close_out, common_options, config_and_filters, open_out
 from .main import UsageError
@@ -35,7 +35,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from host.replay import replay
+    from navtwin.host.replay import replay
 
     cfg, filters = config_and_filters(args, default_config=False)
     try:

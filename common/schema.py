@@ -20,7 +20,7 @@ import typing
 from dataclasses import MISSING, dataclass
 from typing import Any, Callable
 
-from common.limits import show as _num, span
+from navtwin.common.limits import show as _num, span
 
 
 class Invalid(ValueError):

@@ -2,7 +2,7 @@
 
 ::
 
-    from emulator.api import emulate
+    from navtwin.emulator.api import emulate
 
     with emulate("office", seed=1, speed="realtime", duration=30) as lab:
         ser = serial.Serial(lab.ports["xbee"], 115200)   # the stable link to the coordinator
@@ -113,7 +113,7 @@ def command(scenario: str, *, seed: int | None = None, speed: str | float = "rea
             duration: float | None = None, link_dir: str | os.PathLike | None = None,
             record: str | os.PathLike | None = None, overwrite: bool = False) -> list[str]:
     """The ``navtwin emulate`` command line for these settings (run with this Python)."""
-    args = [sys.executable, "-m", "cli", "emulate", "--scenario", str(scenario), "--speed", str(speed)]
+    args = [sys.executable, "-m", "navtwin", "emulate", "--scenario", str(scenario), "--speed", str(speed)]
     for flag, value in (("--seed", seed), ("--duration", duration), ("--link-dir", link_dir),
                         ("--record", record)):
         if value is not None:

@@ -1,6 +1,6 @@
 """Benchmarks of the emulator runtime (not tests: they measure, they do not assert).
 
-``python -m cli.emulator_bench jitter --seconds 60``
+``python -m navtwin.cli.emulator_bench jitter --seconds 60``
     starts ``navtwin emulate --speed realtime`` (as a subprocess, like a user would), reads
     the ``sins`` port with pyserial and reports how regular the SINS frames arrive: p50, p99
     and max of |period - nominal| (nominal = 10 ms of the board's clock, from the scenario's
@@ -10,10 +10,10 @@
     which separates the emulator's jitter from the reader's wake-up latency; and, as the peer
     in the same run, the same reader measure on a bare PTY pair written on an exact schedule
     (``bare_pty``): the floor of the kernel's PTY path on this machine.
-``python -m cli.emulator_bench speed [--scenario office]``
+``python -m navtwin.cli.emulator_bench speed [--scenario office]``
     generates the whole scenario in virtual time (``--speed max``, no PTYs, no recording)
     and reports how many times faster than real time it ran.
-``python -m cli.emulator_bench digi-open [--repeat 10]``
+``python -m navtwin.cli.emulator_bench digi-open [--repeat 10]``
     times digi-xbee's ``XBeeDevice(port, 115200).open()`` on the coordinator's port.
 
 Both print one JSON object.
@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from protocols.recording import Recording
-from protocols.stream import Frame, sins_decoder
+from navtwin.protocols.recording import Recording
+from navtwin.protocols.stream import Frame, sins_decoder
 
-from protocols.serial import wire_ns
+from navtwin.protocols.serial import wire_ns
 
 
 def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = None) -> dict:

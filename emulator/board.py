@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from protocols.sins import FRAME_SIZE, build_sample
-from protocols.serial import char_ns
+from navtwin.protocols.sins import FRAME_SIZE, build_sample
+from navtwin.protocols.serial import char_ns
 
 from .clock import Clock
 

@@ -59,9 +59,9 @@ from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
-from protocols import xbee
-from protocols.stream import Frame, XBeeDecoder
-from protocols.xbee import AtStatus, DeliveryStatus, FrameType, ModemStatus
+from navtwin.protocols import xbee
+from navtwin.protocols.stream import Frame, XBeeDecoder
+from navtwin.protocols.xbee import AtStatus, DeliveryStatus, FrameType, ModemStatus
 
 MS = 1_000_000
 RESPONSE_DELAY_NS = 3 * MS

@@ -31,8 +31,8 @@ import math
 import numpy as np
 from scipy.signal import lfilter, lfilter_zi
 
-from common.earth import EARTH_RATE
-from protocols import adis16350 as adis
+from navtwin.common.earth import EARTH_RATE
+from navtwin.protocols import adis16350 as adis
 
 from .clock import Clock
 

@@ -39,8 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocols.nanoloc import FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT, build_report
-from protocols.serial import char_ns
+from navtwin.protocols.nanoloc import FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT, build_report
+from navtwin.protocols.serial import char_ns
 
 from .clock import Clock, serial_queue
 from .rng import stream

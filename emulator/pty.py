@@ -21,7 +21,7 @@ Line discipline of the emulated cable (peers-and-pty-facts.md section 5):
 
 :class:`LinkDir` is the directory of stable symlinks (``sins``, ``xbee``, ``nanoloc``) to
 the ``/dev/pts/N`` paths: created 0700, refused when owned by another user or writable by
-group or others, locked (``flock`` on :data:`protocols.linkdir.LOCK`, a regular file of
+group or others, locked (``flock`` on :data:`navtwin.protocols.linkdir.LOCK`, a regular file of
 ours opened without following a symlink) while an emulator uses it. Once it holds the lock
 it removes the links a dead run left (symlinks named like a port pointing into
 ``/dev/pts/``), so while the lock is held the links are absent or this run's: the host
@@ -40,8 +40,8 @@ import tty
 from collections.abc import Iterable
 from pathlib import Path
 
-from protocols.linkdir import LOCK
-from protocols.ports import DEFAULT_BAUD
+from navtwin.protocols.linkdir import LOCK
+from navtwin.protocols.ports import DEFAULT_BAUD
 
 PTS = "/dev/pts/"  # where every PTY slave an emulator links to lives
 LOCK_TRIES = 20  # a host's probe holds the lock shared for microseconds: retry ...

@@ -4,8 +4,8 @@ Fixtures:
 
 ``navtwin_lab``
     a factory: ``lab = navtwin_lab("office", seed=3, duration=20)`` starts ``navtwin emulate``
-    (see :func:`emulator.api.emulate` for the keywords) and returns the running
-    :class:`emulator.api.Lab`; every lab the test started is stopped at teardown.
+    (see :func:`navtwin.emulator.api.emulate` for the keywords) and returns the running
+    :class:`navtwin.emulator.api.Lab`; every lab the test started is stopped at teardown.
 ``navtwin_office``, ``navtwin_corridor``, ``navtwin_corridor_outage``
     one running lab of that shipped scenario with the command-line defaults.
 

@@ -42,9 +42,9 @@ import threading
 import time
 from typing import Callable
 
-from common.limits import SPEEDS, span
-from protocols.ports import NAMES as PORT_NAMES
-from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
+from navtwin.common.limits import SPEEDS, span
+from navtwin.protocols.ports import NAMES as PORT_NAMES
+from navtwin.protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
 
 from .coordinator import Coordinator, Remote, identity_registers
 from .faults import acting_on

@@ -22,16 +22,16 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from protocols.adis16350 import GYRO_LSB_DPS
-from protocols.ports import NANOLOC, SINS
-from protocols.xbee import BAUD_CODES, baud_rate
-from common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
+from navtwin.protocols.adis16350 import GYRO_LSB_DPS
+from navtwin.protocols.ports import NANOLOC, SINS
+from navtwin.protocols.xbee import BAUD_CODES, baud_rate
+from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
                               MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS)
 
 from . import trajectory as geometry
 from .faults import Fault
 from .rng import stream
-from common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
+from navtwin.common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
                      non_negative, one_of, positive)
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"

@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import fresnel
 
-from common.schema import Invalid
+from navtwin.common.schema import Invalid
 
 TWO_PI = 2.0 * math.pi
 

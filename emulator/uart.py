@@ -22,7 +22,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Iterable
 
-from protocols.serial import wire_ns
+from navtwin.protocols.serial import wire_ns
 
 END = 1 << 62  # later than any event
 

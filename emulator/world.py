@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from protocols import ports
+from navtwin.protocols import ports
 
 from .board import Board
 from .faults import acting_on

@@ -2,17 +2,17 @@
 
 The emulator times each chunk by when its first byte leaves the device's UART. The lab
 computer has it when its last byte has arrived: ``t_device_ns + wire_ns(size, baud)`` (8N1,
-:func:`protocols.serial.wire_ns`). Across ports the chunks are taken in that order, ties in
+:func:`navtwin.protocols.serial.wire_ns`). Across ports the chunks are taken in that order, ties in
 the order ``xbee``, ``sins``, ``nanoloc`` (then each port's own order), and the stamps are made
 strictly increasing. ``navtwin replay`` of an emulator recording and the in-memory run
-(:func:`lab.run.run_in_memory`) both stamp with :func:`arrivals`, so they give the same lines.
+(:func:`navtwin.lab.run.run_in_memory`) both stamp with :func:`arrivals`, so they give the same lines.
 """
 from __future__ import annotations
 
 import heapq
 from collections.abc import Iterable, Iterator, Mapping
 
-from protocols.serial import wire_ns
+from navtwin.protocols.serial import wire_ns
 
 from .pipeline import INPUTS
 

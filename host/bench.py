@@ -1,4 +1,4 @@
-"""Measurements of the host on bytes it is given (the lab's benchmarks, :mod:`lab.bench`,
+"""Measurements of the host on bytes it is given (the lab's benchmarks, :mod:`navtwin.lab.bench`,
 give it the emulated lab's).
 
 ``bench_latency``: the host service runs in-process on two PTY pairs (coordinator and
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from protocols.recording import Recording, RecordingWriter
+from navtwin.protocols.recording import Recording, RecordingWriter
 
 from .config import HostConfig
 from .output import percentiles_ms
@@ -113,7 +113,7 @@ def bench_replay(directory: str | os.PathLike, filters=None) -> dict:
 
 def benchmarks() -> dict:
     """The host's own benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks);
-    those on the emulated lab's bytes are the lab's (:mod:`lab.bench`)."""
+    those on the emulated lab's bytes are the lab's (:mod:`navtwin.lab.bench`)."""
     def host_filters(quick: bool = False) -> dict:
         """host: microseconds per step of each filter, the strapdown and the estimator"""
         from .bench_filters import measure

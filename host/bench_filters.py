@@ -1,6 +1,6 @@
 """Microseconds per step of each filter, the strapdown and the whole estimator.
 
-    python -m cli.filters_bench [--steps N] [--json]
+    python -m navtwin.cli.filters_bench [--steps N] [--json]
 
 A step is what the estimator does per measurement: predict over the interval, then one
 update. ``sins`` is one strapdown step; ``estimator/imu`` is one 100 Hz IMU sample through

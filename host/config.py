@@ -45,10 +45,10 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
+from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
                            RANGE_BIAS_M, number_problem)
-from protocols.adis16350 import GYRO_LSB_DPS
-from common.schema import REQUIRED, Check, Invalid, between, build, each, key, one_of, rows
+from navtwin.protocols.adis16350 import GYRO_LSB_DPS
+from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, each, key, one_of, rows
 
 from . import tracks
 from .estimator import EstimatorConfig, Tuning
@@ -142,7 +142,7 @@ class HostConfig:
         return None if r is None else int(r, 16)
 
     def estimator_config(self, filters: tuple[str, ...] | None = None) -> EstimatorConfig:
-        """The :class:`host.estimator.EstimatorConfig` for *filters* (default: the config's)."""
+        """The :class:`navtwin.host.estimator.EstimatorConfig` for *filters* (default: the config's)."""
         return EstimatorConfig(
             **{f.name: getattr(self.tuning, f.name) for f in dataclasses.fields(Tuning)},
             anchors=self.anchors, tag_height=self.tag_height, latitude_deg=self.latitude_deg,

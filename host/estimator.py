@@ -50,9 +50,9 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_SCALE
-from common.schema import Check, between, build, each, key, one_of, positive
-from protocols.nanoloc import STATUS_TIMEOUT, is_complete
+from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_SCALE
+from navtwin.common.schema import Check, between, build, each, key, one_of, positive
+from navtwin.protocols.nanoloc import STATUS_TIMEOUT, is_complete
 
 from . import tracks
 from .filters import ACCELERATION, ConstantAcceleration, Linear, Ranges

@@ -28,7 +28,7 @@ KEYS = ("t", "filter", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
 
 
 def estimate_line(e) -> str:
-    """The output line of one :class:`host.estimator.Estimate`."""
+    """The output line of one :class:`navtwin.host.estimator.Estimate`."""
     return json.dumps({"t": float(e.t), "filter": str(e.filter), "x": float(e.x), "y": float(e.y),
                        "vx": float(e.vx), "vy": float(e.vy),
                        "yaw": None if e.yaw is None else float(e.yaw),

@@ -9,14 +9,14 @@ Ports (also the names of a host recording's files):
 
 =========  ==========================================================================
 xbee       the coordinator in API mode: 0x90 packets carry the SINS byte stream
-           (:class:`protocols.stream.XBeeSinsChain`); 0x88 DB answers give link quality,
+           (:class:`navtwin.protocols.stream.XBeeSinsChain`); 0x88 DB answers give link quality,
            0x88 AP answers the coordinator's API mode (a mismatch is an event)
 sins       the SINS board's direct RS-232 line
 nanoloc    the anchors' gateway: one ranging report per exchange
 =========  ==========================================================================
 
 Time. Each SINS sample's host time comes from the board's counter and each range's from
-the anchor network's ``t_us``, both through :class:`host.clock.DeviceClock` (unwrapped,
+the anchor network's ``t_us``, both through :class:`navtwin.host.clock.DeviceClock` (unwrapped,
 aligned to arrival times online, never stepping back). A sample counter seen on both
 ``xbee`` and ``sins`` is one stream: the second copy of a sample is a duplicate. A clock
 that begins a new epoch (its device restarted) is passed on as a ``Restart(t, "imu" |
@@ -45,8 +45,8 @@ import math
 from collections import Counter
 from typing import Any
 
-from protocols import adis16350, nanoloc, sins, xbee
-from protocols.stream import DecodeError, Frame, XBeeSinsChain, nanoloc_decoder, sins_decoder
+from navtwin.protocols import adis16350, nanoloc, sins, xbee
+from navtwin.protocols.stream import DecodeError, Frame, XBeeSinsChain, nanoloc_decoder, sins_decoder
 
 from .clock import DeviceClock, Unwrapper
 from .config import HostConfig

@@ -2,22 +2,22 @@
 
 A host recording (``navtwin host --record DIR``) holds every chunk the live run processed
 with its arrival stamp, and the run's config, filters and API mode in its meta. Feeding the
-chunks in stamp order through a :class:`host.pipeline.Pipeline` built from that meta gives
+chunks in stamp order through a :class:`navtwin.host.pipeline.Pipeline` built from that meta gives
 exactly the live run's estimate lines, byte for byte (the pipeline never reads a clock).
 
 An emulator recording (``navtwin emulate --record DIR``) has device times but no arrival
-times. Arrival is then synthesised by :func:`host.arrival.arrivals`: the time the chunk's
+times. Arrival is then synthesised by :func:`navtwin.host.arrival.arrivals`: the time the chunk's
 last byte leaves the UART (8N1), made strictly increasing across ports. Of the two SINS paths
 the radio (``xbee``) is used when recorded (:func:`emulator_settings`). That is a deterministic
 offline run of the host on the emulated lab; it equals no live run (a live host adds the PTY
-and scheduling delays). The in-memory run (:func:`lab.run.run_in_memory`) uses the same
+and scheduling delays). The in-memory run (:func:`navtwin.lab.run.run_in_memory`) uses the same
 rules without the recording, and gives the same lines.
 """
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping
 
-from protocols.recording import Recording, RecordingError
+from navtwin.protocols.recording import Recording, RecordingError
 
 from . import config as host_config
 from .arrival import arrivals

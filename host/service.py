@@ -5,7 +5,7 @@ or one of the emulator's PTY links, or ``socket://``, ``rfc2217://``, ``spy://``
 owned by a reader thread, which sends ``(port, bytes, read time)`` to one queue. The
 caller's thread takes the chunks in queue order, stamps each with its arrival time
 ``max(read ns - start ns, previous stamp + 1)`` (one counter for all ports, so stamps are
-unique and increasing), records it, and feeds it to the :class:`host.pipeline.Pipeline`.
+unique and increasing), records it, and feeds it to the :class:`navtwin.host.pipeline.Pipeline`.
 The recording therefore holds exactly what was processed, in order: ``navtwin replay``
 gives the same estimates.
 
@@ -23,7 +23,7 @@ readable, on a tty that is not hung up, means another reader took the bytes: it 
 (``contended``) and the port stays open. The pipeline keeps its state meanwhile: only which
 bytes arrive, not how they are processed, depends on it.
 
-An emulator's link (:mod:`protocols.linkdir`) is opened only while the emulator that made it
+An emulator's link (:mod:`navtwin.protocols.linkdir`) is opened only while the emulator that made it
 holds its directory's lock: once it is gone the link's ``/dev/pts/N`` may be another
 program's terminal. The reader then says ``emulator_gone`` once and waits for an emulator to
 take the directory again.
@@ -42,9 +42,9 @@ from typing import Callable, TextIO
 
 import serial
 
-from protocols import __version__
-from protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
-from protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter, write_failure
+from navtwin.protocols import __version__
+from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
+from navtwin.protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter, write_failure
 
 from .config import HostConfig
 from .output import Latency, estimate_line, info_line

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.earth import EARTH_RATE
+from navtwin.common.earth import EARTH_RATE
 
 WGS84_A = 6378137.0  # m
 WGS84_E2 = 6.69437999014e-3

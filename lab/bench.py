@@ -1,17 +1,17 @@
 """Benchmarks that need both sides: the host on the emulated lab's bytes, the in-memory run,
 and the live soak (not tests: they measure, they do not assert).
 
-    python -m cli.lab_bench latency [--seconds 20] [--filters all]
-    python -m cli.lab_bench replay [DIR] [--seconds 60] [--filters all]
-    python -m cli.lab_bench in-memory [--scenario office] [--seeds 3]
-    python -m cli.lab_bench soak [--seconds 600] [--dir DIR]
+    python -m navtwin.cli.lab_bench latency [--seconds 20] [--filters all]
+    python -m navtwin.cli.lab_bench replay [DIR] [--seconds 60] [--filters all]
+    python -m navtwin.cli.lab_bench in-memory [--scenario office] [--seeds 3]
+    python -m navtwin.cli.lab_bench soak [--seconds 600] [--dir DIR]
 
-``latency``: :func:`host.bench.bench_latency` fed the office lab's first --seconds, made in
-memory (:func:`lab.run.lab_chunks`). ``replay``: :func:`host.bench.bench_replay` over DIR (a
+``latency``: :func:`navtwin.host.bench.bench_latency` fed the office lab's first --seconds, made in
+memory (:func:`navtwin.lab.run.lab_chunks`). ``replay``: :func:`navtwin.host.bench.bench_replay` over DIR (a
 host or emulator recording), by default over a host recording of the office lab's first
 --seconds. ``in-memory``: seeds per second of the whole scenario through the host, in memory
-(:func:`lab.run.run_in_memory`) against ``navtwin emulate --speed max --record`` then
-``navtwin replay`` (the disk in between). ``soak``: :func:`lab.soak.soak`. Each prints one
+(:func:`navtwin.lab.run.run_in_memory`) against ``navtwin emulate --speed max --record`` then
+``navtwin replay`` (the disk in between). ``soak``: :func:`navtwin.lab.soak.soak`. Each prints one
 JSON object.
 """
 from __future__ import annotations
@@ -20,12 +20,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from emulator.runner import Emulation
-from emulator.scenario import load_scenario
-from host import tracks
-from host.bench import bench_latency, bench_replay, write_host_recording
-from host.replay import replay
-from protocols.recording import Recording
+from navtwin.emulator.runner import Emulation
+from navtwin.emulator.scenario import load_scenario
+from navtwin.host import tracks
+from navtwin.host.bench import bench_latency, bench_replay, write_host_recording
+from navtwin.host.replay import replay
+from navtwin.protocols.recording import Recording
 
 from .run import lab_chunks, run_in_memory
 

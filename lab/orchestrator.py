@@ -2,7 +2,7 @@
 the host did.
 
 Both sides run as the programs users run: ``navtwin emulate`` (real time, recording) through
-:func:`emulator.api.emulate`, and ``navtwin host`` on its PTYs as its own process, exactly as
+:func:`navtwin.emulator.api.emulate`, and ``navtwin host`` on its PTYs as its own process, exactly as
 it would run on the lab computer's real ports. They share nothing but the ports; the host's
 estimates and the emulator's ``truth.csv`` are files, compared when the scenario ends and
 shown beside paper 000's figures, as a table and a plot.
@@ -28,9 +28,9 @@ import threading
 import time
 from pathlib import Path
 
-from emulator.api import EmulatorError, emulate
-from emulator.scenario import load_scenario
-from host.replay import config_for
+from navtwin.emulator.api import EmulatorError, emulate
+from navtwin.emulator.scenario import load_scenario
+from navtwin.host.replay import config_for
 
 from . import evaluate
 
@@ -85,7 +85,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
     try:
         with emulate(scenario, seed=seed, speed="realtime", duration=duration,
                      link_dir=d / "links", record=d / "emulator") as lab:
-            cmd = [sys.executable, "-m", "cli", "host", "--xbee", lab.ports["xbee"],
+            cmd = [sys.executable, "-m", "navtwin", "host", "--xbee", lab.ports["xbee"],
                    "--nanoloc", lab.ports["nanoloc"], "--config", config,
                    "--record", str(d / "host"), "--out", str(d / "estimates.jsonl")]
             if filters is not None:

@@ -2,14 +2,14 @@
 and no file.
 
 The emulator plays the scenario at ``--speed max`` with no ports; its sink hands over each
-chunk with its device time; :func:`host.arrival.arrivals` stamps it with the time its last
+chunk with its device time; :func:`navtwin.host.arrival.arrivals` stamps it with the time its last
 byte reaches the lab computer, and the host's :class:`~host.pipeline.Pipeline`, built as
-``navtwin replay`` builds it for an emulator recording (:func:`host.replay.emulator_settings`),
+``navtwin replay`` builds it for an emulator recording (:func:`navtwin.host.replay.emulator_settings`),
 turns the chunks into estimates. So the lines equal those of ``navtwin emulate --speed max
 --record DIR`` followed by ``navtwin replay DIR``, without the disk in between::
 
-    from host.output import estimate_line
-    from lab.run import run_in_memory
+    from navtwin.host.output import estimate_line
+    from navtwin.lab.run import run_in_memory
 
     estimates, pipe = run_in_memory("office", seed=1)
     lines = [estimate_line(e) for e in estimates]
@@ -22,11 +22,11 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
-from emulator.runner import Chunk, Emulation
-from emulator.scenario import Scenario, load_scenario
-from host.arrival import arrivals
-from host.pipeline import Pipeline
-from host.replay import drive, emulator_settings
+from navtwin.emulator.runner import Chunk, Emulation
+from navtwin.emulator.scenario import Scenario, load_scenario
+from navtwin.host.arrival import arrivals
+from navtwin.host.pipeline import Pipeline
+from navtwin.host.replay import drive, emulator_settings
 
 
 def _scenario(scenario: str | Path | Scenario) -> Scenario:
@@ -36,7 +36,7 @@ def _scenario(scenario: str | Path | Scenario) -> Scenario:
 def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,
                duration: float | None = None, **overrides) -> tuple[dict, Iterator]:
     """The pipeline's keyword arguments for the scenario's lab (``config``, ``filters``,
-    ``inputs``, ``escaped``; *overrides* as for :func:`host.replay.emulator_settings`) and
+    ``inputs``, ``escaped``; *overrides* as for :func:`navtwin.host.replay.emulator_settings`) and
     the lab computer's ``(port, bytes, arrival ns)`` in processing order."""
     sc = _scenario(scenario)
     kw = emulator_settings(sc.name, {p: dict(v) for p, v in sc.ports.items()}, **overrides)

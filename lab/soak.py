@@ -1,6 +1,6 @@
 """The live soak: the lab for many minutes with the misuse of ordinary days, measured.
 
-``python -m cli.lab_bench soak --seconds 600`` (or ``navtwin bench lab-soak``) runs
+``python -m navtwin.cli.lab_bench soak --seconds 600`` (or ``navtwin bench lab-soak``) runs
 ``navtwin emulate`` in real time on a long office scenario (the loop driven again and again)
 and ``navtwin host`` on its PTYs, each its own process as users run them, and meanwhile:
 
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.api import Lab, command
+from navtwin.emulator.api import Lab, command
 
 from . import evaluate
 
@@ -136,7 +136,7 @@ def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
     first, first_ready = start_emulator("emulator-1")
     log = open(d / "host.log", "wb")
     host = subprocess.Popen(
-        [sys.executable, "-m", "cli", "host", "--xbee", first.ports["xbee"],
+        [sys.executable, "-m", "navtwin", "host", "--xbee", first.ports["xbee"],
          "--nanoloc", first.ports["nanoloc"], "--config", "office", "--status-period", "1",
          "--out", str(d / "estimates.jsonl")],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log)

@@ -173,7 +173,7 @@ class Decoder:
     def _accept(self, offset: int, raw: bytes, ftype: int, parser, data, start: int,
                 size: int) -> None:
         """An intact frame of *ftype* whose body is ``data[start:start + size]``: parsed by
-        *parser* (a :func:`protocols.fast.parser_for` pair), kept raw when the type is not
+        *parser* (a :func:`navtwin.protocols.fast.parser_for` pair), kept raw when the type is not
         declared, malformed when the body does not fit its layout."""
         if parser is None:
             self._frame(Frame(self.format, offset, raw, ftype,

@@ -27,11 +27,11 @@ PATH = Path(__file__).resolve().parent.parent / "fixtures" / "reference" / "esti
 
 def estimate_lines(scenario: str, seed: int) -> list[str]:
     """``navtwin emulate --speed max --record DIR`` then ``navtwin replay DIR``, in process."""
-    from emulator.runner import Emulation
-    from emulator.scenario import load_scenario
-    from host.output import estimate_line
-    from host.replay import replay
-    from protocols.recording import Recording
+    from navtwin.emulator.runner import Emulation
+    from navtwin.emulator.scenario import load_scenario
+    from navtwin.host.output import estimate_line
+    from navtwin.host.replay import replay
+    from navtwin.protocols.recording import Recording
 
     with tempfile.TemporaryDirectory(prefix="navtwin-ref-") as tmp:
         rec = Path(tmp) / "rec"

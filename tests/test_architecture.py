@@ -9,6 +9,9 @@ are the same package.
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -25,7 +28,11 @@ ALLOWED = {
     "host": {"protocols", "common"},
     "lab": {"protocols", "common", "emulator", "host"},
     "cli": {"protocols", "common", "emulator", "host", "lab"},
+    # the namespace itself: its version, and ``python -m navtwin`` (navtwin/__main__.py)
+    "navtwin": {"protocols", "cli"},
 }
+#: ``python -m navtwin`` is the command line's entry: the one module outside cli that runs it.
+CLI_ENTRY = ROOT / "navtwin" / "__main__.py"
 
 
 def packages() -> list[str]:
@@ -89,7 +96,7 @@ def test_imports_follow_the_layers(package):
 def test_nothing_but_cli_imports_cli():
     ours = set(packages())
     found = [f"{path.relative_to(ROOT)}:{line}" for package in ours - {"cli"}
-             for path, module in modules(package)
+             for path, module in modules(package) if path != CLI_ENTRY
              for line, target in imported_packages(path.read_text(), module, ours)
              if target == "cli"]
     assert found == []
@@ -122,3 +129,33 @@ def test_argument_parsing_lives_in_cli():
 def test_imports_are_resolved_however_written(source, module, expected):
     ours = {"protocols", "common", "emulator", "host", "lab", "cli"}
     assert [p for _, p in imported_packages(source, module, ours)] == expected
+
+
+def test_the_build_maps_every_package_folder_into_the_namespace():
+    """pyproject's package-dir and packages cover every folder with an __init__.py."""
+    tool = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    folder_of = {name: folder for name, folder in tool["package-dir"].items()}
+    want = set()
+    for name, folder in folder_of.items():
+        for init in (ROOT / folder).rglob("__init__.py"):
+            rel = init.parent.relative_to(ROOT / folder).parts
+            want.add(".".join((name, *rel)))
+    assert set(tool["packages"]) == want
+    assert set(folder_of) == {NAMESPACE, *(f"{NAMESPACE}.{p}" for p in packages() if p != NAMESPACE)}
+
+
+def test_a_user_package_named_host_imports_beside_navtwin(tmp_path):
+    """A lab's own code called host (or protocols, lab, cli) does not collide with navtwin."""
+    for name in ("host", "protocols", "lab", "cli"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "__init__.py").write_text(f"WHO = 'user {name}'\n")
+    code = ("import cli, host, lab, protocols\n"
+            "import navtwin.host.config, navtwin.protocols.xbee, navtwin.lab.evaluate, navtwin.cli.main\n"
+            "assert [m.WHO for m in (host, protocols, lab, cli)] == "
+            "['user host', 'user protocols', 'user lab', 'user cli']\n"
+            "assert navtwin.host.config.load('office').anchors\n"
+            "print(navtwin.host.config.__name__)")
+    res = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "navtwin.host.config"

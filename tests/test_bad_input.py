@@ -239,7 +239,7 @@ def _env(cwd: Path) -> dict[str, str]:
 
 
 def navtwin(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cli", *argv], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "navtwin", *argv], cwd=cwd,
                           env={**os.environ, **_env(cwd)}, stdin=subprocess.DEVNULL,
                           capture_output=True, text=True, timeout=120)
 
@@ -248,9 +248,9 @@ def navtwin(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
 #: (its own process group, stdin /dev/null), as ``navtwin`` would; prints {name: exit status}.
 DRIVER = r"""
 import json, os, signal, sys, tempfile, time, traceback
-from cli.main import build_parser, main
+from navtwin.cli.main import build_parser, main
 build_parser()  # every command's module imported before the forks, and what they load late:
-import emulator.runner, emulator.scenario, host.estimator, host.replay, host.service  # noqa
+import navtwin.emulator.runner, navtwin.emulator.scenario, navtwin.host.estimator, navtwin.host.replay, navtwin.host.service  # noqa
 status = {}
 for name, job in json.load(sys.stdin).items():
     pid = os.fork()
@@ -352,7 +352,7 @@ def test_the_slowest_valid_sample_rate_and_a_late_board_start_run(tmp_path):
 
 
 def test_every_estimator_number_has_a_range_and_docs_state_it():
-    from host import config as host_config
+    from navtwin.host import config as host_config
 
     table = host_config.markdown_table()
     for row in table.splitlines()[2:]:

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 PLUGIN = '''
-from cli.main import UsageError
+from navtwin.cli.main import UsageError
 
 
 def register(sub):
@@ -49,7 +49,7 @@ def navtwin(tmp_path: Path, *argv: str) -> subprocess.CompletedProcess:
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: labext\nVersion: 1.0\n")
     (info / "entry_points.txt").write_text(ENTRY_POINTS)
     path = os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), str(tmp_path)) if p)
-    return subprocess.run([sys.executable, "-m", "cli", *argv], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "navtwin", *argv], capture_output=True, text=True,
                           env={**os.environ, "PYTHONPATH": path}, timeout=60)
 
 

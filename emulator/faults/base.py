@@ -23,9 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 
-from common.limits import MAX_DURATION_S
-from common.schema import REQUIRED, Invalid, key, non_negative, one_of
-from protocols.ports import NAMES as PORT_NAMES
+from navtwin.common.limits import ANCHOR_IDS, MAX_DURATION_S
+from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative, one_of
+from navtwin.protocols.ports import NAMES as PORT_NAMES
 
 ENTRY_POINTS = "navtwin.faults"
 #: what a fault can act on: an anchor's exchanges, the XBee RF link, a port's UART line
@@ -67,6 +67,14 @@ class DeviceFault(Fault):
 
 
 @dataclass(frozen=True, kw_only=True)
+class AnchorFault(DeviceFault):
+    """A fault on one anchor's exchanges."""
+
+    ACTS_ON = "anchor"
+    anchor: int = key(REQUIRED, "", "anchor id", between(*ANCHOR_IDS))
+
+
+@dataclass(frozen=True, kw_only=True)
 class LineFault(Fault):
     """A fault on the bytes of one port's line, between the device and the client."""
 
@@ -82,7 +90,7 @@ def register(cls: type[Fault]) -> type[Fault]:
     """Add kind *cls* to the registry (a class decorator); FaultError if it cannot be."""
     if not (isinstance(cls, type) and issubclass(cls, (DeviceFault, LineFault))):
         raise FaultError(f"{cls!r} is not a DeviceFault or LineFault subclass; derive the kind "
-                         "from emulator.faults.DeviceFault or LineFault")
+                         "from navtwin.emulator.faults.DeviceFault or LineFault")
     if not cls.KIND or cls.ACTS_ON not in MODELS:
         raise FaultError(f"{cls.__name__} needs KIND (its name) and ACTS_ON (one of "
                          f"{', '.join(MODELS)}); set both class attributes")

@@ -3,19 +3,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from common.limits import ANCHOR_IDS
-from common.schema import REQUIRED, between, key, non_negative
+from navtwin.common.schema import key, non_negative
 
-from .base import DeviceFault, register
+from .base import AnchorFault, register
 
 
 @register
 @dataclass(frozen=True, kw_only=True)
-class Nlos(DeviceFault):
+class Nlos(AnchorFault):
     """Non-line-of-sight: a positive range bias (exponential) and a weaker signal."""
     KIND = "nlos"
-    ACTS_ON = "anchor"
-    anchor: int = key(REQUIRED, "", "anchor id", between(*ANCHOR_IDS))
     bias_m: float = key(0.8, "m", "mean of the exponential NLOS range bias",
                         non_negative(hi=100))
     attenuation_db: float = key(6.0, "dB", "extra path loss on the RSSI", non_negative(hi=200))

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # a type only: host.wsn imports this package's linalg
-    from host.wsn import AnchorLayout
+    from navtwin.host.wsn import AnchorLayout
 
 DIM_X = 6
 _I2 = np.eye(2)
@@ -73,7 +73,7 @@ class ConstantAcceleration:
         self._transition = lru_cache(maxsize=32)(self._build)
 
     # ndarray.dot rather than @ here and in the filters: the same BLAS call, a third of
-    # the overhead on these 6x6 operands (python -m cli.filters_bench)
+    # the overhead on these 6x6 operands (python -m navtwin.cli.filters_bench)
     def F(self, dt: float) -> np.ndarray:
         return np.array((1.0, dt, dt * dt / 2)).dot(_F_BASIS).reshape(DIM_X, DIM_X)
 

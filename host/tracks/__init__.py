@@ -19,11 +19,11 @@ from .base import Estimate, NoSettings, Track
 
 #: The built-in tracks in output order: name -> "module:class" (imported when used).
 _BUILT_IN = {
-    "sins": "host.tracks.sins:SinsTrack",
-    "wsn": "host.tracks.wsn:WsnTrack",
-    "kf": "host.tracks.kf:KfTrack",
-    "ekf": "host.tracks.ekf:EkfTrack",
-    "ukf": "host.tracks.ukf:UkfTrack",
+    "sins": "navtwin.host.tracks.sins:SinsTrack",
+    "wsn": "navtwin.host.tracks.wsn:WsnTrack",
+    "kf": "navtwin.host.tracks.kf:KfTrack",
+    "ekf": "navtwin.host.tracks.ekf:EkfTrack",
+    "ukf": "navtwin.host.tracks.ukf:UkfTrack",
 }
 BUILT_IN = tuple(_BUILT_IN)
 GROUP = "navtwin.tracks"

@@ -2,7 +2,7 @@
 
 A track is a class with a ``name`` (its ``filter`` in the output and its section
 ``[filters.<name>]`` in the host config), a ``Settings`` frozen dataclass declared with
-:func:`common.schema.key` (units, docs, checks: the config reads and documents it), and:
+:func:`navtwin.common.schema.key` (units, docs, checks: the config reads and documents it), and:
 
 * :meth:`handlers`: which records (host.measurements: ImuSample, Exchange, ...) and shared
   products (Motion, Range, Tdoa, host.wsn.Fix, FixRefused) it takes, each with the method
@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Callable, ClassVar
 import numpy as np
 
 if TYPE_CHECKING:
-    from host.estimator import Estimator
+    from navtwin.host.estimator import Estimator
 
 
 @dataclass(frozen=True, slots=True)

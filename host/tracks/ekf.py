@@ -3,7 +3,7 @@ update; measures each cycle's range differences to the reference anchor (``tight
 "toa"``: each range at its own time), linearised at the prior."""
 from __future__ import annotations
 
-from host.filters import ExtendedKalmanFilter
+from navtwin.host.filters import ExtendedKalmanFilter
 
 from .fusion import TightTrack
 

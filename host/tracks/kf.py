@@ -2,8 +2,8 @@
 measures the SINS nav-frame acceleration and each WSN position fix (with its lag)."""
 from __future__ import annotations
 
-from host.filters import KalmanFilter, position_fix
-from host.wsn import Fix
+from navtwin.host.filters import KalmanFilter, position_fix
+from navtwin.host.wsn import Fix
 
 from .fusion import FusionTrack
 

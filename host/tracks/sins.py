@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from common.schema import key, positive
+from navtwin.common.schema import key, positive
 
 from .base import Track, estimate
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from common.schema import between, key
-from host.filters import UnscentedKalmanFilter
+from navtwin.common.schema import between, key
+from navtwin.host.filters import UnscentedKalmanFilter
 
 from .fusion import TightTrack
 

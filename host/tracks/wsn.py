@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from host.measurements import FixRefused
-from host.wsn import Fix
+from navtwin.host.measurements import FixRefused
+from navtwin.host.wsn import Fix
 
 from .base import Track, estimate
 

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-NAVTWIN = [sys.executable, "-c", "import sys; from cli.main import main; sys.exit(main())"]
+NAVTWIN = [sys.executable, "-c", "import sys; from navtwin.cli.main import main; sys.exit(main())"]
 DEADLINE = 60.0
 
 

@@ -13,10 +13,10 @@ import time
 import pytest
 import serial
 
-from emulator.api import emulate
-from emulator.scenario import load_scenario
-from protocols.recording import Recording
-from protocols.stream import (DecodeError, Frame, XBeeDecoder, XBeeSinsChain, nanoloc_decoder,
+from navtwin.emulator.api import emulate
+from navtwin.emulator.scenario import load_scenario
+from navtwin.protocols.recording import Recording
+from navtwin.protocols.stream import (DecodeError, Frame, XBeeDecoder, XBeeSinsChain, nanoloc_decoder,
                               sins_decoder)
 
 pytestmark = pytest.mark.pty

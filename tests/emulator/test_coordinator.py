@@ -8,9 +8,9 @@ from digi.xbee.models.mode import OperatingMode
 from digi.xbee.packets.base import XBeeAPIPacket
 from digi.xbee.packets.factory import build_frame
 
-from emulator.coordinator import (ADDRESS_TIMEOUT_NS, MS, RESET_NS, SERIAL_TX_BUFFER, START_NS,
+from navtwin.emulator.coordinator import (ADDRESS_TIMEOUT_NS, MS, RESET_NS, SERIAL_TX_BUFFER, START_NS,
                                   Coordinator, Remote, identity_registers)
-from protocols import xbee
+from navtwin.protocols import xbee
 
 RfPacket = namedtuple("RfPacket", "src64 src16 options data")
 COORD = {"SH": 0x0013A200, "SL": 0x40A1B2C3, "NI": "LAB-COORD", "HV": 0x1E46, "VR": 0x21A7}

@@ -9,14 +9,14 @@ from dataclasses import dataclass
 
 import pytest
 
-from common.schema import between, key
-from emulator.faults import Fault, FaultError, LineFault, register, unregister
-from emulator.runner import Emulation, RunError
-from emulator.scenario import ScenarioError
-from emulator.uart import Line, LineWrapper, Wire
-from protocols.ports import NAMES as PORTS
-from protocols.recording import Recording
-from protocols.serial import wire_ns
+from navtwin.common.schema import between, key
+from navtwin.emulator.faults import Fault, FaultError, LineFault, register, unregister
+from navtwin.emulator.runner import Emulation, RunError
+from navtwin.emulator.scenario import ScenarioError
+from navtwin.emulator.uart import Line, LineWrapper, Wire
+from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.recording import Recording
+from navtwin.protocols.serial import wire_ns
 
 from .world_helpers import variant
 
@@ -161,7 +161,7 @@ def test_register_refuses_a_taken_kind_and_a_class_that_is_no_kind():
 def test_a_kind_from_an_installed_package_registers_through_its_entry_point(tmp_path, root):
     (tmp_path / "toyfaults.py").write_text(textwrap.dedent("""
         from dataclasses import dataclass
-        from emulator.faults import LineFault
+        from navtwin.emulator.faults import LineFault
 
         @dataclass(frozen=True, kw_only=True)
         class Toy(LineFault):
@@ -174,7 +174,7 @@ def test_a_kind_from_an_installed_package_registers_through_its_entry_point(tmp_
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toyfaults\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text("[navtwin.faults]\ntoy = toyfaults:Toy\n")
     out = subprocess.run(
-        [sys.executable, "-c", "from emulator.faults import Fault; print(list(Fault.KINDS))"],
+        [sys.executable, "-c", "from navtwin.emulator.faults import Fault; print(list(Fault.KINDS))"],
         capture_output=True, text=True, timeout=60,
         env={"PYTHONPATH": f"{root}:{tmp_path}", "PATH": ""})
     assert out.returncode == 0, out.stderr

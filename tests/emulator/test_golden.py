@@ -11,9 +11,9 @@ import sys
 
 import pytest
 
-from emulator.runner import Emulation
-from emulator.scenario import SCENARIO_NAMES, load_scenario
-from protocols.recording import Recording
+from navtwin.emulator.runner import Emulation
+from navtwin.emulator.scenario import SCENARIO_NAMES, load_scenario
+from navtwin.protocols.recording import Recording
 
 PORTS = ("sins", "xbee", "nanoloc")
 
@@ -51,7 +51,7 @@ def test_golden_reproduces_in_virtual_time(root, tmp_path, name):
 def test_first_two_seconds_in_real_time_equal_the_golden(root, tmp_path):
     gold = golden(root, "office")
     out = subprocess.run(
-        [sys.executable, "-c", "import sys; from cli.main import main; sys.exit(main())",
+        [sys.executable, "-c", "import sys; from navtwin.cli.main import main; sys.exit(main())",
          "emulate", "--scenario", "office", "--seed", str(gold.meta["seed"]), "--duration", "2",
          "--speed", "realtime", "--link-dir", str(tmp_path / "links"), "--record",
          str(tmp_path / "rt"), "--quiet"], capture_output=True, text=True, timeout=120)

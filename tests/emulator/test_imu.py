@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from common.earth import EARTH_RATE
-from emulator.imu import Adis16350, bartlett_taps
-from emulator.scenario import load_scenario
-from emulator.trajectory import Trajectory
-from protocols import adis16350 as adis
+from navtwin.common.earth import EARTH_RATE
+from navtwin.emulator.imu import Adis16350, bartlett_taps
+from navtwin.emulator.scenario import load_scenario
+from navtwin.emulator.trajectory import Trajectory
+from navtwin.protocols import adis16350 as adis
 
 from ..protocols.vectors import SINS_LEVEL
 from .world_helpers import port_bytes, run, sins, variant

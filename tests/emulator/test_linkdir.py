@@ -8,13 +8,13 @@ import threading
 
 import pytest
 
-from emulator.pty import LinkDir, LinkDirError
-from protocols.ports import NAMES as PORTS
-from protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
+from navtwin.emulator.pty import LinkDir, LinkDirError
+from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
 from .test_cli import one_line_error
 
-NAVTWIN = [sys.executable, "-m", "cli"]
+NAVTWIN = [sys.executable, "-m", "navtwin"]
 DEADLINE_S = 60.0
 
 

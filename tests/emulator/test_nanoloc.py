@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from emulator.scenario import load_scenario
-from protocols.nanoloc import SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT
+from navtwin.emulator.scenario import load_scenario
+from navtwin.protocols.nanoloc import SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT
 
 from ..protocols.vectors import NANOLOC_5M
 from .world_helpers import reports, run, true_distances, variant

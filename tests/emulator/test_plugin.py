@@ -7,8 +7,8 @@ import textwrap
 
 import pytest
 
-from emulator import pytest_plugin
-from emulator.scenario import SCENARIO_NAMES
+from navtwin.emulator import pytest_plugin
+from navtwin.emulator.scenario import SCENARIO_NAMES
 
 USER_TESTS = textwrap.dedent('''
     import json, os, serial

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from emulator.pty import LinkDir, LinkDirError, PtyPort
+from navtwin.emulator.pty import LinkDir, LinkDirError, PtyPort
 
 pytestmark = pytest.mark.pty
 DEADLINE = 10.0

@@ -5,11 +5,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from protocols.serial import char_ns
-from emulator.radio import ACK_NS, NS_PER_RF_BYTE, RF_OVERHEAD_BYTES, Link, Router
-from emulator.rng import stream
-from emulator.faults import LinkLoss
-from emulator.scenario import load_scenario
+from navtwin.protocols.serial import char_ns
+from navtwin.emulator.radio import ACK_NS, NS_PER_RF_BYTE, RF_OVERHEAD_BYTES, Link, Router
+from navtwin.emulator.rng import stream
+from navtwin.emulator.faults import LinkLoss
+from navtwin.emulator.scenario import load_scenario
 
 from .world_helpers import port_bytes, run, variant
 
@@ -156,7 +156,7 @@ def test_link_loss_fault_removes_packets_from_the_world(tmp_path):
 def test_host_traffic_never_changes_the_device_streams():
     sc = load_scenario("office")
     quiet = run(sc, 9)[1]
-    from emulator.world import World
+    from navtwin.emulator.world import World
     busy = World(sc, 9)
     events = []
     for t in range(0, busy.duration_ns, 250_000_000):

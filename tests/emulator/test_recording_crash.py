@@ -8,16 +8,16 @@ import time
 
 import pytest
 
-from emulator import runner
-from emulator.runner import Emulation
-from emulator.scenario import load_scenario
-from cli.main import main
-from protocols.ports import NAMES as PORTS
-from protocols.recording import Recording
+from navtwin.emulator import runner
+from navtwin.emulator.runner import Emulation
+from navtwin.emulator.scenario import load_scenario
+from navtwin.cli.main import main
+from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.recording import Recording
 from ..fs_helpers import fsize_limit
-from protocols.stream import Frame, XBeeDecoder
+from navtwin.protocols.stream import Frame, XBeeDecoder
 
-NAVTWIN = [sys.executable, "-m", "cli"]
+NAVTWIN = [sys.executable, "-m", "navtwin"]
 DEADLINE_S = 120.0
 
 

@@ -4,18 +4,18 @@ import threading
 import numpy as np
 import pytest
 
-from emulator.clock import serial_queue
-from emulator.coordinator import SERIAL_TX_BUFFER
-from emulator.runner import SEC, Emulation, parse_speed
-from emulator.uart import END, Line, Wire
-from protocols.serial import wire_ns
-from emulator.scenario import load_scenario
-from emulator.truth import read_truth_csv
-from emulator.world import World
-from protocols import xbee
-from protocols.ports import NAMES as PORTS
-from protocols.recording import Recording
-from protocols.stream import (DecodeError, Frame, XBeeDecoder, XBeeSinsChain, nanoloc_decoder,
+from navtwin.emulator.clock import serial_queue
+from navtwin.emulator.coordinator import SERIAL_TX_BUFFER
+from navtwin.emulator.runner import SEC, Emulation, parse_speed
+from navtwin.emulator.uart import END, Line, Wire
+from navtwin.protocols.serial import wire_ns
+from navtwin.emulator.scenario import load_scenario
+from navtwin.emulator.truth import read_truth_csv
+from navtwin.emulator.world import World
+from navtwin.protocols import xbee
+from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.recording import Recording
+from navtwin.protocols.stream import (DecodeError, Frame, XBeeDecoder, XBeeSinsChain, nanoloc_decoder,
                               sins_decoder)
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from emulator.scenario import (SCENARIO_NAMES, ScenarioError, load_scenario, parse_scenario,
+from navtwin.emulator.scenario import (SCENARIO_NAMES, ScenarioError, load_scenario, parse_scenario,
                                schema_markdown)
 
 from .world_helpers import variant

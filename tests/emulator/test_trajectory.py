@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.integrate import cumulative_trapezoid
 
-from emulator.scenario import SCENARIO_NAMES, load_scenario
-from emulator.trajectory import Path, Trajectory, wrap
-from emulator.world import World
+from navtwin.emulator.scenario import SCENARIO_NAMES, load_scenario
+from navtwin.emulator.trajectory import Path, Trajectory, wrap
+from navtwin.emulator.world import World
 
 MS = 1_000_000
 

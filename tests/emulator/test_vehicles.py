@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from emulator.runner import Emulation
-from emulator.scenario import ScenarioError, Vehicle, load_scenario
-from emulator.world import World
+from navtwin.emulator.runner import Emulation
+from navtwin.emulator.scenario import ScenarioError, Vehicle, load_scenario
+from navtwin.emulator.world import World
 
 from .world_helpers import variant
 

@@ -3,9 +3,9 @@ and the virtual-time generation speed (a benchmark, not a timed assertion)."""
 import numpy as np
 import pytest
 
-from emulator.scenario import SCENARIO_NAMES, load_scenario
-from emulator.truth import FIELDS, read_truth_csv, write_truth_csv
-from emulator.world import EVENT_ORDER, Event, RfPacket, World
+from navtwin.emulator.scenario import SCENARIO_NAMES, load_scenario
+from navtwin.emulator.truth import FIELDS, read_truth_csv, write_truth_csv
+from navtwin.emulator.world import EVENT_ORDER, Event, RfPacket, World
 
 from .world_helpers import port_bytes
 

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.scenario import load_scenario
-from emulator.world import World
-from protocols import adis16350 as adis
-from protocols.nanoloc import SPEED_OF_LIGHT
-from protocols.stream import Frame, nanoloc_decoder, sins_decoder
+from navtwin.emulator.scenario import load_scenario
+from navtwin.emulator.world import World
+from navtwin.protocols import adis16350 as adis
+from navtwin.protocols.nanoloc import SPEED_OF_LIGHT
+from navtwin.protocols.stream import Frame, nanoloc_decoder, sins_decoder
 
 
 def variant(tmp_path: Path, base: str, toml: str, name: str = "variant") -> object:

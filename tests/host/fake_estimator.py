@@ -6,8 +6,8 @@ mean something without the real filters; ``calls`` lets tests check times and or
 """
 from __future__ import annotations
 
-from host.estimator import Estimate
-from host.measurements import Exchange, ImuSample
+from navtwin.host.estimator import Estimate
+from navtwin.host.measurements import Exchange, ImuSample
 
 
 class RecordingEstimator:

@@ -1,5 +1,5 @@
-"""The lab computer's bytes from the emulated office lab, made in memory (:mod:`lab.run`)."""
-from lab.run import lab_chunks
+"""The lab computer's bytes from the emulated office lab, made in memory (:mod:`navtwin.lab.run`)."""
+from navtwin.lab.run import lab_chunks
 
 #: A sample's 0x90 frame starts on the coordinator's UART at least 5.6 ms (board UART and
 #: radio) after the board sent it, a report about 5 ms after its exchange: a run of N s and

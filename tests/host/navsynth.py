@@ -119,6 +119,6 @@ def exchanges(traj_fn, anchors, *, duration, sigma, rng: np.random.Generator, cy
 
 def record(kind: str, args: tuple):
     """The measurement record of a synthetic call ("imu" | "range" | "restart", its args)."""
-    from host.measurements import Exchange, ImuSample, Restart
+    from navtwin.host.measurements import Exchange, ImuSample, Restart
 
     return {"imu": ImuSample, "range": Exchange, "restart": Restart}[kind](*args)

@@ -1,6 +1,6 @@
 """A hand-made lab for the pipeline's tests: bytes with the properties they check.
 
-The real world (:mod:`lab.run`) is a moving vehicle; these tests need what it never gives:
+The real world (:mod:`navtwin.lab.run`) is a moving vehicle; these tests need what it never gives:
 a vehicle standing at the config's start (level SINS samples, local gravity on z, seeded
 noise of about one LSB) from a board whose crystal runs ``drift_ppm`` fast, each sample in its
 own 0x90 packet (API mode 2 or 1) or on the direct line, and four-timestamp exchanges with the
@@ -9,10 +9,10 @@ anchors in turn every 25 ms, every 50th a timeout, with the sample counter and t
 """
 import math
 
-from emulator.rng import stream
-from host.config import HostConfig
-from protocols import adis16350, nanoloc, sins, xbee
-from protocols.serial import wire_ns
+from navtwin.emulator.rng import stream
+from navtwin.host.config import HostConfig
+from navtwin.protocols import adis16350, nanoloc, sins, xbee
+from navtwin.protocols.serial import wire_ns
 
 ROUTER64 = 0x0013A20040A1B2D4
 ROUTER16 = 0x4F2A

@@ -1,6 +1,6 @@
 """The arrival rule shared by replay of an emulator recording and the in-memory run."""
-from host.arrival import arrivals
-from protocols.serial import wire_ns
+from navtwin.host.arrival import arrivals
+from navtwin.protocols.serial import wire_ns
 
 
 def test_arrival_is_the_last_byte_off_the_uart_in_arrival_order():

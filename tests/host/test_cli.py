@@ -4,10 +4,10 @@ import os
 
 import pytest
 
-from host import config as host_config
-from host.config import ConfigError
-from cli.main import main
-from host.tracks import BUILT_IN
+from navtwin.host import config as host_config
+from navtwin.host.config import ConfigError
+from navtwin.cli.main import main
+from navtwin.host.tracks import BUILT_IN
 
 
 def run_cli(capsys, *argv) -> tuple[int, str, str]:

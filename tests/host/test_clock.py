@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from host.clock import ClockAligner, DeviceClock, Unwrapper
+from navtwin.host.clock import ClockAligner, DeviceClock, Unwrapper
 
 
 def test_unwrap_counts_through_wraps_and_gaps():

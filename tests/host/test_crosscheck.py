@@ -15,9 +15,9 @@ from filterpy.kalman import MerweScaledSigmaPoints
 from filterpy.kalman import UnscentedKalmanFilter as FpUKF
 from pykalman import AdditiveUnscentedKalmanFilter, KalmanFilter as PkKF
 
-from host.filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter,
+from navtwin.host.filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter,
                           Ranges, UnscentedKalmanFilter, position_fix)
-from host.wsn import AnchorLayout, tdoa_covariance
+from navtwin.host.wsn import AnchorLayout, tdoa_covariance
 
 from .navsynth import OFFICE_ANCHORS, ellipse
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from host.tracks import BUILT_IN
+from navtwin.host.tracks import BUILT_IN
 
 from . import lab_bytes
 

@@ -8,9 +8,9 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
-from host.estimator import Estimate, Estimator, EstimatorConfig
-from host.measurements import Exchange, ImuSample, Restart
-from host.tracks import BUILT_IN
+from navtwin.host.estimator import Estimate, Estimator, EstimatorConfig
+from navtwin.host.measurements import Exchange, ImuSample, Restart
+from navtwin.host.tracks import BUILT_IN
 
 from .navsynth import GRAVITY, OFFICE_ANCHORS, ellipse, exchanges, noisy_imu, perfect_imu, record
 

@@ -18,14 +18,14 @@ import math
 import numpy as np
 import pytest
 
-from host.estimator import Estimator, EstimatorConfig
-from protocols import adis16350, nanoloc
-from protocols.stream import nanoloc_decoder, sins_decoder
+from navtwin.host.estimator import Estimator, EstimatorConfig
+from navtwin.protocols import adis16350, nanoloc
+from navtwin.protocols.stream import nanoloc_decoder, sins_decoder
 
 from .navsynth import record
 
-world = pytest.importorskip("emulator.world")
-scenario = pytest.importorskip("emulator.scenario")
+world = pytest.importorskip("navtwin.emulator.world")
+scenario = pytest.importorskip("navtwin.emulator.scenario")
 
 pytestmark = pytest.mark.slow
 

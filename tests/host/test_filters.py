@@ -6,10 +6,10 @@ import pytest
 from scipy.linalg import expm
 from scipy.stats import chi2
 
-from host.filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter, Linear,
+from navtwin.host.filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter, Linear,
                           Ranges, UnscentedKalmanFilter, position_fix)
-from host.filters.linalg import inverse, solve
-from host.wsn import AnchorLayout, tdoa_covariance
+from navtwin.host.filters.linalg import inverse, solve
+from navtwin.host.wsn import AnchorLayout, tdoa_covariance
 
 from .navsynth import OFFICE_ANCHORS
 

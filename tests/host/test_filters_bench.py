@@ -2,7 +2,7 @@
 IMU sample. Run: .venv/bin/python -m pytest tests/host/test_filters_bench.py --benchmark-only"""
 import pytest
 
-from host.bench_filters import cases
+from navtwin.host.bench_filters import cases
 
 CASES = cases()
 

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from host import config as host_config
+from navtwin.host import config as host_config
 from .synthetic import ROUTER64, synthetic_chunks
-from host.pipeline import DB_PERIOD_S, Pipeline
-from protocols import adis16350, nanoloc, sins, xbee
-from protocols.stream import XBeeDecoder
+from navtwin.host.pipeline import DB_PERIOD_S, Pipeline
+from navtwin.protocols import adis16350, nanoloc, sins, xbee
+from navtwin.protocols.stream import XBeeDecoder
 
 from .fake_estimator import RecordingEstimator
 
@@ -332,8 +332,8 @@ def test_a_second_clients_atap1_is_seen_by_an_api2_host():
     """Issue 7 point 9, with the emulator's coordinator in memory: a second client sends ATAP1
     at 3 s (and reads the OK itself); the host learns it from its own periodic AP query and
     says so; the second client's ATAP2 at 12 s puts things right, and the host says that."""
-    from emulator.runner import SEC, Emulation
-    from emulator.scenario import load_scenario
+    from navtwin.emulator.runner import SEC, Emulation
+    from navtwin.emulator.scenario import load_scenario
 
     emu = Emulation(load_scenario("office"), speed=None, ports=False, duration_s=20)
     coord, line = emu.coordinator, emu.lines["xbee"]

@@ -29,10 +29,10 @@ import tty
 import pytest
 import serial
 
-from emulator.api import Lab, command, emulate
-from host import config as host_config
-from host import service
-from host.service import PortReader, Service, StartError
+from navtwin.emulator.api import Lab, command, emulate
+from navtwin.host import config as host_config
+from navtwin.host import service
+from navtwin.host.service import PortReader, Service, StartError
 
 from .test_service import Running, pty_pair, wait_for
 
@@ -215,7 +215,7 @@ class Host:
     """``navtwin host --xbee LINK`` with its status lines collected as they come."""
 
     def __init__(self, link: str) -> None:
-        self.p = subprocess.Popen([sys.executable, "-m", "cli", "host", "--xbee", link,
+        self.p = subprocess.Popen([sys.executable, "-m", "navtwin", "host", "--xbee", link,
                                    "--filters", "kf", "--status-period", "1", "--out",
                                    os.devnull], stderr=subprocess.PIPE, text=True)
         self.lines = Lines()

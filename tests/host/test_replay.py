@@ -7,15 +7,15 @@ from pathlib import Path
 
 import pytest
 
-from host import config as host_config
-from host.bench import write_host_recording
-from host.output import estimate_line
-from host.pipeline import Pipeline
-from host.replay import chunks, replay, settings
-from host.tracks import BUILT_IN
-from protocols import sins
-from protocols.recording import Recording, RecordingWriter
-from protocols.serial import wire_ns
+from navtwin.host import config as host_config
+from navtwin.host.bench import write_host_recording
+from navtwin.host.output import estimate_line
+from navtwin.host.pipeline import Pipeline
+from navtwin.host.replay import chunks, replay, settings
+from navtwin.host.tracks import BUILT_IN
+from navtwin.protocols import sins
+from navtwin.protocols.recording import Recording, RecordingWriter
+from navtwin.protocols.serial import wire_ns
 
 from . import lab_bytes
 from .fake_estimator import RecordingEstimator

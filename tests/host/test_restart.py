@@ -28,14 +28,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from host import replay as host_replay
-from host.tracks import BUILT_IN as FILTER_NAMES
-from host.pipeline import Pipeline
-from protocols.recording import Recording
+from navtwin.host import replay as host_replay
+from navtwin.host.tracks import BUILT_IN as FILTER_NAMES
+from navtwin.host.pipeline import Pipeline
+from navtwin.protocols.recording import Recording
 
-runner = pytest.importorskip("emulator.runner")
-scenario = pytest.importorskip("emulator.scenario")
-evaluate = pytest.importorskip("lab.evaluate")
+runner = pytest.importorskip("navtwin.emulator.runner")
+scenario = pytest.importorskip("navtwin.emulator.scenario")
+evaluate = pytest.importorskip("navtwin.lab.evaluate")
 
 RUN_S = 40.0
 RECOVER_S = 10.0  # after the restart: every track must be back by then
@@ -244,7 +244,7 @@ class Lines:
 
 
 def emulate(link_dir: Path, record_dir: Path | None, duration: float | None) -> tuple[subprocess.Popen, Lines]:
-    args = [sys.executable, "-m", "cli", "emulate", "--scenario", "office", "--speed",
+    args = [sys.executable, "-m", "navtwin", "emulate", "--scenario", "office", "--speed",
             "realtime", "--link-dir", str(link_dir)]
     if record_dir is not None:
         args += ["--record", str(record_dir)]
@@ -260,8 +260,8 @@ def emulate(link_dir: Path, record_dir: Path | None, duration: float | None) -> 
 @pytest.mark.pty
 @pytest.mark.slow
 def test_live_host_recovers_when_the_emulator_is_killed_and_started_again(tmp_path):
-    from host import config as host_config
-    from host.service import Service
+    from navtwin.host import config as host_config
+    from navtwin.host.service import Service
 
     links = tmp_path / "links"
     first, _ = emulate(links, None, None)

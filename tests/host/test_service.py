@@ -14,14 +14,14 @@ import time
 
 import pytest
 
-from host import config as host_config
-from host.output import estimate_line
-from host.replay import replay
-from host.service import TX_PORT, Service
-from host.tracks import BUILT_IN
-from protocols import adis16350, sins
-from protocols.recording import Recording
-from protocols.stream import XBeeDecoder
+from navtwin.host import config as host_config
+from navtwin.host.output import estimate_line
+from navtwin.host.replay import replay
+from navtwin.host.service import TX_PORT, Service
+from navtwin.host.tracks import BUILT_IN
+from navtwin.protocols import adis16350, sins
+from navtwin.protocols.recording import Recording
+from navtwin.protocols.stream import XBeeDecoder
 
 from . import lab_bytes
 from .fake_estimator import RecordingEstimator

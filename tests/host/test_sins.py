@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from host.sins import (Alignment, Strapdown, euler_from_quat, quat_from_euler, quat_from_rotvec,
+from navtwin.host.sins import (Alignment, Strapdown, euler_from_quat, quat_from_euler, quat_from_rotvec,
                        quat_multiply, quat_to_dcm)
 
 from .navsynth import GRAVITY, LATITUDE_DEG, ellipse, noisy_imu, perfect_imu

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from host import config as host_config
-from host import tracks
-from host.bench import write_host_recording
-from host.output import estimate_line
-from host.replay import replay
-from protocols.recording import Recording
+from navtwin.host import config as host_config
+from navtwin.host import tracks
+from navtwin.host.bench import write_host_recording
+from navtwin.host.output import estimate_line
+from navtwin.host.replay import replay
+from navtwin.protocols.recording import Recording
 
 from . import lab_bytes
 
@@ -25,9 +25,9 @@ OFFICE = host_config.load("office")
 TOY = '''
 from dataclasses import dataclass
 
-from common.schema import between, key
-from host.tracks.base import Track, estimate
-from host.wsn import Fix
+from navtwin.common.schema import between, key
+from navtwin.host.tracks.base import Track, estimate
+from navtwin.host.wsn import Fix
 
 
 @dataclass(frozen=True)

@@ -14,12 +14,12 @@ import time
 
 import pytest
 
-from cli.main import main
-from protocols.recording import Recording
+from navtwin.cli.main import main
+from navtwin.protocols.recording import Recording
 from ..fs_helpers import fsize_limit
 from . import lab_bytes
 
-NAVTWIN = [sys.executable, "-m", "cli"]
+NAVTWIN = [sys.executable, "-m", "navtwin"]
 DEADLINE_S = 60.0
 
 
@@ -175,9 +175,9 @@ def test_host_refuses_to_record_through_a_symlink(capsys, tmp_path):
 
 
 def test_replay_of_a_host_killed_with_sigkill(tmp_path):
-    from host.output import estimate_line
-    from host.pipeline import Pipeline
-    from host.replay import chunks, settings
+    from navtwin.host.output import estimate_line
+    from navtwin.host.pipeline import Pipeline
+    from navtwin.host.replay import chunks, settings
 
     d = tmp_path / "rec"
     host = Host(["--record", d, "--status-period", "60"], ["xbee", "nanoloc"])
@@ -278,7 +278,7 @@ def test_replay_of_a_sparse_3_gib_data_file_streams(golden_copy):
     os.truncate(golden_copy / "xbee.bin", 3 << 30)  # the index names its first 47 KB
     # VmHWM, not ru_maxrss: Linux keeps ru_maxrss across exec, so it would count the
     # forking test process's own memory
-    code = ("import re, sys; from cli.main import main; rc = main(sys.argv[1:]); "
+    code = ("import re, sys; from navtwin.cli.main import main; rc = main(sys.argv[1:]); "
             "print(re.search(r'VmHWM:\\s+(\\d+)', open('/proc/self/status').read())[1], "
             "file=sys.stderr); sys.exit(rc)")
     res = subprocess.run([sys.executable, "-c", code, "replay", str(golden_copy), "--out",

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from host.wsn import (AnchorLayout, CycleGrouper, Fix, Solver, tdoa_closed_form, tdoa_covariance, toa_linear)
+from navtwin.host.wsn import (AnchorLayout, CycleGrouper, Fix, Solver, tdoa_closed_form, tdoa_covariance, toa_linear)
 
 from .navsynth import OFFICE_ANCHORS
 

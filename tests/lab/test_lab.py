@@ -10,7 +10,7 @@ pytestmark = [pytest.mark.pty, pytest.mark.slow]
 
 def test_lab_runs_and_reports_against_truth(tmp_path):
     d = tmp_path / "run"
-    p = subprocess.run([sys.executable, "-m", "cli", "lab", "--duration", "16",
+    p = subprocess.run([sys.executable, "-m", "navtwin", "lab", "--duration", "16",
                         "--dir", str(d), "--no-plot"], capture_output=True, timeout=180)
     assert p.returncode == 0, p.stderr.decode()[-2000:]
     report = json.loads((d / "report.json").read_text())
@@ -23,14 +23,14 @@ def test_lab_runs_and_reports_against_truth(tmp_path):
     assert errors["wsn"]["mean"] < 1.5  # bounded: the emulated office is calibrated near 000's 0.64 m
     assert abs(report["time_offset_s"]) < 5  # both clocks are this machine's CLOCK_MONOTONIC
     # the host's own recording replays to its live lines
-    replayed = subprocess.run([sys.executable, "-m", "cli", "replay", str(d / "host")],
+    replayed = subprocess.run([sys.executable, "-m", "navtwin", "replay", str(d / "host")],
                               capture_output=True, timeout=120)
     assert replayed.stdout.decode() == (d / "estimates.jsonl").read_text()
     assert "filter" in p.stdout.decode() and str(d) in p.stdout.decode()
 
 
 def test_lab_reports_a_bad_scenario_in_one_line(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "cli", "lab", "--scenario", "nowhere",
+    p = subprocess.run([sys.executable, "-m", "navtwin", "lab", "--scenario", "nowhere",
                         "--config", "office",
                         "--dir", str(tmp_path / "r")], capture_output=True,
                        timeout=120)

@@ -1,8 +1,8 @@
 """The in-memory run gives exactly what recording the emulator and replaying it gives."""
 import pytest
 
-from host.output import estimate_line
-from lab.run import run_in_memory
+from navtwin.host.output import estimate_line
+from navtwin.lab.run import run_in_memory
 from tests.reference import estimate_lines
 
 
@@ -20,6 +20,6 @@ def test_in_memory_run_takes_the_filters_and_duration_it_is_given():
 
 
 def test_the_lab_registers_its_benchmarks():
-    from lab.bench import benchmarks
+    from navtwin.lab.bench import benchmarks
 
     assert {"host-latency", "host-replay", "lab-in-memory", "lab-soak"} <= set(benchmarks())

@@ -1,7 +1,7 @@
 """hypothesis strategies: valid frames of each format, garbage, chunkings."""
 from hypothesis import strategies as st
 
-from protocols import nanoloc, sins, xbee
+from navtwin.protocols import nanoloc, sins, xbee
 
 u8 = st.integers(0, 0xFF)
 u16 = st.integers(0, 0xFFFF)

@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocols import xbee
-from protocols.bench import digi_frames, pyxbee_frames
-from protocols.stream import Frame, XBeeDecoder
+from navtwin.protocols import xbee
+from navtwin.protocols.bench import digi_frames, pyxbee_frames
+from navtwin.protocols.stream import Frame, XBeeDecoder
 
 pytest.importorskip("digi.xbee")
 from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress  # noqa: E402

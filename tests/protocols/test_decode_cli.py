@@ -10,11 +10,11 @@ import time
 
 import pytest
 
-from protocols import recording, sins, xbee
+from navtwin.protocols import recording, sins, xbee
 
 from .vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP
 
-NAVTWIN = [sys.executable, "-m", "cli"]
+NAVTWIN = [sys.executable, "-m", "navtwin"]
 
 
 def navtwin(*args, stdin=None):

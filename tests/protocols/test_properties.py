@@ -3,9 +3,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from protocols import nanoloc, sins, xbee
-from protocols.fast import plain
-from protocols.stream import GARBAGE, DecodeError, Frame, XBeeDecoder, nanoloc_decoder, sins_decoder
+from navtwin.protocols import nanoloc, sins, xbee
+from navtwin.protocols.fast import plain
+from navtwin.protocols.stream import GARBAGE, DecodeError, Frame, XBeeDecoder, nanoloc_decoder, sins_decoder
 
 from .strategies import FORMATS, chunked, garbage_bytes, u8
 

@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from protocols.recording import Recording, RecordingError, RecordingWriter
+from navtwin.protocols.recording import Recording, RecordingError, RecordingWriter
 
 
 def test_round_trip_and_merge(tmp_path):

@@ -7,7 +7,7 @@ import resource
 
 import pytest
 
-from protocols.recording import (FLUSH_BYTES, META, Recording, RecordingError,
+from navtwin.protocols.recording import (FLUSH_BYTES, META, Recording, RecordingError,
                                  RecordingWriteError, RecordingWriter)
 
 CHUNKS = [(b"abc", 10), (b"defg", 20), (b"hi", 30), (b"jklmn", 40)]

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from protocols import sins, xbee
-from protocols.stream import (BAD_CHECKSUM, BAD_CRC, BAD_ESCAPE, BAD_LENGTH, EVICTED, GARBAGE,
+from navtwin.protocols import sins, xbee
+from navtwin.protocols.stream import (BAD_CHECKSUM, BAD_CRC, BAD_ESCAPE, BAD_LENGTH, EVICTED, GARBAGE,
                               MALFORMED, MAX_SOURCES, TRUNCATED, DecodeError, Frame, XBeeDecoder,
                               XBeeSinsChain, nanoloc_decoder, sins_decoder)
 
@@ -43,7 +43,7 @@ def test_sins_errors_are_counted_and_frames_after_them_recovered():
 
 
 def test_sins_unknown_type_is_skipped_by_len_and_kept_raw():
-    from protocols.crcframe import encode
+    from navtwin.protocols.crcframe import encode
     other = encode(sins.SYNC, 0x7F, b"\x01\x02\x03")
     (f1, f2) = frames(sins_decoder().decode(other + SINS_LEVEL))
     assert (f1.type, f1.known, f1.fields) == (0x7F, False, {"payload": b"\x01\x02\x03"})

@@ -3,11 +3,11 @@ import math
 
 import pytest
 
-from protocols import adis16350 as adis
-from protocols import nanoloc, sins, xbee
-from protocols.crc import crc16
-from protocols.fast import plain
-from protocols.stream import XBeeDecoder, nanoloc_decoder, sins_decoder
+from navtwin.protocols import adis16350 as adis
+from navtwin.protocols import nanoloc, sins, xbee
+from navtwin.protocols.crc import crc16
+from navtwin.protocols.fast import plain
+from navtwin.protocols.stream import XBeeDecoder, nanoloc_decoder, sins_decoder
 
 from .vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP, XBEE_API1, XBEE_API2
 
