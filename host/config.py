@@ -172,11 +172,34 @@ def _plain(obj):
     return obj
 
 
+#: [filters] keys of the first recorded layout that now live in a track's own section.
+_MOVED = {"ukf_alpha": ("ukf", "alpha"), "ukf_beta": ("ukf", "beta"), "ukf_kappa": ("ukf", "kappa"),
+          "vrw_m_s_rt_hr": ("sins", "vrw_m_s_rt_hr")}
+_FLAT_VEHICLE = ("start", "heading_deg", "tag_height", "tag", "router", "gyro_range_dps")
+
+
+def _from_flat(d: dict) -> dict:
+    """The layout host recordings had before the config had sections (navtwin 0.1: one flat
+    table, ``filters`` the enabled list, ``estimator`` the [filters] keys) in today's."""
+    filters: dict = {"enabled": d["filters"]}
+    for k, v in (d.get("estimator") or {}).items():
+        track, name = _MOVED.get(k, (None, k))
+        (filters.setdefault(track, {}) if track else filters)[name] = v
+    site = {new: d[old] for old, new in (("latitude_deg", "latitude_deg"), ("gravity", "local_gravity"))
+            if old in d}
+    out = {"name": d.get("name"), "site": site, "anchors": d.get("anchors"),
+           "vehicle": {k: d[k] for k in _FLAT_VEHICLE if d.get(k) is not None}, "filters": filters}
+    if "hold_s" in d:
+        out["timing"] = {"hold_s": d["hold_s"]}
+    return out
+
+
 def from_dict(d: dict, source: str = "config") -> HostConfig:
-    """Inverse of :meth:`HostConfig.to_dict`, checked like a TOML file."""
+    """Inverse of :meth:`HostConfig.to_dict`, checked like a TOML file; a config recorded in
+    the first layout (navtwin 0.1) is read too, so older host recordings still replay."""
     if not isinstance(d, dict):
         raise ConfigError(f"{source}: must be a table of the config's sections; re-record it")
-    data = dict(d)
+    data = _from_flat(d) if isinstance(d.get("filters"), list) else dict(d)
     name = data.pop("name", source)
     return _parse(data, source, str(name))
 

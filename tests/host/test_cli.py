@@ -1,4 +1,5 @@
 """`navtwin host` / `navtwin replay` arguments and host config files: one-line errors."""
+import json
 import math
 import os
 
@@ -153,3 +154,15 @@ def test_a_good_config_file_is_read(tmp_path):
                                  "[filters]\nenabled = ['ukf']\nalignment_s = 2.5\n"))
     assert cfg.start == (1.0, 2.0) and cfg.tag == 16 and cfg.filters == ("ukf",)
     assert cfg.estimator_config().alignment_s == 2.5 and cfg.anchors[3] == (5.0, 5.0, 0.0)
+
+
+def test_configs_recorded_in_the_first_layout_still_load(root):
+    """Host recordings made before the config had sections hold a flat config
+    (fixtures/host-config-v1: written by navtwin 0.1's HostConfig.to_dict)."""
+    v1 = json.loads((root / "fixtures" / "host-config-v1" / "configs.json").read_text())
+    for name in ("office", "corridor"):
+        assert host_config.from_dict(v1[name]).to_dict() == host_config.load(name).to_dict()
+    tuned = host_config.from_dict(v1["tuned"])
+    assert (tuned.settings["ukf"].alpha, tuned.settings["ukf"].kappa) == (0.5, 0.0)
+    assert tuned.settings["sins"].vrw_m_s_rt_hr == 3.0
+    assert tuned.range_bias_m == {1: 0.3} and tuned.tuning.tight == "toa" and tuned.lab.vehicle.tag == 16
