@@ -67,7 +67,8 @@ class SecondReader(threading.Thread):
         self.links, self.period, self.stop = links, period, stop
         self.opens = {name: 0 for name in links}
         self.taken = {name: 0 for name in links}
-        self.failed = 0
+        self.failed = 0  # opens that failed (the emulator restarting: no link)
+        self.lost_races = 0  # reads that found the bytes taken by the host first
 
     def run(self) -> None:
         import serial
@@ -78,13 +79,20 @@ class SecondReader(threading.Thread):
             name = names[k % len(names)]
             k += 1
             try:
-                with serial.Serial(self.links[name], 115200, timeout=0.1) as ser:
-                    self.opens[name] += 1
-                    end = time.monotonic() + 1.0
-                    while time.monotonic() < end:
-                        self.taken[name] += len(ser.read(4096))
+                ser = serial.Serial(self.links[name], 115200, timeout=0.1)
             except (serial.SerialException, OSError):
-                self.failed += 1  # e.g. the emulator is restarting: the link is not there
+                self.failed += 1
+                continue
+            with ser:
+                self.opens[name] += 1
+                end = time.monotonic() + 1.0
+                while time.monotonic() < end:
+                    try:
+                        self.taken[name] += len(ser.read(4096))
+                    except serial.SerialException:  # "readiness to read but no data"
+                        self.lost_races += 1
+                    except OSError:  # the port went away under the reader
+                        break
 
 
 def _recovery(truth: dict, est: dict, offset: float, t_from: float, threshold: float) -> float | None:
@@ -177,7 +185,7 @@ def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
     return {"benchmark": "lab-soak", "seconds": seconds, "dir": str(d),
             **_memory(rss), **_rates(status, host_t0, kill_mono, second_ready),
             "second_reader": {"opens": reader.opens, "bytes_taken": reader.taken,
-                              "open_failed": reader.failed},
+                              "open_failed": reader.failed, "lost_races": reader.lost_races},
             "events": _events(status),
             "recovery_s": _tracks(d, host_t0, first_ready, kill_mono, second_ready, done)}
 
