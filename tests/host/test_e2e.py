@@ -10,7 +10,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -19,6 +18,7 @@ import pytest
 
 from navtwin.host.tracks import BUILT_IN
 
+from ..lines import Lines
 from . import lab_bytes
 
 pytestmark = [pytest.mark.pty, pytest.mark.slow]
@@ -33,41 +33,17 @@ class Proc:
     def __init__(self, *argv: str) -> None:
         self.p = subprocess.Popen([NAVTWIN, *argv], stdout=subprocess.PIPE,
                                   stderr=subprocess.PIPE, text=True)
-        self.out: list[str] = []
-        self.err: list[str] = []
-        self._threads = [threading.Thread(target=self._pump, args=(s, d), daemon=True)
-                         for s, d in ((self.p.stdout, self.out), (self.p.stderr, self.err))]
-        for t in self._threads:
-            t.start()
+        self.out, self.err = Lines(self.p.stdout), Lines(self.p.stderr)
 
-    @staticmethod
-    def _pump(stream, lines):
-        for line in stream:
-            lines.append(line)
-
-    def wait_line(self, lines: list[str], pred, what: str, timeout: float = DEADLINE_S) -> dict:
-        deadline = time.monotonic() + timeout
-        seen = 0
-        while time.monotonic() < deadline:
-            while seen < len(lines):
-                line = lines[seen]
-                seen += 1
-                try:
-                    obj = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                if pred(obj):
-                    return obj
-            if self.p.poll() is not None and seen == len(lines):
-                self._join()
-                if seen == len(lines):
-                    break
-            time.sleep(0.01)
-        raise AssertionError(f"no {what} within {timeout} s; stderr: {''.join(self.err)[-2000:]}")
+    def wait_line(self, lines: Lines, pred, what: str, timeout: float = DEADLINE_S) -> dict:
+        try:
+            return lines.wait(pred, what, timeout)
+        except AssertionError as e:
+            raise AssertionError(f"{e}; stderr: {self.err.text()[-2000:]}") from None
 
     def _join(self) -> None:
-        for t in self._threads:
-            t.join(5)
+        self.out.join()
+        self.err.join()
 
     def stop(self, sig=signal.SIGINT) -> int:
         """Signal the process (unless *sig* is None: it ends by itself); its exit status."""
@@ -118,7 +94,7 @@ def test_host_process_on_fed_ptys_stops_on_signal_and_replays_byte_for_byte(tmp_
     host.wait_line(host.err, lambda o: o.get("status", {}).get("imu") == 600
                    and o["status"]["reports"] == 240, "a status line counting every frame")
     assert host.stop(signal.SIGTERM) == 0
-    summary = json.loads(host.err[-1])["summary"]
+    summary = json.loads(host.err.lines[-1])["summary"]
     assert summary["counts"]["imu"] == 600 and summary["counts"]["reports"] == 240
     live = _replay_equals_live(tmp_path)
     assert _filters(live) == set(BUILT_IN)
@@ -142,7 +118,7 @@ def test_office_emulator_and_host_live_then_replay(tmp_path):
                   timeout=20 + DEADLINE_S)
     assert emu.stop(None) == 0
     assert host.stop() == 0
-    summary = json.loads(host.err[-1])["summary"]
+    summary = json.loads(host.err.lines[-1])["summary"]
     assert summary["counts"]["imu"] > 1000 and summary["counts"]["reports"] > 400
     live = _replay_equals_live(tmp_path)
     assert _filters(live) == set(BUILT_IN)

@@ -33,6 +33,8 @@ from navtwin.host.tracks import BUILT_IN as FILTER_NAMES
 from navtwin.host.pipeline import Pipeline
 from navtwin.protocols.recording import Recording
 
+from ..lines import Lines
+
 runner = pytest.importorskip("navtwin.emulator.runner")
 scenario = pytest.importorskip("navtwin.emulator.scenario")
 evaluate = pytest.importorskip("navtwin.lab.evaluate")
@@ -204,45 +206,6 @@ def test_corridor_outage_marks_only_tracks_that_lose_their_fixes(tmp_path):
 NAVTWIN_S = 120.0  # deadline of each wait
 
 
-class Lines:
-    """A subprocess's stdout lines, collected by a thread."""
-
-    def __init__(self, proc: subprocess.Popen) -> None:
-        self.proc, self.lines = proc, []
-        self._cond = threading.Condition()
-        threading.Thread(target=self._pump, daemon=True).start()
-
-    def _pump(self) -> None:
-        for line in self.proc.stdout:
-            with self._cond:
-                self.lines.append(line)
-                self._cond.notify_all()
-        with self._cond:
-            self.lines.append(None)  # end of output
-            self._cond.notify_all()
-
-    def wait(self, pred, what: str, timeout: float = NAVTWIN_S) -> dict:
-        deadline = time.monotonic() + timeout
-        seen = 0
-        with self._cond:
-            while True:
-                while seen < len(self.lines):
-                    line = self.lines[seen]
-                    seen += 1
-                    if line is None:
-                        raise AssertionError(f"{what}: the process ended first")
-                    try:
-                        obj = json.loads(line)
-                    except json.JSONDecodeError:
-                        continue
-                    if pred(obj):
-                        return obj
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise AssertionError(f"no {what} within {timeout} s")
-                self._cond.wait(left)
-
-
 def emulate(link_dir: Path, record_dir: Path | None, duration: float | None) -> tuple[subprocess.Popen, Lines]:
     args = [sys.executable, "-m", "navtwin", "emulate", "--scenario", "office", "--speed",
             "realtime", "--link-dir", str(link_dir)]
@@ -252,8 +215,8 @@ def emulate(link_dir: Path, record_dir: Path | None, duration: float | None) -> 
         args += ["--duration", str(duration)]
     proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.DEVNULL, text=True)
-    lines = Lines(proc)
-    lines.wait(lambda o: o.get("ready"), "ready line from the emulator")
+    lines = Lines(proc.stdout)
+    lines.wait(lambda o: o.get("ready"), "ready line from the emulator", NAVTWIN_S)
     return proc, lines
 
 
@@ -295,7 +258,8 @@ def test_live_host_recovers_when_the_emulator_is_killed_and_started_again(tmp_pa
         first.wait(NAVTWIN_S)
         time.sleep(6.0)  # someone notices and starts it again (the EKF diverged after 6 s)
         second, lines = emulate(links, tmp_path / "second", 22.0)
-        done = lines.wait(lambda o: o.get("done"), "done line from the restarted emulator")
+        done = lines.wait(lambda o: o.get("done"), "done line from the restarted emulator",
+                          NAVTWIN_S)
         second.wait(NAVTWIN_S)
     finally:
         for p in (first, second):

@@ -1,0 +1,57 @@
+"""A subprocess's output lines as they come, and waiting for a JSON line with a deadline."""
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+
+class Lines:
+    """The lines of *stream* (a text pipe), collected by a thread; ``lines`` grows as they
+    come (a process's stdout or stderr)."""
+
+    def __init__(self, stream) -> None:
+        self.lines: list[str] = []
+        self.ended = False
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._pump, args=(stream,), daemon=True)
+        self._thread.start()
+
+    def _pump(self, stream) -> None:
+        for line in stream:
+            with self._cond:
+                self.lines.append(line)
+                self._cond.notify_all()
+        with self._cond:
+            self.ended = True
+            self._cond.notify_all()
+
+    def text(self) -> str:
+        return "".join(self.lines)
+
+    def join(self, timeout: float = 5.0) -> None:
+        """Wait until the stream has ended (the process has exited and closed it)."""
+        self._thread.join(timeout)
+
+    def wait(self, pred, what: str, timeout: float) -> dict:
+        """The first JSON line for which *pred* is true; AssertionError at the end of the
+        stream or after *timeout* s."""
+        deadline = time.monotonic() + timeout
+        seen = 0
+        with self._cond:
+            while True:
+                while seen < len(self.lines):
+                    line = self.lines[seen]
+                    seen += 1
+                    try:
+                        obj = json.loads(line)
+                    except json.JSONDecodeError:
+                        continue
+                    if pred(obj):
+                        return obj
+                if self.ended:
+                    raise AssertionError(f"{what}: the stream ended first")
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(f"no {what} within {timeout} s")
+                self._cond.wait(left)
