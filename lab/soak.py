@@ -91,6 +91,7 @@ class SecondReader(threading.Thread):
                         self.taken[name] += len(ser.read(4096))
                     except serial.SerialException:  # "readiness to read but no data"
                         self.lost_races += 1
+                        time.sleep(0.001)  # pyserial returns at once: do not spin a core
                     except OSError:  # the port went away under the reader
                         break
 
