@@ -43,6 +43,14 @@ def load_estimates(lines) -> dict[str, dict[str, np.ndarray]]:
     return {k: dict(zip(("t", "x", "y"), np.array(v, dtype=float).T)) for k, v in by_filter.items()}
 
 
+def error(truth: dict, e: dict, offset_s: float = 0.0) -> np.ndarray:
+    """Horizontal position error (m) of each estimate of one filter (arrays ``t, x, y``)
+    against the truth interpolated at its scenario time ``t + offset_s``."""
+    t = e["t"] + offset_s
+    return np.hypot(e["x"] - np.interp(t, truth["t"], truth["x"]),
+                    e["y"] - np.interp(t, truth["t"], truth["y"]))
+
+
 def position_errors(truth: dict, estimates: dict, offset_s: float = 0.0,
                     skip_s: float = 0.0) -> dict[str, dict[str, float]]:
     """Per filter: mean, max and RMS horizontal position error (m) and the number of estimates,
@@ -54,9 +62,7 @@ def position_errors(truth: dict, estimates: dict, offset_s: float = 0.0,
         keep = (t >= max(t_truth[0], skip_s)) & (t <= t_truth[-1])
         if not keep.any():
             continue
-        dx = e["x"][keep] - np.interp(t[keep], t_truth, truth["x"])
-        dy = e["y"][keep] - np.interp(t[keep], t_truth, truth["y"])
-        err = np.hypot(dx, dy)
+        err = error(truth, e, offset_s)[keep]
         out[name] = {"mean": float(err.mean()), "max": float(err.max()),
                      "rms": float(math.sqrt((err ** 2).mean())), "n": int(keep.sum())}
     return out
@@ -86,8 +92,7 @@ def plot(truth: dict, estimates: dict, path: str | Path, offset_s: float = 0.0,
     for name, e in sorted(estimates.items()):
         ax1.plot(e["x"], e["y"], lw=1, label=name)
         t = e["t"] + offset_s
-        ax2.plot(t, np.hypot(e["x"] - np.interp(t, truth["t"], truth["x"]),
-                             e["y"] - np.interp(t, truth["t"], truth["y"])), lw=1, label=name)
+        ax2.plot(t, error(truth, e, offset_s), lw=1, label=name)
     xs, ys = list(truth["x"]), list(truth["y"])
     if anchors:
         ax, ay = zip(*[(a[0], a[1]) for a in anchors.values()])

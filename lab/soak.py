@@ -100,9 +100,7 @@ def _recovery(truth: dict, est: dict, offset: float, t_from: float, threshold: f
     """Seconds after *t_from* (host time) until the error stays under *threshold* for HOLD_S."""
     t = est["t"]
     keep = (t >= t_from) & (t + offset <= truth["t"][-1])
-    t = t[keep]
-    err = np.hypot(est["x"][keep] - np.interp(t + offset, truth["t"], truth["x"]),
-                   est["y"][keep] - np.interp(t + offset, truth["t"], truth["y"]))
+    t, err = t[keep], evaluate.error(truth, est, offset)[keep]
     good_since = None
     for ti, e in zip(t, err):
         if e >= threshold:
@@ -122,9 +120,7 @@ def _p95(truth: dict, est: dict, offset: float, t0: float, t1: float,
     keep = (t >= t0) & (t < t1) & (est["t"] < host_before)
     if not keep.any():
         return None
-    err = np.hypot(est["x"][keep] - np.interp(t[keep], truth["t"], truth["x"]),
-                   est["y"][keep] - np.interp(t[keep], truth["t"], truth["y"]))
-    return float(np.percentile(err, 95))
+    return float(np.percentile(evaluate.error(truth, est, offset)[keep], 95))
 
 
 def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
