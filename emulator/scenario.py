@@ -22,7 +22,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from navtwin.protocols.adis16350 import GYRO_LSB_DPS
+from navtwin.protocols.adis16350 import (ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS, GYRO_LSB_DPS,
+                                          VRW_M_S_RT_HR)
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
@@ -144,8 +145,8 @@ class Imu:
                            one_of(1, 2, 4, 8, 16, 32, 64))
     smpl_prd: int = key(1, "", "SMPL_PRD: internal sample period 0.61035 ms x (NS+1) (bit 7 = 18.921 ms "
                         "time base); 1 = 819.2 SPS", between(1, 255))
-    arw_deg_rt_hr: float = key(4.2, "deg/sqrt(h)", "gyro angle random walk", non_negative(hi=1000))
-    gyro_bias_instability_dps: float = key(0.015, "deg/s", "gyro in-run bias (1 sigma of a Gauss-Markov "
+    arw_deg_rt_hr: float = key(ARW_DEG_RT_HR, "deg/sqrt(h)", "gyro angle random walk", non_negative(hi=1000))
+    gyro_bias_instability_dps: float = key(GYRO_BIAS_INSTABILITY_DPS, "deg/s", "gyro in-run bias (1 sigma of a Gauss-Markov "
                                            "process)", non_negative(hi=100))
     gyro_bias_corr_s: float = key(100.0, "s", "correlation time of the gyro bias process",
                               positive(hi=1_000_000))
@@ -155,7 +156,7 @@ class Imu:
                                        non_negative(hi=100_000))
     gyro_misalignment_deg: float = key(0.05, "deg", "1 sigma of each gyro axis' misalignment (per "
                                        "off-diagonal term)", non_negative(hi=10))
-    vrw_m_s_rt_hr: float = key(2.0, "m/s/sqrt(h)", "accelerometer velocity random walk",
+    vrw_m_s_rt_hr: float = key(VRW_M_S_RT_HR, "m/s/sqrt(h)", "accelerometer velocity random walk",
                                    non_negative(hi=1000))
     accel_bias_instability_mg: float = key(0.7, "mg", "accelerometer in-run bias (1 sigma, Gauss-Markov)",
                                            non_negative(hi=1000))

@@ -52,6 +52,7 @@ import numpy as np
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_SCALE
 from navtwin.common.schema import Check, between, build, each, key, one_of, positive
+from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS
 from navtwin.protocols.nanoloc import STATUS_TIMEOUT, is_complete
 
 from . import tracks
@@ -88,9 +89,9 @@ class Tuning:
     range_sigma_m: float = key(0.4, "m", "one exchange's distance, 1 sigma", positive(hi=100))
     range_scale: float = key(1.0, "", "f of 001: distance = (reported - c_i) / f",
                              between(*RANGE_SCALE))
-    arw_deg_rt_hr: float = key(4.2, "deg/sqrt(h)", "gyro angle random walk (ADIS16350)",
+    arw_deg_rt_hr: float = key(ARW_DEG_RT_HR, "deg/sqrt(h)", "gyro angle random walk (ADIS16350)",
                                positive(hi=1000))
-    gyro_bias_instability_dps: float = key(0.015, "deg/s", "gyro in-run bias stability "
+    gyro_bias_instability_dps: float = key(GYRO_BIAS_INSTABILITY_DPS, "deg/s", "gyro in-run bias stability "
                                            "(ADIS16350)", between(0, 100))
     # SINS acceleration as a measurement (docs/filters.md): sigma^2 = accel_sigma_m_s2^2 +
     # (tilt_inflation g s T)^2, s = the tilt rate the alignment leaves, T = time since it

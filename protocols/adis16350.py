@@ -45,6 +45,11 @@ TEMP_LSB_C = 0.1453
 TEMP_ZERO_C = 25.0
 SUPPLY_LSB_V = 1.8315e-3
 AUX_LSB_V = 0.6105e-3
+#: Noise of the datasheet (typical): what the emulator's IMU draws by default and what the
+#: host's filters assume by default.
+ARW_DEG_RT_HR = 4.2  # gyro angle random walk, deg/sqrt(h)
+GYRO_BIAS_INSTABILITY_DPS = 0.015  # gyro in-run bias stability, deg/s
+VRW_M_S_RT_HR = 2.0  # accelerometer velocity random walk, m/s/sqrt(h)
 
 
 def gyro_range_from_sens_avg(sens_avg: int) -> int:

@@ -11,13 +11,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from navtwin.common.schema import key, positive
+from navtwin.protocols.adis16350 import VRW_M_S_RT_HR
 
 from .base import Track, estimate
 
 
 @dataclass(frozen=True)
 class SinsSettings:
-    vrw_m_s_rt_hr: float = key(2.0, "m/s/sqrt(h)", "accelerometer velocity random walk "
+    vrw_m_s_rt_hr: float = key(VRW_M_S_RT_HR, "m/s/sqrt(h)", "accelerometer velocity random walk "
                                "(ADIS16350): the track's covariance", positive(hi=1000))
 
 
