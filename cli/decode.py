@@ -6,6 +6,8 @@ import json
 import sys
 import threading
 
+from navtwin.protocols.ports import DEFAULT_BAUD
+
 from .main import BAUD_HELP, UsageError, baud, stop_on_signals
 
 
@@ -24,7 +26,7 @@ def register(sub) -> None:
     mode.add_argument("--escaped", dest="escaped", action="store_true", default=True,
                       help="XBee API mode 2, escaped (default)")
     mode.add_argument("--api1", dest="escaped", action="store_false", help="XBee API mode 1")
-    p.add_argument("--baud", type=baud, default=115200, help=BAUD_HELP)
+    p.add_argument("--baud", type=baud, default=DEFAULT_BAUD, help=BAUD_HELP)
     p.add_argument("--follow", action="store_true",
                    help="keep reading a port or a growing file until interrupted")
     p.add_argument("--port", help="which port of a recording directory (default: by format)")

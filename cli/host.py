@@ -11,6 +11,7 @@ from navtwin.host import config as host_config
 from navtwin.host import tracks
 from navtwin.host.config import ConfigError
 from navtwin.host.output import KEYS, open_output
+from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import write_failure
 
 from .main import BAUD_HELP, UsageError, baud, number, stop_on_signals
@@ -36,7 +37,7 @@ def register(sub) -> None:
     p.add_argument("--nanoloc", metavar="PORT", help="the anchors' gateway (same forms)")
     p.add_argument("--api1", dest="escaped", action="store_false", default=True,
                    help="the coordinator runs API mode 1 (AP=1); default API mode 2, escaped")
-    p.add_argument("--baud", type=baud, default=115200, help=BAUD_HELP)
+    p.add_argument("--baud", type=baud, default=DEFAULT_BAUD, help=BAUD_HELP)
     common_options(p)
     p.add_argument("--record", metavar="DIR",
                    help="record every chunk read, with its arrival time, in a new directory, "

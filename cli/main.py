@@ -17,6 +17,7 @@ from importlib.metadata import entry_points
 
 from navtwin.common.limits import number_problem, span
 from navtwin.protocols import __version__
+from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.serial import BAUDS
 
 
@@ -49,7 +50,7 @@ def number(lo: float = -math.inf, hi: float = math.inf, *, integer: bool = False
 
 #: ``--baud``: any integer rate in BAUDS (pyserial sets non-standard rates too).
 baud = number(*BAUDS, integer=True)
-BAUD_HELP = f"serial baud rate {span(*BAUDS)} (default 115200)"
+BAUD_HELP = f"serial baud rate {span(*BAUDS)} (default {DEFAULT_BAUD})"
 
 
 @contextmanager

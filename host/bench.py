@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import Recording, RecordingWriter
 
 from .config import HostConfig
@@ -27,7 +28,7 @@ from .service import Service, recording_meta
 
 
 def write_host_recording(directory: str | os.PathLike, config: HostConfig, filters, chunks, *,
-                         escaped: bool = True, baud: int = 115200) -> Path:
+                         escaped: bool = True, baud: int = DEFAULT_BAUD) -> Path:
     """A recording as ``navtwin host --record`` makes it, from ``(port, bytes, ns)``."""
     chunks = list(chunks)
     ports = {p: f"synthetic:{p}" for p in dict.fromkeys(c[0] for c in chunks)}

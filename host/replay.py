@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping
 
+from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import Recording, RecordingError
 
 from . import config as host_config
@@ -91,7 +92,7 @@ def chunks(rec: Recording, inputs: tuple[str, ...]) -> Iterator[tuple[str, bytes
         for c in rec.merged(list(inputs)):
             yield c.port, c.data, c.t_wall_ns
         return
-    bauds = {p: rec.meta.get("ports", {}).get(p, {}).get("baud", 115200) for p in inputs}
+    bauds = {p: rec.meta.get("ports", {}).get(p, {}).get("baud", DEFAULT_BAUD) for p in inputs}
     yield from arrivals({p: _device_times(rec, p) for p in inputs}, bauds)
 
 

@@ -44,6 +44,7 @@ import serial
 
 from navtwin.protocols import __version__
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
+from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter, write_failure
 
 from .config import HostConfig
@@ -221,7 +222,7 @@ class Service:
     """One live run: ports -> recording + pipeline -> estimate lines."""
 
     def __init__(self, ports: dict[str, str], config: HostConfig, filters: tuple[str, ...], *,
-                 out: TextIO, escaped: bool = True, baud: int = 115200,
+                 out: TextIO, escaped: bool = True, baud: int = DEFAULT_BAUD,
                  record: str | os.PathLike | None = None, status: TextIO | None = None,
                  status_period_s: float = 2.0, estimator=None,
                  on_lines: Callable[[str, int, int], None] | None = None) -> None:

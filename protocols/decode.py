@@ -12,6 +12,7 @@ from typing import Iterator
 from . import adis16350, nanoloc, xbee
 from .recording import Recording
 from .stream import DecodeError, Frame, decoder_for
+from .ports import DEFAULT_BAUD
 
 FORMATS = ("sins", "nanoloc", "xbee", "xbee-sins")
 #: The port of a recording each format reads by default.
@@ -105,7 +106,7 @@ def _is_serial(source: str) -> bool:
         return False
 
 
-def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud: int = 115200,
+def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud: int = DEFAULT_BAUD,
                 follow: bool = False, idle: float = 1.0,
                 stop: threading.Event | None = None) -> Iterator[bytes]:
     """Bytes from a file, ``-`` (stdin), a recording directory or a serial port / pyserial URL.
