@@ -72,10 +72,9 @@ def run(args) -> int:
         error = error or close_out(out)
     if error:
         raise UsageError(error)
-    stats = pipe.stats()
     sys.stderr.write(info_line("summary", {"recording": str(rec.directory),
                                            "complete": rec.complete,
                                            **({"skipped": rec.skipped} if rec.skipped else {}),
                                            "elapsed_s": round(time.monotonic() - t0, 3),
-                                           **stats, "estimator": pipe.estimator.stats()}))
+                                           **pipe.stats()}))
     return 0

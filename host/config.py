@@ -14,7 +14,7 @@ written once; docs/host.md's key table is generated from it, :func:`markdown_tab
     y = 1.6
     z = 0.0                        # optional, default 0
 
-    [vehicle]
+    [vehicle]                      # or [[vehicles]], one table per vehicle (below)
     start = [6.0, 1.8]             # m, where the vehicle stands at power-up
     heading_deg = 0.0              # initial heading, counter-clockwise from +x
     tag_height = 0.0               # m, tag above the anchors' z = 0 plane
@@ -32,6 +32,12 @@ written once; docs/host.md's key table is generated from it, :func:`markdown_tab
 
     [timing]
     hold_s = 0.02                  # reorder hold for ranges (docs/host.md, "time order")
+
+Vehicles. ``[vehicle]`` is the lab's one vehicle; a lab with several lists them as
+``[[vehicles]]`` tables of the same keys (not both). Vehicles are numbered from 1 in that
+order (the ``vehicle`` of each estimate line); with more than one, each names its ``tag``
+and ``router``, which route the exchanges and SINS streams to it, and the ``sins`` port
+(a direct RS-232 line) is vehicle 1's.
 
 Shipped configs (``host/configs/*.toml``) are named by the lab setup, e.g. ``office``;
 :func:`load` takes such a name or a file path. Every problem is one line naming the file,
@@ -109,8 +115,21 @@ class Lab:
 
     anchors: tuple[Anchor, ...] = key(REQUIRED, "", "the anchor survey")
     site: Site = Site()
-    vehicle: Vehicle = Vehicle()
+    vehicles: tuple[Vehicle, ...] = key((Vehicle(),), "", "the vehicles, 1 first ([vehicle] "
+                                        "for one)")
     timing: Timing = Timing()
+
+    def __post_init__(self):
+        if len(self.vehicles) > 1:
+            for field_ in ("tag", "router"):
+                values = [getattr(v, field_) for v in self.vehicles]
+                if None in values:
+                    n = values.index(None) + 1
+                    raise Invalid(f"[[vehicles]] #{n} {field_}", "is needed when there are several "
+                                  f"vehicles (it routes their data); give each vehicle its {field_}")
+                if len(set(values)) < len(values):
+                    raise Invalid(f"[[vehicles]] {field_}", f"{values} repeats one; give each "
+                                  f"vehicle its own {field_}")
 
 
 @dataclass(frozen=True)
@@ -129,31 +148,27 @@ class HostConfig:
 
     latitude_deg = property(lambda self: self.lab.site.latitude_deg)
     gravity = property(lambda self: self.lab.site.local_gravity)
-    start = property(lambda self: self.lab.vehicle.start)
-    heading_deg = property(lambda self: self.lab.vehicle.heading_deg)
-    tag_height = property(lambda self: self.lab.vehicle.tag_height)
-    tag = property(lambda self: self.lab.vehicle.tag)
-    gyro_range_dps = property(lambda self: self.lab.vehicle.gyro_range_dps)
+    vehicles = property(lambda self: self.lab.vehicles)
     hold_s = property(lambda self: self.lab.timing.hold_s)
 
-    @property
-    def router(self) -> int | None:
-        r = self.lab.vehicle.router
-        return None if r is None else int(r, 16)
-
-    def estimator_config(self, filters: tuple[str, ...] | None = None) -> EstimatorConfig:
-        """The :class:`navtwin.host.estimator.EstimatorConfig` for *filters* (default: the config's)."""
+    def estimator_config(self, filters: tuple[str, ...] | None = None,
+                         vehicle: int = 1) -> EstimatorConfig:
+        """The :class:`navtwin.host.estimator.EstimatorConfig` of vehicle *vehicle* (numbered
+        from 1) for *filters* (default: the config's)."""
+        v = self.vehicles[vehicle - 1]
         return EstimatorConfig(
             **{f.name: getattr(self.tuning, f.name) for f in dataclasses.fields(Tuning)},
-            anchors=self.anchors, tag_height=self.tag_height, latitude_deg=self.latitude_deg,
-            gravity=self.gravity, start=self.start, heading0_rad=math.radians(self.heading_deg),
-            gyro_range_dps=self.gyro_range_dps, range_bias_m=dict(self.range_bias_m),
-            filters=tuple(filters or self.filters), settings=dict(self.settings))
+            anchors=self.anchors, tag_height=v.tag_height, latitude_deg=self.latitude_deg,
+            gravity=self.gravity, start=v.start, heading0_rad=math.radians(v.heading_deg),
+            gyro_range_dps=v.gyro_range_dps, range_bias_m=dict(self.range_bias_m),
+            filters=tuple(filters or self.filters), settings=dict(self.settings), vehicle=vehicle)
 
     def to_dict(self) -> dict:
         """JSON-able form, the TOML file's layout (a recording's meta); :func:`from_dict`
         reads it back exactly."""
         doc = _plain(self.lab)
+        if len(self.vehicles) == 1:  # the one-vehicle layout: [vehicle]
+            doc["vehicle"] = doc.pop("vehicles")[0]
         filters = {"enabled": list(self.filters), **_plain(self.tuning)}
         if self.range_bias_m:
             filters["range_bias_m"] = {str(a): c for a, c in sorted(self.range_bias_m.items())}
@@ -257,15 +272,15 @@ def _parse(doc: dict, source: str, name: str) -> HostConfig:
 
 
 def _config(doc: dict, name: str) -> HostConfig:
-    known = [f.name for f in dataclasses.fields(Lab)] + ["filters"]
+    known = [f.name for f in dataclasses.fields(Lab)] + ["vehicle", "filters"]
     for section in doc:
         if section not in known:
             raise ConfigError(f"unknown section [{section}]; use {', '.join(sorted(known))}")
     if "anchors" not in doc:
         raise ConfigError("[[anchors]] missing: give one table per anchor with id, x, y (and z)")
-    lab = Lab(anchors=_anchors(doc["anchors"]),
+    lab = Lab(anchors=_anchors(doc["anchors"]), vehicles=_vehicles(doc),
               **{f.name: build(type(f.default), doc[f.name], ((f.name, 0),))
-                 for f in dataclasses.fields(Lab) if f.name != "anchors" and f.name in doc})
+                 for f in dataclasses.fields(Lab) if f.name in ("site", "timing") and f.name in doc})
     filt = doc.get("filters", {})
     if not isinstance(filt, dict):
         raise ConfigError("[filters] must be a table")
@@ -312,6 +327,19 @@ def _anchors(items) -> tuple[Anchor, ...]:
             raise ConfigError(f"anchor id {a.id} appears twice; ids must be unique")
         out.append(a)
     return tuple(out)
+
+
+def _vehicles(doc: dict) -> tuple[Vehicle, ...]:
+    """``[vehicle]`` (one) or ``[[vehicles]]`` (one table each), not both."""
+    if "vehicle" in doc and "vehicles" in doc:
+        raise ConfigError("both [vehicle] and [[vehicles]] given; write one vehicle as [vehicle] "
+                          "or every vehicle as [[vehicles]]")
+    if "vehicles" not in doc:
+        return (build(Vehicle, doc.get("vehicle", {}), (("vehicle", 0),)),)
+    items = doc["vehicles"]
+    if not isinstance(items, list) or not items or not all(isinstance(v, dict) for v in items):
+        raise ConfigError("vehicles must be an array of tables; write each vehicle as [[vehicles]]")
+    return tuple(build(Vehicle, item, (("vehicles", n),)) for n, item in enumerate(items, 1))
 
 
 def _range_bias(value, anchors: set[int]) -> dict[int, float]:

@@ -46,7 +46,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -151,6 +151,7 @@ class EstimatorConfig(Tuning):
     range_bias_m: Mapping[int, float] = field(default_factory=dict)  # c_i of 001: calibrated delays
     filters: tuple[str, ...] = tuple(tracks.BUILT_IN)
     settings: Mapping[str, object] = field(default_factory=dict)  # track name -> its Settings
+    vehicle: int = 1  # which vehicle of the lab (host config): its estimates say so
 
     def __post_init__(self):
         unknown = [f for f in self.filters if f not in tracks.BUILT_IN]
@@ -443,7 +444,8 @@ class Estimator:
             for track in self.tracks:
                 e = track.estimate(b, yaw)
                 if e is not None:
-                    out.append(e)
+                    out.append(e if e.vehicle == self.cfg.vehicle else
+                               replace(e, vehicle=self.cfg.vehicle))
                     self.emitted[track.name] += 1
             self._k_out += 1
             self._next_out = self._k_out * self.cfg.output_period_s

@@ -3,10 +3,11 @@
 Estimates: one JSON object per line, keys in this order, numbers as Python's ``repr``
 (``json.dumps``), so equal estimates give equal bytes::
 
-    {"t":12.34,"filter":"ukf","x":6.01,"y":1.79,"vx":0.0,"vy":0.0,"yaw":0.0,"cov":[[...],...],
+    {"t":12.34,"vehicle":1,"filter":"ukf","x":6.01,"y":1.79,"vx":0.0,"vy":0.0,"yaw":0.0,"cov":[[...],...],
      "extrapolated":false}
 
-``t`` is host time in seconds since the run started (docs/host.md); ``yaw`` is null for
+``t`` is host time in seconds since the run started (docs/host.md); ``vehicle`` the
+vehicle's number in the host config (1 in a lab with one vehicle); ``yaw`` is null for
 the pure WSN track; ``cov`` is the estimator's covariance of (x, y, vx, vy), row-major;
 ``extrapolated`` is true when the track had no aiding for the estimator's
 ``extrapolated_after_s`` before ``t`` (a position update for kf/ekf/ukf, a fix for wsn, an
@@ -24,12 +25,12 @@ from typing import TextIO
 
 import numpy as np
 
-KEYS = ("t", "filter", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
+KEYS = ("t", "vehicle", "filter", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
 
 
 def estimate_line(e) -> str:
     """The output line of one :class:`navtwin.host.estimator.Estimate`."""
-    return json.dumps({"t": float(e.t), "filter": str(e.filter), "x": float(e.x), "y": float(e.y),
+    return json.dumps({"t": float(e.t), "vehicle": int(e.vehicle), "filter": str(e.filter), "x": float(e.x), "y": float(e.y),
                        "vx": float(e.vx), "vy": float(e.vy),
                        "yaw": None if e.yaw is None else float(e.yaw),
                        "cov": np.asarray(e.cov, dtype=float).tolist(),

@@ -24,8 +24,9 @@ that begins a new epoch (its device restarted) is passed on as a ``Restart(t, "i
 range, of the epoch (for the IMU with the board's uptime, its counter x 10 ms: it counts
 from power-up).
 
-Time order, with bounded latency (docs/host.md). Let T be the filter time: the latest
-measurement time given to the estimator. Every measurement is given with its own time.
+Time order, with bounded latency (docs/host.md), for each vehicle. Let T be its filter
+time: the latest measurement time given to its estimator. Every measurement is given with
+its own time.
 
 * A SINS sample is processed as soon as it is decoded (its times strictly increase).
 * A range with t <= T is late: it is processed at once (the estimator applies it with its
@@ -43,7 +44,7 @@ from __future__ import annotations
 import heapq
 import math
 from collections import Counter
-from typing import Any
+from typing import Any, Callable
 
 from navtwin.protocols import adis16350, nanoloc, sins, xbee
 from navtwin.protocols.stream import DecodeError, Frame, XBeeSinsChain, nanoloc_decoder, sins_decoder
@@ -62,20 +63,54 @@ AT_QUERIES = (b"DB", b"AP")
 T_US_TICK_S = 1e-6
 
 
+class Vehicle:
+    """One vehicle's inputs: its SINS stream's clock, its estimator, and the records of the
+    anchor clock held for it (time order is each vehicle's: its ranges wait for its own
+    SINS samples)."""
+
+    def __init__(self, number: int, settings, estimator) -> None:
+        self.number = number  # 1, 2, ... in the host config's order
+        self.router = None if settings.router is None else int(settings.router, 16)
+        self.tag = settings.tag  # None: every tag's exchanges (a lab with one vehicle)
+        self.gyro_range_dps = settings.gyro_range_dps
+        self.imu_clock = DeviceClock(16, sins.PERIOD_S, strict=True)
+        self.estimator = estimator
+        self.held: list[tuple] = []  # heap of (t, n, Exchange | Restart)
+        self.t = -math.inf  # filter time: the latest measurement time given to the estimator
+        self.estimates: Counter = Counter()
+
+    def stats(self) -> dict:
+        return {"vehicle": self.number, "router": None if self.router is None else
+                f"{self.router:016X}", "tag": self.tag, "imu_clock": self.imu_clock.stats(),
+                "held": len(self.held), "estimates": dict(self.estimates),
+                "filter_time": None if self.t == -math.inf else self.t,
+                "estimator": self.estimator.stats()}
+
+
 class Pipeline:
-    """Decoders, clocks, time order and the estimator for one run of the host."""
+    """Decoders, clocks, time order and the estimators of the lab's vehicles for one run of
+    the host.
+
+    The anchors' clock and the gateway's report counter are the anchor network's, shared;
+    each vehicle (host config, :class:`Vehicle`) has its SINS stream, routed by the radio's
+    address (``router``; with one vehicle and none configured, the first router heard), its
+    exchanges, routed by ``tag`` (with one vehicle and none configured, every tag), and its
+    estimator. The direct ``sins`` line is vehicle 1's.
+    """
 
     def __init__(self, config: HostConfig, filters: tuple[str, ...] | None = None, *,
-                 inputs: tuple[str, ...] = INPUTS, escaped: bool = True, estimator=None,
-                 db_period_s: float = DB_PERIOD_S) -> None:
+                 inputs: tuple[str, ...] = INPUTS, escaped: bool = True,
+                 make_estimator: Callable | None = None, db_period_s: float = DB_PERIOD_S) -> None:
         unknown = set(inputs) - set(INPUTS)
         if unknown:
             raise ValueError(f"unknown input {sorted(unknown)[0]!r}; use {', '.join(INPUTS)}")
         self.config = config
         self.filters = tuple(filters or config.filters)
-        if estimator is None:
-            estimator = Estimator(config.estimator_config(self.filters))
-        self.estimator = estimator
+        make_estimator = make_estimator or Estimator  # EstimatorConfig -> estimator
+        self.vehicles = [Vehicle(n, v, make_estimator(config.estimator_config(self.filters, n)))
+                         for n, v in enumerate(config.vehicles, 1)]
+        self._by_router = {v.router: v for v in self.vehicles if v.router is not None}
+        self._by_tag = {v.tag: v for v in self.vehicles if v.tag is not None}
         self.inputs = tuple(p for p in INPUTS if p in inputs)
         self.escaped = escaped
         self._decoders: dict[str, Any] = {}
@@ -83,16 +118,11 @@ class Pipeline:
             self._decoders[port] = (XBeeSinsChain(escaped) if port == "xbee" else
                                     sins_decoder() if port == "sins" else nanoloc_decoder())
         self._hold = config.hold_s if set(IMU_INPUTS) & set(self.inputs) else 0.0
-        self.imu_clock = DeviceClock(16, sins.PERIOD_S, strict=True)
         self.range_clock = DeviceClock(32, T_US_TICK_S, strict=False)
         # the gateway's report counter: equal = a duplicate, any step back = a restart
         self._report_seq = Unwrapper(16, restart=0)
-        # heap of (t, n, Exchange | Restart): the anchor clock's records, in time order
-        self._held: list[tuple] = []
-        self._n = 0
-        self.t = -math.inf  # filter time
+        self._n = 0  # tie-break of held records: the order they came in
         self._arrival = 0.0
-        self._router = config.router
         self._db_period = db_period_s
         self._next_db = 0.0
         self._frame_id = 0
@@ -105,7 +135,6 @@ class Pipeline:
         self.errors: dict[str, Counter] = {p: Counter() for p in self.inputs}
         self.counts: Counter = Counter()
         self.max_late_s = 0.0
-        self.estimates: Counter = Counter()
 
     # -- input ------------------------------------------------------------------------------
     def feed(self, port: str, data: bytes, t_ns: int) -> list:
@@ -118,16 +147,18 @@ class Pipeline:
             for command in AT_QUERIES:
                 self._query(command)
             self._next_db = a + self._db_period
-        self._release(a - self._hold, out)
-        return self._count(out)
+        for v in self.vehicles:
+            self._release(v, a - self._hold, out)
+        return out
 
     def finish(self) -> list:
         """End of input: what the decoders still buffer, then every held range."""
         out: list = []
         for port, dec in self._decoders.items():
             self._events(port, dec.flush(), self._arrival, out)
-        self._release(math.inf, out)
-        return self._count(out)
+        for v in self.vehicles:
+            self._release(v, math.inf, out)
+        return out
 
     def take_tx(self) -> bytes:
         """Bytes the host should send to the coordinator (AT DB and AP queries); cleared."""
@@ -206,31 +237,41 @@ class Pipeline:
 
     # -- measurements ---------------------------------------------------------------------------
     def _imu(self, ev: Frame, a: float, out: list) -> None:
-        if ev.source is not None:  # through the radio: one vehicle router
-            if self._router is None:
-                self._router = ev.source
-            elif ev.source != self._router:
-                self.counts["imu_other_router"] += 1
-                return
-        restarts = self.imu_clock.restarts
-        t = self.imu_clock.time(ev.fields["seq"], a)
+        v = self._vehicle_of(ev.source)
+        if v is None:
+            self.counts["imu_other_router"] += 1
+            return
+        restarts = v.imu_clock.restarts
+        t = v.imu_clock.time(ev.fields["seq"], a)
         if t is None:
             return
-        s = adis16350.words_to_sample(ev.fields["words"], self.config.gyro_range_dps)
+        s = adis16350.words_to_sample(ev.fields["words"], v.gyro_range_dps)
         nd_ok = all(s.nd)
         self.counts["imu"] += 1
         self.counts["imu_no_new_data"] += not nd_ok
         self.counts["imu_alarm"] += s.ea
-        self._release(t, out)
-        self.t = max(t, self.t)
-        if self.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown;
+        self._release(v, t, out)
+        v.t = max(t, v.t)
+        if v.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown;
             # it counts its samples from power-up, so this one says how long it has been up
-            out += self.estimator.feed(Restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S))
-        out += self.estimator.feed(ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok))
+            self._give(v, Restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S), out)
+        self._give(v, ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok), out)
+
+    def _vehicle_of(self, source: int | None) -> Vehicle | None:
+        """The vehicle of a SINS sample from radio *source* (None: the direct line)."""
+        if source is None:
+            return self.vehicles[0]
+        v = self._by_router.get(source)
+        if v is None and len(self.vehicles) == 1 and not self._by_router:
+            v = self.vehicles[0]  # no router configured: the first one heard is the vehicle's
+            v.router = source
+            self._by_router[source] = v
+        return v
 
     def _range(self, f: dict, a: float, out: list) -> None:
         self.counts["reports"] += 1
-        if self.config.tag is not None and f["tag"] != self.config.tag:
+        v = self._by_tag.get(f["tag"], None if self._by_tag else self.vehicles[0])
+        if v is None:
             self.counts["reports_other_tag"] += 1
             return
         _, step = self._report_seq.unwrap(f["seq"], a)
@@ -242,8 +283,8 @@ class Pipeline:
         restarts = self.range_clock.restarts
         t = self.range_clock.time(f["t_us"], a)
         if self.range_clock.restarts != restarts:  # the anchors restarted: in order, before t
-            self._schedule((t, self._n, Restart(t, "anchors")), out)
-            self._n += 1
+            for each in self.vehicles:
+                self._schedule(each, Restart(t, "anchors"), out)
         if f["anchor"] not in self.config.anchors:
             self.counts["reports_unknown_anchor"] += 1
             return
@@ -254,33 +295,35 @@ class Pipeline:
         else:
             distance = None
             self.counts["timeouts" if status & nanoloc.STATUS_TIMEOUT else "range_errors"] += 1
-        self._schedule((t, self._n, Exchange(t, f["anchor"], distance, f["rssi"], status)), out)
-        self._n += 1
+        self._schedule(v, Exchange(t, f["anchor"], distance, f["rssi"], status), out)
 
-    def _schedule(self, item: tuple, out: list) -> None:
-        """Hold an anchor-clock record (an exchange or the anchors' restart) or apply it now."""
-        if item[0] > self.t:
-            heapq.heappush(self._held, item)
+    def _schedule(self, v: Vehicle, record, out: list) -> None:
+        """Hold an anchor-clock record (an exchange or the anchors' restart) for vehicle *v*
+        or apply it now."""
+        if record.t > v.t:
+            heapq.heappush(v.held, (record.t, self._n, record))
+            self._n += 1
         else:
-            self._apply_range(item, out)
+            self._apply_range(v, record, out)
 
-    def _release(self, until: float, out: list) -> None:
-        held = self._held
+    def _release(self, v: Vehicle, until: float, out: list) -> None:
+        held = v.held
         while held and held[0][0] <= until:
-            self._apply_range(heapq.heappop(held), out)
+            self._apply_range(v, heapq.heappop(held)[2], out)
 
-    def _apply_range(self, item: tuple, out: list) -> None:
-        t, _, record = item
-        if t < self.t and type(record) is Exchange:
+    def _apply_range(self, v: Vehicle, record, out: list) -> None:
+        if record.t < v.t and type(record) is Exchange:
             self.counts["ranges_late"] += 1
-            self.max_late_s = max(self.max_late_s, self.t - t)
-        self.t = max(t, self.t)
-        out += self.estimator.feed(record)
+            self.max_late_s = max(self.max_late_s, v.t - record.t)
+        v.t = max(record.t, v.t)
+        self._give(v, record, out)
 
-    def _count(self, out: list) -> list:
-        for e in out:
-            self.estimates[e.filter] += 1
-        return out
+    @staticmethod
+    def _give(v: Vehicle, record, out: list) -> None:
+        estimates = v.estimator.feed(record)
+        for e in estimates:
+            v.estimates[e.filter] += 1
+        out += estimates
 
     # -- status -------------------------------------------------------------------------------
     def _top_decoders(self):
@@ -289,18 +332,17 @@ class Pipeline:
             yield port, dec.xbee if port == "xbee" else dec
 
     def stats(self) -> dict:
-        """Counters of everything the pipeline saw (part of the status and summary lines)."""
+        """Counters of everything the pipeline saw (part of the status and summary lines);
+        each vehicle's under ``vehicles``, in order."""
         return {
             "ports": {p: {"bytes": top.bytes, "frames": top.frames, "errors": dict(self.errors[p])}
                       for p, top in self._top_decoders()},
             "counts": dict(sorted(self.counts.items())),
-            "held": len(self._held),
+            "held": sum(len(v.held) for v in self.vehicles),
             "max_late_ms": self.max_late_s * 1e3,
-            "imu_clock": self.imu_clock.stats(),
             "anchor_clock": self.range_clock.stats(),
             "link_dbm": self.link_dbm,
             "modem_status": self.modem_status,
             "coordinator_api": self.coordinator_api,
-            "estimates": dict(self.estimates),
-            "filter_time": None if self.t == -math.inf else self.t,
+            "vehicles": [v.stats() for v in self.vehicles],
         }

@@ -106,12 +106,12 @@ def _device_times(rec: Recording, port: str) -> Iterator[tuple[bytes, int]]:
 
 
 def replay(rec: Recording, emit: Callable[[list], None], *,
-           progress: Callable[[float], None] | None = None, estimator=None,
+           progress: Callable[[float], None] | None = None, make_estimator=None,
            **overrides) -> Pipeline:
     """Run the pipeline over *rec*, calling *emit* with each batch of estimates; returns the
     pipeline (its ``stats()``). *progress* gets the fraction of bytes done, now and then."""
     kw = settings(rec, **overrides)
-    pipe = Pipeline(kw.pop("config"), kw.pop("filters"), estimator=estimator, **kw)
+    pipe = Pipeline(kw.pop("config"), kw.pop("filters"), make_estimator=make_estimator, **kw)
     total = sum(rec.sizes[p] for p in pipe.inputs) or 1
     return drive(pipe, chunks(rec, pipe.inputs), emit, progress, total)
 

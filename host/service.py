@@ -224,7 +224,7 @@ class Service:
     def __init__(self, ports: dict[str, str], config: HostConfig, filters: tuple[str, ...], *,
                  out: TextIO, escaped: bool = True, baud: int = DEFAULT_BAUD,
                  record: str | os.PathLike | None = None, status: TextIO | None = None,
-                 status_period_s: float = 2.0, estimator=None,
+                 status_period_s: float = 2.0, make_estimator=None,
                  on_lines: Callable[[str, int, int], None] | None = None) -> None:
         unknown = set(ports) - set(INPUTS)
         if unknown or not ports:
@@ -236,7 +236,7 @@ class Service:
         self.on_lines = on_lines
         self.escaped, self.baud = escaped, baud
         self.pipeline = Pipeline(config, self.filters, inputs=tuple(self.ports), escaped=escaped,
-                                 estimator=estimator)
+                                 make_estimator=make_estimator)
         self.latency = Latency()
         self.record_dir = None if record is None else Path(record)
         self.recorder: RecordingWriter | None = None
@@ -250,8 +250,9 @@ class Service:
         self._last_stamp = -1
         self._t0 = 0
         self._prev: dict = {}
-        self._reinit: dict = {}  # the estimator's re-init counts last reported
-        self._reinit_seen = 0  # and their total
+        # per vehicle number: its estimator's re-init counts last reported, and their total
+        self._reinit: dict[int, dict] = {}
+        self._reinit_seen = {v.number: 0 for v in self.pipeline.vehicles}
         self.started = threading.Event()  # set once the ports are open and being read
 
     # -- setup ---------------------------------------------------------------------------
@@ -360,8 +361,9 @@ class Service:
         self._emit(self.pipeline.feed(name, data, stamp), name, t_read)
         for event in self.pipeline.take_events():  # the coordinator's API mode changed
             self._info("status", event)
-        if self.pipeline.estimator.reinit_count != self._reinit_seen:
-            self._reinit_event()
+        for v in self.pipeline.vehicles:
+            if v.estimator.reinit_count != self._reinit_seen[v.number]:
+                self._reinit_event(v)
         tx = self.pipeline.take_tx()
         if tx and self._readers["xbee"].write(tx) and self.recorder is not None:
             self.recorder.port(TX_PORT).write(tx, t_wall_ns=stamp)
@@ -389,17 +391,19 @@ class Service:
             self.status.write(info_line(kind, body))
             self.status.flush()
 
-    def _reinit_event(self) -> None:
-        """A track re-initialised (a discontinuity, host.estimator): which, why, and the totals."""
-        st = self.pipeline.estimator.stats()
+    def _reinit_event(self, v) -> None:
+        """A track of vehicle *v* re-initialised (a discontinuity, host.estimator): which, why,
+        and the totals."""
+        st = v.estimator.stats()
+        last = self._reinit.get(v.number, {})
         new = {}
         for track, causes in st["reinit"].items():
-            diff = {c: n - self._reinit.get(track, {}).get(c, 0) for c, n in causes.items()}
+            diff = {c: n - last.get(track, {}).get(c, 0) for c, n in causes.items()}
             if any(diff.values()):
                 new[track] = {c: n for c, n in diff.items() if n}
-        self._reinit, self._reinit_seen = st["reinit"], self.pipeline.estimator.reinit_count
-        self._info("status", {"event": "reinit", "filter_time": self.pipeline.t, "new": new,
-                              "reinit": st["reinit"], "pending": st["reinit_pending"]})
+        self._reinit[v.number], self._reinit_seen[v.number] = st["reinit"], v.estimator.reinit_count
+        self._info("status", {"event": "reinit", "vehicle": v.number, "filter_time": v.t,
+                              "new": new, "reinit": st["reinit"], "pending": st["reinit_pending"]})
 
     def _status(self, now: int) -> None:
         st = self.pipeline.stats()
@@ -418,7 +422,8 @@ class Service:
                 "reports_per_s": round((ranges - self._prev.get("reports", 0)) / dt, 1),
                 "errors": {p: v["errors"] for p, v in st["ports"].items() if v["errors"]},
                 "link_dbm": st["link_dbm"], "latency": self.latency.period(),
-                "estimates": self.lines, "held": st["held"], "reinit": self._reinit}
+                "estimates": self.lines, "held": st["held"],
+                "reinit": {str(n): r for n, r in self._reinit.items() if r}}
         self._prev.update(now=now, imu=imu, reports=ranges)
         self._info("status", body)
 
@@ -428,6 +433,5 @@ class Service:
                 "contended": {p: r.contended for p, r in self._readers.items()},
                 "tx_dropped": sum(r.tx_dropped for r in self._readers.values()),
                 "latency": self.latency.overall(), **self.pipeline.stats(),
-                "estimator": self.pipeline.estimator.stats(),
                 **({"recording": str(self.record_dir)} if self.record_dir else {}),
                 **({"error": str(self.error)} if self.error else {})}

@@ -29,8 +29,9 @@ def load_truth(path: str | Path) -> dict[str, np.ndarray]:
     return truth
 
 
-def load_estimates(lines) -> dict[str, dict[str, np.ndarray]]:
-    """Estimate JSON lines (an iterable of str, or a path) grouped by filter."""
+def load_estimates(lines, vehicle: int = 1) -> dict[str, dict[str, np.ndarray]]:
+    """Vehicle *vehicle*'s estimate JSON lines (an iterable of str, or a path) grouped by
+    filter (lines written before estimates named their vehicle are vehicle 1's)."""
     if isinstance(lines, (str, Path)):
         lines = Path(lines).read_text().splitlines()
     by_filter: dict[str, list] = {}
@@ -38,7 +39,7 @@ def load_estimates(lines) -> dict[str, dict[str, np.ndarray]]:
         if not line.strip():
             continue
         e = json.loads(line)
-        if "filter" in e:
+        if "filter" in e and e.get("vehicle", 1) == vehicle:
             by_filter.setdefault(e["filter"], []).append((e["t"], e["x"], e["y"]))
     return {k: dict(zip(("t", "x", "y"), np.array(v, dtype=float).T)) for k, v in by_filter.items()}
 

@@ -54,12 +54,12 @@ def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,
 
 def run_in_memory(scenario: str | Path | Scenario, seed: int | None = None, *,
                   config=None, filters: tuple[str, ...] | None = None,
-                  duration: float | None = None, estimator=None) -> tuple[list, Pipeline]:
+                  duration: float | None = None, make_estimator=None) -> tuple[list, Pipeline]:
     """The host's estimates on the emulated lab of *scenario* and *seed* (the scenario's
     shipped host config and its filters unless *config*/*filters* are given; the whole
     scenario unless *duration* s), and the pipeline (its ``stats()``)."""
     kw, chunks = lab_chunks(scenario, seed, duration=duration, config=config, filters=filters)
-    pipe = Pipeline(kw.pop("config"), kw.pop("filters"), estimator=estimator, **kw)
+    pipe = Pipeline(kw.pop("config"), kw.pop("filters"), make_estimator=make_estimator, **kw)
     estimates: list = []
     drive(pipe, chunks, estimates.extend)
     return estimates, pipe

@@ -42,6 +42,7 @@ class Estimate:
     yaw: float | None
     cov: list[float]  # 4x4 covariance of (x, y, vx, vy), row-major
     extrapolated: bool = False  # the track had no aiding for extrapolated_after_s before t
+    vehicle: int = 1  # the lab's vehicle (host config, numbered from 1); the estimator sets it
 
 
 def estimate(t, name, p, v, yaw, cov4, extrapolated: bool) -> Estimate:

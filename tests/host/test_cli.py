@@ -88,14 +88,14 @@ def test_office_config_is_the_survey_of_scenarios_md():
     # shared/specs/scenarios.md, office: anchors, start, latitude, gravity
     assert {i: a[:2] for i, a in cfg.anchors.items()} == {
         1: (1.3, 1.6), 2: (10.8, 1.6), 3: (10.8, 5.4), 4: (1.3, 5.4)}
-    assert cfg.start == (6.0, 1.8) and cfg.heading_deg == 0.0
+    assert cfg.vehicles[0].start == (6.0, 1.8) and cfg.vehicles[0].heading_deg == 0.0
     assert cfg.latitude_deg == 34.316 and cfg.gravity == 9.7952
     assert cfg.filters == BUILT_IN
 
 
 def test_corridor_config_starts_at_the_origin():
     cfg = host_config.load("corridor")
-    assert cfg.start == (0.0, 0.0) and len(cfg.anchors) == 4
+    assert cfg.vehicles[0].start == (0.0, 0.0) and len(cfg.anchors) == 4
 
 
 def test_config_round_trips_through_its_dict():
@@ -112,8 +112,8 @@ def test_estimator_config_carries_the_host_config():
     cfg = host_config.load("office")
     ec = cfg.estimator_config(("wsn", "ukf"))
     assert ec.filters == ("wsn", "ukf") and dict(ec.anchors) == cfg.anchors
-    assert ec.start == cfg.start and ec.gravity == cfg.gravity
-    assert ec.heading0_rad == math.radians(cfg.heading_deg)
+    assert ec.start == cfg.vehicles[0].start and ec.gravity == cfg.gravity
+    assert ec.heading0_rad == math.radians(cfg.vehicles[0].heading_deg)
 
 
 def write(tmp_path, text: str) -> str:
@@ -152,7 +152,7 @@ def test_bad_config_files_get_one_line_naming_key_and_fix(tmp_path, capsys, pty_
 def test_a_good_config_file_is_read(tmp_path):
     cfg = host_config.load(write(tmp_path, ANCHORS + "[vehicle]\nstart = [1, 2]\ntag = 16\n"
                                  "[filters]\nenabled = ['ukf']\nalignment_s = 2.5\n"))
-    assert cfg.start == (1.0, 2.0) and cfg.tag == 16 and cfg.filters == ("ukf",)
+    assert cfg.vehicles[0].start == (1.0, 2.0) and cfg.vehicles[0].tag == 16 and cfg.filters == ("ukf",)
     assert cfg.estimator_config().alignment_s == 2.5 and cfg.anchors[3] == (5.0, 5.0, 0.0)
 
 
@@ -165,4 +165,4 @@ def test_configs_recorded_in_the_first_layout_still_load(root):
     tuned = host_config.from_dict(v1["tuned"])
     assert (tuned.settings["ukf"].alpha, tuned.settings["ukf"].kappa) == (0.5, 0.0)
     assert tuned.settings["sins"].vrw_m_s_rt_hr == 3.0
-    assert tuned.range_bias_m == {1: 0.3} and tuned.tuning.tight == "toa" and tuned.lab.vehicle.tag == 16
+    assert tuned.range_bias_m == {1: 0.3} and tuned.tuning.tight == "toa" and tuned.vehicles[0].tag == 16

@@ -21,7 +21,7 @@ OFFICE = host_config.load("office")
 
 def run(chunks, **kw):
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, **kw)
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, **kw)
     out = []
     for port, data, t_ns in chunks:
         out += pipe.feed(port, data, t_ns)
@@ -40,7 +40,7 @@ def test_synthetic_lab_gives_every_sample_and_exchange_in_time_order():
     # the board's 30 ppm fast crystal: 10 ms nominal samples are 10.0003 ms apart on the host
     span = imu[-1][1] - imu[0][1]
     assert span / 999 == pytest.approx(0.01 * (1 + 30e-6), abs=2e-6)
-    assert pipe.imu_clock.aligner.rate == pytest.approx(30e-6, abs=10e-6)
+    assert pipe.vehicles[0].imu_clock.aligner.rate == pytest.approx(30e-6, abs=10e-6)
     # level and standing: about 1 local g on z, nothing on the gyros beyond noise
     az = np.mean([c[3][2] for c in imu])
     assert az == pytest.approx(OFFICE.gravity, abs=0.01)
@@ -50,9 +50,9 @@ def test_synthetic_lab_gives_every_sample_and_exchange_in_time_order():
     assert len(timeouts) == 8 and all(c[5] == nanoloc.STATUS_TIMEOUT for c in timeouts)
     for _, _, anchor, d, _, _ in ranges:
         if d is not None:
-            true = math.dist(OFFICE.start, OFFICE.anchors[anchor][:2])
+            true = math.dist(OFFICE.vehicles[0].start, OFFICE.anchors[anchor][:2])
             assert abs(d - true) < 0.3  # 5 cm noise, 6 sigma
-    assert pipe.counts["reports_lost"] == 0 and pipe.imu_clock.lost == 0
+    assert pipe.counts["reports_lost"] == 0 and pipe.vehicles[0].imu_clock.lost == 0
     assert sum(pipe.errors["xbee"].values()) == sum(pipe.errors["nanoloc"].values()) == 0
     assert len(out) > 0
 
@@ -107,7 +107,7 @@ def _report(seq, t_us, t_s, anchor=1, status=nanoloc.STATUS_COMPLETE):
 
 def test_a_range_ahead_of_the_imu_waits_for_the_sample_that_passes_it():
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, inputs=("sins", "nanoloc"))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, inputs=("sins", "nanoloc"))
     # SINS samples arrive 3 ms after their 10 ms ticks; anchor time 0 = host 0
     for k in range(5):
         pipe.feed(*_sins_chunk(k, 0.003 + 0.01 * k))
@@ -125,7 +125,7 @@ def test_a_range_ahead_of_the_imu_waits_for_the_sample_that_passes_it():
 
 def test_a_held_range_is_released_by_arrival_time_when_the_imu_stalls():
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, inputs=("sins", "nanoloc"))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, inputs=("sins", "nanoloc"))
     for k in range(3):
         pipe.feed(*_sins_chunk(k, 0.003 + 0.01 * k))
     pipe.feed(*_report(0, 40_000, 0.0405))  # ahead of the last sample (20 ms): held
@@ -142,32 +142,32 @@ def test_a_held_range_is_released_by_arrival_time_when_the_imu_stalls():
 
 def test_late_ranges_go_to_the_estimator_at_once_with_their_own_time():
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, inputs=("sins", "nanoloc"))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, inputs=("sins", "nanoloc"))
     pipe.feed(*_report(0, 1_000_000, 0.0005))  # anchor clock: t_us 1 s = host 0.5 ms
     for k in range(50):
         pipe.feed(*_sins_chunk(k, 0.003 + 0.01 * k))
-    t_filter = pipe.t
+    t_filter = pipe.vehicles[0].t
     pipe.feed(*_report(1, 1_000_000 + 480_000, 0.495))  # happened at 0.4805 s, before T
     assert est.calls[-1][0] == "range"
     assert est.calls[-1][1] == pytest.approx(0.4805, abs=1e-9) and t_filter > 0.4805
     pipe.feed(*_report(2, 1_000_000 + 350_000, 0.496))  # a report 0.14 s late
     assert est.calls[-1][1] == pytest.approx(0.3505, abs=1e-9)
-    assert pipe.counts["ranges_late"] == 2 and pipe.t == t_filter
+    assert pipe.counts["ranges_late"] == 2 and pipe.vehicles[0].t == t_filter
     assert pipe.max_late_s == pytest.approx(t_filter - 0.3505, abs=1e-9)
 
 
 def test_duplicate_sins_frames_are_dropped_and_gaps_counted():
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, inputs=("sins",))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, inputs=("sins",))
     for k, seq in enumerate([7, 8, 8, 9, 13, 14]):
         pipe.feed(*_sins_chunk(seq, 0.003 + 0.01 * k))
     assert sum(1 for c in est.calls if c[0] == "imu") == 5
-    assert pipe.imu_clock.duplicates == 1 and pipe.imu_clock.lost == 3
+    assert pipe.vehicles[0].imu_clock.duplicates == 1 and pipe.vehicles[0].imu_clock.lost == 3
 
 
 def test_corrupt_bytes_are_counted_and_the_next_frames_used():
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, inputs=("sins",))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, inputs=("sins",))
     words = adis16350.sample_to_words(gyro_dps=(0, 0, 0), accel_g=(0, 0, 1))
     bad = bytearray(sins.build_sample(1, words))
     bad[10] ^= 0xFF
@@ -181,7 +181,7 @@ def test_ranges_of_other_tags_and_unknown_anchors_are_not_used():
     est = RecordingEstimator()
     d = OFFICE.to_dict()
     cfg = host_config.from_dict({**d, "vehicle": {**d["vehicle"], "tag": 0x10}})
-    pipe = Pipeline(cfg, estimator=est, inputs=("nanoloc",))
+    pipe = Pipeline(cfg, make_estimator=lambda _: est, inputs=("nanoloc",))
     pipe.feed(*_report(0, 0, 0.001, anchor=1))
     pipe.feed(*_report(1, 25_000, 0.026, anchor=9))
     other = nanoloc.build_report(seq=2, t_us=50_000, anchor=2, tag=0x11, status=0x0F, rssi=-1,
@@ -193,14 +193,14 @@ def test_ranges_of_other_tags_and_unknown_anchors_are_not_used():
 
 def test_distance_is_the_four_timestamp_formula():
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, inputs=("nanoloc",))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, inputs=("nanoloc",))
     pipe.feed(*_report(0, 0, 0.001))
     assert est.calls[0][3] == pytest.approx(4.99994, abs=5e-6)  # wire-formats.md section 3
 
 
 def test_db_query_every_five_seconds_of_arrival_and_its_answer():
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, inputs=("xbee",))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, inputs=("xbee",))
     modem = xbee.build(xbee.FrameType.MODEM_STATUS, True, status=6)
     pipe.feed("xbee", modem, 1_000)
     tx = pipe.take_tx()
@@ -223,7 +223,7 @@ def test_db_query_every_five_seconds_of_arrival_and_its_answer():
 
 def test_only_the_vehicle_router_feeds_the_imu():
     est = RecordingEstimator()
-    pipe = Pipeline(OFFICE, estimator=est, inputs=("xbee",))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: est, inputs=("xbee",))
     words = adis16350.sample_to_words(gyro_dps=(0, 0, 0), accel_g=(0, 0, 1))
     for k, src in enumerate([ROUTER64, ROUTER64 + 1, ROUTER64]):
         frame = xbee.build(0x90, True, src64=src, src16=1, options=1,
@@ -241,8 +241,8 @@ def test_devices_that_restart_start_new_clock_epochs_and_lose_nothing():
     pipe, est, _ = run(first + second)
     assert sum(c[0] == "imu" for c in est.calls) == 600
     assert sum(c[0] == "range" for c in est.calls) == 240
-    assert pipe.imu_clock.counter.restarts == 1 and pipe.range_clock.counter.restarts == 1
-    assert pipe.counts["reports_duplicate"] == 0 and pipe.imu_clock.duplicates == 0
+    assert pipe.vehicles[0].imu_clock.counter.restarts == 1 and pipe.range_clock.counter.restarts == 1
+    assert pipe.counts["reports_duplicate"] == 0 and pipe.vehicles[0].imu_clock.duplicates == 0
     imu = [c[1] for c in est.calls if c[0] == "imu"]
     assert all(b > a for a, b in zip(imu, imu[1:]))
     # the second epoch's times are its own arrival times again (to the link delay)
@@ -276,7 +276,7 @@ def test_a_sample_on_both_the_radio_and_the_direct_line_counts_once():
     both = sorted(radio + [(p, d, t + 1) for p, d, t in direct], key=lambda c: c[2])
     pipe, est, _ = run(both, inputs=("xbee", "sins"))
     assert sum(c[0] == "imu" for c in est.calls) == 200
-    assert pipe.imu_clock.duplicates == 200
+    assert pipe.vehicles[0].imu_clock.duplicates == 200
 
 
 # -- the coordinator's API mode ------------------------------------------------------------------
@@ -287,7 +287,7 @@ def _ap_answer(mode, fid=9, escaped=True):
 
 
 def test_at_queries_read_the_same_in_api_mode_1_and_2():
-    pipe = Pipeline(OFFICE, estimator=RecordingEstimator(), inputs=("xbee",))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: RecordingEstimator(), inputs=("xbee",))
     tx = b""
     for k in range(300):  # wraps the frame ID
         pipe.feed("xbee", b"", k * 5_000_000_000)
@@ -302,7 +302,7 @@ def test_at_queries_read_the_same_in_api_mode_1_and_2():
 
 @pytest.mark.parametrize("escaped,other", [(True, 1), (False, 2)])
 def test_an_ap_answer_that_differs_from_the_host_mode_is_said_once_and_counted(escaped, other):
-    pipe = Pipeline(OFFICE, estimator=RecordingEstimator(), inputs=("xbee",), escaped=escaped)
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: RecordingEstimator(), inputs=("xbee",), escaped=escaped)
     host = 2 if escaped else 1
     pipe.feed("xbee", _ap_answer(host, escaped=escaped), 1)
     assert pipe.take_events() == [] and pipe.coordinator_api == host  # as expected: silent
@@ -320,7 +320,7 @@ def test_an_ap_answer_that_differs_from_the_host_mode_is_said_once_and_counted(e
 
 
 def test_another_clients_ap_set_answer_makes_the_host_ask_at_once():
-    pipe = Pipeline(OFFICE, estimator=RecordingEstimator(), inputs=("xbee",))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: RecordingEstimator(), inputs=("xbee",))
     pipe.feed("xbee", b"", 1)
     pipe.take_tx()
     pipe.feed("xbee", _ap_answer(None), 1_000_000_000)  # "AP set OK", no value
@@ -339,7 +339,7 @@ def test_a_second_clients_atap1_is_seen_by_an_api2_host():
     coord, line = emu.coordinator, emu.lines["xbee"]
     second = {3 * SEC: xbee.build(0x08, True, frame_id=0x42, command=b"AP", parameter=b"\x01"),
               12 * SEC: xbee.build(0x08, False, frame_id=0x43, command=b"AP", parameter=b"\x02")}
-    pipe = Pipeline(OFFICE, estimator=RecordingEstimator(), inputs=("xbee",))
+    pipe = Pipeline(OFFICE, make_estimator=lambda _: RecordingEstimator(), inputs=("xbee",))
     events, t, step = [], 0, 1_000_000
     while t < emu.end_ns:
         t += step

@@ -115,6 +115,6 @@ def test_replay_runs_an_emulator_recording_through_the_pipeline(tmp_path):
         by_port.setdefault(port, []).append((t - wire_ns(len(chunk), 115200), chunk))
     rec = _emulator_recording(tmp_path / "emu", by_port)
     est = RecordingEstimator()
-    replay(rec, lambda es: None, estimator=est)
+    replay(rec, lambda es: None, make_estimator=lambda _: est)
     assert sum(c[0] == "imu" for c in est.calls) == 200
     assert sum(c[0] == "range" for c in est.calls) == 80

@@ -144,10 +144,10 @@ def test_after_an_emulator_restart_every_track_is_back_within_its_normal_error(o
     after += pipe.finish()
     times = check_recovery(track_errors(after, truth, shift_ns / 1e9), threshold)
     print(f"\ngap {gap_s:g} s, first {missed_s:g} s missed: recovery (s after the restart) {times}")
-    est = pipe.estimator.stats()
+    est = pipe.vehicles[0].estimator.stats()
     assert est["reinit"] == {n: {"restart": 1} for n in FILTER_NAMES}
     assert est["reinit_pending"] == []
-    assert pipe.imu_clock.restarts == 1 and pipe.range_clock.restarts == 1
+    assert pipe.vehicles[0].imu_clock.restarts == 1 and pipe.range_clock.restarts == 1
     # the gap and the moments before the first fix of the new run are no aided estimates
     gap = [e for e in after if e.filter != "sins" and e.t * 1e9 < shift_ns]
     assert all(e.extrapolated for e in gap if e.t * 1e9 > last + 0.6e9)
@@ -281,15 +281,17 @@ def test_live_host_recovers_when_the_emulator_is_killed_and_started_again(tmp_pa
     times = check_recovery(errors, normal_thresholds(Recording(tmp_path / "second"), truth),
                            tolerance=0.03)
     print(f"\nlive: recovery (s after the restart) {times}")
-    reinit = result["estimator"]["reinit"]
+    vehicle = result["vehicles"][0]
+    reinit = vehicle["estimator"]["reinit"]
     # one restart per device; a port reopened later than the other may make them two
     assert set(reinit) == set(FILTER_NAMES), reinit
     assert all(set(c) == {"restart"} and 1 <= c["restart"] <= 2 for c in reinit.values()), reinit
-    clocks = {c: result[c]["restarts"] for c in ("imu_clock", "anchor_clock")}
+    clocks = {"imu_clock": vehicle["imu_clock"]["restarts"],
+              "anchor_clock": result["anchor_clock"]["restarts"]}
     events = [json.loads(x).get("status", {}) for x in "".join(status).splitlines()]
     assert any(e.get("event") == "reinit" and "restart" in e["new"].get("ekf", {}) for e in events)
     periodic = [e for e in events if "t_s" in e]
-    assert periodic[-1]["reinit"] == reinit  # the periodic status line shows them
+    assert periodic[-1]["reinit"] == {"1": reinit}  # the periodic status line shows them
     # one new epoch per clock: the host never reads the dead emulator's recycled PTY
     assert clocks == {"imu_clock": 1, "anchor_clock": 1}, clocks
 

@@ -138,7 +138,7 @@ def test_a_pty_that_goes_away_and_comes_back_is_reopened(tmp_path):
     m1, p1 = pty_pair()
     os.symlink(p1, link)
     est, status = RecordingEstimator(), io.StringIO()
-    svc = Service({"sins": str(link)}, OFFICE, ("kf",), out=io.StringIO(), estimator=est,
+    svc = Service({"sins": str(link)}, OFFICE, ("kf",), out=io.StringIO(), make_estimator=lambda _: est,
                   status=status)
     run = Running(svc)
     wait_for(svc.started.is_set, "the service to open its port")
@@ -165,7 +165,7 @@ def test_a_pty_that_goes_away_and_comes_back_is_reopened(tmp_path):
     os.close(m2)
     _check_continuous(est, 200)  # the estimator kept its state: one stream, in order
     assert _seqs(est) == [s % 1000 for s in range(65_500, 65_700)]
-    assert summary["reconnects"] == {"sins": 1} and summary["imu_clock"]["restarts"] == 0
+    assert summary["reconnects"] == {"sins": 1} and summary["vehicles"][0]["imu_clock"]["restarts"] == 0
     events = [json.loads(x)["status"].get("event") for x in status.getvalue().splitlines()
               if "status" in json.loads(x)]
     assert "port_down" in events and events.index("port_up") > events.index("port_down")
@@ -193,7 +193,7 @@ def test_a_socket_port_that_closes_and_reopens_is_reconnected():
     th.start()
     est = RecordingEstimator()
     svc = Service({"sins": f"socket://127.0.0.1:{port}"}, OFFICE, ("kf",), out=io.StringIO(),
-                  estimator=est)
+                  make_estimator=lambda _: est)
     run = Running(svc)
     wait_for(lambda: 299 in _seqs(est), "the last frame")
     summary = run.stop()
@@ -203,4 +203,4 @@ def test_a_socket_port_that_closes_and_reopens_is_reconnected():
     seqs = _seqs(est)
     assert seqs == sorted(seqs) and any(s < 150 for s in seqs) and seqs[-1] == 299
     _check_continuous(est, len(seqs))
-    assert summary["reconnects"] == {"sins": 1} and summary["imu_clock"]["restarts"] == 0
+    assert summary["reconnects"] == {"sins": 1} and summary["vehicles"][0]["imu_clock"]["restarts"] == 0
