@@ -24,7 +24,8 @@ nanoLOC gateway, each on a pseudo-terminal with a stable link (DIR/sins, DIR/xbe
 DIR/nanoloc). On start it prints one JSON line {"ready": true, "ports": {...}, "pts": {...},
 ...} on stdout; it runs until the duration ends or SIGINT/SIGTERM, removes its links and
 prints a final {"done": true, ...} line with frames, bytes and drop counts per port.
-Progress goes to stderr every few seconds."""
+Progress goes to stderr every few seconds. While it runs, `navtwin ctl` (DIR/control)
+injects faults, unplugs and replugs ports."""
 
 
 def register(sub) -> None:

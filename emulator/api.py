@@ -7,6 +7,8 @@
     with emulate("office", seed=1, speed="realtime", duration=30) as lab:
         ser = serial.Serial(lab.ports["xbee"], 115200)   # the stable link to the coordinator
         ...
+        lab.fault("bit_errors", 5.0, port="xbee", ber=1e-4)   # live control: now, for 5 s
+        lab.unplug("sins"); lab.replug("sins")          # the cable pulled and plugged back
         summary = lab.wait_done(timeout=60)             # or leave the block: the lab is stopped
 
 The lab runs as a subprocess of ``navtwin emulate`` (the same program users run), so its
@@ -27,6 +29,8 @@ import tempfile
 import time
 from contextlib import contextmanager
 from typing import Iterator
+
+from .control import Control
 
 
 class EmulatorError(RuntimeError):
@@ -52,6 +56,30 @@ class Lab:
             raise EmulatorError(f"unexpected first line from the emulator: {self.info}")
         self.ports: dict[str, str] = self.info["ports"]  # port name -> stable link
         self.pts: dict[str, str] = self.info["pts"]  # port name -> /dev/pts/N
+        self.control = Control(self.info["link_dir"])  # live control (emulator.control)
+
+    # live control: break the lab at the moment the test chooses
+    def fault(self, kind: str, duration_s: float | None = None, **settings) -> dict:
+        """Inject a fault of *kind* (a scenario [[faults]] kind, without start_s/end_s) now,
+        for *duration_s* or until :meth:`clear`; the reply has its ``id``."""
+        return self.control.fault(kind, duration_s, **settings)
+
+    def clear(self, id: int | None = None) -> dict:
+        """End live fault *id*, or all of them."""
+        return self.control.clear(id)
+
+    def unplug(self, port: str) -> dict:
+        """Pull *port*'s cable: its link vanishes, its clients read a hang-up."""
+        return self.control.unplug(port)
+
+    def replug(self, port: str) -> dict:
+        """Plug *port* back: a new PTY behind the same link (``ports[port]``)."""
+        reply = self.control.replug(port)
+        self.pts[port] = reply["pts"]
+        return reply
+
+    def status(self) -> dict:
+        return self.control.status()
 
     def _line(self, timeout: float) -> dict:
         """The next JSON line on the emulator's stdout, waiting at most *timeout* s."""
@@ -105,6 +133,8 @@ class Lab:
         self.close()
 
     def close(self) -> None:
+        if hasattr(self, "control"):
+            self.control.close()
         self.process.stdout.close()
         self._stderr.close()
 

@@ -74,7 +74,7 @@ class Anchor:
         first = r.start_ms * 1e6 + slot * r.slot_ms * 1e6  # network time of its first exchange
         self.clock = Clock(network_ppm, r.cycle_ms * 1e6, round(first / (1 + network_ppm * 1e-6)))
         self.network_us0 = first / 1e3
-        self.faults = acting_on(sc.faults, "anchor", anchor=spec.id)
+        self.faults = tuple(acting_on(sc.faults, "anchor", anchor=spec.id))
         self.rng = stream(seed, f"nanoloc.anchor.{spec.id}")
 
     def draw(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, np.ndarray]:

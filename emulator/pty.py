@@ -163,6 +163,16 @@ class LinkDir:
         self.links[name] = target
         return final
 
+    def unlink(self, name: str) -> None:
+        """Remove link *name* (an unplugged port: its device node vanishes)."""
+        target = self.links.pop(name, None)
+        final = self.path / name
+        try:
+            if target is not None and os.readlink(final) == target:
+                final.unlink()
+        except OSError:
+            pass
+
     def close(self) -> None:
         """Remove the links this emulator made (if still ours), the lock, and a dir it created."""
         for name, target in self.links.items():
@@ -192,11 +202,24 @@ class PtyPort:
 
     def __init__(self, name: str, baud: int = DEFAULT_BAUD) -> None:
         self.name = name
+        self.baud = baud
+        self.fd = -1
+        self.pts = ""
+        self.attached = False
+        self.attaches = 0
+        self.written = 0
+        self.dropped_unplugged = 0
+        self.dropped_overflow = 0
+        self.received = 0
+        self.unplugs = 0
+        self._open()
+
+    def _open(self) -> None:
         master, slave = os.openpty()
         self.pts = os.ttyname(slave)
         tty.setraw(slave)
         attrs = termios.tcgetattr(slave)
-        speed = getattr(termios, f"B{baud}", None)
+        speed = getattr(termios, f"B{self.baud}", None)
         if speed is not None:  # cosmetic: tools that query the line see the port's rate
             attrs[4] = attrs[5] = speed
             termios.tcsetattr(slave, termios.TCSANOW, attrs)
@@ -204,17 +227,33 @@ class PtyPort:
         os.set_blocking(master, False)
         self.fd = master
         self.attached = False
-        self.attaches = 0
-        self.written = 0
-        self.dropped_unplugged = 0
-        self.dropped_overflow = 0
-        self.received = 0
+
+    @property
+    def plugged(self) -> bool:
+        return self.fd >= 0
+
+    def unplug(self) -> None:
+        """Pull the cable: the PTY goes away (its clients read a hang-up: EIO, POLLHUP), and
+        what the device writes meanwhile is dropped and counted as unplugged."""
+        if self.plugged:
+            self.close()
+            self.attached = False
+            self.unplugs += 1
+
+    def replug(self) -> str:
+        """Plug it back: a new PTY (a new /dev/pts/N, as a USB adapter comes back under a
+        new node); returns its path."""
+        if not self.plugged:
+            self._open()
+        return self.pts
 
     def fileno(self) -> int:
         return self.fd
 
     def check(self) -> bool:
         """Refresh and return ``attached`` (one non-blocking poll of the master)."""
+        if not self.plugged:
+            return False
         p = select.poll()
         p.register(self.fd, select.POLLIN)
         hup = any(ev & select.POLLHUP for _, ev in p.poll(0))
@@ -256,6 +295,8 @@ class PtyPort:
     def read(self) -> bytes:
         """What the client wrote, without blocking. EIO (client gone) marks the port detached."""
         out = bytearray()
+        if not self.plugged:
+            return b""
         while True:
             try:
                 chunk = os.read(self.fd, 65536)
@@ -275,7 +316,8 @@ class PtyPort:
     def stats(self) -> dict:
         return {"pts": self.pts, "attaches": self.attaches, "written": self.written,
                 "dropped_unplugged": self.dropped_unplugged,
-                "dropped_overflow": self.dropped_overflow, "received": self.received}
+                "dropped_overflow": self.dropped_overflow, "received": self.received,
+                "unplugs": self.unplugs}
 
     def close(self) -> None:
         if self.fd >= 0:

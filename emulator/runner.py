@@ -42,12 +42,15 @@ import threading
 import time
 from typing import Callable
 
-from navtwin.common.limits import SPEEDS, span
+from navtwin.common.limits import MAX_DURATION_S, SPEEDS, span
 from navtwin.protocols.ports import NAMES as PORT_NAMES
 from navtwin.protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
 
+from navtwin.common.schema import Invalid, build
+
+from .control import SOCKET as CONTROL_SOCKET, ControlError, ControlServer
 from .coordinator import Coordinator, Remote, identity_registers
-from .faults import acting_on
+from .faults import Fault, LineFault, acting_on
 from .pty import LinkDir, PtyPort
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
@@ -161,6 +164,10 @@ class Emulation:
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
         self.links: dict[str, str] = {}
+        self.control: ControlServer | None = None
+        self.live: dict[int, tuple[Fault, LineWrapper | None]] = {}  # id -> live fault
+        self._live_ids = 0
+        self._now_ns = 0  # the loop's virtual time, for live control
         self.recorder: RecordingWriter | None = None
         try:
             if ports:
@@ -198,6 +205,7 @@ class Emulation:
                 raise RunError(f"cannot create a pseudo-terminal for {name} ({e.strerror}); "
                                f"close some terminals or raise kernel.pty.max") from None
             self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
+        self.control = ControlServer(self.link_dir.path / CONTROL_SOCKET, self._control)
 
     def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
         radios = self.world.radios  # the routers' MY, the network: from the seed
@@ -250,6 +258,7 @@ class Emulation:
                 "scenario": self.scenario.name, "seed": self.seed, "speed": speed_name(self.speed),
                 "duration_s": self.end_ns / SEC,
                 "link_dir": str(self.link_dir.path) if self.link_dir else None,
+                "control": str(self.control.path) if self.control else None,
                 "pid": os.getpid()}
 
     # -- the loop ---------------------------------------------------------------------------
@@ -286,6 +295,7 @@ class Emulation:
                     next_check = wall + CHECK_NS
             for ev in feed.take(now):
                 self._enqueue(ev)
+            self._now_ns = now
             if not paced:  # everything known so far, in one go
                 now = END if feed.exhausted else feed.known_ns
             delivered = False
@@ -335,6 +345,8 @@ class Emulation:
     def _wait(self, deadline: int, check_at: int) -> None:
         """Sleep until *deadline* (monotonic ns) or a client writes; spin the last SPIN_NS."""
         fds = [p.fd for p in self.ports.values() if p.attached]
+        if self.control is not None:
+            fds += self.control.fds()
         now = time.monotonic_ns()
         sleep_until = min(deadline - SPIN_NS, check_at)
         if sleep_until > now:
@@ -351,9 +363,13 @@ class Emulation:
         """Read what clients wrote (stamped *now*) and notice clients coming and going."""
         ports = self.ports
         attached = [p for p in ports.values() if p.attached]
-        readable = select.select(attached, [], [], 0)[0] if attached else []
+        control = self.control.fds() if self.control is not None else []
+        readable = select.select(attached + control, [], [], 0)[0]
         for port in readable:
-            self._host_bytes(port, now)
+            if isinstance(port, PtyPort):
+                self._host_bytes(port, now)
+        if control:
+            self.control.serve([s for s in readable if not isinstance(s, PtyPort)])
         if check_detached:
             for port in ports.values():
                 if not port.attached:
@@ -390,6 +406,85 @@ class Emulation:
         self.progress(f"{self.scenario.name}: {v:.1f} / {self.end_ns / SEC:g} s "
                       f"({v / (elapsed_ns / SEC):.0f}x real time)")
 
+    # -- live control (emulator.control) ------------------------------------------------------
+    def _control(self, req: dict) -> dict:
+        return getattr(self, f"_op_{req['op']}")(req)
+
+    def _op_status(self, req: dict) -> dict:
+        return {"virtual_s": self._now_ns / SEC, "ports": {
+                    n: {"plugged": p.plugged, "attached": p.attached, "pts": p.pts,
+                        "link": self.links.get(n)} for n, p in self.ports.items()},
+                "faults": [self._live_entry(i) for i in self.live]}
+
+    def _live_entry(self, n: int) -> dict:
+        fault, _ = self.live[n]
+        return {"id": n, "kind": fault.KIND, "start_s": fault.start_s, "end_s": fault.end_s}
+
+    def _op_fault(self, req: dict) -> dict:
+        """A fault from now on: a line fault from the next chunk, a device fault from the
+        world's next block (what is generated, up to ~2 s ahead when paced, stays)."""
+        spec, duration = req.get("fault"), req.get("duration_s")
+        if not isinstance(spec, dict) or {"start_s", "end_s"} & set(spec):
+            raise ControlError('give "fault" as {"kind": ..., settings} without start_s/end_s '
+                               '(a live fault starts now; "duration_s" sets its length)')
+        if duration is not None and (isinstance(duration, bool) or not isinstance(duration, (int, float))
+                                     or not 0 < duration <= MAX_DURATION_S):
+            raise ControlError(f"duration_s must be a number in (0, {MAX_DURATION_S:g}] s, not "
+                               f"{duration!r}")
+        kind = Fault.KINDS.get(spec.get("kind"))
+        start = self._now_ns if kind is not None and issubclass(kind, LineFault) else \
+            self.world.generated_ns
+        end = MAX_DURATION_S if duration is None else start / SEC + duration
+        try:
+            fault = build(Fault, {**spec, "start_s": start / SEC, "end_s": end}, (("fault", 0),))
+        except Invalid as e:
+            raise ControlError(str(e)) from None
+        if getattr(fault, "anchor", None) is not None and \
+                fault.anchor not in {a.id for a in self.scenario.anchors}:
+            raise ControlError(f"[fault] anchor {fault.anchor} is not in the scenario's "
+                               "[[anchors]]; use one of their ids")
+        self._live_ids += 1
+        wrapper = None
+        if isinstance(fault, LineFault):
+            wrapper = fault.wrapper(stream(self.seed, f"faults.live.{self._live_ids}"))
+            self.lines[fault.port].wrap(wrapper)
+        else:
+            self.world.inject(fault)
+        self.live[self._live_ids] = (fault, wrapper)
+        return self._live_entry(self._live_ids)
+
+    def _op_clear(self, req: dict) -> dict:
+        ids = list(self.live) if req.get("id") is None else [req["id"]]
+        if any(n not in self.live for n in ids):
+            raise ControlError(f"no live fault {req['id']!r}; the live ones are {list(self.live)}")
+        for n in ids:
+            fault, wrapper = self.live.pop(n)
+            if wrapper is not None:
+                self.lines[fault.port].wrappers.remove(wrapper)
+            else:
+                self.world.remove(fault)
+        return {"cleared": ids}
+
+    def _port(self, req: dict) -> PtyPort:
+        port = self.ports.get(req.get("port"))
+        if port is None:
+            raise ControlError(f"no port {req.get('port')!r}; use one of {', '.join(self.ports)}")
+        return port
+
+    def _op_unplug(self, req: dict) -> dict:
+        port = self._port(req)
+        port.unplug()
+        self.link_dir.unlink(port.name)
+        self.links.pop(port.name, None)
+        return {"port": port.name, "plugged": False}
+
+    def _op_replug(self, req: dict) -> dict:
+        port = self._port(req)
+        if not port.plugged:
+            port.replug()
+            self.links[port.name] = str(self.link_dir.link(port.name, port.pts))
+        return {"port": port.name, "plugged": True, "pts": port.pts}
+
     # -- results ----------------------------------------------------------------------------
     def summary(self) -> dict:
         ports = {}
@@ -418,6 +513,9 @@ class Emulation:
                     finish()
                 except RecordingWriteError as e:  # the first failure is the one to report
                     self.record_error = self.record_error or e
+        if getattr(self, "control", None) is not None:
+            self.control.close()
+            self.control = None
         for port in self.ports.values():
             port.close()
         if self.link_dir is not None:

@@ -153,6 +153,32 @@ class World:
         self._returned_ns = until_ns
         return out
 
+    # -- live faults ------------------------------------------------------------------------
+    def _holders(self):
+        """(model, what it is, which) for every model that device faults act on."""
+        for a in self.nanoloc.anchors:
+            yield a, "anchor", {"anchor": a.id}
+        for link in [v.uplink for v in self.vehicles] + [self.link]:
+            yield link, "link", {}
+
+    @property
+    def generated_ns(self) -> int:
+        """Events before this are generated (and fixed): a live fault acts from here on."""
+        return self._generated_ns
+
+    def inject(self, fault) -> None:
+        """Add device fault *fault* during the run (live control); it acts on the blocks not
+        generated yet (from :attr:`generated_ns`): what is generated stays as it was. The
+        models it acts on: as for a scenario's faults (emulator.faults.acting_on)."""
+        for model, kind, which in self._holders():
+            if acting_on([fault], kind, **which):
+                model.faults = (*model.faults, fault)
+
+    def remove(self, fault) -> None:
+        """End live fault *fault* for the blocks not generated yet."""
+        for model, _, _ in self._holders():
+            model.faults = tuple(f for f in model.faults if f is not fault)
+
     @property
     def finished(self) -> bool:
         return self._returned_ns >= self.duration_ns

@@ -1,0 +1,95 @@
+"""``navtwin ctl``: break a running lab at the moment you choose (its control socket)."""
+from __future__ import annotations
+
+import json
+import sys
+import tomllib
+
+from navtwin.common.limits import MAX_DURATION_S
+
+from .main import UsageError, number
+
+DESCRIPTION = """\
+Talk to a running `navtwin emulate` through the control socket in its link directory
+(DIR/control, mode 0600). Each command prints the emulator's JSON reply on stdout:
+
+  status                      virtual time, ports (plugged, attached), live faults
+  fault KIND:key=value,...    inject a fault now (e.g. bit_errors:port=xbee,ber=1e-4), for
+                              --duration S or until cleared; its id is in the reply
+  clear [ID]                  end one live fault, or all
+  unplug PORT / replug PORT   pull a port's cable (its link vanishes, clients read a hang-up)
+                              and plug it back (a new PTY behind the same link)
+
+The fault kinds and their settings are those of a scenario's [[faults]] (docs/scenarios.md);
+live faults have no start_s/end_s: they start now."""
+
+
+def register(sub) -> None:
+    from navtwin.emulator.pty import default_link_dir
+
+    p = sub.add_parser("ctl", help="control a running emulator: faults, unplug, status",
+                       description=DESCRIPTION, formatter_class=_raw())
+    p.add_argument("--link-dir", metavar="DIR", default=None,
+                   help=f"the emulator's link directory (default: {default_link_dir()})")
+    p.add_argument("--timeout", type=number(0, 600, above=True), default=10.0, metavar="S",
+                   help="seconds to wait for the reply (default 10)")
+    p.add_argument("op", choices=("status", "fault", "clear", "unplug", "replug"))
+    p.add_argument("arg", nargs="?", help="the fault (KIND:key=value,...), the fault id, or the port")
+    p.add_argument("--duration", type=number(0, MAX_DURATION_S, above=True), metavar="S",
+                   help="with fault: how long it lasts (default: until cleared)")
+    p.set_defaults(func=run_ctl)
+
+
+def _raw():
+    import argparse
+
+    return argparse.RawDescriptionHelpFormatter
+
+
+def parse_fault(text: str) -> dict:
+    """``KIND:key=value,...`` -> ``{"kind": KIND, key: value, ...}``; values read as TOML
+    scalars (``1e-4``, ``true``, ``"x"``), a bare word as a string (``port=xbee``)."""
+    kind, _, rest = text.partition(":")
+    if not kind.strip():
+        raise UsageError(f"fault {text!r}: give it as KIND:key=value,... "
+                         "(e.g. bit_errors:port=xbee,ber=1e-4)")
+    out: dict = {"kind": kind.strip()}
+    for item in filter(None, (i.strip() for i in rest.split(","))):
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise UsageError(f"fault {text!r}: {item!r} is not key=value; write e.g. ber=1e-4")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key.strip()] = value.strip()
+    return out
+
+
+def run_ctl(args) -> int:
+    from navtwin.emulator.control import Control, ControlError
+    from navtwin.emulator.pty import default_link_dir
+
+    op, arg = args.op, args.arg
+    if op in ("fault", "unplug", "replug") and arg is None:
+        what = "the fault as KIND:key=value,..." if op == "fault" else "the port (sins, xbee, nanoloc)"
+        raise UsageError(f"ctl {op} needs {what}")
+    if args.duration is not None and op != "fault":
+        raise UsageError("--duration goes with ctl fault only")
+    request: dict = {}
+    if op == "fault":
+        request["fault"] = parse_fault(arg)
+        if args.duration is not None:
+            request["duration_s"] = args.duration
+    elif op == "clear" and arg is not None:
+        if not arg.isdigit():
+            raise UsageError(f"ctl clear {arg}: a fault id is a number (see ctl status)")
+        request["id"] = int(arg)
+    elif op in ("unplug", "replug"):
+        request["port"] = arg
+    with Control(args.link_dir or default_link_dir(), timeout=args.timeout) as ctl:
+        try:
+            reply = ctl.call(op, **request)
+        except ControlError as e:
+            raise UsageError(str(e)) from None
+    sys.stdout.write(json.dumps(reply, separators=(",", ":")) + "\n")
+    return 0

@@ -1,0 +1,144 @@
+"""Live control: a test breaks the running lab through its control socket (emulator.control),
+from Python (emulator.api.Lab) or from ``navtwin ctl``."""
+import json
+import os
+import socket
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import serial
+
+from navtwin.emulator.api import emulate
+from navtwin.emulator.control import Control, ControlError
+from navtwin.emulator.runner import Emulation
+from navtwin.emulator.scenario import load_scenario
+from navtwin.protocols import nanoloc
+from navtwin.protocols.recording import Recording
+from navtwin.protocols.stream import nanoloc_decoder, sins_decoder
+
+DEADLINE_S = 20.0
+
+
+def _frames(decoder, chunks):
+    out = []
+    for c in chunks:
+        out += [f for f in decoder.feed(c) if hasattr(f, "fields")]
+    return out
+
+
+def _read_frames(ser, decoder, want: int, deadline_s: float = DEADLINE_S):
+    """Read until *want* frames decode (or the deadline); the frames."""
+    frames, end = [], time.monotonic() + deadline_s
+    while len(frames) < want and time.monotonic() < end:
+        frames += [f for f in decoder.feed(ser.read(ser.in_waiting or 1)) if hasattr(f, "fields")]
+    return frames
+
+
+def test_the_socket_is_private_and_answers_status_and_refuses_bad_requests(tmp_path):
+    with emulate("office", duration=60, link_dir=tmp_path / "links") as lab:
+        path = Path(lab.info["control"])
+        assert path.parent == tmp_path / "links" and stat.S_IMODE(path.stat().st_mode) == 0o600
+        st = lab.status()
+        assert set(st["ports"]) == {"sins", "xbee", "nanoloc"}
+        assert all(p["plugged"] for p in st["ports"].values()) and st["faults"] == []
+        with pytest.raises(ControlError, match=r"unknown op 'explode'; use one of status"):
+            lab.control.call("explode")
+        with pytest.raises(ControlError, match=r"kind must be one of"):
+            lab.fault("no_such_kind")
+        with pytest.raises(ControlError, match=r"anchor 9 is not in the scenario"):
+            lab.fault("anchor_outage", anchor=9)
+        with pytest.raises(ControlError, match=r"without start_s/end_s"):
+            lab.control.call("fault", fault={"kind": "anchor_outage", "anchor": 1, "start_s": 1})
+        with pytest.raises(ControlError, match=r"no port 'usb0'"):
+            lab.unplug("usb0")
+        # garbage on the socket: one error line, the connection and the lab carry on
+        with socket.socket(socket.AF_UNIX) as s:
+            s.settimeout(DEADLINE_S)
+            s.connect(str(path))
+            s.sendall(b"\xff\xfe not json\n{\"op\": \"status\"}\n")
+            replies = s.makefile().readline(), s.makefile().readline()
+        assert json.loads(replies[0])["ok"] is False and "not JSON" in replies[0]
+        assert lab.status()["virtual_s"] > 0 and lab.running()
+
+
+def test_unplug_hangs_up_the_client_and_replug_brings_the_port_back(tmp_path):
+    with emulate("office", duration=60, link_dir=tmp_path / "links") as lab:
+        link = lab.ports["sins"]
+        with serial.Serial(link, 115200, timeout=0.2) as ser:
+            before = _read_frames(ser, sins_decoder(), 5)
+            assert len(before) == 5
+            assert lab.unplug("sins") == {"ok": True, "port": "sins", "plugged": False}
+            assert not os.path.lexists(link)  # the device node is gone
+            with pytest.raises(serial.SerialException):
+                end = time.monotonic() + DEADLINE_S
+                while time.monotonic() < end:  # what was in flight, then the hang-up
+                    ser.read(4096)
+        assert lab.status()["ports"]["sins"]["plugged"] is False
+        reply = lab.replug("sins")
+        assert os.readlink(link) == reply["pts"]
+        with serial.Serial(link, 115200, timeout=0.2) as ser:
+            frames = _read_frames(ser, sins_decoder(), 5)
+            assert len(frames) == 5  # valid SINS frames again, consecutive
+            assert all(b.fields["seq"] == (a.fields["seq"] + 1) % 65536
+                       for a, b in zip(frames, frames[1:]))
+        # the board ran on while its cable was out: its counter went on (no wrap in 60 s)
+        assert frames[0].fields["seq"] > before[-1].fields["seq"]
+        summary = lab.stop()
+    assert summary["ports"]["sins"]["unplugs"] == 1
+
+
+def test_a_live_anchor_outage_times_out_that_anchor_and_nothing_else(tmp_path):
+    sc = load_scenario("office")
+    rec = tmp_path / "rec"
+    with emulate("office", duration=9, link_dir=tmp_path / "links", record=rec) as lab:
+        fault = lab.fault("anchor_outage", 2.0, anchor=1)
+        assert fault["kind"] == "anchor_outage" and fault["end_s"] == pytest.approx(fault["start_s"] + 2)
+        assert [f["id"] for f in lab.status()["faults"]] == [fault["id"]]
+        lab.wait_done(60)
+    # the same run without the fault, at max speed, in process
+    clean: list = []
+    with Emulation(sc, None, speed=None, duration_s=9, ports=False,
+                   sink=lambda c: clean.append(c.data) if c.port == "nanoloc" else None) as emu:
+        emu.run()
+    got = _frames(nanoloc_decoder(), [c.data for c in Recording(rec).chunks("nanoloc")])
+    want = _frames(nanoloc_decoder(), clean)
+    assert len(got) == len(want) > 300
+    changed = 0
+    for g, w in zip(got, want):
+        g, w = g.fields, w.fields
+        assert (g["seq"], g["anchor"], g["t_us"]) == (w["seq"], w["anchor"], w["t_us"])
+        # the exchange starts a few ms before its t_us: a margin of one cycle either side
+        inside = fault["start_s"] + 0.1 <= g["t_us"] / 1e6 < fault["end_s"] - 0.1
+        near = fault["start_s"] - 0.1 <= g["t_us"] / 1e6 < fault["end_s"] + 0.1
+        if g["anchor"] == 1 and inside:
+            assert g["status"] == nanoloc.STATUS_TIMEOUT
+            changed += w["status"] != nanoloc.STATUS_TIMEOUT
+        elif not (g["anchor"] == 1 and near):
+            assert g == w
+    assert changed > 10  # about 2 s of anchor 1's exchanges
+
+
+def test_navtwin_ctl_prints_replies_and_refuses_in_one_line(tmp_path):
+    def ctl(*args):
+        return subprocess.run([sys.executable, "-m", "navtwin", "ctl", "--link-dir",
+                               str(tmp_path / "links"), *args], capture_output=True, text=True,
+                              timeout=60)
+
+    r = ctl("status")
+    assert r.returncode == 2 and "cannot connect" in r.stderr and len(r.stderr.splitlines()) == 1
+    with emulate("office", duration=60, link_dir=tmp_path / "links") as lab:
+        r = ctl("fault", "anchor_outage:anchor=2", "--duration", "30")
+        assert r.returncode == 0, r.stderr
+        fid = json.loads(r.stdout)["id"]
+        assert [f["id"] for f in json.loads(ctl("status").stdout)["faults"]] == [fid]
+        r = ctl("fault", "anchor_outage:anchor=2,colour=blue")
+        assert r.returncode == 2 and "unknown key 'colour'" in r.stderr
+        assert "Traceback" not in r.stderr and len(r.stderr.splitlines()) == 1
+        assert json.loads(ctl("clear", str(fid)).stdout)["cleared"] == [fid]
+        assert ctl("unplug", "nanoloc").returncode == 0
+        assert not os.path.lexists(lab.ports["nanoloc"])
+        assert ctl("replug", "nanoloc").returncode == 0 and os.path.lexists(lab.ports["nanoloc"])
