@@ -52,6 +52,7 @@ from .pty import LinkDir, PtyPort
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
 from .uart import END, Chunk, Line, LineWrapper, Wire
+from .uart_rx import ClientView, Framing
 
 SEC = 1_000_000_000
 SPIN_NS = 250_000  # busy-wait for the last 0.25 ms before a deadline (select overshoots ~0.1 ms)
@@ -160,6 +161,7 @@ class Emulation:
             self.lines["xbee"].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
+        self.views: dict[str, ClientView] = {}  # per port: what the client's UART reads
         self.links: dict[str, str] = {}
         self.recorder: RecordingWriter | None = None
         try:
@@ -198,6 +200,8 @@ class Emulation:
                 raise RunError(f"cannot create a pseudo-terminal for {name} ({e.strerror}); "
                                f"close some terminals or raise kernel.pty.max") from None
             self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
+            self.views[name] = ClientView(name, Framing(self.lines[name].device.baud),
+                                          notify=self.progress)
 
     def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
         radios = self.world.radios  # the routers' MY, the network: from the seed
@@ -348,7 +352,8 @@ class Emulation:
             pass
 
     def _service(self, now: int, check_detached: bool) -> None:
-        """Read what clients wrote (stamped *now*) and notice clients coming and going."""
+        """Read what clients wrote (stamped *now*) and notice clients coming and going, and
+        (every CHECK_NS) their termios settings."""
         ports = self.ports
         attached = [p for p in ports.values() if p.attached]
         readable = select.select(attached, [], [], 0)[0] if attached else []
@@ -361,6 +366,9 @@ class Emulation:
                     # what a client wrote before it was noticed (it may even have gone
                     # again): a real line delivers it all the same
                     self._host_bytes(port, now)
+            for name, port in ports.items():
+                self.views[name].settle(*(port.client_framing() if port.attached
+                                          else (None, 0)))
 
     def _host_bytes(self, port: PtyPort, now: int) -> None:
         data = port.read()
@@ -378,8 +386,9 @@ class Emulation:
 
     def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
         port = self.ports.get(chunk.port)
-        if port is not None:
-            port.write(chunk.data)
+        if port is not None:  # the recording below keeps the device's bytes, not this view
+            port.write(self.views[chunk.port].view(chunk.start_ns, chunk.data,
+                                                   Framing(chunk.baud)))
         if self.recorder is not None:
             self.recorder.port(chunk.port).write(chunk.data, chunk.start_ns, wall_ns)
         if self.sink is not None:
@@ -389,6 +398,9 @@ class Emulation:
         v = self.reached_ns / SEC
         self.progress(f"{self.scenario.name}: {v:.1f} / {self.end_ns / SEC:g} s "
                       f"({v / (elapsed_ns / SEC):.0f}x real time)")
+        for view in self.views.values():
+            if view.client is not None:
+                self.progress(view.status())
 
     # -- results ----------------------------------------------------------------------------
     def summary(self) -> dict:
@@ -399,6 +411,7 @@ class Emulation:
                 entry["dropped_tx_buffer"] = self.coordinator.dropped_tx_buffer
             if name in self.ports:
                 entry.update(self.ports[name].stats())
+                entry.update(self.views[name].stats())
             ports[name] = entry
         return {"done": True, "scenario": self.scenario.name, "seed": self.seed,
                 "speed": speed_name(self.speed), "virtual_s": self.reached_ns / SEC,
