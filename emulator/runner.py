@@ -22,6 +22,11 @@ and times come from the world and the UART model only, the bytes of every port, 
 device times, are identical in every mode; only host commands (read from the PTYs when
 they arrive) add answers on the ``xbee`` line.
 
+Clients' settings. Every CHECK_NS the attached ports' termios are read; while a client's
+rate, data bits or parity differ from its device's line, the port writes what the client's
+UART would read (``uart_rx.ClientView``), with one progress line when that starts or stops.
+The recording and the sink get the device's bytes, whatever the clients' settings.
+
 Recording. Each chunk a device emits is recorded, whether or not a client is attached:
 ``t_device_ns`` = when its first byte leaves the UART, ``t_wall_ns`` (paced runs only) =
 monotonic ns since the run started when it was written to the PTY. The recording, and
