@@ -109,7 +109,8 @@ class Receiver:
         self._edge = 0
 
     def feed(self, start_ns: int, data: bytes) -> Received:
-        """The characters completed by a chunk of *data* whose first bit starts at *start_ns*."""
+        """The characters completed by a chunk of *data* whose first bit starts at *start_ns*
+        (an empty chunk says the line was idle until then: it finishes a pending frame)."""
         levels = waveform(data, self.tx)
         out = []
         hunt = -1.0  # the next frame starts at the first falling edge after this position
