@@ -16,7 +16,12 @@
 ``python -m navtwin.cli.emulator_bench digi-open [--repeat 10]``
     times digi-xbee's ``XBeeDevice(port, 115200).open()`` on the coordinator's port.
 
-Both print one JSON object.
+``navtwin bench uart-rx``
+    bytes per second the client-UART model (emulator.uart_rx) turns into what a client at
+    other settings reads, on 30-byte chunks every 10 ms (the SINS board's frames) for
+    several client settings, against the 11 520 B/s a 115200 8N1 line carries.
+
+Each prints one JSON object.
 """
 from __future__ import annotations
 
@@ -157,6 +162,27 @@ def digi_open(repeat: int = 10, scenario: str = "office") -> dict:
             "min_s": min(times), "median_s": float(np.median(times)), "max_s": max(times)}
 
 
+def uart_rx(chunks: int = 3000, seed: int = 1) -> dict:
+    """Throughput of Receiver + tty_bytes against the line rate it must keep up with."""
+    from .uart_rx import Framing, Receiver, tty_bytes
+
+    line = Framing(115200)
+    data = np.random.default_rng(seed).integers(0, 256, (chunks, 30), dtype=np.uint8)
+    blobs = [row.tobytes() for row in data]
+    out = {}
+    for client in (Framing(9600), Framing(57600), Framing(230400), Framing(115200, parity="O"),
+                   Framing(115200, bits=7)):
+        rx = Receiver(line, client)
+        t = time.perf_counter()
+        for k, blob in enumerate(blobs):
+            tty_bytes(rx.feed(k * 10_000_000, blob), 0)
+        out[str(client)] = len(blobs) * 30 / (time.perf_counter() - t)
+    line_bps = line.baud / line.frame_bits
+    return {"benchmark": "uart-rx", "device": str(line), "chunk_bytes": 30,
+            "bytes_per_s": out, "line_bytes_per_s": line_bps,
+            "min_x_line": min(out.values()) / line_bps}
+
+
 def benchmarks() -> dict:
     """The emulator's benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks)."""
     def emulator_speed(quick: bool = False) -> dict:
@@ -171,5 +197,9 @@ def benchmarks() -> dict:
         """emulator: digi-xbee XBeeDevice.open() on the coordinator (goal < 1.5 s)"""
         return digi_open(3 if quick else 10)
 
+    def uart_rx_model(quick: bool = False) -> dict:
+        """emulator: client-UART model throughput vs the 11.5 kB/s line (goal >= 5x)"""
+        return uart_rx(500 if quick else 3000)
+
     return {"emulator-speed": emulator_speed, "emulator-jitter": emulator_jitter,
-            "digi-open": digi_xbee_open}
+            "digi-open": digi_xbee_open, "uart-rx": uart_rx_model}

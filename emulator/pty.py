@@ -17,7 +17,12 @@ Line discipline of the emulated cable (peers-and-pty-facts.md section 5):
   (``dropped_overflow``), as a UART loses what the host does not read. The emulator never
   blocks on a client;
 * a detached master reads EIO and ``select`` reports it readable forever, so only
-  attached ports are waited on; detached ones are re-checked with :meth:`PtyPort.check`.
+  attached ports are waited on; detached ones are re-checked with :meth:`PtyPort.check`;
+* the client's settings: termios ioctls on the master act on the slave, so
+  :meth:`PtyPort.client_framing` reads the baud, data bits, parity and stop bits the client
+  set (one ``tcgetattr``; the runner looks every ``CHECK_NS``). The PTY driver forces CS8
+  and clears PARENB on every set (``pty_set_termios``), so 7 data bits and even parity
+  never show; odd parity does, by the PARODD it leaves behind; baud and CSTOPB show as set.
 
 :class:`LinkDir` is the directory of stable symlinks (``sins``, ``xbee``, ``nanoloc``) to
 the ``/dev/pts/N`` paths: created 0700, refused when owned by another user or writable by
@@ -34,6 +39,7 @@ import fcntl
 import os
 import select
 import stat
+import struct
 import termios
 import time
 import tty
@@ -43,9 +49,18 @@ from pathlib import Path
 from navtwin.protocols.linkdir import LOCK
 from navtwin.protocols.ports import DEFAULT_BAUD
 
+from .uart_rx import Framing
+
 PTS = "/dev/pts/"  # where every PTY slave an emulator links to lives
 LOCK_TRIES = 20  # a host's probe holds the lock shared for microseconds: retry ...
 LOCK_RETRY_S = 0.005  # ... this often before calling the directory in use
+#: termios speed constants -> baud (B0, "hang up", is left out: no rate to read at)
+SPEED_BAUD = {getattr(termios, n): int(n[1:]) for n in dir(termios)
+              if n.startswith("B") and n[1:].isdigit() and int(n[1:]) > 0}
+BOTHER = 0o010000  # a rate that is no B constant (pyserial's 250000): read it with TCGETS2
+TERMIOS2 = struct.Struct("4IB19s2I")  # struct termios2: flags, c_line, c_cc, c_ispeed, c_ospeed
+TCGETS2 = 2 << 30 | TERMIOS2.size << 16 | ord("T") << 8 | 0x2A  # _IOR('T', 0x2A, termios2)
+CSIZE_BITS = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
 
 
 class LinkDirError(ValueError):
@@ -264,6 +279,26 @@ class PtyPort:
         elif hup and self.attached:
             self.attached = False
         return self.attached
+
+    def client_framing(self) -> tuple[Framing | None, int]:
+        """The client's (Framing, c_iflag) from the slave's termios; Framing None when
+        the rate is B0 (hang up) or unreadable."""
+        try:
+            iflag, _, cflag, _, ispeed, ospeed, _ = termios.tcgetattr(self.fd)
+            speed = ispeed or ospeed  # an input speed of 0 means "as the output"
+            baud = SPEED_BAUD.get(speed)
+            if speed == BOTHER:
+                raw = fcntl.ioctl(self.fd, TCGETS2, bytes(TERMIOS2.size))
+                _, _, _, _, _, _, ibaud, obaud = TERMIOS2.unpack(raw)
+                baud = ibaud or obaud or None
+        except OSError:
+            return None, 0
+        if baud is None:
+            return None, iflag
+        # PARODD without PARENB: the PTY cleared PARENB of a client that asked for odd parity
+        parity = "O" if cflag & termios.PARODD else "E" if cflag & termios.PARENB else "N"
+        return Framing(baud, CSIZE_BITS[cflag & termios.CSIZE], parity,
+                       2 if cflag & termios.CSTOPB else 1), iflag
 
     def _flush_stale(self) -> None:
         try:

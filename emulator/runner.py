@@ -22,6 +22,11 @@ and times come from the world and the UART model only, the bytes of every port, 
 device times, are identical in every mode; only host commands (read from the PTYs when
 they arrive) add answers on the ``xbee`` line.
 
+Clients' settings. Every CHECK_NS the attached ports' termios are read; while a client's
+rate, data bits or parity differ from its device's line, the port writes what the client's
+UART would read (``uart_rx.ClientView``), with one progress line when that starts or stops.
+The recording and the sink get the device's bytes, whatever the clients' settings.
+
 Recording. Each chunk a device emits is recorded, whether or not a client is attached:
 ``t_device_ns`` = when its first byte leaves the UART, ``t_wall_ns`` (paced runs only) =
 monotonic ns since the run started when it was written to the PTY. The recording, and
@@ -55,6 +60,7 @@ from .pty import LinkDir, PtyPort
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
 from .uart import END, Chunk, Line, LineWrapper, Wire
+from .uart_rx import ClientView, Framing
 
 SEC = 1_000_000_000
 SPIN_NS = 250_000  # busy-wait for the last 0.25 ms before a deadline (select overshoots ~0.1 ms)
@@ -163,6 +169,7 @@ class Emulation:
             self.lines["xbee"].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
+        self.views: dict[str, ClientView] = {}  # per port: what the client's UART reads
         self.links: dict[str, str] = {}
         self.control: ControlServer | None = None
         self.live: dict[int, tuple[Fault, LineWrapper | None]] = {}  # id -> live fault
@@ -205,6 +212,8 @@ class Emulation:
                 raise RunError(f"cannot create a pseudo-terminal for {name} ({e.strerror}); "
                                f"close some terminals or raise kernel.pty.max") from None
             self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
+            self.views[name] = ClientView(name, Framing(self.lines[name].device.baud),
+                                          notify=self.progress)
         self.control = ControlServer(self.link_dir.path / CONTROL_SOCKET, self._control)
 
     def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
@@ -360,7 +369,8 @@ class Emulation:
             pass
 
     def _service(self, now: int, check_detached: bool) -> None:
-        """Read what clients wrote (stamped *now*) and notice clients coming and going."""
+        """Read what clients wrote (stamped *now*) and notice clients coming and going, and
+        (every CHECK_NS) their termios settings."""
         ports = self.ports
         attached = [p for p in ports.values() if p.attached]
         control = self.control.fds() if self.control is not None else []
@@ -377,6 +387,9 @@ class Emulation:
                     # what a client wrote before it was noticed (it may even have gone
                     # again): a real line delivers it all the same
                     self._host_bytes(port, now)
+            for name, port in ports.items():
+                self.views[name].settle(*(port.client_framing() if port.attached
+                                          else (None, 0)))
 
     def _host_bytes(self, port: PtyPort, now: int) -> None:
         data = port.read()
@@ -394,8 +407,9 @@ class Emulation:
 
     def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
         port = self.ports.get(chunk.port)
-        if port is not None:
-            port.write(chunk.data)
+        if port is not None:  # the recording below keeps the device's bytes, not this view
+            port.write(self.views[chunk.port].view(chunk.start_ns, chunk.data,
+                                                   Framing(chunk.baud)))
         if self.recorder is not None:
             self.recorder.port(chunk.port).write(chunk.data, chunk.start_ns, wall_ns)
         if self.sink is not None:
@@ -405,6 +419,9 @@ class Emulation:
         v = self.reached_ns / SEC
         self.progress(f"{self.scenario.name}: {v:.1f} / {self.end_ns / SEC:g} s "
                       f"({v / (elapsed_ns / SEC):.0f}x real time)")
+        for view in self.views.values():
+            if view.client is not None:
+                self.progress(view.status())
 
     # -- live control (emulator.control) ------------------------------------------------------
     def _control(self, req: dict) -> dict:
@@ -494,6 +511,7 @@ class Emulation:
                 entry["dropped_tx_buffer"] = self.coordinator.dropped_tx_buffer
             if name in self.ports:
                 entry.update(self.ports[name].stats())
+                entry.update(self.views[name].stats())
             ports[name] = entry
         return {"done": True, "scenario": self.scenario.name, "seed": self.seed,
                 "speed": speed_name(self.speed), "virtual_s": self.reached_ns / SEC,

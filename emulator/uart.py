@@ -33,6 +33,7 @@ class Chunk:
     start_ns: int  # first byte leaves the device's UART
     end_ns: int  # last byte has arrived; the chunk is delivered now
     data: bytes
+    baud: int  # the device's rate when the chunk started (the XBee's BD may change it)
 
 
 class Wire:
@@ -161,7 +162,7 @@ class Line:
                 if not data or t >= end_ns:  # dropped, or held back past the end of the run
                     continue
                 end = t + wire_ns(len(data), baud)
-                self.current = Chunk(self.name, t, end, data)
+                self.current = Chunk(self.name, t, end, data, baud)
                 self.queued += len(data)
                 self.free_ns = end
                 self.chunks += 1
