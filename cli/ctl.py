@@ -19,6 +19,8 @@ Talk to a running `navtwin emulate` through the control socket in its link direc
   clear [ID]                  end one live fault, or all
   unplug PORT / replug PORT   pull a port's cable (its link vanishes, clients read a hang-up)
                               and plug it back (a new PTY behind the same link)
+  reset board|coordinator     power-cycle the SINS board (its counter starts again) or the
+                              coordinator (modem status 0x00, 0x06) now, --duration S off
 
 The fault kinds and their settings are those of a scenario's [[faults]] (docs/scenarios.md);
 live faults have no start_s/end_s: they start now."""
@@ -33,10 +35,12 @@ def register(sub) -> None:
                    help=f"the emulator's link directory (default: {default_link_dir()})")
     p.add_argument("--timeout", type=number(0, 600, above=True), default=10.0, metavar="S",
                    help="seconds to wait for the reply (default 10)")
-    p.add_argument("op", choices=("status", "fault", "clear", "unplug", "replug"))
-    p.add_argument("arg", nargs="?", help="the fault (KIND:key=value,...), the fault id, or the port")
+    p.add_argument("op", choices=("status", "fault", "clear", "unplug", "replug", "reset"))
+    p.add_argument("arg", nargs="?", help="the fault (KIND:key=value,...), the fault id, the "
+                                          "port, or the device (board, coordinator)")
     p.add_argument("--duration", type=number(0, MAX_DURATION_S, above=True), metavar="S",
-                   help="with fault: how long it lasts (default: until cleared)")
+                   help="with fault: how long it lasts (default: until cleared); with reset: "
+                        "how long the device is off (default 0.5)")
     p.set_defaults(func=run_ctl)
 
 
@@ -70,11 +74,13 @@ def run_ctl(args) -> int:
     from navtwin.emulator.pty import default_link_dir
 
     op, arg = args.op, args.arg
-    if op in ("fault", "unplug", "replug") and arg is None:
-        what = "the fault as KIND:key=value,..." if op == "fault" else "the port (sins, xbee, nanoloc)"
-        raise UsageError(f"ctl {op} needs {what}")
-    if args.duration is not None and op != "fault":
-        raise UsageError("--duration goes with ctl fault only")
+    needs = {"fault": "the fault as KIND:key=value,...", "unplug": "the port (sins, xbee, "
+             "nanoloc)", "replug": "the port (sins, xbee, nanoloc)",
+             "reset": "the device (board, coordinator)"}
+    if op in needs and arg is None:
+        raise UsageError(f"ctl {op} needs {needs[op]}")
+    if args.duration is not None and op not in ("fault", "reset"):
+        raise UsageError("--duration goes with ctl fault and ctl reset only")
     request: dict = {}
     if op == "fault":
         request["fault"] = parse_fault(arg)
@@ -86,6 +92,10 @@ def run_ctl(args) -> int:
         request["id"] = int(arg)
     elif op in ("unplug", "replug"):
         request["port"] = arg
+    elif op == "reset":
+        request["device"] = arg
+        if args.duration is not None:
+            request["duration_s"] = args.duration
     with Control(args.link_dir or default_link_dir(), timeout=args.timeout) as ctl:
         try:
             reply = ctl.call(op, **request)

@@ -4,8 +4,14 @@ clock and writes one SINS frame (wire-formats.md section 1) on its RS-232 line.
 Frame k is written from true time ``t_k = start + round(k period / (1 + ppm 1e-6))`` (the
 board's crystal; an absolute schedule) with seq = k mod 65536; its registers are read over
 SPI ``spi_read_us`` earlier, so they hold the sensor's latest sample at that moment.
+
+Board faults (emulator.faults, ACTS_ON "board"): while one is ``off`` the board writes
+nothing; its first frame after counts from 0 again (seq = k - k0, k0 the tick it came back
+at), as after power-up, and on the same crystal schedule.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -15,20 +21,42 @@ from navtwin.protocols.serial import char_ns
 from .clock import Clock
 
 
+@dataclass(slots=True)
+class BoardEffects:
+    """What board faults change in a block's frames: ``off`` (bool per frame), in place."""
+
+    off: np.ndarray
+
+
 class Board:
-    def __init__(self, spec, ppm: float, imu) -> None:
+    def __init__(self, spec, ppm: float, imu, faults=()) -> None:
         self.clock = Clock(ppm, spec.period_ms * 1e6, round(spec.start_ms * 1e6))
         self.spi_read_ns = round(spec.spi_read_us * 1e3)
         self.char_ns = char_ns(spec.baud)
         self.imu = imu
+        self.faults = tuple(faults)
+        self._k0 = 0  # the tick of the last power-up: frame k counts k - k0
+        self._off = False  # the last frame of the previous block was not written
 
     def frames(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, list[bytes]]:
         """Write start times and bytes of the frames with lo_ns <= t_k < hi_ns; the IMU must
         have generated its samples up to hi_ns."""
         k = self.clock.ticks_between(lo_ns, hi_ns)
         t = self.clock.tick(k)
+        effect = BoardEffects(np.zeros(len(k), dtype=bool))
+        for f in self.faults:
+            f.act(effect, f.active(t))
+        if effect.off.any() or self._off:
+            on = ~effect.off
+            back = on & np.concatenate(([self._off], effect.off[:-1]))  # first frame after off
+            k0 = np.maximum.accumulate(np.where(back, k, self._k0))
+            if len(k):
+                self._k0, self._off = int(k0[-1]), bool(effect.off[-1])
+            k, t, seq = k[on], t[on], (k - k0)[on]
+        else:
+            seq = k - self._k0
         words = self.imu.read(t - self.spi_read_ns).tolist()
-        return t, [build_sample(seq, w) for seq, w in zip(k.tolist(), words)]
+        return t, [build_sample(s, w) for s, w in zip(seq.tolist(), words)]
 
     def byte_times(self, starts: np.ndarray) -> np.ndarray:
         """(N, 30) true times at which each byte of frames starting at *starts* has been

@@ -37,6 +37,7 @@ OPS = {
     "clear": "end live faults: {id?} (default: all)",
     "unplug": "pull a port's cable: {port}; its link vanishes, clients read a hang-up",
     "replug": "plug it back: {port}; a new PTY behind the same link",
+    "reset": "power-cycle a device now: {device: board|coordinator, duration_s?} (default 0.5 s)",
 }
 
 
@@ -213,6 +214,10 @@ class Control:
 
     def replug(self, port: str) -> dict:
         return self.call("replug", port=port)
+
+    def reset(self, device: str, duration_s: float | None = None) -> dict:
+        return self.call("reset", device=device, **({} if duration_s is None else
+                                                    {"duration_s": duration_s}))
 
     def close(self) -> None:
         if self._sock is not None:

@@ -189,11 +189,13 @@ class Registers:
 
 
 class Reply(NamedTuple):
-    """An answer frame waiting for the UART: frame data, and whether AP/BD may change
-    after it has been sent."""
+    """An answer frame waiting for the UART: frame data, whether AP/BD may change after it
+    has been sent, and whether it is the first frame after a power-up (the registers are
+    back to what WR saved before it is sent)."""
 
     data: bytes
     reconfigure: bool = False
+    power_up: bool = False
 
 
 class Output(NamedTuple):
@@ -243,6 +245,7 @@ class Coordinator:
     link: Any  # .unicast(t_ns, nbytes) -> (delivered, retries, latency_ns)
     rng: np.random.Generator
     response_delay_ns: int = RESPONSE_DELAY_NS
+    faults: tuple = ()  # emulator.faults acting on the coordinator: off while one is active
     escaped: bool = field(init=False)
     baud: int = field(init=False)
     reset_until_ns: int = field(default=-1, init=False)
@@ -265,7 +268,7 @@ class Coordinator:
         radio is rebooting)."""
         if isinstance(item, Reply):
             return len(xbee.wrap(item.data, self.escaped))
-        if t_ns < self.reset_until_ns:
+        if t_ns < self.reset_until_ns or self.off(t_ns):
             return None
         size = len(xbee.wrap(self._rx_prefix(item) + item.data, self.escaped))
         if queued + size > SERIAL_TX_BUFFER:
@@ -276,11 +279,15 @@ class Coordinator:
     def render(self, t_ns: int, item) -> bytes:
         """The API frame bytes of an output item, in the current API mode; b"" = nothing."""
         if isinstance(item, Reply):
+            if item.power_up:
+                self.registers.reset()
+                self._reconfigure()
+                self._decoder = XBeeDecoder(self.escaped)  # a half-read frame is gone
             out = xbee.wrap(item.data, self.escaped)
             if item.reconfigure:
                 self._reconfigure()
             return out
-        if t_ns < self.reset_until_ns:
+        if t_ns < self.reset_until_ns or self.off(t_ns):
             return b""  # the radio is rebooting: the packet is never reported
         return xbee.wrap(self._rx_prefix(item) + item.data, self.escaped)
 
@@ -309,9 +316,15 @@ class Coordinator:
             self._decoder = XBeeDecoder(self.escaped)
 
     # -- events -----------------------------------------------------------------------------
-    def power_up(self) -> list[Output]:
-        return [Output(0, self._modem(ModemStatus.HARDWARE_RESET)),
-                Output(POWER_UP_START_NS, self._modem(ModemStatus.COORDINATOR_STARTED))]
+    def power_up(self, t_ns: int = 0) -> list[Output]:
+        """Modem status 0x00 (hardware reset) at *t_ns*, then 0x06 (coordinator started);
+        after a power cut (a coordinator fault), with the registers WR saved."""
+        return [Output(t_ns, self._modem(ModemStatus.HARDWARE_RESET)._replace(power_up=t_ns > 0)),
+                Output(t_ns + POWER_UP_START_NS, self._modem(ModemStatus.COORDINATOR_STARTED))]
+
+    def off(self, t_ns: int) -> bool:
+        """Whether a coordinator fault has the radio powered off at *t_ns*."""
+        return any(f.active(t_ns) for f in self.faults)
 
     def received(self, t_ns: int, packet) -> Output:
         """An RF packet the radio received at *t_ns*: reported as a 0x90/0x91 frame."""
@@ -319,6 +332,8 @@ class Coordinator:
 
     def host(self, t_ns: int, data: bytes) -> list[Output]:
         """Bytes the host wrote, arriving at *t_ns*: the answers they cause."""
+        if self.off(t_ns):
+            return []  # a radio without power reads nothing
         out: list[Output] = []
         for ev in self._decoder.feed(data):
             if not isinstance(ev, Frame):

@@ -39,7 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.protocols.nanoloc import FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT, build_report
+from navtwin.protocols.nanoloc import (FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT,
+                                      STATUS_VALUE_ERROR, build_report)
 from navtwin.protocols.serial import char_ns
 
 from .clock import Clock, serial_queue
@@ -60,6 +61,8 @@ class ExchangeEffects:
     bias_m: np.ndarray  # extra range bias (on top of the anchor's range_bias_m)
     attenuation_db: np.ndarray  # extra path loss on the RSSI
     exponential: np.ndarray  # a standard exponential draw per exchange (the NLOS bias)
+    uniform: np.ndarray  # the uniform draw per exchange (below timeout_prob: a random timeout)
+    value_error: np.ndarray  # bool: the gateway flags the exchange (status 0x80)
 
 
 class Anchor:
@@ -126,7 +129,8 @@ class NanolocNetwork:
         tag = self.trajectory.position(when.ravel()).reshape(m, 4, 3)
         d = np.linalg.norm(tag - where[:, None, :], axis=2)
         tof = d / SPEED_OF_LIGHT
-        effect = ExchangeEffects(z[:, 7] < r.timeout_prob, np.zeros(m), np.zeros(m), z[:, 8])
+        effect = ExchangeEffects(z[:, 7] < r.timeout_prob, np.zeros(m), np.zeros(m), z[:, 8],
+                                 z[:, 7], np.zeros(m, dtype=bool))
         for i, a in enumerate(self.anchors):
             mine = idx == i
             for f in a.faults:
@@ -139,7 +143,8 @@ class NanolocNetwork:
         rt3 = tof[:, 2] + det[:, 2] + p_a + tof[:, 3] + det[:, 3]
         taus = np.column_stack((rt1 * (1 + e_a), p_t * (1 + e_t), rt3 * (1 + e_t), p_a * (1 + e_a)))
         taus = np.clip(np.rint(taus * PS_PER_S), 0, U32).astype(np.int64)
-        taus[timeout] = 0
+        value_error = effect.value_error & ~timeout
+        taus[timeout | value_error] = 0
         rssi = r.rssi_1m_dbm - 10 * r.path_loss_exponent * np.log10(np.maximum(d[:, 0], 0.1)) \
             + r.shadowing_db * z[:, 6] - attenuation
         rssi = np.clip(np.rint(rssi), -128, 127).astype(np.int64)
@@ -151,7 +156,8 @@ class NanolocNetwork:
             "anchor": np.array([a.id for a in self.anchors])[idx][order],
             "start_ns": t0[order],
             "t_us": t_us.astype(np.int64)[order],
-            "status": np.where(timeout, STATUS_TIMEOUT, STATUS_COMPLETE)[order],
+            "status": np.select([timeout, value_error], [STATUS_TIMEOUT, STATUS_VALUE_ERROR],
+                                STATUS_COMPLETE)[order],
             "rssi": np.where(timeout, RSSI_NONE, rssi)[order],
             "tau": taus[order],
             "ready_ns": result[order] + self.latency_ns,

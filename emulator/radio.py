@@ -74,9 +74,10 @@ class Router:
 @dataclass(slots=True)
 class AttemptEffects:
     """What link faults (emulator.faults, ACTS_ON "link") change: ``lost`` (packets x
-    attempts, bool), changed in place."""
+    attempts, bool), changed in place; ``u`` the uniform draw that decided each attempt."""
 
     lost: np.ndarray
+    u: np.ndarray
 
 
 class Link:
@@ -94,7 +95,7 @@ class Link:
         s = self.spec
         n, tries = len(start_ns), s.max_retries + 1
         u = self.rng.random((n, 2 * tries))
-        effect = AttemptEffects(u[:, :tries] < s.per_attempt_loss)
+        effect = AttemptEffects(u[:, :tries] < s.per_attempt_loss, u[:, :tries])
         for fault in self.faults:
             fault.act(effect, fault.active(start_ns))
         lost = effect.lost

@@ -165,7 +165,9 @@ class Emulation:
                       for name in PORT_NAMES}
         for n, fault in enumerate(acting_on(scenario.faults, "line")):
             self.wrap(fault.port, fault.wrapper(stream(self.seed, f"faults.line.{n}")))
-        for out in self.coordinator.power_up():
+        self.coordinator.faults = tuple(acting_on(scenario.faults, "coordinator"))
+        for out in self.coordinator.power_up() + [o for f in self.coordinator.faults
+                                                  for o in self._power_ups(f)]:
             self.lines["xbee"].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
@@ -449,8 +451,10 @@ class Emulation:
             raise ControlError(f"duration_s must be a number in (0, {MAX_DURATION_S:g}] s, not "
                                f"{duration!r}")
         kind = Fault.KINDS.get(spec.get("kind"))
-        start = self._now_ns if kind is not None and issubclass(kind, LineFault) else \
-            self.world.generated_ns
+        # a line or coordinator fault acts on what has not been sent: from now; the world's
+        # models on what they have not generated
+        start = self._now_ns if kind is not None and kind.ACTS_ON in ("line", "coordinator") \
+            else self.world.generated_ns
         end = MAX_DURATION_S if duration is None else start / SEC + duration
         try:
             fault = build(Fault, {**spec, "start_s": start / SEC, "end_s": end}, (("fault", 0),))
@@ -460,15 +464,38 @@ class Emulation:
                 fault.anchor not in {a.id for a in self.scenario.anchors}:
             raise ControlError(f"[fault] anchor {fault.anchor} is not in the scenario's "
                                "[[anchors]]; use one of their ids")
+        if fault.ACTS_ON == "coordinator" and duration is None:
+            raise ControlError("a live coordinator_reset needs duration_s: the radio powers up "
+                               "at its end")
         self._live_ids += 1
         wrapper = None
         if isinstance(fault, LineFault):
             wrapper = fault.wrapper(stream(self.seed, f"faults.live.{self._live_ids}"))
             self.lines[fault.port].wrap(wrapper)
+        elif fault.ACTS_ON == "coordinator":
+            self.coordinator.faults += (fault,)
+            for out in self._power_ups(fault):
+                self.lines["xbee"].put(out.t_ns, out.item)
         else:
             self.world.inject(fault)
         self.live[self._live_ids] = (fault, wrapper)
         return self._live_entry(self._live_ids)
+
+    #: ``reset``: the device -> the fault kind that power-cycles it
+    RESETS = {"board": "board_reset", "coordinator": "coordinator_reset"}
+    RESET_S = 0.5  # a brown-out and the boot after it
+
+    def _op_reset(self, req: dict) -> dict:
+        kind = self.RESETS.get(req.get("device"))
+        if kind is None:
+            raise ControlError(f"no device {req.get('device')!r} to reset; use one of "
+                               f"{', '.join(self.RESETS)}")
+        return self._op_fault({"fault": {"kind": kind},
+                               "duration_s": req.get("duration_s", self.RESET_S)})
+
+    def _power_ups(self, fault) -> list:
+        """The coordinator's power-up at the end of each episode of coordinator fault *fault*."""
+        return self.coordinator.power_up(round(fault.end_s * SEC))
 
     def _op_clear(self, req: dict) -> dict:
         ids = list(self.live) if req.get("id") is None else [req["id"]]
@@ -478,7 +505,7 @@ class Emulation:
             fault, wrapper = self.live.pop(n)
             if wrapper is not None:
                 self.lines[fault.port].wrappers.remove(wrapper)
-            else:
+            elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
                 self.world.remove(fault)
         return {"cleared": ids}
 

@@ -75,7 +75,8 @@ class Vehicle:
         self.trajectory = Trajectory(spec.trajectory, spec.tag.z)
         self.imu = Adis16350(spec.imu, sc.site, sc.area, self.trajectory, sc.clocks.imu_ppm,
                              self._stream(seed, "imu"))
-        self.board = Board(spec.board, sc.clocks.board_ppm, self.imu)
+        self.board = Board(spec.board, sc.clocks.board_ppm, self.imu,
+                           acting_on(sc.faults, "board", vehicle=number))
         self.router = Router(router["NP"], router["RO"], self.board.char_ns)
         self.uplink = Link(sc.link, acting_on(sc.faults, "link"),
                            self._stream(seed, "xbee.link.router"))
@@ -158,6 +159,8 @@ class World:
         """(model, what it is, which) for every model that device faults act on."""
         for a in self.nanoloc.anchors:
             yield a, "anchor", {"anchor": a.id}
+        for v in self.vehicles:
+            yield v.board, "board", {"vehicle": v.number}
         for link in [v.uplink for v in self.vehicles] + [self.link]:
             yield link, "link", {}
 

@@ -3,14 +3,18 @@
 Importing the package registers the shipped kinds, in this order (the order of the docs
 table), then the kinds of installed packages (entry-point group ``navtwin.faults``).
 """
-from .base import (ENTRY_POINTS, MODELS, AnchorFault, DeviceFault, Fault, FaultError, LineFault,
-                   acting_on, load_entry_points, register, unregister)
+from .base import (ENTRY_POINTS, MODELS, AnchorFault, BoardFault, DeviceFault, Fault, FaultError,
+                   LineFault, acting_on, load_entry_points, register, unregister)
 from .anchor_outage import AnchorOutage
 from .nlos import Nlos
 from .link_loss import LinkLoss
+from .link_fade import LinkFade
+from .range_value_error import RangeValueError
+from .board_reset import BoardReset
+from .coordinator_reset import CoordinatorReset
 
 load_entry_points()
 
-__all__ = ["ENTRY_POINTS", "MODELS", "AnchorFault", "DeviceFault", "Fault", "FaultError", "LineFault",
+__all__ = ["ENTRY_POINTS", "MODELS", "AnchorFault", "BoardFault", "DeviceFault", "Fault", "FaultError", "LineFault",
            "acting_on", "load_entry_points", "register", "unregister", "AnchorOutage", "Nlos",
-           "LinkLoss"]
+           "LinkLoss", "LinkFade", "RangeValueError", "BoardReset", "CoordinatorReset"]

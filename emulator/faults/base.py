@@ -7,7 +7,7 @@ name) and ``ACTS_ON`` (the model it acts on, one of :data:`MODELS`), registered 
 places:
 
 - on a device model (:class:`DeviceFault`): the model asks :func:`acting_on` for the faults
-  on it (an anchor by id, the RF link) and calls each one's ``act(effect, on)`` with the
+  on it (an anchor by id, the RF link, a vehicle's board, the coordinator) and calls each one's ``act(effect, on)`` with the
   model's effects of one block (``on``: which of the block's events fall in the episode);
   the model defines what ``effect`` holds (emulator.nanoloc.ExchangeEffects,
   emulator.radio.AttemptEffects);
@@ -28,8 +28,9 @@ from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative,
 from navtwin.protocols.ports import NAMES as PORT_NAMES
 
 ENTRY_POINTS = "navtwin.faults"
-#: what a fault can act on: an anchor's exchanges, the XBee RF link, a port's UART line
-MODELS = ("anchor", "link", "line")
+#: what a fault can act on: an anchor's exchanges, the XBee RF link, a vehicle's SINS board,
+#: the lab computer's XBee coordinator, a port's UART line
+MODELS = ("anchor", "link", "board", "coordinator", "line")
 
 
 class FaultError(ValueError):
@@ -72,6 +73,14 @@ class AnchorFault(DeviceFault):
 
     ACTS_ON = "anchor"
     anchor: int = key(REQUIRED, "", "anchor id", between(*ANCHOR_IDS))
+
+
+@dataclass(frozen=True, kw_only=True)
+class BoardFault(DeviceFault):
+    """A fault on one vehicle's SINS board."""
+
+    ACTS_ON = "board"
+    vehicle: int = key(1, "", "the vehicle whose board it is, 1 = the first", between(1, 64))
 
 
 @dataclass(frozen=True, kw_only=True)
