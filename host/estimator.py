@@ -53,6 +53,7 @@ import numpy as np
 from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_SCALE
 from navtwin.common.schema import Check, between, build, each, key, one_of, positive
 from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS
+from navtwin.protocols import sins as sins_format
 from navtwin.protocols.nanoloc import STATUS_TIMEOUT, is_complete
 
 from . import tracks
@@ -114,6 +115,8 @@ class Tuning:
                                "track is off", positive(hi=3600))
     extrapolated_after_s: float = key(0.5, "s", "no aiding for longer: an estimate is "
                                       "extrapolated", positive(hi=3600))
+    imu_gap_s: float = key(0.5, "s", "a longer gap in the IMU stream is not bridged: the "
+                           "fusion tracks start again from the next fix", positive(hi=3600))
     wsn_method: str = key("tdoa", "", "pure-WSN and KF fixes (000 eqs. 12-13)", _methods())
     tight: str = key("tdoa", "", "EKF/UKF range measurement: per cycle (tdoa) or each range "
                      "(toa)", _methods())
@@ -249,6 +252,8 @@ class Estimator:
         if max(map(abs, gyro)) >= self._gyro_limit:
             self.counts["imu_overrange"] += 1  # saturated, still the best reading there is
         out = self._begin(t_s)
+        if self.t_imu is not None and t_s - self.t_imu > 1.5 * sins_format.PERIOD_S:  # a sample or more lost
+            self._imu_gap(t_s)
         acceleration = self._sins_step(t_s, gyro, accel)
         if self._motion:
             if acceleration is None:
@@ -318,6 +323,20 @@ class Estimator:
             self.origin, self._origin_since = tuple(self.cfg.start), t_s
             self._origin_fixes = (np.zeros(2), 0)
         return self._end(t_s, out)
+
+    def _imu_gap(self, t_s: float) -> None:
+        """Samples were lost before t_s (a link fade, a pulled cable): up to ``imu_gap_s``
+        the strapdown bridges the gap with this sample; beyond, its integration restarts at
+        this sample (what happened in the gap is unknown) and every track that depends on
+        it starts again from the next WSN fix (cause ``gap``)."""
+        if t_s - self.t_imu <= self.cfg.imu_gap_s:
+            self.counts["imu_gaps_bridged"] += 1
+            return
+        self.counts["imu_gaps_reinit"] += 1
+        if self.sins is not None:
+            self.t_imu = t_s  # the next step integrates from here, over nothing
+        for track in self.tracks:
+            track.gap(t_s)
 
     def _other(self, rec) -> list[Estimate]:
         """A record the estimator does not process: straight to the tracks that take it."""
@@ -465,6 +484,8 @@ class Estimator:
         return {
             "imu_samples": self.counts["imu"],
             "imu_overrange": self.counts["imu_overrange"],
+            "imu_gaps": {"bridged": self.counts["imu_gaps_bridged"],
+                         "reinit": self.counts["imu_gaps_reinit"]},
             "exchanges": self.counts["exchanges"],
             "input_rejections": dict(sorted(self.input_rejections.items())),
             "updates": {t.name: dict(sorted(t.updates.items())) for t in self.tracks if t.aided},

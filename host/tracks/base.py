@@ -10,7 +10,7 @@ A track is a class with a ``name`` (its ``filter`` in the output and its section
 * :meth:`estimate`: what it emits at an output instant (an Estimate, or None before it has
   one), with ``extrapolated`` set from its last aiding;
 * :meth:`restart`: its reset when a device restarts (a discontinuity), counted with
-  :meth:`count_reinit`; a track that starts again from a WSN fix sets ``reinit_since``;
+  :meth:`count_reinit`; :meth:`gap` likewise after a gap in the IMU stream too long to bridge; a track that starts again from a WSN fix sets ``reinit_since``;
 * its stats: ``updates`` and ``rejections`` (Counters by kind or reason) and ``reinits``.
 
 The estimator (``est``) owns what several tracks share: the time base (``est.t``), the
@@ -82,6 +82,10 @@ class Track:
 
     def restart(self, device: str, t: float) -> None:
         """``device`` restarted at t: what the track holds need not be where the vehicle is."""
+
+    def gap(self, t: float) -> None:
+        """The IMU stream had a gap longer than ``imu_gap_s`` before t, which the strapdown
+        did not bridge (host.estimator)."""
 
     #: Set to the time of a discontinuity by a track that starts again from the first WSN
     #: fix newer than it: the estimator then calls :meth:`reinit_at` with that fix.

@@ -75,6 +75,9 @@ class FusionTrack(Track):
     def restart(self, device: str, t: float) -> None:
         self._discontinuity("restart", t)
 
+    def gap(self, t: float) -> None:
+        self._discontinuity("gap", t)  # its motion input stopped: the state is not the vehicle's
+
     def _discontinuity(self, cause: str, t: float) -> None:
         """Off for ``cause``: start again from the next fix newer than t (counted once per
         discontinuity, however many causes it has)."""

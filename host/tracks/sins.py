@@ -32,6 +32,10 @@ class SinsTrack(Track):
         if device == "imu":
             self.count_reinit("restart")
 
+    def gap(self, t: float) -> None:
+        if self.est.sins is not None:  # dead reckoning over an unknown stretch
+            self.count_reinit("gap")
+
     def estimate(self, b: float, yaw: float):
         est = self.est
         sp, sv, _ = est.cfg.p0_sigma
