@@ -8,9 +8,20 @@ from .base import (ENTRY_POINTS, MODELS, AnchorFault, DeviceFault, Fault, FaultE
 from .anchor_outage import AnchorOutage
 from .nlos import Nlos
 from .link_loss import LinkLoss
+from .bit_errors import BitErrors
+from .byte_drop import ByteDrop
+from .byte_duplicate import ByteDuplicate
+from .byte_insert import ByteInsert
+from .garbage import Garbage
+from .burst_loss import BurstLoss
+from .latency import Latency
+from .bandwidth import Bandwidth
+from .slicing import Slicing
+from .stuck import Stuck
 
 load_entry_points()
 
 __all__ = ["ENTRY_POINTS", "MODELS", "AnchorFault", "DeviceFault", "Fault", "FaultError", "LineFault",
            "acting_on", "load_entry_points", "register", "unregister", "AnchorOutage", "Nlos",
-           "LinkLoss"]
+           "LinkLoss", "BitErrors", "ByteDrop", "ByteDuplicate", "ByteInsert", "Garbage",
+           "BurstLoss", "Latency", "Bandwidth", "Slicing", "Stuck"]

@@ -104,6 +104,20 @@ class Fault:
         end = t_ns - phase + (self.end_s - self.start_s) * 1e9
         return max(math.ceil(end), t_ns + 1)
 
+    def at_active(self, active_ns: float) -> int | None:
+        """The time at which *active_ns* of episode time have passed since the first
+        episode began (a Poisson process in episode time maps onto the run so); None if
+        the episodes end before."""
+        length = (self.end_s - self.start_s) * 1e9
+        k = active_ns // length
+        if k and self.repeat_s is None:
+            return None
+        begin = self.start_s * 1e9 + k * (self.repeat_s or 0) * 1e9
+        if self.until_s is not None and begin >= self.until_s * 1e9:
+            return None
+        t = math.ceil(begin + active_ns - k * length)
+        return t if self.active(t) else None  # a float edge at the episode's end
+
     def next_active(self, t_ns: int) -> int | None:
         """The first ns at or after *t_ns* inside an episode; None if no episode is left."""
         if self.active(t_ns):
