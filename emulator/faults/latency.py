@@ -5,7 +5,9 @@ USB-serial adapter's latency timer. The delay counts from the chunk's ready time
 the line would have started it), so a steady stream keeps its rate and is only shifted; it
 holds the line: chunks stay in order and never overlap, so one drawn shorter than the one
 before waits behind it. The jitter is uniform in [-jitter_s, +jitter_s] (the delay never
-below 0). One ledger entry per chunk held, with ``held_ns`` (its start moved by that).
+below 0). One ledger entry per chunk held, with ``delay_ns`` (its start after its ready
+time) and ``held_ns`` (how much later it started than it would have without this fault's
+hold on it).
 """
 from __future__ import annotations
 
@@ -39,5 +41,5 @@ class _Latency(FaultWrapper):
             delay += self.rng.uniform(-self.fault.jitter_s, self.fault.jitter_s)
         at = max(start_ns, self.line.ready_ns + round(max(delay, 0.0) * 1e9))
         if at > start_ns:
-            self.mark(at, 0, len(data), held_ns=at - start_ns)
+            self.mark(at, 0, len(data), delay_ns=at - self.line.ready_ns, held_ns=at - start_ns)
         return at, data
