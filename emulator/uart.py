@@ -165,15 +165,16 @@ class _Wrapped:
             pieces = out
         return pieces
 
-    def _settle(self, keep: bool) -> None:
-        """The wrappers' marks into the ledger, at the stream's current offset."""
+    def _settle(self, size: int | None) -> None:
+        """The wrappers' marks into the ledger at the stream's current offset, cut to the
+        *size* bytes that go into the stream (None: none of it goes, the marks are void)."""
         for w in self.wrappers:
-            if w.marks and keep and self.ledger is not None:
+            if w.marks and size is not None and self.ledger is not None:
                 for m in w.marks:
                     self.ledger.add(kind=w.kind, fault=w.fault_index, port=self.name,
                                     direction=w.direction, **{
-                                        **m, "start": m["start"] + self.bytes,
-                                        "end": m["end"] + self.bytes})
+                                        **m, "start": self.bytes + min(m["start"], size),
+                                        "end": self.bytes + min(m["end"], size)})
             w.marks.clear()
 
 
@@ -211,13 +212,8 @@ class Line(_Wrapped):
         """(time, what) of the next chunk start on an idle line: what = -2 the next piece,
         -1 the next item of the buffer, k >= 0 wrapper k's release; (END, 0) if none
         before *end_ns*. A release due by an item's start goes first."""
-        if self._pieces:
-            start = max(self._pieces[0][0], self.free_ns)
-            if start < end_ns:
-                return start, -2
-            for _, data, _ in self._pieces:  # held past the end of the run: never sent
-                self.queued -= len(data)
-            self._pieces.clear()
+        if self._pieces:  # all start before the end of the run (see _launch)
+            return max(self._pieces[0][0], self.free_ns), -2
         start, what = END, 0
         if self._queue:
             start, what = max(self._queue[0][0], self.free_ns), -1
@@ -289,12 +285,23 @@ class Line(_Wrapped):
                         else [(t, data)] if data else []
                 else:
                     pieces = self._chain(what, t, t, None, baud)
-                sent = not pieces or pieces[0][0] < end_ns  # else held past the end of the run
-                if self.wrappers:
-                    self._settle(sent)
-                if pieces and sent:
-                    self._pieces.extend((s, d, baud) for s, d in pieces)
-                    self.queued += sum(len(d) for _, d in pieces)
+                self._launch(pieces, baud, end_ns)
+
+    def _launch(self, pieces: list, baud: int, end_ns: int) -> None:
+        """Queue the pieces of a chunk that will start before *end_ns* (each starts when
+        the line is free, not before its own start); the wrappers' marks go to the ledger,
+        cut to the bytes that are sent, unless none are (a chunk held past the end)."""
+        free, sent = self.free_ns, 0
+        for s, d in pieces:
+            s = max(s, free)
+            if s >= end_ns:
+                break
+            free = s + wire_ns(len(d), baud)
+            self._pieces.append((s, d, baud))
+            self.queued += len(d)
+            sent += len(d)
+        if self.wrappers:
+            self._settle(sent if sent or not pieces else None)
 
     def busy(self) -> bool:
         return self.current is not None or bool(self._pieces)
@@ -321,7 +328,7 @@ class Inbound(_Wrapped):
 
     def _emit(self, pieces: list, baud: int) -> None:
         if self.wrappers:
-            self._settle(True)
+            self._settle(sum(len(d) for _, d in pieces))
         for s, d in pieces:
             self._last = max(s + wire_ns(len(d), baud), self._last)
             self._out.append((self._last, d))

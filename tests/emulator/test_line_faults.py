@@ -335,10 +335,14 @@ def test_pieces_held_past_the_end_of_the_run_are_not_sent():
     out, _ = through("slicing", [(SEC - 1, bytes(30))], piece_bytes=10, gap_s=0.4)
     assert len(out) == 3  # all before the end
     fault = Fault.KINDS["slicing"](port="sins", start_s=0.0, end_s=10.0, piece_bytes=10, gap_s=0.5)
-    line = Line("sins", Wire(BAUD), [fault.wrapper(stream(1, "t"))])
+    ledger = Ledger()
+    line = Line("sins", Wire(BAUD), [fault.wrapper(stream(1, "t"))], ledger=ledger)
     line.put(SEC - 1, bytes(30))
+    line.put(SEC + 1, bytes(30))  # after the end: never starts, no entry
     assert [len(c.data) for c in line.poll(5 * SEC, 5 * SEC, SEC)] == [10]
     assert not line.busy() and line.queued == 0
+    (e,) = ledger.entries  # the range is what was sent
+    assert (e["start"], e["end"], e["pieces"]) == (0, 10, [10, 10, 10])
 
 
 # -- schedule ----------------------------------------------------------------------------------
