@@ -183,8 +183,8 @@ class Line(_Wrapped):
     ready, sent one chunk at a time.
 
     ``queued`` = bytes in the buffer: items waiting plus the chunk in progress (counted
-    whole until its last byte has arrived; a chunk cut in pieces counts until its last
-    piece has). At its ready time an item goes to ``device.admit(ready, item, queued)``,
+    whole until its last byte has arrived; a chunk cut in pieces, each piece until its own
+    last byte has). At its ready time an item goes to ``device.admit(ready, item, queued)``,
     which gives its size or None to drop it (the coordinator's bounded buffer); every step
     is taken in time order, so what is dropped depends on the timeline only, not on when
     the loop polls.
