@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import json
 import sys
-import tomllib
 
 from navtwin.common.limits import MAX_DURATION_S
 
@@ -50,28 +49,10 @@ def _raw():
     return argparse.RawDescriptionHelpFormatter
 
 
-def parse_fault(text: str) -> dict:
-    """``KIND:key=value,...`` -> ``{"kind": KIND, key: value, ...}``; values read as TOML
-    scalars (``1e-4``, ``true``, ``"x"``), a bare word as a string (``port=xbee``)."""
-    kind, _, rest = text.partition(":")
-    if not kind.strip():
-        raise UsageError(f"fault {text!r}: give it as KIND:key=value,... "
-                         "(e.g. bit_errors:port=xbee,ber=1e-4)")
-    out: dict = {"kind": kind.strip()}
-    for item in filter(None, (i.strip() for i in rest.split(","))):
-        key, eq, value = item.partition("=")
-        if not eq or not key.strip():
-            raise UsageError(f"fault {text!r}: {item!r} is not key=value; write e.g. ber=1e-4")
-        try:
-            out[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            out[key.strip()] = value.strip()
-    return out
-
-
 def run_ctl(args) -> int:
     from navtwin.emulator.control import Control, ControlError
     from navtwin.emulator.pty import default_link_dir
+    from navtwin.emulator.scenario import ScenarioError, parse_fault
 
     op, arg = args.op, args.arg
     needs = {"fault": "the fault as KIND:key=value,...", "unplug": "the port (sins, xbee, "
@@ -83,7 +64,10 @@ def run_ctl(args) -> int:
         raise UsageError("--duration goes with ctl fault and ctl reset only")
     request: dict = {}
     if op == "fault":
-        request["fault"] = parse_fault(arg)
+        try:
+            request["fault"] = parse_fault(arg, "ctl fault")
+        except ScenarioError as e:
+            raise UsageError(str(e)) from None
         if args.duration is not None:
             request["duration_s"] = args.duration
     elif op == "clear" and arg is not None:

@@ -23,7 +23,8 @@ Run the emulated lab: the SINS board, the lab computer's XBee coordinator (API m
 nanoLOC gateway, each on a pseudo-terminal with a stable link (DIR/sins, DIR/xbee,
 DIR/nanoloc). On start it prints one JSON line {"ready": true, "ports": {...}, "pts": {...},
 ...} on stdout; it runs until the duration ends or SIGINT/SIGTERM, removes its links and
-prints a final {"done": true, ...} line with frames, bytes and drop counts per port.
+prints a final {"done": true, ...} line with frames, bytes and drop counts per port, and
+per fault kind the injections and bytes touched (the recording's faults.jsonl lists each).
 Progress goes to stderr every few seconds. While it runs, `navtwin ctl` (DIR/control)
 injects faults, unplugs and replugs ports."""
 
@@ -48,6 +49,10 @@ def register(sub) -> None:
                         "flushed every 0.5 s, so a killed run leaves a replayable prefix)")
     p.add_argument("--overwrite", action="store_true",
                    help="with --record: replace the recording already in DIR")
+    p.add_argument("--fault", action="append", default=[], metavar="KIND:KEY=VALUE,...",
+                   help="add a fault to the scenario's [[faults]] (repeatable), e.g. "
+                        "byte_drop:port=sins,probability=0.01,start_s=0,end_s=5; keys and "
+                        "checks as in [[faults]] (docs/scenarios.md), values as TOML scalars")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_emulate)
 
@@ -79,12 +84,12 @@ def _check_record_dir(path: str, overwrite: bool) -> None:
 def run_emulate(args) -> int:
     from navtwin.emulator.pty import LinkDirError
     from navtwin.emulator.runner import Emulation, RunError
-    from navtwin.emulator.scenario import ScenarioError, load_scenario
+    from navtwin.emulator.scenario import ScenarioError, load_scenario, with_faults
 
     try:
         if args.record is not None:
             _check_record_dir(args.record, args.overwrite)
-        scenario = load_scenario(args.scenario)
+        scenario = with_faults(load_scenario(args.scenario), args.fault)
     except (RunError, ScenarioError) as e:
         raise UsageError(str(e)) from None
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))

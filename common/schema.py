@@ -288,29 +288,33 @@ def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
     if kinds:
         out.append((prefix + "kind", "", "required", ", ".join(f"`{k}`" for k in kinds),
                     "the kind of entry"))
-    seen = set()
+    shared: dict[tuple, list] = {}  # a key as documented -> the kinds declaring it so
     for c in classes:
         hints = typing.get_type_hints(c)
         for f in dataclasses.fields(c):
             name = prefix + f.name
-            if name in seen:
-                continue
-            seen.add(name)
             tp = hints[f.name]
             origin, args = typing.get_origin(tp), typing.get_args(tp)
-            if _is_table(tp):
-                out.extend(rows(tp, name + "."))
-            elif origin is tuple and args and _is_table(args[0]):
-                out.extend(rows(args[0], name + "[]."))
+            if _is_table(tp) or (origin is tuple and args and _is_table(args[0])):
+                if name not in shared:
+                    shared[name] = []
+                    out.extend(rows(tp if _is_table(tp) else args[0],
+                                    name + ("." if _is_table(tp) else "[].")))
+                continue
+            default = "required" if f.default is MISSING else (
+                "none" if f.default is None else _scalar(f.default, f.metadata.get("hex", 0)))
+            valid = "; ".join(c.must.replace("must be ", "") for c in f.metadata.get("checks", ()))
+            row = (name, f.metadata.get("unit", ""), default, valid, f.metadata.get("doc", ""))
+            if len(classes) == 1:
+                out.append(row)
+            elif row in shared:  # kinds that declare a key alike share its row
+                shared[row].append(c.KIND)
             else:
-                default = "required" if f.default is MISSING else (
-                    "none" if f.default is None else _scalar(f.default, f.metadata.get("hex", 0)))
-                doc = f.metadata.get("doc", "")
-                if len(classes) > 1:
-                    users = [k.KIND for k in classes if f.name in {g.name for g in dataclasses.fields(k)}]
-                    doc = f"({', '.join(users)}) {doc}"
-                valid = "; ".join(c.must.replace("must be ", "") for c in f.metadata.get("checks", ()))
-                out.append((name, f.metadata.get("unit", ""), default, valid, doc))
+                shared[row] = [c.KIND]
+                out.append(row)
+    if len(classes) > 1:
+        out = [r if r not in shared else r[:4] + (f"({', '.join(shared[r])}) {r[4]}",)
+               for r in out]
     return out
 
 

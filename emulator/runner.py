@@ -35,6 +35,13 @@ paced, in an idle gap, as world generation is, but never more than ``FLUSH_S`` l
 speed also every ``MAX_BLOCK_NS`` of virtual time), so a killed run leaves a replayable
 prefix. A write that fails ends the run (``record_error``).
 
+Faults. The scenario's line faults are wrappers on their port's line (``to_host``) or on
+what the host writes to the xbee port (``to_device``: an ``uart.Inbound`` between the PTY
+and the coordinator); each draws from its own stream ``faults.line.{n}`` (n counting the
+line faults in scenario order). Every injection goes into the run's ledger
+(:attr:`Emulation.ledger`, emulator.ledger): into the recording's ``faults.jsonl`` and,
+per kind, into the summary's ``faults`` (injections, bytes touched).
+
 Sink. ``sink`` (a callable) is given every chunk as it is delivered, with its device times:
 the in-memory run (``lab.run``) takes the lab's bytes from here, with no PTY and no file.
 """
@@ -49,17 +56,17 @@ from typing import Callable
 
 from navtwin.common.limits import MAX_DURATION_S, SPEEDS, span
 from navtwin.protocols.ports import NAMES as PORT_NAMES
-from navtwin.protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter
-
 from navtwin.common.schema import Invalid, build
+from navtwin.protocols.recording import FAULTS, FLUSH_S, RecordingWriteError, RecordingWriter
 
 from .control import SOCKET as CONTROL_SOCKET, ControlError, ControlServer
 from .coordinator import Coordinator, Remote, identity_registers
 from .faults import Fault, LineFault, acting_on
+from .ledger import Ledger
 from .pty import LinkDir, PtyPort
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
-from .uart import END, Chunk, Line, LineWrapper, Wire
+from .uart import END, Chunk, Inbound, Line, LineWrapper, Wire
 from .uart_rx import ClientView, Framing
 
 SEC = 1_000_000_000
@@ -161,10 +168,18 @@ class Emulation:
         self.sink = sink
         self.coordinator = self._coordinator(response_delay_ns)
         bauds = {name: scenario.ports[name]["baud"] for name in PORT_NAMES}
-        self.lines = {name: Line(name, self.coordinator if name == "xbee" else Wire(bauds[name]))
+        # a recorded run has its entries in faults.jsonl; others keep them in memory
+        self.ledger = Ledger(self._record_fault if record is not None else None,
+                             keep=record is None)
+        self.lines = {name: Line(name, self.coordinator if name == "xbee" else Wire(bauds[name]),
+                                 ledger=self.ledger)
                       for name in PORT_NAMES}
-        for n, fault in enumerate(acting_on(scenario.faults, "line")):
-            self.wrap(fault.port, fault.wrapper(stream(self.seed, f"faults.line.{n}")))
+        self.inbound = Inbound("xbee", self.coordinator, ledger=self.ledger)
+        line_faults = [(i, f) for i, f in enumerate(scenario.faults) if f.ACTS_ON == "line"]
+        for n, (index, fault) in enumerate(line_faults):
+            wrapper = fault.wrapper(stream(self.seed, f"faults.line.{n}"))
+            wrapper.kind, wrapper.fault_index = fault.KIND, index
+            self.wrap(fault.port, wrapper, fault.direction)
         self.coordinator.faults = tuple(acting_on(scenario.faults, "coordinator"))
         for out in self.coordinator.power_up() + [o for f in self.coordinator.faults
                                                   for o in self._power_ups(f)]:
@@ -196,12 +211,24 @@ class Emulation:
         self.interrupted = False
         self.record_error: RecordingWriteError | None = None  # the write that ended the run
 
-    def wrap(self, port: str, wrapper: LineWrapper) -> None:
+    def wrap(self, port: str, wrapper: LineWrapper, direction: str = "to_host") -> None:
         """Put *wrapper* between *port*'s device and its line (before :meth:`run`); it sees
-        every chunk the device sends (emulator.uart.LineWrapper)."""
+        every chunk the device sends (emulator.uart.LineWrapper); with ``direction =
+        "to_device"``, every read of what the host writes to the xbee port instead."""
         if port not in self.lines:
             raise RunError(f"no port {port!r} to wrap; use one of {', '.join(self.lines)}")
-        self.lines[port].wrap(wrapper)
+        if direction == "to_device":
+            if port != self.inbound.name:
+                raise RunError(f"{port} ignores what the host writes; wrap the "
+                               f"{self.inbound.name} port to_device, or {port} to_host")
+            self.inbound.wrap(wrapper)
+        else:
+            self.lines[port].wrap(wrapper)
+        wrapper.direction = direction
+
+    def _record_fault(self, entry: dict) -> None:
+        if self.recorder is not None:
+            self.recorder.fault(entry)
 
     # -- assembly -------------------------------------------------------------------------
     def _publish(self, link_dir, bauds: dict[str, int]) -> None:
@@ -241,6 +268,7 @@ class Emulation:
         try:
             rec.write_file("scenario.toml", self.scenario.to_toml().encode())
             rec.file("truth.csv").append(TRUTH_HEADER)
+            rec.file(FAULTS)  # the ledger: there, and empty, even when no fault acts
         except BaseException:
             rec.close()
             raise
@@ -307,6 +335,7 @@ class Emulation:
             for ev in feed.take(now):
                 self._enqueue(ev)
             self._now_ns = now
+            self._to_device(now)
             if not paced:  # everything known so far, in one go
                 now = END if feed.exhausted else feed.known_ns
             delivered = False
@@ -320,7 +349,7 @@ class Emulation:
             if wall >= next_progress:
                 self._report(wall - t0)
                 next_progress = wall + PROGRESS_NS
-            target = min((t for line in self.lines.values()
+            target = min((t for line in (*self.lines.values(), self.inbound)
                           if (t := line.next_ns()) is not None), default=None)
             if not feed.exhausted:
                 target = feed.known_ns if target is None else min(target, feed.known_ns)
@@ -395,10 +424,16 @@ class Emulation:
 
     def _host_bytes(self, port: PtyPort, now: int) -> None:
         data = port.read()
-        if data and port.name == "xbee":
-            for out in self.coordinator.host(now, data):
-                self.lines["xbee"].put(out.t_ns, out.item)
+        if data and port.name == self.inbound.name:
+            self.inbound.put(now, data)
+            self._to_device(now)
         # the SINS board and the nanoLOC gateway ignore what the host sends them
+
+    def _to_device(self, now: int) -> None:
+        """Give the coordinator what the host wrote, as its to_device faults let it through."""
+        for t, data in self.inbound.poll(now):
+            for out in self.coordinator.host(t, data):
+                self.lines["xbee"].put(out.t_ns, out.item)
 
     def _enqueue(self, ev) -> None:
         if ev.port == "xbee":
@@ -471,7 +506,8 @@ class Emulation:
         wrapper = None
         if isinstance(fault, LineFault):
             wrapper = fault.wrapper(stream(self.seed, f"faults.live.{self._live_ids}"))
-            self.lines[fault.port].wrap(wrapper)
+            wrapper.kind, wrapper.fault_index = fault.KIND, None  # live: in no [[faults]]
+            self.wrap(fault.port, wrapper, fault.direction)
         elif fault.ACTS_ON == "coordinator":
             self.coordinator.faults += (fault,)
             for out in self._power_ups(fault):
@@ -504,7 +540,8 @@ class Emulation:
         for n in ids:
             fault, wrapper = self.live.pop(n)
             if wrapper is not None:
-                self.lines[fault.port].wrappers.remove(wrapper)
+                (self.inbound if wrapper.direction == "to_device" else
+                 self.lines[fault.port]).wrappers.remove(wrapper)
             elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
                 self.world.remove(fault)
         return {"cleared": ids}
@@ -543,6 +580,7 @@ class Emulation:
         return {"done": True, "scenario": self.scenario.name, "seed": self.seed,
                 "speed": speed_name(self.speed), "virtual_s": self.reached_ns / SEC,
                 "interrupted": self.interrupted, "ports": ports,
+                "faults": self.ledger.totals(),  # per kind: injections, bytes touched
                 # scenario time 0 on this machine's CLOCK_MONOTONIC (paced runs), so a host on
                 # the same machine can put its estimates on the scenario's time for evaluation
                 "t0_monotonic_ns": self.t0_monotonic_ns if self.speed is not None else None}

@@ -545,3 +545,37 @@ def parse_scenario(data: dict, source: str = "scenario") -> Scenario:
         return build(Scenario, _vehicles(data, source))
     except Invalid as e:
         raise ScenarioError(f"{source}: {e}".replace("\n", " ")) from None
+
+
+def parse_fault(spec: str, where: str = "--fault") -> dict:
+    """``KIND:key=value,...`` (the ``--fault`` option, ``navtwin ctl fault``) as the table a
+    ``[[faults]]`` entry is; values are TOML scalars (``0.5``, ``true``, ``"text"``), a bare
+    word a string."""
+    kind, _, rest = spec.partition(":")
+    if not kind.strip():
+        raise ScenarioError(f"{where} {spec!r}: no kind; write KIND:key=value,... e.g. "
+                            "byte_drop:port=sins,probability=0.01")
+    table: dict = {"kind": kind.strip()}
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        name, eq, text = item.partition("=")
+        if not eq or not name.strip():
+            raise ScenarioError(f"{where} {spec!r}: {item!r} is not key=value; write e.g. "
+                                "start_s=1.5")
+        try:
+            value = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text.strip()  # a bare word: port=sins, direction=to_device
+        table[name.strip()] = value
+    return table
+
+
+def with_faults(sc: Scenario, specs) -> Scenario:
+    """*sc* with the faults of ``--fault`` *specs* after its own, validated as [[faults]]."""
+    faults = list(sc.faults)
+    for spec in specs:
+        try:
+            faults.append(build(Fault, parse_fault(spec), (("faults", len(faults) + 1),)))
+            sc = dataclasses.replace(sc, faults=tuple(faults))
+        except Invalid as e:
+            raise ScenarioError(f"--fault {spec}: {e}".replace("\n", " ")) from None
+    return sc

@@ -10,10 +10,23 @@ nanoseconds since the run started.
 A device is any object with ``.baud`` and the two calls of :class:`Wire`. Between the
 device and its line sit the line's wrappers (:class:`LineWrapper`, as pyserial's ``spy://``
 wraps a port): each sees every chunk the device hands the UART, with its start time and
-baud, and gives back the chunk to send, changed, shortened, lengthened, emptied (dropped)
-or started later (a stalled line); the line times what the last wrapper returns. An
-``Emulation`` installs them with ``Emulation.wrap(port, wrapper)``; the line-level fault
-kinds (emulator.faults) make theirs from the scenario.
+baud, and gives back the chunk to send, changed, shortened, lengthened, emptied (dropped),
+started later (a stalled line) or cut into pieces sent one after another (a list of
+``(start_ns, data)``); a wrapper may also hold bytes back and send them when it asks to
+(``due_ns``/``release``: a stuck line, noise on an idle line). The line times what the last
+wrapper returns. An ``Emulation`` installs them with ``Emulation.wrap(port, wrapper)``; the
+line-level fault kinds (emulator.faults) make theirs from the scenario.
+
+What the host writes reaches the device through an :class:`Inbound`, which runs the same
+wrappers (the ``to_device`` faults) over each read: a read of n bytes at t is taken as a
+chunk that started on the wire n byte-times before t, so with no wrapper the device gets
+the bytes at t, as read.
+
+Ledger. A wrapper marks what it did with :meth:`LineWrapper.mark` (byte offsets within what
+it returned for the call); the line turns them into offsets in the port's stream (the
+bytes as delivered, i.e. as recorded in ``<port>.bin``) and adds them to its ledger
+(emulator.ledger). With several wrappers on one line, the last one's offsets are exact;
+an earlier one's are exact when the wrappers after it keep the length of what it returned.
 """
 from __future__ import annotations
 
@@ -54,57 +67,171 @@ class Wire:
 class LineWrapper:
     """A filter between a device and its line; the base passes every chunk through.
 
-    :meth:`send` is called once per chunk, in line order, when the chunk would start; it
-    returns ``(start_ns, data)``: the same for no change, other bytes to change, drop or add
-    bytes (the line times them: more bytes take longer), ``b""`` to drop the chunk, or a
-    later ``start_ns`` (never earlier) to hold the line idle until then. A wrapper that
-    draws random numbers takes its own stream (emulator.rng), so the other ports' bytes do
-    not change.
+    :meth:`send` is called once per chunk (or piece of the wrapper before it), in line
+    order, when the chunk would start; it returns ``(start_ns, data)``: the same for no
+    change, other bytes to change, drop or add bytes (the line times them: more bytes take
+    longer), ``b""`` to drop the chunk, or a later ``start_ns`` (never earlier) to hold the
+    line idle until then; or a list of such pairs, the pieces of the chunk, sent in order,
+    each when the line is free and not before its start. A wrapper that holds bytes back
+    names the time it wants to send them in :meth:`due_ns`; the line calls :meth:`release`
+    then (or when it is next free) and sends what it returns, ahead of the next chunk.
+
+    While a chunk is handled, ``self.line.ready_ns`` is when it was ready (its start had
+    the line been free). A wrapper that draws random numbers takes its own stream
+    (emulator.rng), so the other ports' bytes do not change. ``kind``, ``fault_index`` and
+    ``direction`` name it in the ledger.
     """
 
-    def send(self, start_ns: int, data: bytes, baud: int) -> tuple[int, bytes]:
+    kind = ""
+    fault_index: int | None = None  # its place in the scenario's [[faults]]
+    direction = "to_host"
+
+    def attach(self, line) -> None:
+        """Called when installed on *line* (a :class:`Line` or :class:`Inbound`)."""
+        self.line = line
+        self.marks: list[dict] = []
+
+    def send(self, start_ns: int, data: bytes, baud: int):
         return start_ns, data
 
+    def due_ns(self) -> int | None:
+        """When the wrapper has bytes of its own to send (None: never)."""
+        return None
 
-class Line:
+    def release(self, t_ns: int, baud: int):
+        """What to send at *t_ns* (>= :meth:`due_ns`), as :meth:`send` returns it."""
+        return []
+
+    def mark(self, t_ns: int, start: int, end: int, **detail) -> None:
+        """Record one injection for the ledger: bytes ``[start, end)`` of what this call
+        returns (all its pieces together; ``start == end`` where bytes were removed)."""
+        self.marks.append({"t_ns": int(t_ns), "start": int(start), "end": int(end), **detail})
+
+
+def _pieces(wrapper, result, start_ns: int, port: str) -> list:
+    """A wrapper's result as a list of non-empty (start_ns, data), refusing early starts."""
+    pieces = result if isinstance(result, list) else [result]
+    for s, _ in pieces:
+        if s < start_ns:
+            raise ValueError(f"{type(wrapper).__name__} moved a {port} chunk earlier "
+                             f"({s} < {start_ns} ns); a line cannot send early")
+    return [(s, bytes(d)) for s, d in pieces if d]
+
+
+class _Wrapped:
+    """The wrappers of one direction of a port, and the ledger their marks go to."""
+
+    def __init__(self, name: str, wrappers: Iterable[LineWrapper], ledger) -> None:
+        self.name = name
+        self.ledger = ledger
+        self.wrappers: list[LineWrapper] = []
+        self.ready_ns = 0
+        self.bytes = 0  # bytes of the stream so far: the offset of the next one
+        for w in wrappers:
+            self.wrap(w)
+
+    def wrap(self, wrapper: LineWrapper) -> None:
+        """Put *wrapper* after the wrappers already there."""
+        wrapper.attach(self)
+        self.wrappers.append(wrapper)
+
+    def _due(self) -> tuple[int, int]:
+        """(time, index) of the earliest wrapper release; (END, -1) if none."""
+        best = (END, -1)
+        for k, w in enumerate(self.wrappers):
+            t = w.due_ns()
+            if t is not None and t < best[0]:
+                best = (t, k)
+        return best
+
+    def _chain(self, k: int, t: int, ready: int, data: bytes | None, baud: int) -> list:
+        """The pieces wrappers[k:] make of a chunk (*data* None: wrapper k's release)."""
+        self.ready_ns = ready
+        if data is None:
+            w = self.wrappers[k]
+            pieces = _pieces(w, w.release(t, baud), t, self.name)
+            k += 1
+        else:
+            pieces = [(t, data)]
+        for w in self.wrappers[k:]:
+            out, done = [], 0
+            for s, d in pieces:
+                n = len(w.marks)
+                got = _pieces(w, w.send(s, d, baud), s, self.name)
+                for m in w.marks[n:]:  # offsets of this call -> of all this wrapper returned
+                    m["start"] += done
+                    m["end"] += done
+                done += sum(len(x) for _, x in got)
+                out += got
+            pieces = out
+        return pieces
+
+    def _settle(self, size: int | None) -> None:
+        """The wrappers' marks into the ledger at the stream's current offset, cut to the
+        *size* bytes that go into the stream (None: none of it goes, the marks are void)."""
+        for w in self.wrappers:
+            if w.marks and size is not None and self.ledger is not None:
+                for m in w.marks:
+                    self.ledger.add(kind=w.kind, fault=w.fault_index, port=self.name,
+                                    direction=w.direction, **{
+                                        **m, "start": self.bytes + min(m["start"], size),
+                                        "end": self.bytes + min(m["end"], size)})
+            w.marks.clear()
+
+
+class Line(_Wrapped):
     """One port's UART: items in ready order, taken into the device's transmit buffer when
     ready, sent one chunk at a time.
 
     ``queued`` = bytes in the buffer: items waiting plus the chunk in progress (counted
-    whole until its last byte has arrived). At its ready time an item goes to
-    ``device.admit(ready, item, queued)``, which gives its size or None to drop it (the
-    coordinator's bounded buffer); every step is taken in time order, so what is dropped
-    depends on the timeline only, not on when the loop polls.
+    whole until its last byte has arrived; a chunk cut in pieces, each piece until its own
+    last byte has). At its ready time an item goes to ``device.admit(ready, item, queued)``,
+    which gives its size or None to drop it (the coordinator's bounded buffer); every step
+    is taken in time order, so what is dropped depends on the timeline only, not on when
+    the loop polls.
     """
 
-    def __init__(self, name: str, device: Any, wrappers: Iterable[LineWrapper] = ()) -> None:
-        self.name = name
+    def __init__(self, name: str, device: Any, wrappers: Iterable[LineWrapper] = (),
+                 ledger=None) -> None:
         self.device = device  # .baud, .admit(t_ns, item, queued) and .render(t_ns, item)
-        self.wrappers = list(wrappers)  # device -> wrappers[0] -> ... -> wrappers[-1] -> line
         self._pending: list = []  # heap of (ready, seq, item) not yet in the buffer
         self._queue: deque = deque()  # (ready, item, size) in the buffer, in ready order
+        self._pieces: deque = deque()  # (start, data, baud) of the chunk being sent, not started
         self._seq = 0
         self.queued = 0
         self.free_ns = 0
         self.current: Chunk | None = None
         self.chunks = 0
-        self.bytes = 0
-
-    def wrap(self, wrapper: LineWrapper) -> None:
-        """Put *wrapper* between the device (and the wrappers already there) and the line."""
-        self.wrappers.append(wrapper)
+        # device -> wrappers[0] -> ... -> wrappers[-1] -> line; .bytes: bytes sent so far
+        super().__init__(name, wrappers, ledger)
 
     def put(self, t_ns: int, item: Any) -> None:
         heapq.heappush(self._pending, (t_ns, self._seq, item))
         self._seq += 1
+
+    def _next_start(self, end_ns: int) -> tuple[int, int]:
+        """(time, what) of the next chunk start on an idle line: what = -2 the next piece,
+        -1 the next item of the buffer, k >= 0 wrapper k's release; (END, 0) if none
+        before *end_ns*. A release due by an item's start goes first."""
+        if self._pieces:  # all start before the end of the run (see _launch)
+            return max(self._pieces[0][0], self.free_ns), -2
+        start, what = END, 0
+        if self._queue:
+            start, what = max(self._queue[0][0], self.free_ns), -1
+        if self.wrappers:
+            due, k = self._due()
+            if due < END and max(due, self.free_ns) <= start:
+                start, what = max(due, self.free_ns), k
+        return (start, what) if start < end_ns else (END, 0)
 
     def next_ns(self) -> int | None:
         """When this line next has something to do: end of the chunk in progress or start
         of the next one (an item's arrival in the buffer waits for that)."""
         if self.current is not None:
             return self.current.end_ns
-        if self._queue:
-            return max(self._queue[0][0], self.free_ns)
+        start, _ = self._next_start(END)
+        if start < END:
+            return start
         if self._pending:
             return max(self._pending[0][0], self.free_ns)
         return None
@@ -126,11 +253,7 @@ class Line:
                 if not arrive:
                     t = cur.end_ns
             else:
-                start = END
-                if queue:
-                    start = max(queue[0][0], self.free_ns)
-                    if start >= end_ns:
-                        start = END
+                start, what = self._next_start(end_ns)
                 arrive = t <= start
                 if not arrive:
                     t = start
@@ -146,27 +269,85 @@ class Line:
                 out.append(cur)
                 self.current = None
                 self.queued -= len(cur.data)
-            else:
-                ready, item, size = queue.popleft()
-                self.queued -= size
-                baud = self.device.baud  # before rendering: a BD change applies to later chunks
-                data = self.device.render(ready, item)
-                for wrapper in self.wrappers:
-                    if not data:
-                        break
-                    start, data = wrapper.send(t, data, baud)
-                    if start < t:
-                        raise ValueError(f"{type(wrapper).__name__} moved a {self.name} chunk "
-                                         f"earlier ({start} < {t} ns); a line cannot send early")
-                    t = start
-                if not data or t >= end_ns:  # dropped, or held back past the end of the run
-                    continue
+            elif what == -2:
+                _, data, baud = self._pieces.popleft()
                 end = t + wire_ns(len(data), baud)
                 self.current = Chunk(self.name, t, end, data, baud)
-                self.queued += len(data)
                 self.free_ns = end
                 self.chunks += 1
                 self.bytes += len(data)
+            else:
+                baud = self.device.baud  # before rendering: a BD change applies to later chunks
+                if what == -1:
+                    ready, item, size = queue.popleft()
+                    self.queued -= size
+                    data = self.device.render(ready, item)
+                    pieces = self._chain(0, t, ready, data, baud) if data and self.wrappers \
+                        else [(t, data)] if data else []
+                else:
+                    pieces = self._chain(what, t, t, None, baud)
+                self._launch(pieces, baud, end_ns)
+
+    def _launch(self, pieces: list, baud: int, end_ns: int) -> None:
+        """Queue the pieces of a chunk that will start before *end_ns* (each starts when
+        the line is free, not before its own start); the wrappers' marks go to the ledger,
+        cut to the bytes that are sent, unless none are (a chunk held past the end)."""
+        free, sent = self.free_ns, 0
+        for s, d in pieces:
+            s = max(s, free)
+            if s >= end_ns:
+                break
+            free = s + wire_ns(len(d), baud)
+            self._pieces.append((s, d, baud))
+            self.queued += len(d)
+            sent += len(d)
+        if self.wrappers:
+            self._settle(sent if sent or not pieces else None)
 
     def busy(self) -> bool:
-        return self.current is not None
+        return self.current is not None or bool(self._pieces)
+
+
+class Inbound(_Wrapped):
+    """What the host writes to a port on its way to the device, through the port's
+    ``to_device`` wrappers. :meth:`put` a read; :meth:`poll` gives ``(t_ns, data)`` when
+    the device gets it: the end of each piece's time on the wire, in order."""
+
+    def __init__(self, name: str, device: Any, wrappers: Iterable[LineWrapper] = (),
+                 ledger=None) -> None:
+        self.device = device  # .baud
+        self._out: deque = deque()  # (t_ns, data) not yet given to the device
+        self._last = -END
+        super().__init__(name, wrappers, ledger)
+
+    def put(self, t_ns: int, data: bytes) -> None:
+        """Bytes the host wrote, read at *t_ns*."""
+        baud = self.device.baud
+        start = t_ns - wire_ns(len(data), baud)  # its first byte was on the wire then
+        self._emit(self._chain(0, start, start, data, baud) if self.wrappers else [(start, data)],
+                   baud)
+
+    def _emit(self, pieces: list, baud: int) -> None:
+        if self.wrappers:
+            self._settle(sum(len(d) for _, d in pieces))
+        for s, d in pieces:
+            self._last = max(s + wire_ns(len(d), baud), self._last)
+            self._out.append((self._last, d))
+            self.bytes += len(d)
+
+    def next_ns(self) -> int | None:
+        t = min(self._out[0][0] if self._out else END, self._due()[0] if self.wrappers else END)
+        return None if t == END else t
+
+    def poll(self, now_ns: int) -> list[tuple[int, bytes]]:
+        """What the device gets by *now_ns*, in order (releases due by then included)."""
+        while self.wrappers:
+            due, k = self._due()
+            if due > now_ns:
+                break
+            baud = self.device.baud
+            self._emit(self._chain(k, due, due, None, baud), baud)
+        out = []
+        while self._out and self._out[0][0] <= now_ns:
+            out.append(self._out.popleft())
+        return out

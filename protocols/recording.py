@@ -6,6 +6,7 @@ Layout (``docs/emulator.md``, "Recordings")::
                             "ports": {...}, ...}
     DIR/<port>.bin         every byte of the port, in order
     DIR/<port>.csv         one line per chunk: offset,size,t_device_ns,t_wall_ns
+    DIR/faults.jsonl       the fault ledger (emulator recordings): one JSON object a line
 
 A chunk is one write by a device (emulator) or one read by the host. ``t_device_ns`` is the
 device clock at the chunk's first byte (emulator recordings; empty in host recordings);
@@ -20,6 +21,16 @@ a write failed). The writer buffers data and index in memory and writes them on
 names bytes that are not on disk: a killed process leaves a replayable prefix up to its
 last flush. Callers flush at least every ``FLUSH_S``; the writer flushes itself when
 ``FLUSH_BYTES`` are buffered.
+
+Fault ledger. Every injection of a fault, one JSON object per line, in the order they
+happened (emulator.ledger describes an entry): ``kind`` (a string), ``fault`` (an integer
+>= 0 or null), ``port`` (a port of the recording or null), ``direction`` ("to_host",
+"to_device" or null), ``t_ns`` (an integer), ``start`` and ``end`` (integers, 0 <= start <=
+end, or both null), any other keys the kind's details. An emulator recording always has the
+file, empty when no fault acted; a recording without it (older ones, the host's) has an
+empty ledger. It is flushed with the other files, after the ports' data: an entry is added
+when its chunk starts, so in a killed run's recording the last entries may name bytes past
+a port's recorded end; they are skipped, as is a partial last line.
 
 Reading validates: the meta's shape, and each index against its data file (contiguous
 offsets from 0, sizes in (0, MAX_CHUNK], integer non-decreasing times). Data files are
@@ -46,6 +57,9 @@ from .serial import BAUDS
 FORMAT = "navtwin-recording"
 VERSION = 1
 META = "recording.json"
+FAULTS = "faults.jsonl"
+DIRECTIONS = ("to_host", "to_device")
+_MAX_FAULT_LINE = 1 << 16
 INDEX_HEADER = "offset,size,t_device_ns,t_wall_ns"
 FLUSH_S = 0.5  # callers flush at least this often: a kill loses at most ~1 s of wall time
 FLUSH_BYTES = 1 << 20  # buffered bytes (all files) that make the writer flush by itself
@@ -249,6 +263,11 @@ class RecordingWriter:
             self.files[name] = _File(self, name, self.replace)
         return self.files[name]
 
+    def fault(self, entry: dict) -> None:
+        """Buffer one fault-ledger entry (a JSON object) as a line of faults.jsonl."""
+        self.file(FAULTS).append(json.dumps(entry, sort_keys=True, separators=(",", ":"))
+                                 .encode() + b"\n")
+
     def write_file(self, name: str, data: bytes) -> None:
         """A whole small file, written now."""
         f = _File(self, name, self.replace)
@@ -363,6 +382,11 @@ def _check_meta(meta, where: Path) -> None:
         api = port.get("api_mode", 1)
         if type(api) is not int or api not in (1, 2):
             fail(f"port {name!r} api_mode {api!r} is not 1 or 2")
+
+
+def _lines(path: Path) -> int:
+    with open(path, "rb") as fh:
+        return sum(block.count(b"\n") for block in iter(lambda: fh.read(1 << 16), b""))
 
 
 def _text(line: bytes) -> str:
@@ -514,6 +538,83 @@ class Recording:
         except OSError as e:
             raise RecordingError(f"{data_path}: {e.strerror}; check the file and the disk") \
                 from None
+
+    def faults(self) -> list[dict]:
+        """The fault ledger, validated (module docstring); [] without a faults.jsonl. A
+        truncated tail (see the module docstring) is skipped in a recording that is not
+        complete (``skipped["faults.jsonl"]``) and damage in a complete one, unless
+        ``salvage``."""
+        path = self.directory / FAULTS
+        try:
+            fh = open(path, "rb")
+        except FileNotFoundError:
+            return []
+        except OSError as e:
+            raise RecordingError(f"{path}: {e.strerror}; check the file and the disk") from None
+        out: list[dict] = []
+        with fh:
+            n = 0
+            while line := fh.readline(_MAX_FAULT_LINE + 1):
+                n += 1
+
+                def bad(problem: str):
+                    raise RecordingError(f"{path}:{n}: {problem}; the fault ledger is damaged: "
+                                         f"re-record, or restore {FAULTS}")
+                if not line.endswith(b"\n"):
+                    if len(line) > _MAX_FAULT_LINE:
+                        bad(f"a line longer than {_MAX_FAULT_LINE} bytes")
+                    self._tail(path, n, "a partial last line", len(out) + 1)
+                    break
+                try:
+                    entry = json.loads(line.decode("utf-8"))
+                except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+                    bad(f"not a JSON object ({type(e).__name__})")
+                problem = self._fault_problem(entry)
+                if problem:
+                    bad(problem)
+                if entry["port"] is not None and entry["end"] is not None \
+                        and entry["direction"] != "to_device" \
+                        and entry["end"] > self.sizes[entry["port"]]:
+                    # an entry names its chunk's bytes when the chunk starts: a killed run
+                    # has the entry and not yet the bytes
+                    self._tail(path, n, f"entries past the end of {entry['port']}.bin",
+                               _lines(path) - n + 1)
+                    break
+                out.append(entry)
+        return out
+
+    def _tail(self, path: Path, n: int, why: str, entries: int) -> None:
+        if self.complete and not self.salvage:
+            raise RecordingError(f"{path}:{n}: {why}: the recording is marked complete, so it "
+                                 f"is damaged; 'navtwin replay --salvage' uses the intact prefix")
+        self.skipped[FAULTS] = {"chunks": entries, "bytes": 0, "why": why}
+
+    def _fault_problem(self, e) -> str | None:
+        """What is wrong with a ledger entry, or None."""
+        def integer(v) -> bool:
+            return type(v) is int
+
+        if not isinstance(e, dict):
+            return f"an entry is {type(e).__name__}, not an object"
+        missing = [k for k in ("kind", "fault", "port", "direction", "t_ns", "start", "end")
+                   if k not in e]
+        if missing:
+            return f"an entry lacks {', '.join(missing)}"
+        if not isinstance(e["kind"], str) or not e["kind"]:
+            return f"kind {e['kind']!r} is not a name"
+        if e["fault"] is not None and not (integer(e["fault"]) and e["fault"] >= 0):
+            return f"fault {e['fault']!r} is not an index >= 0 or null"
+        if e["port"] is not None and e["port"] not in self.ports:
+            return f"port {e['port']!r} is not a port of the recording"
+        if e["direction"] is not None and e["direction"] not in DIRECTIONS:
+            return f"direction {e['direction']!r} is not one of {', '.join(DIRECTIONS)} or null"
+        if not integer(e["t_ns"]):
+            return f"t_ns {e['t_ns']!r} is not an integer"
+        start, end = e["start"], e["end"]
+        if (start is None) != (end is None) or (start is not None and not (
+                integer(start) and integer(end) and 0 <= start <= end)):
+            return f"start {start!r}, end {end!r} are not integers 0 <= start <= end or both null"
+        return None
 
     def merged(self, ports: list[str] | None = None, clock: str = "t_wall_ns") -> Iterator[Chunk]:
         """Chunks of several ports in time order (ties: port name order) by *clock*."""

@@ -12,9 +12,21 @@ from .link_fade import LinkFade
 from .range_value_error import RangeValueError
 from .board_reset import BoardReset
 from .coordinator_reset import CoordinatorReset
+from .bit_errors import BitErrors
+from .byte_drop import ByteDrop
+from .byte_duplicate import ByteDuplicate
+from .byte_insert import ByteInsert
+from .garbage import Garbage
+from .burst_loss import BurstLoss
+from .latency import Latency
+from .bandwidth import Bandwidth
+from .slicing import Slicing
+from .stuck import Stuck
 
 load_entry_points()
 
 __all__ = ["ENTRY_POINTS", "MODELS", "AnchorFault", "BoardFault", "DeviceFault", "Fault", "FaultError", "LineFault",
            "acting_on", "load_entry_points", "register", "unregister", "AnchorOutage", "Nlos",
-           "LinkLoss", "LinkFade", "RangeValueError", "BoardReset", "CoordinatorReset"]
+           "LinkLoss", "LinkFade", "RangeValueError", "BoardReset", "CoordinatorReset",
+           "BitErrors", "ByteDrop", "ByteDuplicate", "ByteInsert", "Garbage", "BurstLoss",
+           "Latency", "Bandwidth", "Slicing", "Stuck"]

@@ -3,8 +3,15 @@
 A kind is a frozen dataclass of its settings (the schema: ``key(...)`` fields, checked on
 load and listed in docs/scenarios.md) with a class attribute ``KIND`` (its ``kind = "..."``
 name) and ``ACTS_ON`` (the model it acts on, one of :data:`MODELS`), registered with
-:func:`register`. Every episode has ``start_s`` and ``end_s``. A kind acts in one of two
-places:
+:func:`register`.
+
+Schedule (every kind). An episode runs from ``start_s`` to ``end_s`` (exclusive). With
+``repeat_s`` it recurs: episode k runs from ``start_s + k * repeat_s`` for ``end_s -
+start_s`` seconds (``repeat_s`` longer than that, so episodes never touch), until an episode
+would start at or after ``until_s`` (none: to the end of the run). :meth:`Fault.active`
+tells which times (an int or a numpy array of ns) fall in an episode.
+
+A kind acts in one of two places:
 
 - on a device model (:class:`DeviceFault`): the model asks :func:`acting_on` for the faults
   on it (an anchor by id, the RF link, a vehicle's board, the coordinator) and calls each one's ``act(effect, on)`` with the
@@ -14,23 +21,31 @@ places:
 - on a port's UART line (:class:`LineFault`): ``wrapper(rng)`` gives an
   emulator.uart.LineWrapper, which the Emulation puts between the port's device and its line;
   it sees every chunk the device sends and may change, drop, delay or add bytes.
+  ``direction = "to_device"`` puts it on the bytes the host writes instead (only the xbee
+  coordinator reads them). Its wrapper marks what it did (``LineWrapper.mark``) and the
+  line writes each mark into the run's fault ledger (emulator.ledger).
 
 Kinds of a user's package register through the entry-point group ``navtwin.faults`` (name =
 the kind, value = the class); they are loaded when emulator.faults is imported.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_DURATION_S
-from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative, one_of
+from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative, one_of, positive
 from navtwin.protocols.ports import NAMES as PORT_NAMES
 
 ENTRY_POINTS = "navtwin.faults"
 #: what a fault can act on: an anchor's exchanges, the XBee RF link, a vehicle's SINS board,
 #: the lab computer's XBee coordinator, a port's UART line
 MODELS = ("anchor", "link", "board", "coordinator", "line")
+#: which bytes a line fault acts on: what the device sends the host, or what the host writes
+DIRECTIONS = ("to_host", "to_device")
+#: the ports whose device reads what the host writes (the others ignore it)
+READING_PORTS = ("xbee",)
 
 
 class FaultError(ValueError):
@@ -48,14 +63,76 @@ class Fault:
     end_s: float = key(REQUIRED, "s", "end of the episode (exclusive)",
                        non_negative(hi=MAX_DURATION_S))
 
+    repeat_s: float | None = key(None, "s", "period: the episode recurs every repeat_s from "
+                                 "start_s; none = once", positive(hi=MAX_DURATION_S))
+    until_s: float | None = key(None, "s", "with repeat_s: no episode starts at or after "
+                                "until_s; none = to the end", non_negative(hi=MAX_DURATION_S))
+
     def __post_init__(self):
         if self.end_s <= self.start_s:
             raise Invalid("end_s", f"must be after start_s (got {self.end_s:g} <= {self.start_s:g} s); "
                                    "make end_s > start_s")
+        length = self.end_s - self.start_s
+        if self.repeat_s is not None and self.repeat_s <= length:
+            raise Invalid("repeat_s", f"must be longer than the episode ({self.repeat_s:g} <= "
+                                      f"{length:g} s), so episodes do not run together; make "
+                                      "repeat_s > end_s - start_s or make one longer episode")
+        if self.until_s is not None and (self.repeat_s is None or self.until_s <= self.start_s):
+            raise Invalid("until_s", "needs repeat_s and must be after start_s; set repeat_s, "
+                                     "or drop until_s")
+
+    def _phase(self, t_ns):
+        """(episode number, ns since that episode began) of time(s) *t_ns* at or after start."""
+        since = t_ns - self.start_s * 1e9
+        if self.repeat_s is None:
+            return 0 * since, since
+        k = since // (self.repeat_s * 1e9)
+        return k, since - k * (self.repeat_s * 1e9)
 
     def active(self, t_ns):
-        """Whether true time(s) *t_ns* fall in the episode."""
-        return (t_ns >= self.start_s * 1e9) & (t_ns < self.end_s * 1e9)
+        """Whether true time(s) *t_ns* (an int or a numpy array of ns) fall in an episode."""
+        if self.repeat_s is None:
+            return (t_ns >= self.start_s * 1e9) & (t_ns < self.end_s * 1e9)
+        k, phase = self._phase(t_ns)
+        on = (t_ns >= self.start_s * 1e9) & (phase < (self.end_s - self.start_s) * 1e9)
+        if self.until_s is not None:
+            on = on & (self.start_s * 1e9 + k * (self.repeat_s * 1e9) < self.until_s * 1e9)
+        return on
+
+    def episode_end(self, t_ns: int) -> int:
+        """The first ns after the episode that *t_ns* falls in (which must be active)."""
+        k, phase = self._phase(t_ns)
+        end = t_ns - phase + (self.end_s - self.start_s) * 1e9
+        return max(math.ceil(end), t_ns + 1)
+
+    def at_active(self, active_ns: float) -> int | None:
+        """The time at which *active_ns* of episode time have passed since the first
+        episode began (a Poisson process in episode time maps onto the run so); None if
+        the episodes end before."""
+        length = (self.end_s - self.start_s) * 1e9
+        k = active_ns // length
+        if k and self.repeat_s is None:
+            return None
+        begin = self.start_s * 1e9 + k * (self.repeat_s or 0) * 1e9
+        if self.until_s is not None and begin >= self.until_s * 1e9:
+            return None
+        t = math.ceil(begin + active_ns - k * length)
+        return t if self.active(t) else None  # a float edge at the episode's end
+
+    def next_active(self, t_ns: int) -> int | None:
+        """The first ns at or after *t_ns* inside an episode; None if no episode is left."""
+        if self.active(t_ns):
+            return t_ns
+        if t_ns < self.start_s * 1e9:
+            return math.ceil(self.start_s * 1e9)
+        if self.repeat_s is None:
+            return None
+        k, _ = self._phase(t_ns)
+        begin = self.start_s * 1e9 + (k + 1) * (self.repeat_s * 1e9)
+        if self.until_s is not None and begin >= self.until_s * 1e9:
+            return None
+        t = math.ceil(begin)
+        return t if self.active(t) else t + 1  # a float edge one ns short
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,6 +166,15 @@ class LineFault(Fault):
 
     ACTS_ON = "line"
     port: str = key(REQUIRED, "", "the port whose line it acts on", one_of(*PORT_NAMES))
+    direction: str = key("to_host", "", "the bytes it acts on: to_host (the device's) or "
+                         "to_device (the host's; xbee only)", one_of(*DIRECTIONS))
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.direction == "to_device" and self.port not in READING_PORTS:
+            raise Invalid("direction", f"to_device on {self.port}: its device ignores what the host "
+                                       f"writes; use port = {' or '.join(map(repr, READING_PORTS))} "
+                                       'or direction = "to_host"')
 
     def wrapper(self, rng):
         """The emulator.uart.LineWrapper to install; *rng* is this fault's own stream."""

@@ -160,3 +160,25 @@ def test_reset_power_cycles_the_board_under_a_reading_client(tmp_path):
             assert 0 in seqs  # the board came back and counts from power-up
         with pytest.raises(ControlError, match=r"no device 'toaster'"):
             lab.control.call("reset", device="toaster")
+
+
+def test_a_live_line_fault_garbles_the_port_until_cleared_and_the_ledger_has_it(tmp_path):
+    rec = tmp_path / "rec"
+    with emulate("office", duration=60, link_dir=tmp_path / "links", record=rec) as lab:
+        with serial.Serial(lab.ports["sins"], 115200, timeout=0.2) as ser:
+            dec = sins_decoder()
+            assert len(_read_frames(ser, dec, 5)) == 5
+            lab.fault("bit_errors", port="sins", ber=0.01)  # ~2 flipped bits per frame
+            end = time.monotonic() + DEADLINE_S
+            while time.monotonic() < end and not sum(dec.errors.values()):
+                dec.feed(ser.read(ser.in_waiting or 1))
+            assert sum(dec.errors.values()) > 0  # the client's decoder sees the damage
+            lab.clear()
+            ser.reset_input_buffer()
+            fresh = sins_decoder()
+            frames = _read_frames(ser, fresh, 20)
+            assert len(frames) == 20  # clean again
+        lab.stop()
+    ledger = Recording(rec).faults()
+    assert ledger and {e["kind"] for e in ledger} == {"bit_errors"}
+    assert all(e["port"] == "sins" and e["fault"] is None for e in ledger)

@@ -1,0 +1,54 @@
+"""The fault ledger of a run: one entry per injection, whatever the fault acts on.
+
+An entry is a flat JSON object::
+
+    {"kind": "byte_drop", "fault": 2, "port": "sins", "direction": "to_host",
+     "t_ns": 1520000000, "start": 4410, "end": 4410, "removed": 1}
+
+``kind`` and ``fault`` (its place in the scenario's ``[[faults]]``, from 0) name the fault;
+``port`` and ``direction`` the stream it touched (None for a fault on no port); ``t_ns`` the
+device time of the injection; ``[start, end)`` the bytes it touched in that stream as
+delivered (for ``to_host``: offsets in the recorded ``<port>.bin``; for ``to_device``: in
+the bytes the device received), ``start == end`` where bytes were removed (``removed``
+says how many). Other keys are the kind's details (a flipped ``mask``, a ``held_ns``, ...).
+
+Line faults add entries through their line (emulator.uart); device faults call
+:meth:`Ledger.add` themselves. The Emulation writes each entry into its recording's
+``faults.jsonl`` (protocols.recording) and keeps per-kind totals for its summary.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+
+class Ledger:
+    """Entries as they are added: to *write* (a recording), and kept in :attr:`entries`
+    when *keep* (in-memory runs and tests; a recorded run has them in its file)."""
+
+    def __init__(self, write: Callable[[dict], None] | None = None, keep: bool = True) -> None:
+        self._write = write
+        self.entries: list[dict] | None = [] if keep else None
+        self._totals: dict[str, dict] = {}
+
+    def add(self, *, kind: str, fault: int | None, port: str | None, t_ns: int,
+            start: int | None = None, end: int | None = None, direction: str | None = None,
+            **detail) -> None:
+        entry = {"kind": kind, "fault": fault, "port": port, "direction": direction,
+                 "t_ns": int(t_ns), "start": start, "end": end, **detail}
+        total = self._totals.setdefault(kind, {"injections": 0, "bytes": 0})
+        total["injections"] += 1
+        total["bytes"] += touched(entry)
+        if self.entries is not None:
+            self.entries.append(entry)
+        if self._write is not None:
+            self._write(entry)
+
+    def totals(self) -> dict[str, dict]:
+        """Per kind: ``injections`` (entries) and ``bytes`` (touched: see :func:`touched`)."""
+        return {k: dict(v) for k, v in self._totals.items()}
+
+
+def touched(entry: dict) -> int:
+    """Bytes an entry touched: its range plus the bytes it removed."""
+    start, end = entry.get("start"), entry.get("end")
+    return (end - start if start is not None and end is not None else 0) + entry.get("removed", 0)
