@@ -23,6 +23,7 @@ from .line import FaultWrapper
 class Bandwidth(LineFault):
     """A bandwidth cap below the line's rate."""
     KIND = "bandwidth"
+    CHANGES_BYTES = False  # the bytes arrive intact, later
     bytes_per_s: float = key(1000.0, "B/s", "the most the line carries", positive(hi=1e7))
 
     def wrapper(self, rng):

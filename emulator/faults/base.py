@@ -165,6 +165,9 @@ class LineFault(Fault):
     """A fault on the bytes of one port's line, between the device and the client."""
 
     ACTS_ON = "line"
+    #: False for a kind that only moves bytes in time (latency, bandwidth, slicing): the
+    #: audit (lab.audit) then expects the far side to accept every frame it touched
+    CHANGES_BYTES = True
     port: str = key(REQUIRED, "", "the port whose line it acts on", one_of(*PORT_NAMES))
     direction: str = key("to_host", "", "the bytes it acts on: to_host (the device's) or "
                          "to_device (the host's; xbee only)", one_of(*DIRECTIONS))

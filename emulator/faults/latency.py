@@ -26,6 +26,7 @@ MAX_DELAY_S = 3600.0
 class Latency(LineFault):
     """Added latency with jitter; chunks stay in order."""
     KIND = "latency"
+    CHANGES_BYTES = False  # the bytes arrive intact, later
     delay_s: float = key(0.05, "s", "added delay", non_negative(hi=MAX_DELAY_S))
     jitter_s: float = key(0.0, "s", "the delay varies uniformly by up to this either way",
                           non_negative(hi=MAX_DELAY_S))

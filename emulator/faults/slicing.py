@@ -25,6 +25,7 @@ MAX_PIECE = 1 << 16
 class Slicing(LineFault):
     """Chunks delivered in pieces, with a gap between them."""
     KIND = "slicing"
+    CHANGES_BYTES = False  # the bytes arrive intact, later
     probability: float = key(1.0, "", "the probability that a chunk is cut", positive(hi=1.0))
     piece_bytes: int = key(8, "B", "mean size of a piece", between(1, MAX_PIECE))
     piece_variation: int = key(0, "B", "a piece's size varies uniformly by up to this",

@@ -1,0 +1,241 @@
+"""The audit: did the host lose only what the injected faults damaged?
+
+The host's decisions are those of its decoders on the bytes it read, and its recording holds
+exactly those bytes: replaying them gives the same frames (the architecture's rule: same
+bytes, same estimates), so the audit decodes them again instead of trusting a log.
+
+``navtwin audit EMULATOR_RECORDING HOST_RECORDING`` compares, per port both recorded, the
+bytes the emulator delivered (``<port>.bin``, after its line faults) with the bytes the host
+read, and the emulator's fault ledger (``faults.jsonl``, emulator.ledger) with what the
+host's decoder made of them. Three checks, each of which can fail:
+
+1. **intact -> accepted**: every frame of the delivered stream that no byte-changing
+   injection touched, and that the host saw whole, was decoded by the host (same decoder,
+   protocols.stream);
+2. **rejected -> injected**: every byte the host's decoder rejected (garbage, bad CRC or
+   checksum, truncated, ...) lies in a frame or run that an injection touched, or at an edge
+   of what the host saw (it attached, or a cable was pulled, mid-frame);
+3. **the ledger is accounted for**: every byte-changing ledger entry inside what the host saw
+   overlaps bytes the host rejected (a damaged frame was not accepted as good); entries of
+   kinds that only move bytes in time (latency, bandwidth, slicing) must touch accepted
+   frames only.
+
+Alignment. The host's bytes of a port are located in the emulator's as a sequence of
+slices (a host that attached late sees a suffix; one whose cable was pulled, pieces); bytes
+the host read that the emulator never delivered fail the audit. Bytes the emulator delivered
+that the host never read (before it attached, while unplugged, a PTY overflow) are reported,
+not judged: the frames in them are "unseen".
+
+The xbee port is audited at the API-frame level in the API mode the emulator recorded at its
+start (a run whose coordinator switched mode under the host is not auditable so).
+"""
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from navtwin.emulator.faults import Fault
+from navtwin.protocols.recording import Recording
+from navtwin.protocols.stream import DecodeError, Frame, XBeeDecoder, nanoloc_decoder, sins_decoder
+
+PORTS = ("sins", "xbee", "nanoloc")
+_PROBE = 64  # bytes of the host's stream looked for in the emulator's to place a slice
+
+
+class AuditError(ValueError):
+    """Recordings that cannot be audited; one line naming the fix."""
+
+
+def _decoder(port: str, escaped: bool):
+    return XBeeDecoder(escaped) if port == "xbee" else sins_decoder() if port == "sins" \
+        else nanoloc_decoder()
+
+
+def _read(rec: Recording, port: str) -> bytes:
+    return b"".join(c.data for c in rec.chunks(port))
+
+
+def align(host: bytes, emu: bytes) -> tuple[list[tuple[int, int, int]], int]:
+    """``(host_offset, emu_offset, length)`` slices that map *host* into *emu* in order, and
+    how many host bytes match nothing the emulator sent after the previous slice (foreign)."""
+    out, h, e, foreign = [], 0, 0, 0
+    while h < len(host):
+        at = emu.find(host[h:h + _PROBE], e)
+        if at < 0:
+            foreign += 1  # not the emulator's bytes: skip one and look again
+            h += 1
+            continue
+        n = 0
+        limit = min(len(host) - h, len(emu) - at)
+        while n < limit:  # extend in blocks, then byte by byte at the first difference
+            step = min(4096, limit - n)
+            if host[h + n:h + n + step] == emu[at + n:at + n + step]:
+                n += step
+                continue
+            while host[h + n] == emu[at + n]:
+                n += 1
+            break
+        out.append((h, at, n))
+        h, e = h + n, at + n
+    return out, foreign
+
+
+@dataclass
+class PortAudit:
+    port: str
+    emulator_bytes: int = 0
+    host_bytes: int = 0
+    unseen_bytes: int = 0
+    frames: int = 0  # frames in the delivered stream, inside what the host saw
+    intact: int = 0
+    damaged: int = 0
+    accepted: int = 0
+    rejected_bytes: int = 0
+    injections: int = 0  # byte-changing ledger entries inside what the host saw
+    timing_injections: int = 0
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+def _overlaps(ranges: list[tuple[int, int]], starts: list[int], lo: int, hi: int,
+              at_start: bool = False) -> bool:
+    """Whether [lo, hi) meets a range of *ranges* (sorted by start). A removal is a point
+    (p, p): it meets [lo, hi) when lo < p < hi, and with *at_start* also at p == lo (bytes
+    removed just before a rejected run are its cause: a frame that lost its first byte)."""
+    i = bisect.bisect_right(starts, hi)
+    for a, b in reversed(ranges[max(0, i - 64):i]):  # ranges are short and sorted
+        if a == b:
+            if lo < a < hi or (at_start and a == lo):
+                return True
+        elif a < hi and b > lo:
+            return True
+    return False
+
+
+def audit_port(port: str, emu: bytes, host: bytes, entries: list[dict], escaped: bool) -> PortAudit:
+    r = PortAudit(port, len(emu), len(host))
+    slices, foreign = align(host, emu)
+    if foreign:
+        r.problems.append(f"{port}: the host read {foreign} bytes the emulator never sent "
+                          "(are these recordings of the same run?)")
+    seen = [(e, e + n) for _, e, n in slices]
+    r.unseen_bytes = len(emu) - sum(n for _, _, n in slices)
+    seen_starts = [a for a, _ in seen]
+
+    def inside(lo: int, hi: int) -> bool:  # wholly inside one slice the host saw
+        i = bisect.bisect_right(seen_starts, lo) - 1
+        return i >= 0 and seen[i][0] <= lo and hi <= seen[i][1]
+
+    changing = [e for e in entries if e["port"] == port and e.get("direction", "to_host") != "to_device"
+                and e["start"] is not None and getattr(Fault.KINDS.get(e["kind"]), "CHANGES_BYTES", True)]
+    timing = [e for e in entries if e["port"] == port and e.get("direction", "to_host") != "to_device"
+              and e["start"] is not None and e not in changing]
+    damage = sorted((e["start"], e["end"]) for e in changing)
+    damage_starts = [a for a, _ in damage]
+
+    # the delivered stream's frames, judged by the ledger
+    intact = {}
+    for ev in _decoder(port, escaped).decode(emu):
+        if isinstance(ev, Frame):
+            lo, hi = ev.offset, ev.offset + len(ev.raw)
+            if not inside(lo, hi):
+                continue
+            r.frames += 1
+            if _overlaps(damage, damage_starts, lo, hi):
+                r.damaged += 1
+            else:
+                intact[lo] = hi
+    r.intact = len(intact)
+
+    # what the host made of its bytes, in the emulator's offsets
+    host_starts = [h for h, _, _ in slices]
+
+    def to_emu(h: int) -> int:  # a foreign byte maps to the end of the slice before it
+        i = bisect.bisect_right(host_starts, h) - 1
+        if i < 0:
+            return 0
+        hs, es, n = slices[i]
+        return es + min(h - hs, n)
+
+    accepted, rejected = set(), []
+    for ev in _decoder(port, escaped).decode(host):
+        if isinstance(ev, Frame):
+            accepted.add(to_emu(ev.offset))
+        elif isinstance(ev, DecodeError) and ev.size:
+            rejected.append((to_emu(ev.offset), to_emu(ev.offset + ev.size - 1) + 1))
+    r.accepted = len(accepted)
+    r.rejected_bytes = sum(b - a for a, b in rejected)
+
+    missed = [lo for lo in intact if lo not in accepted]
+    if missed:
+        r.problems.append(f"{port}: {len(missed)} intact frames were not accepted by the host "
+                          f"(first at emulator offset {missed[0]})")
+    unexplained = [(a, b) for a, b in rejected if not _overlaps(damage, damage_starts, a, b, True)
+                   and not _near_edge(seen, a, b)]
+    if unexplained:
+        a, b = unexplained[0]
+        r.problems.append(f"{port}: the host rejected {sum(y - x for x, y in unexplained)} bytes "
+                          f"no injection touched ({len(unexplained)} runs, first [{a}, {b}))")
+    rejected.sort()
+    rej_starts = [a for a, _ in rejected]
+    for e in changing:
+        if not inside(e["start"], max(e["end"], e["start"] + 1)):
+            continue
+        r.injections += 1
+        # a removal (a point) is accounted for by a rejected run that begins or holds it
+        if not _overlaps(rejected, rej_starts, e["start"], e["end"] + (e["start"] == e["end"])):
+            r.problems.append(f"{port}: {e['kind']} at t={e['t_ns'] / 1e9:.3f} s changed bytes "
+                              f"[{e['start']}, {e['end']}) but the host rejected none of them")
+            break
+    for e in timing:
+        if inside(e["start"], max(e["end"], e["start"] + 1)):
+            r.timing_injections += 1
+    return r
+
+
+_EDGE = 256  # a frame cut by the edge of what the host saw is at most this long (API frame)
+
+
+def _near_edge(seen: list[tuple[int, int]], a: int, b: int) -> bool:
+    """Rejected bytes within a frame's length of where the host's view of the stream starts
+    or ends (it attached, or the cable came back, mid-frame)."""
+    return any(abs(a - lo) <= _EDGE or abs(b - hi) <= _EDGE for lo, hi in seen)
+
+
+def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
+    """The audit of an emulator recording and a host recording of the same run (module
+    docstring): per port, the counts and problems; ``ok`` when there are none."""
+    emu, host = Recording(emulator_dir), Recording(host_dir)
+    if emu.meta.get("source") != "navtwin emulate":
+        raise AuditError(f"{emulator_dir}: not an emulator recording (source "
+                         f"{emu.meta.get('source')!r}); give the emulator's --record directory first")
+    if (host.meta.get("source") or "").startswith("navtwin emulate"):
+        raise AuditError(f"{host_dir}: an emulator recording; give the host's --record directory second")
+    entries = emu.faults()
+    escaped = emu.meta.get("ports", {}).get("xbee", {}).get("api_mode", 2) == 2
+    ports = [p for p in PORTS if emu.sizes.get(p) and host.sizes.get(p)]
+    if not ports:
+        raise AuditError("the recordings share no port with data; record the host on the "
+                         "emulator's ports")
+    results = [audit_port(p, _read(emu, p), _read(host, p), entries, escaped) for p in ports]
+    return {"ok": all(r.ok for r in results), "ledger_entries": len(entries),
+            "ports": {r.port: {k: v for k, v in vars(r).items() if k != "port"} for r in results}}
+
+
+def report(result: dict) -> str:
+    """One screen: a row per port, then the problems."""
+    cols = ("frames", "intact", "damaged", "accepted", "rejected_bytes", "injections",
+            "timing_injections", "unseen_bytes")
+    lines = [f"{'port':8} " + " ".join(f"{c:>17}" for c in cols)]
+    for port, r in result["ports"].items():
+        lines.append(f"{port:8} " + " ".join(f"{r[c]:>17}" for c in cols))
+    problems = [p for r in result["ports"].values() for p in r["problems"]]
+    lines.append(f"ledger: {result['ledger_entries']} entries")
+    lines += [f"FAIL {p}" for p in problems] or ["PASS: every intact frame was accepted, every "
+                                                 "rejected byte was injected, every injection "
+                                                 "was rejected"]
+    return "\n".join(lines) + "\n"
