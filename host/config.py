@@ -219,9 +219,12 @@ def load(name_or_path: str | None = None) -> HostConfig:
             raise ConfigError(f"no host config named {spec!r}; use one of {', '.join(shipped())} "
                               f"or a path to a .toml file")
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")  # TOML is UTF-8, whatever the locale says
     except OSError as e:
         raise ConfigError(f"{path}: cannot read ({e.strerror}); check the path") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start}); save it "
+                          f"as UTF-8") from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

@@ -166,3 +166,13 @@ def test_configs_recorded_in_the_first_layout_still_load(root):
     assert (tuned.settings["ukf"].alpha, tuned.settings["ukf"].kappa) == (0.5, 0.0)
     assert tuned.settings["sins"].vrw_m_s_rt_hr == 3.0
     assert tuned.range_bias_m == {1: 0.3} and tuned.tuning.tight == "toa" and tuned.lab.vehicle.tag == 16
+
+
+def test_a_config_file_that_is_not_utf8_gets_one_line(tmp_path):
+    """Found by the host_config fuzz target (tests/fuzz): a UnicodeDecodeError escaped."""
+    path = tmp_path / "lab.toml"
+    path.write_bytes(b"[[anchors]]\nid = 1" + b"\xcd" * 106 + b"\nx = 0\ny = 0\n")
+    with pytest.raises(ConfigError) as e:
+        host_config.load(str(path))
+    assert "not UTF-8 text" in str(e.value) and str(path) in str(e.value)
+    assert "\n" not in str(e.value)
