@@ -7,6 +7,7 @@ nan, inf or 1e300 reaches arithmetic that overflows, loops forever or hangs up a
 from __future__ import annotations
 
 import math
+import sys
 
 #: nanoLOC node ids as the gateway reports them (anchors and tags).
 ANCHOR_IDS = (1, 254)
@@ -53,3 +54,11 @@ def number_problem(value, lo=-math.inf, hi=math.inf, *, integer: bool = False,
     if not ((lo < value) if above else (lo <= value)) or not value <= hi:
         return f"must be {what} {span(lo, hi, above)}"
     return None
+
+
+def limit_problem(e: Exception) -> str:
+    """The limit a TOML parser hit beyond its syntax, in one line: nesting deeper than the
+    recursion limit, or (ValueError) an integer of more digits than Python converts."""
+    if isinstance(e, RecursionError):
+        return "arrays or tables nested too deeply"
+    return f"an integer of more than {sys.get_int_max_str_digits()} digits"

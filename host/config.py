@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
-                           RANGE_BIAS_M, number_problem)
+                           RANGE_BIAS_M, limit_problem, number_problem)
 from navtwin.protocols.adis16350 import GYRO_LSB_DPS
 from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, each, key, one_of, rows
 
@@ -229,6 +229,8 @@ def load(name_or_path: str | None = None) -> HostConfig:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: not valid TOML ({e}); fix the syntax") from None
+    except (ValueError, RecursionError) as e:  # tomllib's limits: an integer's digits, nesting
+        raise ConfigError(f"{path}: {limit_problem(e)}; shorten it") from None
     return _parse(doc, str(path), path.stem)
 
 

@@ -140,3 +140,15 @@ def test_docs_carry_the_generated_key_table():
     """docs/scenarios.md documents every key: its table is generated from the declarations."""
     doc = (ROOT / "docs" / "scenarios.md").read_text(encoding="utf-8")
     assert schema_markdown() in doc
+
+
+@pytest.mark.parametrize("text, problem", [
+    (b"duration_s = " + b"[" * 2000, "arrays or tables nested too deeply"),
+    (b'base = "office"\nduration_s = ' + b"1" * 4400, "an integer of more than 4300 digits"),
+])
+def test_a_file_past_tomllibs_limits_is_a_one_line_error(tmp_path, text, problem):
+    """The scenario fuzz target's seeds: RecursionError and ValueError escaped the reader."""
+    (tmp_path / "deep.toml").write_bytes(text)
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(tmp_path / "deep.toml")
+    assert str(e.value) == f"deep.toml: {problem}; shorten it"

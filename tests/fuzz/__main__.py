@@ -16,8 +16,9 @@ from pathlib import Path
 
 from . import TARGETS
 
-#: the longest input libFuzzer makes: long enough for many frames or a whole scenario file
-MAX_LEN = {"recording": 8192}
+#: the longest input libFuzzer makes: many frames; for a reader, room for its parser's limits
+#: (an integer of 4300 digits, nesting past the recursion limit)
+MAX_LEN = {"recording": 8192, "scenario": 8192, "host_config": 8192}
 DEFAULT_MAX_LEN = 4096
 DONE = re.compile(r"Done (\d+) runs in (\d+) second")
 

@@ -23,7 +23,10 @@ def _seeds() -> list[bytes]:
     data = fixture("golden", "office", "sins.bin", size=1200)  # more than the index names
     incomplete = meta.replace(b"true", b"false")
     return [_input(meta, index, data, False), _input(incomplete, index + b"1200,30,1", data, True),
-            _input(meta, index, data[:100], True)]
+            _input(meta, index, data[:100], True),
+            # json's limits: nesting past the recursion limit, an integer past 4300 digits
+            _input(b"[" * 2000 + b"]" * 2000, index, data, False),
+            _input(meta.replace(b'"version": 1', b'"version": ' + b"1" * 4400), index, data, False)]
 
 
 SEEDS = _seeds()

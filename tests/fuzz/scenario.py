@@ -7,7 +7,9 @@ from .harness import check_reader, fixture
 NAME = "fuzz.toml"
 SEEDS = [p.read_bytes() for p in sorted(SCENARIO_DIR.glob("*.toml"))] + \
     [fixture("golden", "office", "scenario.toml"), b'base = "office"\nduration_s = 1e400\n',
-     b'base = "fuzz.toml"\n']
+     b'base = "fuzz.toml"\n',
+     # tomllib's limits: nesting past the recursion limit, an integer past 4300 digits
+     b"duration_s = " + b"[" * 2000, b'base = "office"\nduration_s = ' + b"1" * 4400]
 
 
 def check(data: bytes) -> None:

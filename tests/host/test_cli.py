@@ -176,3 +176,16 @@ def test_a_config_file_that_is_not_utf8_gets_one_line(tmp_path):
         host_config.load(str(path))
     assert "not UTF-8 text" in str(e.value) and str(path) in str(e.value)
     assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("text, problem", [
+    (b"[timing]\nhold_s = " + b"{a = " * 2000, "arrays or tables nested too deeply"),
+    (b"[[anchors]]\nid = " + b"1" * 4400, "an integer of more than 4300 digits"),
+])
+def test_a_config_file_past_tomllibs_limits_gets_one_line(tmp_path, text, problem):
+    """The host_config fuzz target's seeds: RecursionError and ValueError escaped load()."""
+    path = tmp_path / "lab.toml"
+    path.write_bytes(text)
+    with pytest.raises(ConfigError) as e:
+        host_config.load(str(path))
+    assert str(e.value) == f"{path}: {problem}; shorten it"
