@@ -42,6 +42,15 @@ def span(lo, hi, above: bool = False) -> str:
     return f"in {'(' if above else '['}{show(lo)}, {show(hi)}]"
 
 
+def finite(value: int | float) -> bool:
+    """Whether *value* is a finite float; an int past the float range (TOML integers have any
+    number of digits) is not, where math.isfinite would raise OverflowError."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def number_problem(value, lo=-math.inf, hi=math.inf, *, integer: bool = False,
                    above: bool = False) -> str | None:
     """Why *value* is not a finite number (an integer if *integer*) in [lo, hi] ((lo, hi] if
@@ -49,7 +58,7 @@ def number_problem(value, lo=-math.inf, hi=math.inf, *, integer: bool = False,
     what = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
         return f"must be {what}"
-    if not math.isfinite(value):
+    if not (integer or finite(value)):
         return "must be a finite number"
     if not ((lo < value) if above else (lo <= value)) or not value <= hi:
         return f"must be {what} {span(lo, hi, above)}"

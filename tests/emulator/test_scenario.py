@@ -152,3 +152,16 @@ def test_a_file_past_tomllibs_limits_is_a_one_line_error(tmp_path, text, problem
     with pytest.raises(ScenarioError) as e:
         load_scenario(tmp_path / "deep.toml")
     assert str(e.value) == f"deep.toml: {problem}; shorten it"
+
+
+#: Found by the scenario fuzz target (tests/fuzz): a TOML integer past the float range where
+#: a number is due raised OverflowError (math.isfinite) instead of a ScenarioError.
+FUZZ_HUGE_INT = b'base = "office"\nduration_s = ' + b"1" * 2344 + b"0" * 571 + b"4099276460824344803"
+
+
+def test_an_integer_past_the_float_range_is_a_one_line_error(tmp_path):
+    (tmp_path / "huge.toml").write_bytes(FUZZ_HUGE_INT)
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(tmp_path / "huge.toml")
+    assert str(e.value) == ("huge.toml: duration_s must be a finite number (got an integer of "
+                            "2934 digits); write a finite number")

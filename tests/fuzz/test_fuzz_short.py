@@ -37,9 +37,10 @@ def _atheris() -> bool:
 @pytest.mark.skipif(not _atheris(), reason="atheris is not installed (pip install -e '.[fuzz]')")
 @pytest.mark.parametrize("name", TARGETS)
 def test_short_fuzz_run_finds_no_broken_contract(name, tmp_path):
+    # a fixed libFuzzer seed: the same inputs on every run, so a failure here reproduces
     p = subprocess.run([sys.executable, "-m", "tests.fuzz", name, "--runs", str(SHORT_RUNS),
-                        "--artifacts", str(tmp_path)], cwd=ROOT, capture_output=True, text=True,
-                       timeout=120)
-    crashes = sorted(tmp_path.glob(f"{name}-crash-*"))
-    assert p.returncode == 0 and not crashes, p.stderr[-3000:]
+                        "--artifacts", str(tmp_path), "-seed=1"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=120)
+    crashes = [f.read_bytes().hex() for f in sorted(tmp_path.glob(f"{name}-crash-*"))]
+    assert p.returncode == 0 and not crashes, f"{p.stderr[-3000:]}\ncrash input (hex): {crashes}"
     assert f"Done {SHORT_RUNS} runs" in p.stderr

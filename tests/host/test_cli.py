@@ -189,3 +189,12 @@ def test_a_config_file_past_tomllibs_limits_gets_one_line(tmp_path, text, proble
     with pytest.raises(ConfigError) as e:
         host_config.load(str(path))
     assert str(e.value) == f"{path}: {problem}; shorten it"
+
+
+def test_an_integer_past_the_float_range_gets_one_line(tmp_path):
+    """As the scenario fuzz target found for scenarios: OverflowError from math.isfinite."""
+    path = tmp_path / "lab.toml"
+    path.write_text(ANCHORS + "[site]\nlatitude_deg = 1" + "0" * 400 + "\n")
+    with pytest.raises(ConfigError) as e:
+        host_config.load(str(path))
+    assert "latitude_deg must be a finite number" in str(e.value) and "\n" not in str(e.value)
