@@ -20,7 +20,7 @@ from . import TARGETS
 #: (an integer of 4300 digits, nesting past the recursion limit)
 MAX_LEN = {"recording": 8192, "scenario": 8192, "host_config": 8192}
 DEFAULT_MAX_LEN = 4096
-DONE = re.compile(r"Done (\d+) runs in (\d+) second")
+STATUS = re.compile(r"^#(\d+)\t", re.M)  # libFuzzer's progress lines: inputs run so far
 
 
 def fuzz(name: str, runs: int, artifacts: Path, corpus: Path | None, extra: list[str]) -> None:
@@ -57,14 +57,15 @@ def fuzz_all(names: list[str], args, libfuzzer: list[str]) -> int:
         cmd = [sys.executable, "-m", "tests.fuzz", name, "--runs", str(args.runs),
                "--artifacts", str(args.artifacts), *libfuzzer]
         t0 = time.monotonic()
-        p = subprocess.run(cmd, capture_output=True, text=True)
+        log = args.artifacts / f"{name}.log"
+        args.artifacts.mkdir(parents=True, exist_ok=True)
+        with open(log, "w") as fh:
+            p = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT)
         wall = time.monotonic() - t0
-        done = DONE.search(p.stderr)
-        n = int(done.group(1)) if done else 0
-        result = "ok" if p.returncode == 0 else f"CRASH (exit {p.returncode}), see {args.artifacts}"
+        n = max(map(int, STATUS.findall(log.read_text(errors="replace"))), default=0)
+        result = "ok" if p.returncode == 0 else f"CRASH (exit {p.returncode}), see {log}"
         if p.returncode:
             failed += 1
-            sys.stderr.write(p.stderr[-4000:])
         print(f"{name:12} {n:9d} {wall:8.1f} {n / wall:8.0f}  {result}", flush=True)
     return 1 if failed else 0
 
