@@ -48,7 +48,11 @@ SMPL_TIME_BASES_S = (1.0 / 1638.4, 18.921e-3)  # ADIS16350 SMPL_PRD bit 7 = 0, 1
 
 
 class ScenarioError(ValueError):
-    """A scenario that cannot be used; the message is one line naming the fix."""
+    """A scenario that cannot be used; the message is one line naming the fix (a newline in
+    a path or value it quotes is shown as ``\\n``)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message.replace("\n", "\\n"))
 
 
 def _ppm(doc: str):

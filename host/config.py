@@ -60,7 +60,11 @@ DEFAULT = "office"
 
 
 class ConfigError(ValueError):
-    """A bad host configuration: the message is one line naming the problem and the fix."""
+    """A bad host configuration: the message is one line naming the problem and the fix (a
+    newline in a path or value it quotes is shown as ``\\n``)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message.replace("\n", "\\n"))
 
 
 def _hex16(v) -> bool:

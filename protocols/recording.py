@@ -329,7 +329,11 @@ class RecordingWriter:
 
 
 class RecordingError(ValueError):
-    pass
+    """A recording that cannot be read: one line naming the file and the fix (a newline in a
+    path or value it quotes is shown as ``\\n``)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message.replace("\n", "\\n"))
 
 
 def _limit(e: Exception) -> str:

@@ -165,3 +165,11 @@ def test_an_integer_past_the_float_range_is_a_one_line_error(tmp_path):
         load_scenario(tmp_path / "huge.toml")
     assert str(e.value) == ("huge.toml: duration_s must be a finite number (got an integer of "
                             "2934 digits); write a finite number")
+
+
+def test_a_base_with_a_newline_is_named_on_one_line(tmp_path):
+    """Found by the scenario fuzz target (tests/fuzz): the path was quoted with its newline."""
+    (tmp_path / "nl.toml").write_bytes(b'base = "\\nfice"\nduration_s0= 1e400\n')
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(tmp_path / "nl.toml")
+    assert str(e.value) == f"no scenario file {tmp_path}/\\nfice; check the path"
