@@ -2,7 +2,7 @@
 
 A target module defines ``SEEDS`` (inputs built in code from real frames, shipped scenarios
 and fixtures) and ``check(data)``, which raises AssertionError (or anything else) when a
-contract is broken. ``python -m tests.fuzz`` runs it under atheris; ``replay`` runs it on its
+contract is broken. ``python -m tests.fuzz`` runs it under atheris, or with ``--replay`` on its
 seeds without atheris, so the contract checks run in every test run.
 """
 from __future__ import annotations
@@ -40,12 +40,6 @@ class Input:
 
     def rest(self) -> bytes:
         return self.bytes(self._end - self._start)
-
-
-def replay(check, seeds) -> None:
-    """The target's contract on each seed (the run without atheris)."""
-    for seed in seeds:
-        check(seed)
 
 
 # -- decoders ------------------------------------------------------------------------------
