@@ -7,6 +7,7 @@ nan, inf or 1e300 reaches arithmetic that overflows, loops forever or hangs up a
 from __future__ import annotations
 
 import math
+import sys
 
 #: nanoLOC node ids as the gateway reports them (anchors and tags).
 ANCHOR_IDS = (1, 254)
@@ -41,6 +42,15 @@ def span(lo, hi, above: bool = False) -> str:
     return f"in {'(' if above else '['}{show(lo)}, {show(hi)}]"
 
 
+def finite(value: int | float) -> bool:
+    """Whether *value* is a finite float; an int past the float range (TOML integers have any
+    number of digits) is not, where math.isfinite would raise OverflowError."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def number_problem(value, lo=-math.inf, hi=math.inf, *, integer: bool = False,
                    above: bool = False) -> str | None:
     """Why *value* is not a finite number (an integer if *integer*) in [lo, hi] ((lo, hi] if
@@ -48,8 +58,16 @@ def number_problem(value, lo=-math.inf, hi=math.inf, *, integer: bool = False,
     what = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
         return f"must be {what}"
-    if not math.isfinite(value):
+    if not (integer or finite(value)):
         return "must be a finite number"
     if not ((lo < value) if above else (lo <= value)) or not value <= hi:
         return f"must be {what} {span(lo, hi, above)}"
     return None
+
+
+def limit_problem(e: Exception) -> str:
+    """The limit a TOML parser hit beyond its syntax, in one line: nesting deeper than the
+    recursion limit, or (ValueError) an integer of more digits than Python converts."""
+    if isinstance(e, RecursionError):
+        return "arrays or tables nested too deeply"
+    return f"an integer of more than {sys.get_int_max_str_digits()} digits"

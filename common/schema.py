@@ -20,7 +20,8 @@ import typing
 from dataclasses import MISSING, dataclass
 from typing import Any, Callable
 
-from navtwin.common.limits import show as _num, span
+from navtwin.common.limits import finite, span
+from navtwin.common.limits import show as _num
 
 
 class Invalid(ValueError):
@@ -86,6 +87,8 @@ def _describe(value: Any) -> str:
         return f"{value:g}"
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_describe(v) for v in value) + "]"
+    if isinstance(value, int) and len(digits := str(abs(value))) > 20:
+        return f"an integer of {len(digits)} digits"
     return repr(value) if isinstance(value, str) else str(value)
 
 
@@ -130,7 +133,7 @@ def _convert(value: Any, tp, at: str) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise wrong
-        if not math.isfinite(value):
+        if not finite(value):
             raise Invalid(at, f"must be a finite number (got {_describe(value)}); write a finite number")
         return float(value)
     if tp is str:

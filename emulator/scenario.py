@@ -27,7 +27,7 @@ from navtwin.protocols.adis16350 import (ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DP
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
-                              MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS)
+                              MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS, limit_problem)
 
 from . import trajectory as geometry
 from .faults import Fault
@@ -48,7 +48,11 @@ SMPL_TIME_BASES_S = (1.0 / 1638.4, 18.921e-3)  # ADIS16350 SMPL_PRD bit 7 = 0, 1
 
 
 class ScenarioError(ValueError):
-    """A scenario that cannot be used; the message is one line naming the fix."""
+    """A scenario that cannot be used; the message is one line naming the fix (a newline in
+    a path or value it quotes is shown as ``\\n``)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message.replace("\n", "\\n"))
 
 
 def _ppm(doc: str):
@@ -487,6 +491,8 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{path.name}: not valid TOML: {e}; fix the syntax") from None
+    except (ValueError, RecursionError) as e:  # tomllib's limits: an integer's digits, nesting
+        raise ScenarioError(f"{path.name}: {limit_problem(e)}; shorten it") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError(f"{path.name}: cannot read it ({e}); check the path") from None
     data = _vehicles(data, path.name)

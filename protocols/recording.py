@@ -48,6 +48,7 @@ import json
 import os
 import re
 import stat
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -347,7 +348,18 @@ class RecordingWriter:
 
 
 class RecordingError(ValueError):
-    pass
+    """A recording that cannot be read: one line naming the file and the fix (a newline in a
+    path or value it quotes is shown as ``\\n``)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message.replace("\n", "\\n"))
+
+
+def _limit(e: Exception) -> str:
+    """The limit json hit beyond its syntax (the nesting depth, an integer's digits)."""
+    if isinstance(e, RecursionError):
+        return "arrays or objects nested too deeply"
+    return f"an integer of more than {sys.get_int_max_str_digits()} digits"
 
 
 def _check_meta(meta, where: Path) -> None:
@@ -409,6 +421,9 @@ class Recording:
         except json.JSONDecodeError as e:
             raise RecordingError(f"{meta_path}: not valid JSON ({e}); restore recording.json "
                                  f"or re-record") from None
+        except (ValueError, RecursionError) as e:  # json's own limits: digits, nesting
+            raise RecordingError(f"{meta_path}: not a recording's JSON ({_limit(e)}); restore "
+                                 f"recording.json or re-record") from None
         except OSError as e:
             raise RecordingError(f"{meta_path}: {e.strerror}; check the directory") from None
         _check_meta(self.meta, meta_path)

@@ -273,7 +273,16 @@ def nanoloc_decoder() -> CrcFramedDecoder:
 
 
 _XBEE_PARSERS = {t: parser_for(st) for t, st in xbee.FRAME_BODIES.items()}
-_ESCAPED = tuple(bytes((b,)) for b in sorted(xbee.ESCAPED_BYTES))
+
+
+def _raw_extent(seg, need: int) -> int:
+    """Raw bytes of validly escaped *seg* that unescape to its first *need* bytes: *need*
+    plus the 7D of each pair among them. (Counting the unescaped bytes that are escapable
+    overcounts a sender's bare 11 or 13, and so took the next frame's 7E into this one.)"""
+    end = need
+    while (n := need + seg.count(xbee.ESCAPE, 0, end)) != end:
+        end = n
+    return end
 
 
 class XBeeDecoder(LengthFramed):
@@ -340,9 +349,7 @@ class XBeeDecoder(LengthFramed):
                 else:
                     kind, size = TRUNCATED, stop - j
             else:
-                # raw extent: all that was unescaped when the frame is all of it, else count
-                end = j + 1 + (used if len(u) == need else
-                               need + sum(u.count(e, 0, need) for e in _ESCAPED))
+                end = j + 1 + _raw_extent(seg, need)
                 if sum(u[2:need]) & 0xFF == 0xFF:
                     self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
                     i = end

@@ -140,3 +140,36 @@ def test_docs_carry_the_generated_key_table():
     """docs/scenarios.md documents every key: its table is generated from the declarations."""
     doc = (ROOT / "docs" / "scenarios.md").read_text(encoding="utf-8")
     assert schema_markdown() in doc
+
+
+@pytest.mark.parametrize("text, problem", [
+    (b"duration_s = " + b"[" * 2000, "arrays or tables nested too deeply"),
+    (b'base = "office"\nduration_s = ' + b"1" * 4400, "an integer of more than 4300 digits"),
+])
+def test_a_file_past_tomllibs_limits_is_a_one_line_error(tmp_path, text, problem):
+    """The scenario fuzz target's seeds: RecursionError and ValueError escaped the reader."""
+    (tmp_path / "deep.toml").write_bytes(text)
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(tmp_path / "deep.toml")
+    assert str(e.value) == f"deep.toml: {problem}; shorten it"
+
+
+#: Found by the scenario fuzz target (tests/fuzz): a TOML integer past the float range where
+#: a number is due raised OverflowError (math.isfinite) instead of a ScenarioError.
+FUZZ_HUGE_INT = b'base = "office"\nduration_s = ' + b"1" * 2344 + b"0" * 571 + b"4099276460824344803"
+
+
+def test_an_integer_past_the_float_range_is_a_one_line_error(tmp_path):
+    (tmp_path / "huge.toml").write_bytes(FUZZ_HUGE_INT)
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(tmp_path / "huge.toml")
+    assert str(e.value) == ("huge.toml: duration_s must be a finite number (got an integer of "
+                            "2934 digits); write a finite number")
+
+
+def test_a_base_with_a_newline_is_named_on_one_line(tmp_path):
+    """Found by the scenario fuzz target (tests/fuzz): the path was quoted with its newline."""
+    (tmp_path / "nl.toml").write_bytes(b'base = "\\nfice"\nduration_s0= 1e400\n')
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(tmp_path / "nl.toml")
+    assert str(e.value) == f"no scenario file {tmp_path}/\\nfice; check the path"

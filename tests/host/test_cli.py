@@ -166,3 +166,35 @@ def test_configs_recorded_in_the_first_layout_still_load(root):
     assert (tuned.settings["ukf"].alpha, tuned.settings["ukf"].kappa) == (0.5, 0.0)
     assert tuned.settings["sins"].vrw_m_s_rt_hr == 3.0
     assert tuned.range_bias_m == {1: 0.3} and tuned.tuning.tight == "toa" and tuned.vehicles[0].tag == 16
+
+
+def test_a_config_file_that_is_not_utf8_gets_one_line(tmp_path):
+    """Found by the host_config fuzz target (tests/fuzz): a UnicodeDecodeError escaped."""
+    path = tmp_path / "lab.toml"
+    path.write_bytes(b"[[anchors]]\nid = 1" + b"\xcd" * 106 + b"\nx = 0\ny = 0\n")
+    with pytest.raises(ConfigError) as e:
+        host_config.load(str(path))
+    assert "not UTF-8 text" in str(e.value) and str(path) in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("text, problem", [
+    (b"[timing]\nhold_s = " + b"{a = " * 2000, "arrays or tables nested too deeply"),
+    (b"[[anchors]]\nid = " + b"1" * 4400, "an integer of more than 4300 digits"),
+])
+def test_a_config_file_past_tomllibs_limits_gets_one_line(tmp_path, text, problem):
+    """The host_config fuzz target's seeds: RecursionError and ValueError escaped load()."""
+    path = tmp_path / "lab.toml"
+    path.write_bytes(text)
+    with pytest.raises(ConfigError) as e:
+        host_config.load(str(path))
+    assert str(e.value) == f"{path}: {problem}; shorten it"
+
+
+def test_an_integer_past_the_float_range_gets_one_line(tmp_path):
+    """As the scenario fuzz target found for scenarios: OverflowError from math.isfinite."""
+    path = tmp_path / "lab.toml"
+    path.write_text(ANCHORS + "[site]\nlatitude_deg = 1" + "0" * 400 + "\n")
+    with pytest.raises(ConfigError) as e:
+        host_config.load(str(path))
+    assert "latitude_deg must be a finite number" in str(e.value) and "\n" not in str(e.value)

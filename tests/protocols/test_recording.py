@@ -33,3 +33,16 @@ def test_bad_recordings_are_one_line_errors(tmp_path):
     (tmp_path / "recording.json").write_text("{")
     with pytest.raises(RecordingError, match="not valid JSON"):
         Recording(tmp_path)
+
+
+@pytest.mark.parametrize("meta, problem", [
+    (b"[" * 2000 + b"]" * 2000, "arrays or objects nested too deeply"),
+    (b'{"format": "navtwin-recording", "version": ' + b"1" * 4400 + b"}",
+     "an integer of more than 4300 digits"),
+])
+def test_a_meta_past_jsons_limits_is_a_one_line_error(tmp_path, meta, problem):
+    """The recording fuzz target's seeds: RecursionError and ValueError escaped the reader."""
+    (tmp_path / "recording.json").write_bytes(meta)
+    with pytest.raises(RecordingError) as e:
+        Recording(tmp_path)
+    assert problem in str(e.value) and "\n" not in str(e.value)

@@ -229,3 +229,34 @@ def test_a_bad_escape_has_the_same_size_wherever_the_input_is_cut():
         ev = _events(dec, chunks)
         assert ev[:2] == [(0, f, ev[0][2]), (51, f, ev[0][2])]
         assert ev[2:] == [(BAD_ESCAPE, 102, 7), (GARBAGE, 102, 47), (149, f, ev[0][2])]
+
+
+#: Found by the xbee_sins fuzz target (tests/fuzz): golden packets, one of them (at 58) with
+#: a bare 13 in its address; chunked, its bad_checksum was 46 bytes, whole 47.
+FUZZ_BARE_XOFF = bytes.fromhex(
+    "7e00028a00757e00028a066f7e002a900013a20040a1b2d4902601a55a011800008aa98010801280084100"
+    "40137e4870038001800280005131727e002a900013a20040a1b2d490af2601a55a011800018aa9bff8bfff"
+    "80bff6038022819e80018fff8001800082331d7e002a900013a20040a1b2d4902601a55a011800028aab80"
+    "0cbfffbff8bff7800c818380008004c0018000ef8f837e002a900013a2004040a1b2d4902601a55a011800"
+    "0a8aa9f7800c81838000efbffd812f80038ffe8fff800058117e00028a00757e00028a066f7e002a90007d"
+    "33a20040a1617e00b2d4902601a55a011800008aa9801080128008bfffbfec81b78ffe8001800280005133"
+    "726d6d6d6d6d6d6d6d6d6d6d6d6d6d6d6d")
+
+
+def test_the_fuzzers_bare_xoff_input_keeps_its_contracts():
+    from tests.fuzz import xbee_sins
+
+    xbee_sins.check(FUZZ_BARE_XOFF)
+
+
+def test_a_bare_xon_or_xoff_in_api_mode_2_does_not_swallow_the_next_frame():
+    """A sender that leaves 11 and 13 unescaped: the frame's raw extent counted them as pairs,
+    so with a byte of garbage after it the frame reached past the next 7E, and the intact
+    frame there was lost (whole), or not (chunked)."""
+    data = b"\x8a\x11\x13"
+    bare = b"\x7e\x00\x03" + data + bytes((xbee.checksum(data),))
+    good = xbee.build(0x8A, True, status=6)
+    stream = bare + b"G" + good
+    for chunks in ([stream], [stream[:7], stream[7:]]):
+        assert _events(XBeeDecoder(escaped=True), chunks) == [
+            (MALFORMED, 0, 7), (GARBAGE, 0, 8), (8, good, {"status": 6})]
