@@ -45,6 +45,9 @@ def main(argv: list[str] | None = None) -> int:
     k.add_argument("--seconds", type=number(30, 36000), default=600.0,
                    help="30 to 36000 (default 600)")
     k.add_argument("--dir", help="keep the run here (default: a new temp dir)")
+    k.add_argument("--faults", action="store_true",
+                   help="inject lab.soak.SOAK_FAULTS periodically, record the host and audit it "
+                        "(no emulator restart then)")
     args = p.parse_args(argv)
     if args.what == "latency":
         result = latency(args.seconds, args.filters)
@@ -56,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         from navtwin.lab.soak import soak
 
-        result = soak(args.seconds, directory=args.dir,
+        result = soak(args.seconds, directory=args.dir, faults=args.faults,
                       progress=lambda m: print(m, file=sys.stderr, flush=True))
     print(json.dumps(result))
     return 0

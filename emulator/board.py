@@ -37,26 +37,41 @@ class Board:
         self.faults = tuple(faults)
         self._k0 = 0  # the tick of the last power-up: frame k counts k - k0
         self._off = False  # the last frame of the previous block was not written
+        self._last_k = -1  # the tick of the last frame written
+        self._cause = None  # the board fault that last had it off
 
-    def frames(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, list[bytes]]:
-        """Write start times and bytes of the frames with lo_ns <= t_k < hi_ns; the IMU must
-        have generated its samples up to hi_ns."""
+    def frames(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, list[bytes], dict]:
+        """Write start times and bytes of the frames with lo_ns <= t_k < hi_ns (the IMU must
+        have generated its samples up to hi_ns), and the ledger marks by frame index: the
+        first frame after a reset says which fault and how many frames were not written."""
         k = self.clock.ticks_between(lo_ns, hi_ns)
         t = self.clock.tick(k)
         effect = BoardEffects(np.zeros(len(k), dtype=bool))
+        marks: dict[int, tuple] = {}
         for f in self.faults:
-            f.act(effect, f.active(t))
+            on = f.active(t)
+            f.act(effect, on)
+            if on.any():
+                self._cause = f
         if effect.off.any() or self._off:
             on = ~effect.off
             back = on & np.concatenate(([self._off], effect.off[:-1]))  # first frame after off
             k0 = np.maximum.accumulate(np.where(back, k, self._k0))
+            written = k[on]
+            for j in np.flatnonzero(back).tolist():
+                kept = int(on[:j].sum())  # its index among the frames written
+                before = int(written[kept - 1]) if kept else self._last_k
+                marks[kept] = ({"kind": self._cause.KIND, "fault": self._cause, "t_ns": int(t[j]),
+                                "missing": int(k[j]) - before - 1},)
             if len(k):
                 self._k0, self._off = int(k0[-1]), bool(effect.off[-1])
             k, t, seq = k[on], t[on], (k - k0)[on]
         else:
             seq = k - self._k0
+        if len(k):
+            self._last_k = int(k[-1])  # the last frame written
         words = self.imu.read(t - self.spi_read_ns).tolist()
-        return t, [build_sample(s, w) for s, w in zip(seq.tolist(), words)]
+        return t, [build_sample(s, w) for s, w in zip(seq.tolist(), words)], marks
 
     def byte_times(self, starts: np.ndarray) -> np.ndarray:
         """(N, 30) true times at which each byte of frames starting at *starts* has been

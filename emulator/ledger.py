@@ -12,8 +12,10 @@ delivered (for ``to_host``: offsets in the recorded ``<port>.bin``; for ``to_dev
 the bytes the device received), ``start == end`` where bytes were removed (``removed``
 says how many). Other keys are the kind's details (a flipped ``mask``, a ``held_ns``, ...).
 
-Line faults add entries through their line (emulator.uart); device faults call
-:meth:`Ledger.add` themselves. The Emulation writes each entry into its recording's
+Line faults add entries through their line (emulator.uart); a device fault marks the items
+it changed (emulator.uart.Marked: an anchor's timed-out or biased report, the board's first
+frame after a reset, the coordinator's power-up frame), and the line adds an entry over the
+bytes each became. The Emulation writes each entry into its recording's
 ``faults.jsonl`` (protocols.recording) and keeps per-kind totals for its summary.
 """
 from __future__ import annotations
@@ -25,8 +27,10 @@ class Ledger:
     """Entries as they are added: to *write* (a recording), and kept in :attr:`entries`
     when *keep* (in-memory runs and tests; a recorded run has them in its file)."""
 
-    def __init__(self, write: Callable[[dict], None] | None = None, keep: bool = True) -> None:
+    def __init__(self, write: Callable[[dict], None] | None = None, keep: bool = True,
+                 faults: tuple = ()) -> None:
         self._write = write
+        self._index = {id(f): i for i, f in enumerate(faults)}  # the scenario's [[faults]]
         self.entries: list[dict] | None = [] if keep else None
         self._totals: dict[str, dict] = {}
 
@@ -42,6 +46,10 @@ class Ledger:
             self.entries.append(entry)
         if self._write is not None:
             self._write(entry)
+
+    def index(self, fault) -> int | None:
+        """*fault*'s place in the scenario's [[faults]]; None for a live one (or an int as is)."""
+        return fault if fault is None or isinstance(fault, int) else self._index.get(id(fault))
 
     def totals(self) -> dict[str, dict]:
         """Per kind: ``injections`` (entries) and ``bytes`` (touched: see :func:`touched`)."""

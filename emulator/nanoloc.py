@@ -131,10 +131,13 @@ class NanolocNetwork:
         tof = d / SPEED_OF_LIGHT
         effect = ExchangeEffects(z[:, 7] < r.timeout_prob, np.zeros(m), np.zeros(m), z[:, 8],
                                  z[:, 7], np.zeros(m, dtype=bool))
+        hits = []  # (fault, the exchanges it changed): the ledger's marks
         for i, a in enumerate(self.anchors):
             mine = idx == i
             for f in a.faults:
-                f.act(effect, mine & f.active(t0))
+                on = mine & f.active(t0)
+                acted = f.act(effect, on)
+                hits.append((f, on if acted is None else acted))
         timeout, attenuation = effect.timeout, effect.attenuation_db
         bias = np.array([a.bias for a in self.anchors])[idx] + effect.bias_m
         sigma = r.sigma0_m + r.sigma_per_m * d
@@ -152,7 +155,16 @@ class NanolocNetwork:
         result = t0 + np.rint(np.where(timeout, r.timeout_ms * 1e-3, done) * 1e9).astype(np.int64)
         t_us = np.floor(np.array([a.network_us0 for a in self.anchors])[idx] + k * self.cycle_us)
         order = np.argsort(t0, kind="stable")  # slots never overlap: results come in this order
+        marks: dict[int, tuple] = {}
+        if hits:
+            rank = np.empty(m, dtype=np.int64)
+            rank[order] = np.arange(m)
+            for f, acted in hits:
+                for j in np.flatnonzero(acted).tolist():
+                    marks[int(rank[j])] = marks.get(int(rank[j]), ()) + (
+                        {"kind": f.KIND, "fault": f, "t_ns": int(t0[j]), "anchor": int(self.anchors[idx[j]].id)},)
         return {
+            "marks": marks,
             "anchor": np.array([a.id for a in self.anchors])[idx][order],
             "start_ns": t0[order],
             "t_us": t_us.astype(np.int64)[order],
@@ -163,15 +175,18 @@ class NanolocNetwork:
             "ready_ns": result[order] + self.latency_ns,
         }
 
-    def reports(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, list[bytes]]:
-        """Write start times and bytes of the reports of the exchanges starting in the block."""
+    def reports(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, list[bytes], dict]:
+        """Write start times and bytes of the reports of the exchanges starting in the block,
+        and the ledger marks of the reports a fault changed (by index)."""
         x = self.exchanges(lo_ns, hi_ns)
         start, end = serial_queue(x["ready_ns"], np.full(len(x["ready_ns"]), self.report_ns), self.busy_until)
         if len(end):
             self.busy_until = int(end[-1])
         seq = self.seq
         self.seq += len(start)
-        return start, [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=self.tag, status=st, rssi=rs, tau=tau)
-                       for n, (t_us, a, st, rs, tau) in enumerate(zip(
-                           x["t_us"].tolist(), x["anchor"].tolist(), x["status"].tolist(),
-                           x["rssi"].tolist(), x["tau"].tolist()))]
+        reports = [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=self.tag, status=st, rssi=rs,
+                                tau=tau)
+                   for n, (t_us, a, st, rs, tau) in enumerate(zip(
+                       x["t_us"].tolist(), x["anchor"].tolist(), x["status"].tolist(),
+                       x["rssi"].tolist(), x["tau"].tolist()))]
+        return start, reports, x["marks"]

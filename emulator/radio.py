@@ -88,6 +88,8 @@ class Link:
         self.faults = tuple(faults)  # emulator.faults acting on the link
         self.rng = rng
         self.busy_until = 0
+        self._hits: list = []  # (fault, packets in its episode) of the last packets sent
+        self._lost: dict | None = None  # a fault's packets lost since the last delivered one
 
     def _attempts(self, start_ns: np.ndarray, sizes: np.ndarray):
         """(delivered, retries, delivery offset, service time) for packets whose first
@@ -96,8 +98,12 @@ class Link:
         n, tries = len(start_ns), s.max_retries + 1
         u = self.rng.random((n, 2 * tries))
         effect = AttemptEffects(u[:, :tries] < s.per_attempt_loss, u[:, :tries])
+        hits = []
         for fault in self.faults:
-            fault.act(effect, fault.active(start_ns))
+            on = fault.active(start_ns)
+            fault.act(effect, on)
+            hits.append((fault, on))
+        self._hits = hits
         lost = effect.lost
         backoff = np.rint(u[:, tries:] * s.jitter_ms * 1e6).astype(np.int64)
         air = ((sizes + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE)[:, None]
@@ -111,14 +117,28 @@ class Link:
         return delivered, retries, offset, service
 
     def transmit(self, ready_ns: np.ndarray, sizes: np.ndarray):
-        """Send packets in order, one at a time: (arrival_ns, delivered) per packet."""
+        """Send packets in order, one at a time: (arrival_ns, delivered) per packet, and the
+        ledger marks by packet index: the first packet delivered after packets a link fault
+        lost says which fault, when and how many."""
         sizes = np.asarray(sizes, dtype=np.int64)
         start = np.asarray(ready_ns, dtype=np.int64)
         delivered, _, offset, service = self._attempts(start, sizes)
+        marks: dict[int, tuple] = {}
+        if self._hits or self._lost:
+            for i in range(len(start)):
+                if not delivered[i]:
+                    cause = next((f for f, on in self._hits if on[i]), None)
+                    if cause is not None:
+                        lost = self._lost or {"kind": cause.KIND, "fault": cause,
+                                              "t_ns": int(start[i]), "lost": 0}
+                        lost["lost"] += 1
+                        self._lost = lost
+                elif self._lost is not None:
+                    marks[i], self._lost = (self._lost,), None
         start, end = serial_queue(start, service, self.busy_until)
         if len(end):
             self.busy_until = int(end[-1])
-        return start + offset, delivered
+        return start + offset, delivered, marks
 
     def unicast(self, t_ns: int, nbytes: int) -> tuple[bool, int, int]:
         """One packet offered at *t_ns*: (delivered, retries, latency_ns); the latency is to

@@ -66,7 +66,7 @@ from .ledger import Ledger
 from .pty import LinkDir, PtyPort
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
-from .uart import END, Chunk, Inbound, Line, LineWrapper, Wire
+from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked, Wire
 from .uart_rx import ClientView, Framing
 
 SEC = 1_000_000_000
@@ -170,7 +170,7 @@ class Emulation:
         bauds = {name: scenario.ports[name]["baud"] for name in PORT_NAMES}
         # a recorded run has its entries in faults.jsonl; others keep them in memory
         self.ledger = Ledger(self._record_fault if record is not None else None,
-                             keep=record is None)
+                             keep=record is None, faults=scenario.faults)
         self.lines = {name: Line(name, self.coordinator if name == "xbee" else Wire(bauds[name]),
                                  ledger=self.ledger)
                       for name in PORT_NAMES}
@@ -438,9 +438,9 @@ class Emulation:
     def _enqueue(self, ev) -> None:
         if ev.port == "xbee":
             out = self.coordinator.received(ev.t_ns, ev.data)
-            self.lines["xbee"].put(out.t_ns, out.item)
+            self.lines["xbee"].put(out.t_ns, Marked(out.item, ev.marks) if ev.marks else out.item)
         else:
-            self.lines[ev.port].put(ev.t_ns, ev.data)
+            self.lines[ev.port].put(ev.t_ns, Marked(ev.data, ev.marks) if ev.marks else ev.data)
 
     def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
         port = self.ports.get(chunk.port)
@@ -530,8 +530,16 @@ class Emulation:
                                "duration_s": req.get("duration_s", self.RESET_S)})
 
     def _power_ups(self, fault) -> list:
-        """The coordinator's power-up at the end of each episode of coordinator fault *fault*."""
-        return self.coordinator.power_up(round(fault.end_s * SEC))
+        """The coordinator's power-up at the end of each episode of coordinator fault *fault*
+        (its first frame marked for the ledger)."""
+        out, t = [], fault.next_active(0)
+        while t is not None and t < self.end_ns:
+            up = fault.episode_end(t)
+            first, *rest = self.coordinator.power_up(up)
+            mark = {"kind": fault.KIND, "fault": fault, "t_ns": up, "off_ns": up - t}
+            out += [first._replace(item=Marked(first.item, (mark,))), *rest]
+            t = fault.next_active(up)
+        return out
 
     def _op_clear(self, req: dict) -> dict:
         ids = list(self.live) if req.get("id") is None else [req["id"]]

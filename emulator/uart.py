@@ -33,11 +33,20 @@ from __future__ import annotations
 import heapq
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any, Iterable, NamedTuple
 
 from navtwin.protocols.serial import wire_ns
 
 END = 1 << 62  # later than any event
+
+
+class Marked(NamedTuple):
+    """A device's item (bytes, or what its ``render`` takes) with ledger marks: a device
+    fault changed it. Each mark is ``{"kind", "fault" (the Fault), "t_ns", **detail}``; the
+    line writes one ledger entry per mark over the bytes the item became."""
+
+    item: Any
+    marks: tuple
 
 
 @dataclass(slots=True)
@@ -261,7 +270,8 @@ class Line(_Wrapped):
                 return out
             if arrive:
                 ready, _, item = heapq.heappop(pending)
-                size = self.device.admit(ready, item, self.queued)
+                size = self.device.admit(ready, item.item if type(item) is Marked else item,
+                                         self.queued)
                 if size is not None:
                     queue.append((ready, item, size))
                     self.queued += size
@@ -278,17 +288,26 @@ class Line(_Wrapped):
                 self.bytes += len(data)
             else:
                 baud = self.device.baud  # before rendering: a BD change applies to later chunks
+                marks = ()
                 if what == -1:
                     ready, item, size = queue.popleft()
                     self.queued -= size
+                    if type(item) is Marked:
+                        item, marks = item
                     data = self.device.render(ready, item)
                     pieces = self._chain(0, t, ready, data, baud) if data and self.wrappers \
                         else [(t, data)] if data else []
                 else:
                     pieces = self._chain(what, t, t, None, baud)
-                self._launch(pieces, baud, end_ns)
+                offset = self.bytes + sum(len(d) for _, d, _ in self._pieces)
+                sent = self._launch(pieces, baud, end_ns)
+                if marks and sent and self.ledger is not None:
+                    for m in marks:
+                        self.ledger.add(**{**m, "fault": self.ledger.index(m["fault"])},
+                                        port=self.name, direction="to_host", start=offset,
+                                        end=offset + sent)
 
-    def _launch(self, pieces: list, baud: int, end_ns: int) -> None:
+    def _launch(self, pieces: list, baud: int, end_ns: int) -> int:
         """Queue the pieces of a chunk that will start before *end_ns* (each starts when
         the line is free, not before its own start); the wrappers' marks go to the ledger,
         cut to the bytes that are sent, unless none are (a chunk held past the end)."""
@@ -303,6 +322,7 @@ class Line(_Wrapped):
             sent += len(d)
         if self.wrappers:
             self._settle(sent if sent or not pieces else None)
+        return sent
 
     def busy(self) -> bool:
         return self.current is not None or bool(self._pieces)

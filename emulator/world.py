@@ -53,6 +53,7 @@ class Event(NamedTuple):
     t_ns: int
     port: str
     data: bytes | RfPacket
+    marks: tuple = ()  # ledger marks of the device faults that changed it (emulator.uart.Marked)
 
 
 def _order(e: Event) -> tuple[int, int]:
@@ -88,14 +89,17 @@ class Vehicle:
         """The board's SINS frames written in [lo, hi) and the RF packets they become
         (*more*: the run goes on after *hi*, so an open packet waits for the next bytes)."""
         self.imu.generate(lo, hi)
-        t_sins, frames = self.board.frames(lo, hi)
-        events = [Event(t, "sins", f) for t, f in zip(t_sins.tolist(), frames)]
+        t_sins, frames, marks = self.board.frames(lo, hi)
+        events = [Event(t, "sins", f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
         times = self.board.byte_times(t_sins).ravel()
         packets = self.router.packetise(b"".join(frames), times, next_byte)
-        arrival, delivered = self.uplink.transmit(packets.ready_ns, [len(p) for p in packets.payloads])
-        return events, [Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p))
-                        for t, p, ok in zip(arrival.tolist(), packets.payloads, delivered.tolist()) if ok]
+        arrival, delivered, lost = self.uplink.transmit(packets.ready_ns,
+                                                        [len(p) for p in packets.payloads])
+        return events, [Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p),
+                              lost.get(i, ()))
+                        for i, (t, p, ok) in enumerate(zip(arrival.tolist(), packets.payloads,
+                                                           delivered.tolist())) if ok]
 
     def device_truth(self) -> dict:
         """What this vehicle's devices drew at power-on and its router's join."""
@@ -133,8 +137,9 @@ class World:
             s, r = vehicle.block(lo, hi, hi < self.duration_ns)
             sins += s
             rf += r
-        t_nl, reports = self.nanoloc.reports(lo, hi)
-        return sins + [Event(t, "nanoloc", r) for t, r in zip(t_nl.tolist(), reports)] + rf
+        t_nl, reports, marks = self.nanoloc.reports(lo, hi)
+        return sins + [Event(t, "nanoloc", r, marks.get(i, ()))
+                       for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))] + rf
 
     def advance(self, until_ns: int) -> list[Event]:
         """Events with t_ns < until_ns not returned before, in (t_ns, port) order."""

@@ -40,7 +40,6 @@ from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import DecodeError, Frame, XBeeDecoder, nanoloc_decoder, sins_decoder
 
 PORTS = ("sins", "xbee", "nanoloc")
-_PROBE = 64  # bytes of the host's stream looked for in the emulator's to place a slice
 
 
 class AuditError(ValueError):
@@ -52,33 +51,30 @@ def _decoder(port: str, escaped: bool):
         else nanoloc_decoder()
 
 
-def _read(rec: Recording, port: str) -> bytes:
-    return b"".join(c.data for c in rec.chunks(port))
-
-
-def align(host: bytes, emu: bytes) -> tuple[list[tuple[int, int, int]], int]:
-    """``(host_offset, emu_offset, length)`` slices that map *host* into *emu* in order, and
-    how many host bytes match nothing the emulator sent after the previous slice (foreign)."""
-    out, h, e, foreign = [], 0, 0, 0
-    while h < len(host):
-        at = emu.find(host[h:h + _PROBE], e)
-        if at < 0:
-            foreign += 1  # not the emulator's bytes: skip one and look again
-            h += 1
-            continue
-        n = 0
-        limit = min(len(host) - h, len(emu) - at)
-        while n < limit:  # extend in blocks, then byte by byte at the first difference
-            step = min(4096, limit - n)
-            if host[h + n:h + n + step] == emu[at + n:at + n + step]:
-                n += step
+def align(reads: list[bytes], emu: bytes) -> tuple[list[tuple[int, int, int]], int]:
+    """``(host_offset, emu_offset, length)`` slices that map the host's *reads* (its
+    recording's chunks, in order) into *emu*, and how many host bytes match nothing the
+    emulator sent after the previous slice (foreign). One read is contiguous in the stream
+    it was taken from (a tty read takes a prefix of its buffer), so each read is placed
+    where it continues the last one, or else at its next occurrence."""
+    out: list[list[int]] = []
+    h = e = foreign = 0
+    for data in reads:
+        n = len(data)
+        if emu[e:e + n] == data:
+            at = e
+        else:
+            at = emu.find(data, e)
+            if at < 0:
+                foreign += n
+                h += n
                 continue
-            while host[h + n] == emu[at + n]:
-                n += 1
-            break
-        out.append((h, at, n))
+        if out and out[-1][0] + out[-1][2] == h and out[-1][1] + out[-1][2] == at:
+            out[-1][2] += n  # continues the slice
+        else:
+            out.append([h, at, n])
         h, e = h + n, at + n
-    return out, foreign
+    return [tuple(x) for x in out], foreign
 
 
 @dataclass
@@ -102,23 +98,26 @@ class PortAudit:
 
 
 def _overlaps(ranges: list[tuple[int, int]], starts: list[int], lo: int, hi: int,
-              at_start: bool = False) -> bool:
+              ends: bool = False) -> bool:
     """Whether [lo, hi) meets a range of *ranges* (sorted by start). A removal is a point
-    (p, p): it meets [lo, hi) when lo < p < hi, and with *at_start* also at p == lo (bytes
-    removed just before a rejected run are its cause: a frame that lost its first byte)."""
+    (p, p): it meets [lo, hi) when lo < p < hi, and with *ends* also at p == lo or p == hi
+    (bytes removed at either end of a rejected run are its cause: a frame that lost its
+    first or its last byte)."""
     i = bisect.bisect_right(starts, hi)
     for a, b in reversed(ranges[max(0, i - 64):i]):  # ranges are short and sorted
         if a == b:
-            if lo < a < hi or (at_start and a == lo):
+            if lo < a < hi or (ends and a in (lo, hi)):
                 return True
         elif a < hi and b > lo:
             return True
     return False
 
 
-def audit_port(port: str, emu: bytes, host: bytes, entries: list[dict], escaped: bool) -> PortAudit:
+def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
+               escaped: bool) -> PortAudit:
+    host = b"".join(reads)
     r = PortAudit(port, len(emu), len(host))
-    slices, foreign = align(host, emu)
+    slices, foreign = align(reads, emu)
     if foreign:
         r.problems.append(f"{port}: the host read {foreign} bytes the emulator never sent "
                           "(are these recordings of the same run?)")
@@ -186,8 +185,9 @@ def audit_port(port: str, emu: bytes, host: bytes, entries: list[dict], escaped:
         if not inside(e["start"], max(e["end"], e["start"] + 1)):
             continue
         r.injections += 1
-        # a removal (a point) is accounted for by a rejected run that begins or holds it
-        if not _overlaps(rejected, rej_starts, e["start"], e["end"] + (e["start"] == e["end"])):
+        # a removal (a point) is accounted for by a rejected run that holds it or ends there
+        point = e["start"] == e["end"]
+        if not _overlaps(rejected, rej_starts, e["start"] - point, e["end"] + point):
             r.problems.append(f"{port}: {e['kind']} at t={e['t_ns'] / 1e9:.3f} s changed bytes "
                               f"[{e['start']}, {e['end']}) but the host rejected none of them")
             break
@@ -221,7 +221,8 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
     if not ports:
         raise AuditError("the recordings share no port with data; record the host on the "
                          "emulator's ports")
-    results = [audit_port(p, _read(emu, p), _read(host, p), entries, escaped) for p in ports]
+    results = [audit_port(p, b"".join(c.data for c in emu.chunks(p)),
+                          [c.data for c in host.chunks(p)], entries, escaped) for p in ports]
     return {"ok": all(r.ok for r in results), "ledger_entries": len(entries),
             "ports": {r.port: {k: v for k, v in vars(r).items() if k != "port"} for r in results}}
 

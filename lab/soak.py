@@ -12,6 +12,13 @@ and ``navtwin host`` on its PTYs, each its own process as users run them, and me
   link directory (the vehicle is back at its start): the host must follow the new links and
   every track must come back.
 
+With ``faults`` (``--faults``) the scenario also injects, periodically, the fault kinds of
+:data:`SOAK_FAULTS` (line faults on both of the host's ports, an RF fade, an anchor outage,
+value errors, a board reset), the host records, and at the end the run is audited
+(lab.audit): nothing the host lost may be unaccounted for. The emulator is then not
+restarted (a host recording spans one emulator run for the audit; restarts have their own
+test), the second reader still takes bytes (the audit sees them as unseen, not lost).
+
 It reports the host's and the emulator's resident memory after warm-up and at the end, the
 host's IMU rate per status period (and the worst period outside the restart), what the
 second reader took, the host's port events, and per track the recovery time after the
@@ -21,6 +28,7 @@ restart: the first time after which its error against the new emulator's truth s
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -35,17 +43,83 @@ import numpy as np
 from navtwin.emulator.api import Lab, command
 
 from . import evaluate
+from .audit import audit
 
 WARMUP_S = 60.0  # memory is compared from here: imports, buffers and caches are in place
 HOLD_S = 5.0  # an error must stay under its threshold this long to count as recovered
 FLOOR_M = 0.5
 
 
-def _scenario(path: Path, seconds: float) -> Path:
-    """Office, its loop driven as often as *seconds* needs (a lap is about 62 s)."""
+#: the faulted soak's [[faults]]: each kind every 2 to 5 minutes, a few seconds long
+SOAK_FAULTS = """
+[[faults]]
+kind = "bit_errors"
+port = "xbee"
+ber = 2e-5
+start_s = 30
+end_s = 40
+repeat_s = 120
+
+[[faults]]
+kind = "byte_drop"
+port = "nanoloc"
+probability = 1e-3
+start_s = 45
+end_s = 55
+repeat_s = 120
+
+[[faults]]
+kind = "garbage"
+port = "xbee"
+start_s = 60
+end_s = 70
+repeat_s = 120
+
+[[faults]]
+kind = "latency"
+port = "nanoloc"
+delay_s = 0.003
+jitter_s = 0.002
+start_s = 75
+end_s = 85
+repeat_s = 120
+
+[[faults]]
+kind = "link_fade"
+attempt_loss = 0.9
+start_s = 90
+end_s = 92
+repeat_s = 120
+
+[[faults]]
+kind = "anchor_outage"
+anchor = 3
+start_s = 100
+end_s = 105
+repeat_s = 180
+
+[[faults]]
+kind = "range_value_error"
+anchor = 2
+probability = 0.3
+start_s = 110
+end_s = 115
+repeat_s = 180
+
+[[faults]]
+kind = "board_reset"
+start_s = 150
+end_s = 150.5
+repeat_s = 300
+"""
+
+
+def _scenario(path: Path, seconds: float, faults: bool = False) -> Path:
+    """Office, its loop driven as often as *seconds* needs (a lap is about 62 s); with
+    *faults*, SOAK_FAULTS too."""
     laps = int(seconds // 55) + 2
     path.write_text(f'base = "office"\nname = "office-soak"\nduration_s = {seconds + 30.0}\n'
-                    f"\n[trajectory]\nloops = {laps}\n")
+                    f"\n[trajectory]\nloops = {laps}\n" + (SOAK_FAULTS if faults else ""))
     return path
 
 
@@ -124,13 +198,14 @@ def _p95(truth: dict, est: dict, offset: float, t0: float, t1: float,
 
 
 def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
-         directory: str | os.PathLike | None = None, progress=None) -> dict:
+         directory: str | os.PathLike | None = None, progress=None,
+         faults: bool = False) -> dict:
     """Run the soak; returns its figures (see the module docstring)."""
     d = Path(directory or tempfile.mkdtemp(prefix="navtwin-soak-"))
     d.mkdir(parents=True, exist_ok=True)
     links_dir = d / "links"
-    scenario = _scenario(d / "soak.toml", seconds)
-    half = seconds / 2
+    scenario = _scenario(d / "soak.toml", seconds, faults)
+    half = math.inf if faults else seconds / 2
     say = progress or (lambda msg: None)
 
     def start_emulator(tag: str) -> tuple[Lab, int]:
@@ -143,7 +218,7 @@ def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
     host = subprocess.Popen(
         [sys.executable, "-m", "navtwin", "host", "--xbee", first.ports["xbee"],
          "--nanoloc", first.ports["nanoloc"], "--config", "office", "--status-period", "1",
-         "--out", str(d / "estimates.jsonl")],
+         "--out", str(d / "estimates.jsonl"), *(["--record", str(d / "host")] if faults else [])],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log)
     stop = threading.Event()
     reader = SecondReader({"xbee": first.ports["xbee"], "nanoloc": first.ports["nanoloc"]},
@@ -179,7 +254,16 @@ def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
     summary = next((x["summary"] for x in reversed(lines) if "summary" in x), {})
     status = [x["status"] for x in lines if "status" in x]
     host_t0 = summary.get("t0_monotonic_ns")
-    return {"benchmark": "lab-soak", "seconds": seconds, "dir": str(d),
+    audited = {}
+    if faults:
+        result = audit(d / "emulator-1", d / "host")
+        audited = {"faults": done.get("faults"), "audit": {
+            "ok": result["ok"], "ledger_entries": result["ledger_entries"],
+            "ports": {p: {k: r[k] for k in ("frames", "accepted", "rejected_bytes", "injections",
+                                            "unseen_bytes", "problems")}
+                      for p, r in result["ports"].items()}},
+            "reinit": [v["estimator"]["reinit"] for v in summary.get("vehicles", [])]}
+    return {"benchmark": "lab-soak", "seconds": seconds, "dir": str(d), **audited,
             **_memory(rss), **_rates(status, host_t0, kill_mono, second_ready),
             "second_reader": {"opens": reader.opens, "bytes_taken": reader.taken,
                               "open_failed": reader.failed, "lost_races": reader.lost_races},

@@ -137,10 +137,15 @@ class Fault:
 
 @dataclass(frozen=True, kw_only=True)
 class DeviceFault(Fault):
-    """A fault that changes what a device model does (ACTS_ON "anchor" or "link")."""
+    """A fault that changes what a device model does (ACTS_ON "anchor", "link", "board" or
+    "coordinator"). Its frames reach the host intact (lab.audit: CHANGES_BYTES)."""
 
-    def act(self, effect, on) -> None:
-        """Change the model's *effect* of one block where the boolean array *on* is set."""
+    CHANGES_BYTES = False
+
+    def act(self, effect, on):
+        """Change the model's *effect* of one block where the boolean array *on* is set;
+        return the events it changed (a boolean array) when that is not all of *on* (the
+        ledger marks those), else None."""
         raise NotImplementedError
 
 

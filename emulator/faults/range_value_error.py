@@ -17,5 +17,7 @@ class RangeValueError(AnchorFault):
     probability: float = key(0.5, "", "probability that one exchange is a value error",
                              between(0, 1))
 
-    def act(self, effect, on) -> None:
-        effect.value_error |= on & (effect.uniform >= 1 - self.probability)
+    def act(self, effect, on):
+        hit = on & (effect.uniform >= 1 - self.probability)
+        effect.value_error |= hit
+        return hit  # the exchanges it flagged
