@@ -327,7 +327,11 @@ class Coordinator:
         return any(f.active(t_ns) for f in self.faults)
 
     def received(self, t_ns: int, packet) -> Output:
-        """An RF packet the radio received at *t_ns*: reported as a 0x90/0x91 frame."""
+        """An RF packet the radio received at *t_ns*: reported as a 0x90/0x91 frame. The
+        sender's 16-bit address is learnt from it (a router that rejoined has a new one)."""
+        for r in self.remotes:
+            if r.addr64 == packet.src64 and r.addr16 != packet.src16:
+                r.registers.values["MY"] = packet.src16
         return Output(t_ns, packet)
 
     def host(self, t_ns: int, data: bytes) -> list[Output]:

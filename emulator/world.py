@@ -20,6 +20,7 @@ are dropped.
 from __future__ import annotations
 
 import bisect
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -47,6 +48,13 @@ class RfPacket(NamedTuple):
     src16: int
     options: int
     data: bytes
+
+
+@dataclass(slots=True)
+class RouterEffects:
+    """What router faults change in a block's packets: ``absent`` (bool per packet)."""
+
+    absent: np.ndarray
 
 
 class Event(NamedTuple):
@@ -81,6 +89,9 @@ class Vehicle:
         self.router = Router(router["NP"], router["RO"], self.board.char_ns)
         self.uplink = Link(sc.link, acting_on(sc.faults, "link"),
                            self._stream(seed, "xbee.link.router"))
+        self.faults = tuple(acting_on(sc.faults, "router", vehicle=number))  # its router's
+        self._rejoin_rng = self._stream(seed, "xbee.router.rejoin")  # new MYs after rejoins
+        self._absent: dict | None = None  # the router's packets lost while out of the network
 
     def _stream(self, seed: int, name: str):
         return stream(seed, name if self.number == 1 else f"vehicle{self.number}.{name}")
@@ -96,10 +107,35 @@ class Vehicle:
         packets = self.router.packetise(b"".join(frames), times, next_byte)
         arrival, delivered, lost = self.uplink.transmit(packets.ready_ns,
                                                         [len(p) for p in packets.payloads])
-        return events, [Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p),
-                              lost.get(i, ()))
-                        for i, (t, p, ok) in enumerate(zip(arrival.tolist(), packets.payloads,
-                                                           delivered.tolist())) if ok]
+        out, (absent, cause) = [], self._out_of_network(packets.ready_ns)
+        for i, (t, p, ok) in enumerate(zip(arrival.tolist(), packets.payloads, delivered.tolist())):
+            marks = lost.get(i, ())
+            if absent is not None:
+                if absent[i]:
+                    self._absent = self._absent or {"kind": cause.KIND, "fault": cause,
+                                                    "t_ns": int(packets.ready_ns[i]), "lost": 0}
+                    self._absent["lost"] += 1
+                    continue
+                if self._absent is not None:  # back in the network, under a new address
+                    self.src16 = int(self._rejoin_rng.integers(1, 0xFFF8))
+                    marks, self._absent = marks + ({**self._absent, "my": self.src16},), None
+            if ok:
+                out.append(Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p),
+                                 marks))
+        return events, out
+
+    def _out_of_network(self, ready_ns):
+        """(which packets the router sends while a router fault has it out of the network,
+        that fault); (None, None) when it has no fault and is in. The episode's ledger mark
+        waits in ``_absent`` until the router is back."""
+        if not self.faults and self._absent is None:
+            return None, None
+        effect, cause = RouterEffects(np.zeros(len(ready_ns), dtype=bool)), None
+        for f in self.faults:
+            on = f.active(ready_ns)
+            f.act(effect, on)
+            cause = cause or (f if on.any() else None)
+        return effect.absent, cause
 
     def device_truth(self) -> dict:
         """What this vehicle's devices drew at power-on and its router's join."""
@@ -166,6 +202,7 @@ class World:
             yield a, "anchor", {"anchor": a.id}
         for v in self.vehicles:
             yield v.board, "board", {"vehicle": v.number}
+            yield v, "router", {"vehicle": v.number}
         for link in [v.uplink for v in self.vehicles] + [self.link]:
             yield link, "link", {}
 

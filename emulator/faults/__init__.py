@@ -4,7 +4,7 @@ Importing the package registers the shipped kinds, in this order (the order of t
 table), then the kinds of installed packages (entry-point group ``navtwin.faults``).
 """
 from .base import (ENTRY_POINTS, MODELS, AnchorFault, BoardFault, DeviceFault, Fault, FaultError,
-                   LineFault, acting_on, load_entry_points, register, unregister)
+                   LineFault, RouterFault, acting_on, load_entry_points, register, unregister)
 from .anchor_outage import AnchorOutage
 from .nlos import Nlos
 from .link_loss import LinkLoss
@@ -12,6 +12,7 @@ from .link_fade import LinkFade
 from .range_value_error import RangeValueError
 from .board_reset import BoardReset
 from .coordinator_reset import CoordinatorReset
+from .router_rejoin import RouterRejoin
 from .bit_errors import BitErrors
 from .byte_drop import ByteDrop
 from .byte_duplicate import ByteDuplicate
@@ -25,8 +26,8 @@ from .stuck import Stuck
 
 load_entry_points()
 
-__all__ = ["ENTRY_POINTS", "MODELS", "AnchorFault", "BoardFault", "DeviceFault", "Fault", "FaultError", "LineFault",
+__all__ = ["ENTRY_POINTS", "MODELS", "AnchorFault", "BoardFault", "RouterFault", "DeviceFault", "Fault", "FaultError", "LineFault",
            "acting_on", "load_entry_points", "register", "unregister", "AnchorOutage", "Nlos",
-           "LinkLoss", "LinkFade", "RangeValueError", "BoardReset", "CoordinatorReset",
+           "LinkLoss", "LinkFade", "RangeValueError", "BoardReset", "CoordinatorReset", "RouterRejoin",
            "BitErrors", "ByteDrop", "ByteDuplicate", "ByteInsert", "Garbage", "BurstLoss",
            "Latency", "Bandwidth", "Slicing", "Stuck"]

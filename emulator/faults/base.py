@@ -39,9 +39,9 @@ from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative,
 from navtwin.protocols.ports import NAMES as PORT_NAMES
 
 ENTRY_POINTS = "navtwin.faults"
-#: what a fault can act on: an anchor's exchanges, the XBee RF link, a vehicle's SINS board,
-#: the lab computer's XBee coordinator, a port's UART line
-MODELS = ("anchor", "link", "board", "coordinator", "line")
+#: what a fault can act on: an anchor's exchanges, the XBee RF link, a vehicle's SINS board
+#: or XBee router, the lab computer's XBee coordinator, a port's UART line
+MODELS = ("anchor", "link", "board", "router", "coordinator", "line")
 #: which bytes a line fault acts on: what the device sends the host, or what the host writes
 DIRECTIONS = ("to_host", "to_device")
 #: the ports whose device reads what the host writes (the others ignore it)
@@ -163,6 +163,14 @@ class BoardFault(DeviceFault):
 
     ACTS_ON = "board"
     vehicle: int = key(1, "", "the vehicle whose board it is, 1 = the first", between(1, 64))
+
+
+@dataclass(frozen=True, kw_only=True)
+class RouterFault(DeviceFault):
+    """A fault on one vehicle's XBee router."""
+
+    ACTS_ON = "router"
+    vehicle: int = key(1, "", "the vehicle whose router it is, 1 = the first", between(1, 64))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -105,3 +105,14 @@ def test_range_value_error_rate_matches_its_probability(tmp_path, p):
     ones = [f.fields["status"] for _, f in got if f.fields["anchor"] == 1]
     n, k = len(ones), sum(s == nanoloc.STATUS_VALUE_ERROR for s in ones)
     assert abs(k - p * n) < 4 * np.sqrt(n * p * (1 - p)), (k, n)  # 4 sigma of a binomial
+
+
+def test_router_rejoin_loses_its_packets_then_it_sends_under_a_new_address(tmp_path):
+    cs = chunks(with_fault(tmp_path, 'kind = "router_rejoin"\nstart_s = 4.0\nend_s = 5.0\n'))
+    rx = [(t, f) for t, f in frames(cs, "xbee", XBeeDecoder(True))
+          if f.type == xbee.FrameType.RECEIVE_PACKET]
+    before = {f.fields["src16"] for t, f in rx if t < 4 * SEC}
+    after = {f.fields["src16"] for t, f in rx if t > 5.1 * SEC}
+    assert len(before) == len(after) == 1 and before != after  # a new 16-bit address
+    assert {f.fields["src64"] for _, f in rx} == {rx[0][1].fields["src64"]}  # the same radio
+    assert not [t for t, _ in rx if 4.01 * SEC <= t < 5 * SEC]  # out of the network

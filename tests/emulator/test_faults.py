@@ -22,7 +22,7 @@ from .world_helpers import variant
 
 SEC = 1_000_000_000
 SHIPPED = ["anchor_outage", "nlos", "link_loss", "link_fade", "range_value_error", "board_reset",
-           "coordinator_reset", "bit_errors", "byte_drop", "byte_duplicate",
+           "coordinator_reset", "router_rejoin", "bit_errors", "byte_drop", "byte_duplicate",
            "byte_insert", "garbage", "burst_loss", "latency", "bandwidth", "slicing", "stuck"]
 
 

@@ -50,6 +50,7 @@ KINDS = {
                           {"range_errors": count("range_value_error")}),
     "board_reset": ("", {"imu_restarts": count("board_reset")}),
     "coordinator_reset": ("", {"modem_status": lambda entries, st: 2 + 2 * len(entries)}),
+    "router_rejoin": ("", {}),
 }
 
 
