@@ -477,6 +477,10 @@ class Estimator:
 
     # ---------------------------------------------------------------- status
 
+    def imu_gaps(self) -> dict:
+        """IMU gaps so far: ``bridged`` (the state kept) and ``reinit`` (the tracks restarted)."""
+        return {"bridged": self.counts["imu_gaps_bridged"], "reinit": self.counts["imu_gaps_reinit"]}
+
     def stats(self) -> dict:
         """Counts: inputs, input rejections, updates and rejections per aided track by
         kind/reason, estimates emitted, re-initialisations, and the alignment result."""
@@ -484,8 +488,7 @@ class Estimator:
         return {
             "imu_samples": self.counts["imu"],
             "imu_overrange": self.counts["imu_overrange"],
-            "imu_gaps": {"bridged": self.counts["imu_gaps_bridged"],
-                         "reinit": self.counts["imu_gaps_reinit"]},
+            "imu_gaps": self.imu_gaps(),
             "exchanges": self.counts["exchanges"],
             "input_rejections": dict(sorted(self.input_rejections.items())),
             "updates": {t.name: dict(sorted(t.updates.items())) for t in self.tracks if t.aided},

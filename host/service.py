@@ -423,7 +423,10 @@ class Service:
                 "errors": {p: v["errors"] for p, v in st["ports"].items() if v["errors"]},
                 "link_dbm": st["link_dbm"], "latency": self.latency.period(),
                 "estimates": self.lines, "held": st["held"],
-                "reinit": {str(n): r for n, r in self._reinit.items() if r}}
+                "reinit": {str(n): r for n, r in self._reinit.items() if r},
+                # IMU gaps by vehicle: bridged (filter state kept) or re-initialised
+                "imu_gaps": {str(v.number): g for v in self.pipeline.vehicles
+                             if any((g := v.estimator.imu_gaps()).values())}}
         self._prev.update(now=now, imu=imu, reports=ranges)
         self._info("status", body)
 
