@@ -48,7 +48,13 @@ def run(args) -> int:
                              stop=stop, plot=args.plot)
     except LabError as e:
         raise UsageError(str(e)) from None
+    from navtwin.lab.audit import report as audit_report
+
     print(evaluate.table(report["errors"]) if report["errors"] else "no estimates to compare")
+    if "audit" in report:  # the scenario injected faults
+        a = report["audit"]
+        print("\naudit of the host against the fault ledger:\n" +
+              (audit_report(a) if "ports" in a else f"not possible: {a['error']}"), end="")
     print(f"\nrun directory: {report['dir']}" + (f"\nplot: {report['plot']}" if report.get("plot")
                                                   else ""))
     return 0

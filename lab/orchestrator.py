@@ -31,8 +31,10 @@ from pathlib import Path
 from navtwin.emulator.api import EmulatorError, emulate
 from navtwin.emulator.scenario import load_scenario
 from navtwin.host.replay import config_for
+from navtwin.protocols.recording import FAULTS
 
 from . import evaluate
+from .audit import AuditError, audit
 
 HOST_STOP_S = 30.0
 
@@ -135,6 +137,11 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
                                                    _anchors(d / "emulator" / "scenario.toml")))
             except ImportError:
                 report["plot"] = None  # matplotlib is in the 'plot' extra
+    if (d / "emulator" / FAULTS).is_file() and (d / "emulator" / FAULTS).stat().st_size:
+        try:  # faults were injected: did the host lose only what they damaged?
+            report["audit"] = audit(d / "emulator", d / "host")
+        except AuditError as e:
+            report["audit"] = {"ok": False, "error": str(e)}
     (d / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
 

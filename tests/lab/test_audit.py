@@ -66,6 +66,8 @@ def _copy(run, tmp_path):
 
 def test_a_live_run_with_line_faults_passes(run):
     result = audit_mod.audit(run / "emulator", run / "host")
+    # navtwin lab audited it itself: the same result in its report
+    assert json.loads((run / "report.json").read_text())["audit"] == json.loads(json.dumps(result))
     assert result["ok"], audit_mod.report(result)
     xb, nl = result["ports"]["xbee"], result["ports"]["nanoloc"]
     assert xb["injections"] > 0 and nl["injections"] > 0 and nl["timing_injections"] > 0
