@@ -10,7 +10,7 @@ from navtwin.common.schema import key, positive
 
 from .base import LineFault, register
 from .byte_drop import PER_BYTE
-from .line import FaultWrapper, Gaps
+from .line import FaultWrapper, Gaps, insert
 
 
 @register
@@ -30,11 +30,7 @@ class _ByteDuplicate(FaultWrapper):
         self.gaps = Gaps(rng, fault.probability)
 
     def act(self, start_ns, data, baud):
-        out, prev = bytearray(), 0
-        for p in self.gaps.take(len(data)):
-            out += data[prev:p + 1]
-            self.mark(start_ns, len(out), len(out) + 1)
-            out.append(data[p])
-            prev = p + 1
-        out += data[prev:]
-        return start_ns, bytes(out)
+        out, added = insert(data, self.gaps.take(len(data)), data.__getitem__, after=True)
+        for at, _ in added:
+            self.mark(start_ns, at, at + 1)
+        return start_ns, out

@@ -12,7 +12,7 @@ from navtwin.common.schema import key, positive
 
 from .base import LineFault, register
 from .byte_drop import PER_BYTE
-from .line import FaultWrapper, Gaps
+from .line import FaultWrapper, Gaps, insert
 
 
 @register
@@ -32,12 +32,7 @@ class _ByteInsert(FaultWrapper):
         self.gaps = Gaps(rng, fault.probability)
 
     def act(self, start_ns, data, baud):
-        out, prev = bytearray(), 0
-        for p in self.gaps.take(len(data)):
-            out += data[prev:p]
-            value = int(self.rng.integers(256))
-            self.mark(start_ns, len(out), len(out) + 1, value=value)
-            out.append(value)
-            prev = p
-        out += data[prev:]
-        return start_ns, bytes(out)
+        out, added = insert(data, self.gaps.take(len(data)), lambda p: int(self.rng.integers(256)))
+        for at, value in added:
+            self.mark(start_ns, at, at + 1, value=value)
+        return start_ns, out

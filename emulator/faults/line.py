@@ -48,6 +48,21 @@ class Gaps:
         return out
 
 
+def insert(data: bytes, positions, new_byte, after: bool = False) -> tuple[bytes, list]:
+    """*data* with a byte ``new_byte(p)`` added before ``data[p]`` for each of *positions*
+    (ascending; after it with *after*), and ``(offset in the result, byte)`` of each added."""
+    out, added, prev = bytearray(), [], 0
+    for p in positions:
+        cut = p + 1 if after else p
+        out += data[prev:cut]
+        value = new_byte(p)
+        added.append((len(out), value))
+        out.append(value)
+        prev = cut
+    out += data[prev:]
+    return bytes(out), added
+
+
 def remove(data: bytes, positions) -> tuple[bytes, list[list[int]]]:
     """*data* without the bytes at *positions* (ascending), and the removals as runs
     ``[offset in the result, bytes removed]`` (adjacent removals make one run)."""
