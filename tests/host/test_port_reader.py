@@ -266,7 +266,9 @@ def test_a_second_reader_for_5_s_leaves_the_host_open_with_imu_data_every_second
     assert took > 0  # the other reader did take bytes
     assert "port_down" not in host.lines.events()
     assert len(during) >= 3 and all(r > 0 for r in during)
-    assert summary["contended"]["xbee"] > 0 and summary["reconnects"] == {"xbee": 0}
+    # reads that found the bytes taken (``contended``) happen when the other reader wins a
+    # race, which a loaded box may never let it: counted, not required
+    assert summary["reconnects"] == {"xbee": 0}
 
 
 @pytest.mark.slow
