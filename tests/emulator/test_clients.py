@@ -44,7 +44,7 @@ def read_frames(ser, decoder, n, deadline=DEADLINE):
 def test_pyserial_reads_valid_sins_frames_without_gaps(lab):
     with serial.Serial(lab.ports["sins"], 115200, timeout=1) as ser:
         frames, errors = read_frames(ser, sins_decoder(), 200)
-    assert len(frames) == 200
+    assert len(frames) >= 200  # one read may finish more than one frame
     assert [e.kind for e in errors] in ([], ["garbage"])  # at most a partial first frame
     seqs = [f.fields["seq"] for f in frames]
     assert all((b - a) % 65536 == 1 for a, b in zip(seqs, seqs[1:]))
