@@ -111,18 +111,24 @@ def hung_up(ser: serial.SerialBase) -> bool:
 
 def read_chunk(ser: serial.SerialBase) -> bytes:
     """What has arrived, waiting up to the port's timeout for it. On a tty everything waiting
-    is taken in one read once the line is readable, so a second reader woken by the same
-    bytes finds them gone instead of taking all but the first; a readable tty with nothing
-    waiting (another reader was first, or a hang-up) raises, as pyserial does. Elsewhere
-    (``in_waiting`` is 0/1 on sockets) the first byte is waited for and the rest taken
-    without waiting."""
+    is taken in one ``read(2)`` once the line is readable, so a second reader woken by the
+    same bytes finds them gone instead of taking all but the first, and a chunk is always
+    contiguous in the line's stream (pyserial's ``read(n)`` loops over several reads, between
+    which a second reader can take bytes: one soak chunk had a frame, then a byte from five
+    frames later). A readable tty with nothing to read (another reader was first, or a
+    hang-up) raises, as pyserial does. Elsewhere (``in_waiting`` is 0/1 on sockets) the
+    first byte is waited for and the rest taken without waiting."""
     fd = getattr(ser, "fd", None)
     if fd is not None:
         if not select.select([fd], [], [], ser.timeout)[0]:
             return b""
-        if not (n := ser.in_waiting):
+        try:
+            data = os.read(fd, MAX_CHUNK)  # pyserial keeps the fd non-blocking
+        except BlockingIOError:
+            data = b""
+        if not data:
             raise serial.SerialException("readable but no data waiting")
-        return ser.read(min(n, MAX_CHUNK))
+        return data
     data = ser.read(1)
     while data and len(data) < MAX_CHUNK and (n := ser.in_waiting):
         data += ser.read(n)
