@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import chi2
 
 #: Paper 000, section 3.3 and 4.3: mean position error (m) on the office run.
 PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
@@ -31,7 +32,9 @@ def load_truth(path: str | Path) -> dict[str, np.ndarray]:
 
 def load_estimates(lines, vehicle: int = 1) -> dict[str, dict[str, np.ndarray]]:
     """Vehicle *vehicle*'s estimate JSON lines (an iterable of str, or a path) grouped by
-    filter (lines written before estimates named their vehicle are vehicle 1's)."""
+    filter (lines written before estimates named their vehicle are vehicle 1's): per filter
+    arrays ``t, x, y``, ``cov`` (N x 2 x 2, the position block of the line's covariance) and
+    ``extrapolated``."""
     if isinstance(lines, (str, Path)):
         lines = Path(lines).read_text().splitlines()
     by_filter: dict[str, list] = {}
@@ -40,22 +43,55 @@ def load_estimates(lines, vehicle: int = 1) -> dict[str, dict[str, np.ndarray]]:
             continue
         e = json.loads(line)
         if "filter" in e and e.get("vehicle", 1) == vehicle:
-            by_filter.setdefault(e["filter"], []).append((e["t"], e["x"], e["y"]))
-    return {k: dict(zip(("t", "x", "y"), np.array(v, dtype=float).T)) for k, v in by_filter.items()}
+            c = e["cov"]
+            by_filter.setdefault(e["filter"], []).append(
+                (e["t"], e["x"], e["y"], c[0], c[1], c[4], c[5], e.get("extrapolated", False)))
+    out = {}
+    for k, v in by_filter.items():
+        a = np.array(v, dtype=float)
+        out[k] = {"t": a[:, 0], "x": a[:, 1], "y": a[:, 2], "cov": a[:, 3:7].reshape(-1, 2, 2),
+                  "extrapolated": a[:, 7].astype(bool)}
+    return out
+
+
+def axis_errors(truth: dict, e: dict, offset_s: float = 0.0) -> np.ndarray:
+    """Signed error (m) of each estimate of one filter, N x 2 (x, y), against the truth
+    interpolated at its scenario time ``t + offset_s``."""
+    t = e["t"] + offset_s
+    return np.column_stack((e["x"] - np.interp(t, truth["t"], truth["x"]),
+                            e["y"] - np.interp(t, truth["t"], truth["y"])))
 
 
 def error(truth: dict, e: dict, offset_s: float = 0.0) -> np.ndarray:
     """Horizontal position error (m) of each estimate of one filter (arrays ``t, x, y``)
     against the truth interpolated at its scenario time ``t + offset_s``."""
-    t = e["t"] + offset_s
-    return np.hypot(e["x"] - np.interp(t, truth["t"], truth["x"]),
-                    e["y"] - np.interp(t, truth["t"], truth["y"]))
+    return np.hypot(*axis_errors(truth, e, offset_s).T)
+
+
+#: Two-sided 95 % band of a consistent 2-D position NEES (chi-square, 2 degrees of freedom).
+NEES_BAND_95 = (float(chi2.ppf(0.025, 2)), float(chi2.ppf(0.975, 2)))
+
+
+def nees(err: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Normalised estimation error squared e^T P^-1 e of each (x, y) error against the
+    estimate's own position covariance; NaN where that covariance is not positive definite
+    (the pure SINS track reports none)."""
+    a, b, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
+    det = a * d - b * b
+    ok = (a > 0) & (det > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = (d * err[:, 0] ** 2 - 2 * b * err[:, 0] * err[:, 1] + a * err[:, 1] ** 2) / det
+    return np.where(ok, q, np.nan)
 
 
 def position_errors(truth: dict, estimates: dict, offset_s: float = 0.0,
                     skip_s: float = 0.0) -> dict[str, dict[str, float]]:
-    """Per filter: mean, max and RMS horizontal position error (m) and the number of estimates,
-    over estimates inside the truth's time span and after *skip_s* of scenario time."""
+    """Per filter, over estimates inside the truth's time span and after *skip_s* of scenario
+    time: mean, max and RMS horizontal position error (m), the number of estimates, paper
+    001's Table 1 figures (``x_min``/``x_max``, ``x_var``, ``y_min``/``y_max``, ``y_var`` of
+    the signed per-axis errors) and, where the filter reports a covariance, its mean NEES
+    and the share of NEES inside the 95 % band (``nees_mean``, ``nees_in_band``; None
+    without one)."""
     out = {}
     t_truth = truth["t"]
     for name, e in sorted(estimates.items()):
@@ -63,9 +99,19 @@ def position_errors(truth: dict, estimates: dict, offset_s: float = 0.0,
         keep = (t >= max(t_truth[0], skip_s)) & (t <= t_truth[-1])
         if not keep.any():
             continue
-        err = error(truth, e, offset_s)[keep]
+        xy = axis_errors(truth, e, offset_s)[keep]
+        err = np.hypot(*xy.T)
+        q = nees(xy, e["cov"][keep]) if "cov" in e else np.full(len(err), np.nan)
+        q = q[np.isfinite(q)]
+        lo, hi = NEES_BAND_95
         out[name] = {"mean": float(err.mean()), "max": float(err.max()),
-                     "rms": float(math.sqrt((err ** 2).mean())), "n": int(keep.sum())}
+                     "rms": float(math.sqrt((err ** 2).mean())), "n": int(keep.sum()),
+                     "x_min": float(xy[:, 0].min()), "x_max": float(xy[:, 0].max()),
+                     "x_var": float(xy[:, 0].var()),
+                     "y_min": float(xy[:, 1].min()), "y_max": float(xy[:, 1].max()),
+                     "y_var": float(xy[:, 1].var()),
+                     "nees_mean": float(q.mean()) if q.size else None,
+                     "nees_in_band": float(((q >= lo) & (q <= hi)).mean()) if q.size else None}
     return out
 
 

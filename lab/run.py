@@ -24,6 +24,7 @@ from pathlib import Path
 
 from navtwin.emulator.runner import Chunk, Emulation
 from navtwin.emulator.scenario import Scenario, load_scenario
+from navtwin.emulator.world import World
 from navtwin.host.arrival import arrivals
 from navtwin.host.pipeline import Pipeline
 from navtwin.host.replay import drive, emulator_settings
@@ -63,3 +64,11 @@ def run_in_memory(scenario: str | Path | Scenario, seed: int | None = None, *,
     estimates: list = []
     drive(pipe, chunks, estimates.extend)
     return estimates, pipe
+
+
+def truth(scenario: str | Path | Scenario, seed: int | None = None) -> dict:
+    """The vehicle's true ``t`` (s), ``x``, ``y`` (m), one row per millisecond, as
+    :func:`navtwin.lab.evaluate.load_truth` reads them from the emulator's ``truth.csv``."""
+    w = World(_scenario(scenario), seed)
+    tr = w.truth(0, w.duration_ns)
+    return {"t": tr["t"] / 1e9, "x": tr["x"], "y": tr["y"]}
