@@ -37,7 +37,6 @@ def _filter_list(text: str) -> str:
 
 
 def run(args) -> int:
-    from navtwin.lab import evaluate
     from navtwin.lab.orchestrator import LabError, run_lab
 
     stop = threading.Event()
@@ -48,6 +47,13 @@ def run(args) -> int:
                              stop=stop, plot=args.plot)
     except LabError as e:
         raise UsageError(str(e)) from None
+    print_report(report)
+    return 0
+
+
+def print_report(report: dict) -> None:
+    """The end of a lab run on stdout: the accuracy table, the audit, where the files are."""
+    from navtwin.lab import evaluate
     from navtwin.lab.audit import report as audit_report
 
     print(evaluate.table(report["errors"]) if report["errors"] else "no estimates to compare")
@@ -57,4 +63,3 @@ def run(args) -> int:
               (audit_report(a) if "ports" in a else f"not possible: {a['error']}"), end="")
     print(f"\nrun directory: {report['dir']}" + (f"\nplot: {report['plot']}" if report.get("plot")
                                                   else ""))
-    return 0

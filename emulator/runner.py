@@ -465,7 +465,8 @@ class Emulation:
         return getattr(self, f"_op_{req['op']}")(req)
 
     def _op_status(self, req: dict) -> dict:
-        return {"virtual_s": self._now_ns / SEC, "ports": {
+        return {"virtual_s": self._now_ns / SEC, "duration_s": self.end_ns / SEC,
+                "t0_monotonic_ns": self.t0_monotonic_ns, "ports": {
                     n: {"plugged": p.plugged, "attached": p.attached, "pts": p.pts,
                         "link": self.links.get(n)} for n, p in self.ports.items()},
                 "faults": [self._live_entry(i) for i in self.live]}

@@ -306,7 +306,7 @@ class Service:
             r = self._readers[name] = PortReader(name, self.ports[name], self.baud, ser,
                                                  self._queue, self._stop_readers)
             r.start()
-        self._info("status", {"event": "started", "ports": self.ports,
+        self._info("status", {"event": "started", "t0_monotonic_ns": self._t0, "ports": self.ports,
                               "filters": list(self.filters), "config": self.config.name})
         self.started.set()
         period_ns = int(self.status_period_s * 1e9)

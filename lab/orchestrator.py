@@ -29,11 +29,13 @@ import time
 from pathlib import Path
 
 from navtwin.emulator.api import EmulatorError, emulate
-from navtwin.emulator.scenario import load_scenario
+from navtwin.emulator.control import ControlError
+from navtwin.emulator.scenario import ScenarioError, load_scenario
 from navtwin.host.replay import config_for
 from navtwin.protocols.recording import FAULTS
 
 from . import evaluate
+from .live import LiveErrors, Tail
 from .audit import AuditError, audit
 
 HOST_STOP_S = 30.0
@@ -74,11 +76,49 @@ def _wait_log(path: Path, pred, timeout: float) -> bool:
     return False
 
 
+class Watch:
+    """What the lab shows while it runs. This one, ``navtwin lab``'s, prints a JSON line when
+    it starts and every ``tick_s``: the host's last status line and each track's latest error
+    against truth (m); ``navtwin demo`` draws the same state in the terminal."""
+
+    tick_s = 2.0
+
+    def __init__(self, out=sys.stderr) -> None:
+        self.out = out
+
+    def __enter__(self) -> Watch:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """The run is over (a view that holds the terminal gives it back)."""
+
+    def started(self, info: dict) -> None:
+        """*info*: ``dir``, ``scenario``, ``seed``, ``duration_s``, ``ports``."""
+        print(json.dumps({"lab": "running", **info}), file=self.out, flush=True)
+
+    def tick(self, state: dict) -> None:
+        """*state*: ``elapsed_s``; ``emulator``, its control status (virtual time, ports,
+        live faults) or None; ``host``, its last status line's body or None; ``tracks``,
+        filter -> :class:`navtwin.lab.live.TrackError` (empty until truth and estimates
+        meet)."""
+        line = {"host": state["host"]} if state["host"] else {}
+        if state["tracks"]:
+            line["error_m"] = {k: round(v.last, 3) for k, v in state["tracks"].items()}
+        if line:
+            print(json.dumps(line), file=self.out, flush=True)
+
+
 def run_lab(scenario: str = "office", *, seed: int | None = None, duration: float | None = None,
             config: str | None = None, filters: str | None = None, directory=None,
-            stop: threading.Event | None = None, status=sys.stderr, plot: bool = True) -> dict:
+            stop: threading.Event | None = None, watch: Watch | None = None,
+            plot: bool = True) -> dict:
     """Run the lab; returns the report (errors per filter, paths, both summaries)."""
     stop = stop or threading.Event()
+    watch = watch or Watch()
+    try:  # refused before anything is made (the emulator would refuse it the same way)
+        load_scenario(scenario)
+    except ScenarioError as e:
+        raise LabError(str(e)) from None
     config = config or config_for(Path(scenario).stem)  # the scenario's lab, as replay finds it
     if config is None:
         raise LabError(f"no host config for scenario {scenario!r}; give --config NAME|FILE")
@@ -89,20 +129,17 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
                      link_dir=d / "links", record=d / "emulator") as lab:
             cmd = [sys.executable, "-m", "navtwin", "host", "--xbee", lab.ports["xbee"],
                    "--nanoloc", lab.ports["nanoloc"], "--config", config,
-                   "--record", str(d / "host"), "--out", str(d / "estimates.jsonl")]
+                   "--record", str(d / "host"), "--out", str(d / "estimates.jsonl"),
+                   "--status-period", str(min(watch.tick_s, 2.0))]
             if filters is not None:
                 cmd += ["--filters", filters]
             with open(log, "wb") as f:
                 host = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                         stderr=f)
-            print(json.dumps({"lab": "running", "dir": str(d), **{k: lab.info[k] for k in (
-                "scenario", "seed", "duration_s", "ports")}}), file=status, flush=True)
+            watch.started({"dir": str(d), **{k: lab.info[k] for k in (
+                "scenario", "seed", "duration_s", "ports")}})
             try:
-                while lab.running() and host.poll() is None and not stop.is_set():
-                    stop.wait(2.0)
-                    last = [x["status"] for x in _log_lines(log)[-3:] if "status" in x]
-                    if last:
-                        print(json.dumps({"host": last[-1]}), file=status, flush=True)
+                _watch(lab, host, log, d, watch, stop)
                 done = lab.stop()
                 # the emulator's ports are gone once it has ended: a host that has read all
                 # they held reports them down; then it is told to stop
@@ -118,6 +155,32 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
         tail = _log_lines(log)[-1:] or [{"text": "no output"}]
         raise LabError(f"the host failed: {tail[0].get('text', tail[0])}; see {log}")
     return _report(d, summaries[-1], done, plot)
+
+
+def _watch(lab, host, log: Path, d: Path, watch: Watch, stop: threading.Event) -> None:
+    """Until the scenario ends, the host exits or *stop* is set: the live state to *watch*."""
+    status_log = Tail(log)
+    live = LiveErrors(d / "emulator" / "truth.csv", d / "estimates.jsonl")
+    t0, host_t0, last = time.monotonic(), None, None
+    while lab.running() and host.poll() is None and not stop.is_set():
+        stop.wait(watch.tick_s)
+        for line in status_log.lines():
+            try:
+                st = json.loads(line).get("status")
+            except json.JSONDecodeError:
+                continue
+            if isinstance(st, dict):
+                host_t0 = st.get("t0_monotonic_ns", host_t0)
+                last = st if "t_s" in st else last
+        try:
+            emu = lab.status()
+        except (ControlError, OSError):  # it is ending
+            emu = None
+        offset = None
+        if host_t0 and emu and emu.get("t0_monotonic_ns"):
+            offset = (host_t0 - emu["t0_monotonic_ns"]) / 1e9  # scenario = host time + offset
+        watch.tick({"elapsed_s": time.monotonic() - t0, "emulator": emu, "host": last,
+                    "tracks": live.update(offset)})
 
 
 def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:

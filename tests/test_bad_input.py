@@ -125,6 +125,11 @@ CASES = {
     "lab --duration nan": (["lab", "--duration", "nan", "--dir", "run"], {}, ["--duration"]),
     "lab --seed -1": (["lab", "--seed", "-1", "--dir", "run"], {}, ["--seed"]),
     "lab --filters ''": (["lab", "--filters", "", "--dir", "run"], {}, ["--filters"]),
+    # navtwin demo
+    "demo --duration nan": (["demo", "--duration", "nan", "--dir", "run"], {}, ["--duration"]),
+    "demo --filters ''": (["demo", "--filters", "", "--dir", "run"], {}, ["--filters"]),
+    "demo --scenario nowhere": (["demo", "--scenario", "nowhere", "--config", "office",
+                                 "--dir", "run"], {}, ["nowhere"]),
     # navtwin decode
     "decode --baud 0": (["decode", "x.bin", "--format", "sins", "--baud", "0"],
                         {"x.bin": ""}, ["--baud", "[50, 4000000]"]),

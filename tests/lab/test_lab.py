@@ -27,6 +27,10 @@ def test_lab_runs_and_reports_against_truth(tmp_path):
                               capture_output=True, timeout=120)
     assert replayed.stdout.decode() == (d / "estimates.jsonl").read_text()
     assert "filter" in p.stdout.decode() and str(d) in p.stdout.decode()
+    # while it ran: JSON lines with the host's status and every track's latest error
+    live = [json.loads(x) for x in p.stderr.decode().splitlines() if x.startswith("{")]
+    assert any(set(x.get("error_m", {})) == set(errors) for x in live)
+    assert any("host" in x for x in live)
 
 
 def test_lab_reports_a_bad_scenario_in_one_line(tmp_path):

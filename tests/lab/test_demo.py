@@ -1,0 +1,77 @@
+"""`navtwin demo` and the live errors it draws: truth and estimates tailed from the files
+both sides write, equal to the after-the-run figures."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from navtwin.emulator.truth import HEADER, csv_rows
+from navtwin.emulator.world import World
+from navtwin.host.output import estimate_line
+from navtwin.lab import evaluate
+from navtwin.lab.live import LiveErrors, Tail
+from navtwin.lab.run import run_in_memory
+from navtwin.emulator.scenario import load_scenario
+
+
+def test_a_tail_yields_whole_lines_only_and_each_once(tmp_path):
+    p = tmp_path / "f"
+    tail = Tail(p)
+    assert tail.lines() == []  # not there yet
+    p.write_bytes(b"a\nb")
+    assert tail.lines() == ["a"]
+    with open(p, "ab") as f:
+        f.write(b"c\n\nd\n")
+    assert tail.lines() == ["bc", "d"] and tail.lines() == []
+
+
+def test_live_errors_on_growing_files_equal_the_errors_after_the_run(tmp_path):
+    sc = load_scenario("office")
+    estimates, _ = run_in_memory(sc, 1, duration=12)
+    w = World(sc, 1)
+    tr = w.truth(0, 12 * 10**9)
+    truth_csv, est_file = tmp_path / "truth.csv", tmp_path / "estimates.jsonl"
+    truth_bytes = HEADER + csv_rows(tr)
+    lines = "".join(map(estimate_line, estimates)).encode()
+    live = LiveErrors(truth_csv, est_file)
+    # both files grow in uneven pieces, cut mid-line, the truth ahead or behind
+    cuts_t = np.linspace(0, len(truth_bytes), 23).astype(int)
+    cuts_e = np.linspace(0, len(lines), 17).astype(int)
+    for k in range(1, 24):
+        truth_csv.write_bytes(truth_bytes[:cuts_t[k - 1]] if k % 3 else truth_bytes[:cuts_t[k]])
+        est_file.write_bytes(lines[:cuts_e[min(k, 16)]])
+        live.update(None if k < 4 else 0.0)  # the offset is known late: estimates wait
+    truth_csv.write_bytes(truth_bytes)
+    est_file.write_bytes(lines)
+    got = live.update(0.0)
+    truth = evaluate.load_truth(truth_csv)  # the file's rounding, as after a run
+    want = {}
+    for name, e in evaluate.load_estimates(lines.decode().splitlines()).items():
+        keep = e["t"] <= truth["t"][-1]
+        want[name] = evaluate.error(truth, e)[keep]
+    assert set(got) == set(want) == {"sins", "wsn", "kf", "ekf", "ukf"}
+    for name, err in want.items():
+        g = got[name]
+        assert g.n == err.size and g.max == err.max() and g.last == err[-1]
+        assert g.mean == pytest.approx(err.mean(), rel=1e-12)
+
+
+@pytest.mark.pty
+@pytest.mark.slow
+def test_demo_runs_every_track_and_ends_with_the_table_and_the_run_directory(tmp_path):
+    d = tmp_path / "run"
+    p = subprocess.run([sys.executable, "-m", "navtwin", "demo", "--duration", "8", "--dir",
+                        str(d)], capture_output=True, timeout=180)
+    assert p.returncode == 0, p.stderr.decode()[-2000:]
+    out, err = p.stdout.decode(), p.stderr.decode()
+    report = json.loads((d / "report.json").read_text())
+    assert set(report["errors"]) == {"sins", "wsn", "kf", "ekf", "ukf"}  # every track
+    rows = {line.split()[0]: line.split()[1:] for line in out.splitlines() if line.strip()}
+    for name, e in report["errors"].items():  # the table on stdout is the report's
+        assert rows[name][:2] == [f"{e['mean']:.3f}", f"{e['max']:.3f}"]
+    assert str(d) in out
+    # not a terminal: the view's last frame, with the ports and every track's live error
+    assert "tracks: position error against truth" in err and "nanoloc" in err
+    assert all(f"│ {name}" in err for name in report["errors"])
