@@ -476,8 +476,12 @@ def _resolve(ref: str, relative_to: Path | None) -> Path:
     path = Path(ref)
     if relative_to is not None and not path.is_absolute():
         path = relative_to / path
-    if path.is_file():
-        return path
+    try:
+        if path.is_file():
+            return path
+    except OSError as e:  # a name too long for the file system, say (found by fuzzing)
+        raise ScenarioError(f"scenario path {str(path)[:80]}...: {e.strerror}; check the path") \
+            from None
     if path.suffix == ".toml" or len(path.parts) > 1:
         raise ScenarioError(f"no scenario file {path}; check the path")
     names = ", ".join(SCENARIO_NAMES)

@@ -173,3 +173,13 @@ def test_a_base_with_a_newline_is_named_on_one_line(tmp_path):
     with pytest.raises(ScenarioError) as e:
         load_scenario(tmp_path / "nl.toml")
     assert str(e.value) == f"no scenario file {tmp_path}/\\nfice; check the path"
+
+
+def test_a_base_name_too_long_for_the_file_system_is_one_line(tmp_path):
+    """Found by the scenario fuzz target (tests/fuzz, 1M inputs): OSError ENAMETOOLONG
+    escaped the reader."""
+    (tmp_path / "long.toml").write_text(f'base = "{"1" * 600}fuzz.toml"\n')
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(tmp_path / "long.toml")
+    msg = str(e.value)
+    assert "\n" not in msg and "File name too long" in msg and len(msg) < 200
