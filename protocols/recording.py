@@ -82,6 +82,21 @@ def write_failure(path, err: OSError) -> str:
             f"{_FIX.get(err.errno, 'check the path and its permissions, or write elsewhere')}")
 
 
+
+def _numbered_lines(fh, limit: int, damaged, first: int = 1) -> Iterator[tuple[int, bytes | None]]:
+    """``(number, line)`` of each whole line of *fh*, read at most *limit* bytes at a time
+    (bounded memory on a damaged file), then ``(number, None)`` for a partial last line; a
+    line longer than *limit* is ``damaged(number, problem)``, which raises."""
+    n = first - 1
+    while line := fh.readline(limit + 1):
+        n += 1
+        if not line.endswith(b"\n"):
+            if len(line) > limit:
+                damaged(n, f"a line longer than {limit} bytes")
+            yield n, None
+            return
+        yield n, line
+
 class RecordingWriteError(Exception):
     """A recording that cannot be created or written: one line naming the file and the fix.
     ``written``: bytes of the failed flush that did reach the file."""
@@ -461,16 +476,14 @@ class Recording:
                 raise RecordingError(f"{index}:1: the first line must be {INDEX_HEADER!r}; "
                                      f"restore the index or re-record")
             offset, last = 0, {"t_device_ns": -1, "t_wall_ns": -1}
-            n = 1
-            while line := fh.readline(_MAX_INDEX_LINE + 1):
-                n += 1
 
+            def damaged(n: int, problem: str):
+                raise RecordingError(f"{index}:{n}: {problem}; the index is damaged: "
+                                     f"re-record, or restore {index.name}")
+            for n, line in _numbered_lines(fh, _MAX_INDEX_LINE, damaged, first=2):
                 def bad(problem: str):
-                    raise RecordingError(f"{index}:{n}: {problem}; the index is damaged: "
-                                         f"re-record, or restore {index.name}")
-                if not line.endswith(b"\n"):
-                    if len(line) > _MAX_INDEX_LINE:
-                        bad(f"a line longer than {_MAX_INDEX_LINE} characters")
+                    damaged(n, problem)
+                if line is None:
                     yield n, None, "a partial last index line", None, None
                     return
                 fields = line.rstrip(b"\r\n").split(b",")
@@ -567,17 +580,14 @@ class Recording:
         except OSError as e:
             raise RecordingError(f"{path}: {e.strerror}; check the file and the disk") from None
         out: list[dict] = []
+        def damaged(n: int, problem: str):
+            raise RecordingError(f"{path}:{n}: {problem}; the fault ledger is damaged: "
+                                 f"re-record, or restore {FAULTS}")
         with fh:
-            n = 0
-            while line := fh.readline(_MAX_FAULT_LINE + 1):
-                n += 1
-
+            for n, line in _numbered_lines(fh, _MAX_FAULT_LINE, damaged):
                 def bad(problem: str):
-                    raise RecordingError(f"{path}:{n}: {problem}; the fault ledger is damaged: "
-                                         f"re-record, or restore {FAULTS}")
-                if not line.endswith(b"\n"):
-                    if len(line) > _MAX_FAULT_LINE:
-                        bad(f"a line longer than {_MAX_FAULT_LINE} bytes")
+                    damaged(n, problem)
+                if line is None:
                     self._tail(path, n, "a partial last line", len(out) + 1)
                     break
                 try:

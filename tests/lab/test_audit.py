@@ -1,6 +1,7 @@
 """navtwin audit: a live run of the lab with line faults passes it; each kind of unaccounted
 loss, made on purpose in a copy of the recordings, fails it."""
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -8,7 +9,7 @@ import sys
 import pytest
 
 from navtwin.lab import audit as audit_mod
-from navtwin.lab.orchestrator import run_lab
+from navtwin.lab.orchestrator import Watch, run_lab
 from navtwin.protocols.stream import nanoloc_decoder
 
 FAULTS = """base = "office"
@@ -49,7 +50,7 @@ def run(tmp_path_factory):
     d = tmp_path_factory.mktemp("audit")
     (d / "faulty.toml").write_text(FAULTS)
     run_lab(str(d / "faulty.toml"), config="office", duration=12, directory=d / "run",
-            status=open("/dev/null", "w"), plot=False)
+            watch=Watch(open(os.devnull, "w")), plot=False)
     return d / "run"
 
 
