@@ -152,7 +152,7 @@ class EstimatorConfig(Tuning):
     heading0_rad: float = 0.0  # initial heading (MEMS gyros cannot gyrocompass)
     gyro_range_dps: int = 300  # ADIS16350 range: the service's word scale; counts overrange
     range_bias_m: Mapping[int, float] = field(default_factory=dict)  # c_i of 001: calibrated delays
-    filters: tuple[str, ...] = tuple(tracks.BUILT_IN)
+    filters: tuple[str, ...] = tracks.DEFAULT
     settings: Mapping[str, object] = field(default_factory=dict)  # track name -> its Settings
     vehicle: int = 1  # which vehicle of the lab (host config): its estimates say so
 
