@@ -1,7 +1,7 @@
 """Fusion tracks, one module each, registered by name (docs/filters.md).
 
 Built in, in output order: ``sins``, ``wsn``, ``kf``, ``ekf``, ``ukf`` (000's) and ``lc``,
-``tc`` (001's). A track of a user's
+``tc``, ``fatci`` (001's). A track of a user's
 package is added with :func:`register` (in process), or by an entry point in the group
 ``navtwin.tracks`` whose name is the track's name and whose object is its class::
 
@@ -27,6 +27,7 @@ _BUILT_IN = {
     "ukf": "navtwin.host.tracks.ukf:UkfTrack",
     "lc": "navtwin.host.tracks.lc:LcTrack",
     "tc": "navtwin.host.tracks.tc:TcTrack",
+    "fatci": "navtwin.host.tracks.fatci:FatciTrack",
 }
 BUILT_IN = tuple(_BUILT_IN)
 #: What runs when no filters are named: 000's tracks. 001's error-state tracks (lc, ...) run
