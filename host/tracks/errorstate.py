@@ -28,7 +28,6 @@ from navtwin.common.schema import key, positive
 from navtwin.host.filters.errorstate import NAV, ErrorStateFilter
 from navtwin.host.measurements import ImuSample
 from navtwin.host.wsn import Fix, chi2_gate
-from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, VRW_M_S_RT_HR
 
 from .base import Track, estimate
 
@@ -36,13 +35,14 @@ from .base import Track, estimate
 @dataclass(frozen=True)
 class ErrorStateSettings:
     """The error-state tracks' process noise (001 eq. 4: W = [gyro noise, accel noise]) and
-    initial attitude uncertainty. The defaults are 3x the ADIS16350's random walks: what the
+    initial attitude uncertainty. The defaults are 3x the ADIS16350's random walks (4.2
+    deg/sqrt(h), 2.0 m/s/sqrt(h)): what the
     alignment leaves of the gyro bias, and the accelerometer bias that a turn shows, act on
     the filter like extra white noise (docs/filters.md)."""
 
-    gyro_noise_deg_rt_hr: float = key(3 * ARW_DEG_RT_HR, "deg/sqrt(h)", "attitude error random walk "
+    gyro_noise_deg_rt_hr: float = key(12.6, "deg/sqrt(h)", "attitude error random walk "
                                       "(001 eq. 4, omega_epsilon)", positive(hi=1e5))
-    accel_noise_m_s_rt_hr: float = key(3 * VRW_M_S_RT_HR, "m/s/sqrt(h)", "velocity error random walk "
+    accel_noise_m_s_rt_hr: float = key(6.0, "m/s/sqrt(h)", "velocity error random walk "
                                        "(001 eq. 4, delta a^b)", positive(hi=1e5))
     attitude_sigma_deg: float = key(0.5, "deg", "initial attitude error, 1 sigma per axis",
                                     positive(hi=180))

@@ -51,7 +51,7 @@ def test_host_bad_url_scheme(capsys):
 
 def test_host_unknown_filter(capsys, pty_path):
     line = one_line_error(capsys, "host", "--sins", pty_path, "--filters", "kf,pf")
-    assert "unknown filter 'pf'" in line and "sins, wsn, kf, ekf, ukf or all" in line
+    assert "unknown filter 'pf'" in line and "sins, wsn, kf, ekf, ukf, lc, tc, fatci or all" in line
 
 
 def test_host_unknown_config_name(capsys, pty_path):
