@@ -87,12 +87,13 @@ NOISE = dict(gyro_noise_deg_rt_hr=4.2, accel_noise_m_s_rt_hr=2.0, attitude_sigma
 RUNS = 20
 
 
-def model_run(track: str, seed: int):
+def model_run(track: str, seed: int, lone_after: float | None = None):
     """One run whose truth follows the error-state model: a perfect IMU at rest (so the
     alignment is exact), then white gyro and accelerometer noise of the filter's densities;
     the start off by the configured p0_sigma; ranges with white noise of range_sigma_m and,
-    for tc, each anchor's NLOS random walk of the filter's sigma and walk. Returns the
-    estimates' (t, error of (x, y, vx, vy), cov)."""
+    for tc, each anchor's NLOS random walk of the filter's sigma and walk; from
+    ``lone_after`` s on anchor 1's ranges alone. Returns the estimates' (t, error of
+    (x, y, vx, vy), cov)."""
     rng = np.random.default_rng(seed)
     traj = lambda t: ellipse(t, omega=0.1, t_start=ALIGN_S + 1.0, ramp=4.0)  # noqa: E731
     t = np.arange(0.0, DURATION_S, 0.01)
@@ -114,6 +115,8 @@ def model_run(track: str, seed: int):
             last[a] = te
             noisy.append((te, a, d + walk[a]))
         ex = noisy
+    if lone_after is not None:
+        ex = [(te, a, d) for te, a, d in ex if te < lone_after or a == 1]
     settings = (TcSettings(nlos_sigma_m=NLOS_SIGMA, nlos_walk_m_rt_s=NLOS_WALK, **NOISE) if track == "tc"
                 else LcTrack.Settings(**NOISE))
     cfg = EstimatorConfig(anchors=OFFICE_ANCHORS, latitude_deg=LATITUDE_DEG, gravity=GRAVITY,
@@ -147,6 +150,16 @@ def test_nees_is_within_its_95_percent_chi_square_bounds(track):
     # a consistent filter has 95 % of the instants inside; each instant is one test
     assert inside.mean() >= 0.85, (lo, hi, np.round(mean, 2))
     assert lo <= mean.mean() <= hi
+
+
+@pytest.mark.slow
+def test_a_lone_anchor_still_aids_tc_where_lc_has_no_fix():
+    lone = 12.0
+    final = {}
+    for track in ("lc", "tc"):
+        final[track] = [np.hypot(*run[-1][1][:2]) for run in (model_run(track, seed, lone) for seed in range(5))]
+    # 28 s on anchor 1 alone: lc coasts on its strapdown, tc still takes every range
+    assert np.mean(final["tc"]) < 0.5 * np.mean(final["lc"]), final
 
 
 # -- corridor-outage: anchor 2 silent 18-23 s and 40-45 s ----------------------------------
