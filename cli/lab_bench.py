@@ -26,8 +26,8 @@ def main(argv: list[str] | None = None) -> int:
     p = Parser(prog="python -m navtwin.cli.lab_bench", description=bench.__doc__,
                formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="what", required=True, parser_class=Parser)
-    filters = {"type": _filters, "default": tracks.BUILT_IN,
-               "help": "comma list or all (default all)"}
+    filters = {"type": _filters, "default": tracks.DEFAULT,
+               "help": "comma list or all (default: 000's sins,wsn,kf,ekf,ukf)"}
     lat = sub.add_parser("latency", help="the host on PTYs: last byte -> estimate line")
     lat.add_argument("--seconds", type=number(1, 3600), default=20.0, help="1 to 3600 (default 20)")
     lat.add_argument("--filters", **filters)

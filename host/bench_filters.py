@@ -3,9 +3,12 @@
     python -m navtwin.cli.filters_bench [--steps N] [--json]
 
 A step is what the estimator does per measurement: predict over the interval, then one
-update. ``sins`` is one strapdown step; ``estimator/imu`` is one 100 Hz IMU sample through
-the estimator with every filter on, including its share of the 40 exchanges per second
-(so 1e6 / that number is the estimator's speed in multiples of real time). pytest-benchmark
+update. ``sins`` is one strapdown step. 001's error-state tracks: ``lc/imu``, ``tc/imu``,
+``fatci/imu`` one IMU sample through the track (its strapdown step and predict), and
+``lc/fix``, ``tc/range``, ``fatci/range`` that plus one update. ``estimator/imu`` is one
+100 Hz IMU sample through the estimator with the default tracks on (``estimator/imu all``:
+every built-in track, 001's too), including its share of the 40 exchanges per second (so
+1e6 / that number is the estimator's speed in multiples of real time). pytest-benchmark
 runs the same cases: ``pytest tests/host/test_filters_bench.py --benchmark-only``.
 """
 from __future__ import annotations
@@ -15,12 +18,13 @@ from collections.abc import Callable
 
 import numpy as np
 
+from . import tracks
 from .estimator import Estimator, EstimatorConfig
 from .filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter, Ranges,
                       UnscentedKalmanFilter, position_fix)
-from .measurements import Exchange, ImuSample
+from .measurements import Exchange, ImuSample, Range
 from .sins import Strapdown, quat_from_euler
-from .wsn import AnchorLayout, tdoa_covariance
+from .wsn import AnchorLayout, Fix, tdoa_covariance
 
 DT = 0.01
 X0 = np.array([6.0, 1.8, 0.3, 0.1, 0.05, -0.02])
@@ -61,12 +65,48 @@ def cases() -> dict[str, Callable[[], object]]:
     gyro, accel = (0.001, -0.002, 0.1), (0.05, 0.04, 9.7952)  # floats, as the estimator passes them
     out["sins"] = lambda: sins.step(DT, gyro, accel)
     out["estimator/imu"] = _estimator_step()
+    out["estimator/imu all"] = _estimator_step(tracks.BUILT_IN)
+    out.update(_error_state_steps())
     return out
 
 
-def _estimator_step() -> Callable[[], object]:
-    """One IMU sample (and 0.4 exchanges) of a parked vehicle through all five filters."""
-    cfg = EstimatorConfig(alignment_s=0.5)
+def _error_state_steps() -> dict[str, Callable[[], object]]:
+    """001's tracks: one IMU sample (their strapdown step and predict over 10 ms) and one
+    update (lc: a fix, tc and fatci: a range), past the alignment of a parked vehicle."""
+    out = {}
+    p = np.array([6.0, 1.8])
+    for name, kind in (("lc", "fix"), ("tc", "range"), ("fatci", "range")):
+        cfg = EstimatorConfig(alignment_s=0.5, filters=(name,))
+        est = Estimator(cfg)
+        for k in range(60):  # through the alignment
+            est.feed(ImuSample(k * DT, (0.0, 0.0, 0.0), (0.0, 0.0, 9.7952)))
+        track = est.tracks[0]
+        state = {"t": 60 * DT}
+        meas = Ranges(est.layout, (2,))
+        z = est.layout.ranges(p[None], meas.idx) + 0.1
+        fix = Fix(0.0, p + 0.1, 0.04 * np.eye(2), (1, 2, 3, 4), 1.0)
+
+        def imu(track=track, state=state):
+            state["t"] += DT
+            t = state["t"]
+            track.imu(ImuSample(t, (0.001, -0.002, 0.0), (0.05, 0.04, 9.7952)))
+            return t
+
+        def update(track=track, imu=imu, z=z, meas=meas, fix=fix, kind=kind):
+            t = imu()
+            if kind == "fix":
+                track.fix(Fix(t, fix.p, fix.cov, fix.anchors, fix.chi2))
+            else:
+                track.range(Range(t, z, np.array([[0.16]]), meas))
+        out[f"{name}/imu"] = imu
+        out[f"{name}/{kind}"] = update
+    return out
+
+
+def _estimator_step(filters: tuple[str, ...] = tracks.DEFAULT) -> Callable[[], object]:
+    """One IMU sample (and 0.4 exchanges) of a parked vehicle through the default five
+    tracks (or *filters*)."""
+    cfg = EstimatorConfig(alignment_s=0.5, filters=filters)
     est = Estimator(cfg)
     rng = np.random.default_rng(0)
     layout = AnchorLayout(cfg.anchors)

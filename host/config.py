@@ -140,7 +140,7 @@ class Lab:
 class HostConfig:
     name: str
     lab: Lab
-    filters: tuple[str, ...] = tuple(tracks.BUILT_IN)
+    filters: tuple[str, ...] = tracks.DEFAULT
     tuning: Tuning = Tuning()  # the estimator's shared settings
     range_bias_m: dict[int, float] = field(default_factory=dict)
     settings: dict[str, object] = field(default_factory=dict)  # track name -> its Settings
@@ -376,7 +376,7 @@ def markdown_table() -> str:
     """docs/host.md's table of every host config key: the sections, [filters] (shared), then
     each built-in track's [filters.<name>]."""
     lines = ["| key | unit | default | valid | meaning |", "|---|---|---|---|---|"]
-    extra = [("filters.enabled", "", "all", "track names (host.tracks)", "the tracks to run"),
+    extra = [("filters.enabled", "", "sins,wsn,kf,ekf,ukf", "track names (host.tracks)", "the tracks to run"),
              ("filters.range_bias_m", "m", "{}", f"per anchor id, in [{RANGE_BIAS_M[0]}, "
               f"{RANGE_BIAS_M[1]}]", "c_i of 001: distance = (reported - c_i) / f")]
     all_rows = rows(Lab) + extra + rows(Tuning, "filters.")

@@ -10,7 +10,8 @@ are plug-ins; the Estimator names none of them. It keeps what they share, and di
 * the alignment and the strapdown (``sins``, ``aligned``), and from them each IMU sample's
   Motion product (the nav-frame acceleration as a measurement, or at rest while aligning);
 * the WSN: exchanges grouped into TDMA cycles, each cycle's fix (``fixes``: the last two)
-  or FixRefused, and the Range (``tight = "toa"``) or Tdoa (``"tdoa"``) product;
+  or FixRefused, and the Range (each exchange, for the tracks that take it) and Tdoa
+  (``tight = "tdoa"``) products;
 * device restarts (Restart records): each track's reset, the strapdown's realignment, and
   the re-initialisation of the tracks waiting for a fix newer than their discontinuity.
 
@@ -152,7 +153,7 @@ class EstimatorConfig(Tuning):
     heading0_rad: float = 0.0  # initial heading (MEMS gyros cannot gyrocompass)
     gyro_range_dps: int = 300  # ADIS16350 range: the service's word scale; counts overrange
     range_bias_m: Mapping[int, float] = field(default_factory=dict)  # c_i of 001: calibrated delays
-    filters: tuple[str, ...] = tuple(tracks.BUILT_IN)
+    filters: tuple[str, ...] = tracks.DEFAULT
     settings: Mapping[str, object] = field(default_factory=dict)  # track name -> its Settings
     vehicle: int = 1  # which vehicle of the lab (host config): its estimates say so
 
@@ -286,7 +287,7 @@ class Estimator:
             self.input_rejections["range_implausible"] += 1
         else:
             d = (float(distance_m) - self._range_bias.get(anchor, 0.0)) / self.cfg.range_scale
-            if self.cfg.tight == "toa" and self._range:
+            if self._range:
                 m = Range(t_s, np.array([d]), np.array([[self.cfg.range_sigma_m**2]]),
                           Ranges(self.layout, (anchor,), (max(self.t - t_s, 0.0),)))
                 for take in self._range:

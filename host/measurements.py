@@ -19,7 +19,8 @@ Products (made once by the estimator, given to each track that takes them):
 Motion       the SINS's horizontal nav-frame acceleration as a linear measurement of the
              fusion state (``kind`` "accel"), or at rest while the alignment runs
              ("stationary")
-Range        one corrected exchange distance as a range measurement (``tight = "toa"``)
+Range        one corrected exchange distance as a range measurement (each exchange: the
+             EKF/UKF take it with ``tight = "toa"``, 001's tc and fatci always)
 Tdoa         one closed TDMA cycle's range differences to the reference anchor
              (``tight = "tdoa"``); ``meas`` None when too few anchors remain
 host.wsn.Fix        a WSN position fix of a closed TDMA cycle

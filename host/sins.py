@@ -38,6 +38,7 @@ tilt at rest; it is absorbed in roll and pitch (and cancels while the unit stays
 """
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -181,6 +182,7 @@ class Strapdown:
         self._tan_lat = math.tan(lat)
         self.gravity = float(gravity)  # g^n = (0, 0, -g) acts on v_U alone, which eq. 5 holds at 0
         self._prev: tuple[Vec3, Vec3] | None = None  # last sample, bias removed
+        self.f_n: Vec3 = (0.0, 0.0, self.gravity)  # the last step's specific force, nav frame
 
     @property
     def p(self) -> np.ndarray:
@@ -235,7 +237,7 @@ class Strapdown:
         # dv/dt = C_b^n f^b - (2 w_ie + w_en) x v + g^n, horizontal: v_U = 0 on the floor (eq. 5)
         wx, wy, wz = 2.0 * ie_x + en_x, 2.0 * ie_y + en_y, 2.0 * ie_z + en_z
         vx, vy, vz = self._v
-        fn_x, fn_y, _ = mat_vec(quat_to_dcm(q_mid), f_b)
+        self.f_n = fn_x, fn_y, _ = mat_vec(quat_to_dcm(q_mid), f_b)
         ax = fn_x - (wy * vz - wz * vy)
         ay = fn_y - (wz * vx - wx * vz)
         s = 0.5 * dt * dt
@@ -243,6 +245,28 @@ class Strapdown:
         self._p = (x + (vx * dt + ax * s), y + (vy * dt + ay * s), z + vz * dt)
         self._v = (vx + ax * dt, vy + ay * dt, vz)
         return (ax, ay, 0.0)
+
+    def copy(self) -> Strapdown:
+        """An independent strapdown in the same state (a track that corrects its own)."""
+        return copy.copy(self)  # its state is tuples and floats: nothing shared changes
+
+    def correct(self, dp: Sequence[float], dv: Sequence[float], da: Sequence[float]) -> None:
+        """Closed-loop feedback of an error-state filter (001 sect. 2): remove the estimated
+        errors (computed minus true) of the horizontal position ``dp`` and velocity ``dv``
+        and the attitude error ``da`` (rad, nav frame: C_computed = exp(da x) C_true)."""
+        x, y, z = self._p
+        vx, vy, vz = self._v
+        self._p = (x - dp[0], y - dp[1], z)
+        self._v = (vx - dv[0], vy - dv[1], vz)
+        qw, qx, qy, qz = quat_multiply(quat_from_rotvec((-da[0], -da[1], -da[2])), self._q)
+        norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        self._q = (qw / norm, qx / norm, qy / norm, qz / norm)
+
+    def place(self, position: Sequence[float], velocity: Sequence[float]) -> None:
+        """Put the strapdown at a horizontal position and velocity (a re-initialisation),
+        its attitude kept."""
+        self._p = (float(position[0]), float(position[1]), self._p[2])
+        self._v = (float(velocity[0]), float(velocity[1]), self._v[2])
 
     @property
     def euler(self) -> tuple[float, float, float]:

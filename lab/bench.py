@@ -30,13 +30,13 @@ from navtwin.protocols.recording import Recording
 from .run import lab_chunks, run_in_memory
 
 
-def latency(seconds: float = 20.0, filters=tracks.BUILT_IN, seed: int = 1) -> dict:
+def latency(seconds: float = 20.0, filters=tracks.DEFAULT, seed: int = 1) -> dict:
     """The host service on PTYs, fed the office lab at its arrival times."""
     kw, chunks = lab_chunks("office", seed, duration=seconds, filters=tuple(filters))
     return bench_latency(kw["config"], kw["filters"], list(chunks), seconds)
 
 
-def office_replay(seconds: float = 60.0, filters=tracks.BUILT_IN, seed: int = 1) -> dict:
+def office_replay(seconds: float = 60.0, filters=tracks.DEFAULT, seed: int = 1) -> dict:
     """Replay speed of a host recording of the office lab's first *seconds*."""
     kw, chunks = lab_chunks("office", seed, duration=seconds, filters=tuple(filters))
     with tempfile.TemporaryDirectory(prefix="navtwin-bench-") as tmp:

@@ -4,6 +4,8 @@ kf.KalmanFilter, ekf.ExtendedKalmanFilter, ukf.UnscentedKalmanFilter share
 ``predict(dt)`` and ``update(z, R, measurement, gate=None) -> Innovation``;
 model.py holds the motion model (000 eq. 14) and measurement models (000 eq. 15);
 linalg.py the small inverse and solve (shared with host.wsn's Gauss-Newton).
+Paper 001's filters: errorstate.ErrorStateFilter (the closed-loop error state on the
+strapdown, lc/tc/fatci) and fuzzy.FuzzySystem (fatci's SISO fuzzy inference).
 """
 from .ekf import ExtendedKalmanFilter
 from .innovation import Innovation

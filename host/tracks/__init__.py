@@ -1,6 +1,7 @@
 """Fusion tracks, one module each, registered by name (docs/filters.md).
 
-Built in, in output order: ``sins``, ``wsn``, ``kf``, ``ekf``, ``ukf``. A track of a user's
+Built in, in output order: ``sins``, ``wsn``, ``kf``, ``ekf``, ``ukf`` (000's) and ``lc``,
+``tc``, ``fatci`` (001's). A track of a user's
 package is added with :func:`register` (in process), or by an entry point in the group
 ``navtwin.tracks`` whose name is the track's name and whose object is its class::
 
@@ -24,12 +25,19 @@ _BUILT_IN = {
     "kf": "navtwin.host.tracks.kf:KfTrack",
     "ekf": "navtwin.host.tracks.ekf:EkfTrack",
     "ukf": "navtwin.host.tracks.ukf:UkfTrack",
+    "lc": "navtwin.host.tracks.lc:LcTrack",
+    "tc": "navtwin.host.tracks.tc:TcTrack",
+    "fatci": "navtwin.host.tracks.fatci:FatciTrack",
 }
 BUILT_IN = tuple(_BUILT_IN)
+#: What runs when no filters are named: 000's tracks. 001's error-state tracks (lc, ...) run
+#: when named (``--filters``, ``[filters] enabled``): each costs about what the three CA
+#: filters together cost (docs/filters.md, "Speed").
+DEFAULT = ("sins", "wsn", "kf", "ekf", "ukf")
 GROUP = "navtwin.tracks"
 _registered: dict[str, type[Track]] = {}
 
-__all__ = ["BUILT_IN", "Estimate", "GROUP", "NoSettings", "Track", "get", "names", "register",
+__all__ = ["BUILT_IN", "DEFAULT", "Estimate", "GROUP", "NoSettings", "Track", "get", "names", "register",
            "unregister"]
 
 

@@ -146,7 +146,9 @@ class TightTrack(FusionTrack):
     reference anchor (``tight = "tdoa"``) or each range at its own time (``"toa"``)."""
 
     def handlers(self) -> dict:
-        return {**super().handlers(), Range: self.range, Tdoa: self.tdoa}
+        if self.est.cfg.tight == "toa":  # the estimator makes Range products for any taker
+            return {**super().handlers(), Range: self.range}
+        return {**super().handlers(), Tdoa: self.tdoa}
 
     def range(self, m: Range) -> None:
         self._update("range", m.z, m.R, m.meas, m.t)

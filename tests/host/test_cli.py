@@ -8,7 +8,7 @@ import pytest
 from navtwin.host import config as host_config
 from navtwin.host.config import ConfigError
 from navtwin.cli.main import main
-from navtwin.host.tracks import BUILT_IN
+from navtwin.host.tracks import DEFAULT
 
 
 def run_cli(capsys, *argv) -> tuple[int, str, str]:
@@ -51,7 +51,7 @@ def test_host_bad_url_scheme(capsys):
 
 def test_host_unknown_filter(capsys, pty_path):
     line = one_line_error(capsys, "host", "--sins", pty_path, "--filters", "kf,pf")
-    assert "unknown filter 'pf'" in line and "sins, wsn, kf, ekf, ukf or all" in line
+    assert "unknown filter 'pf'" in line and "sins, wsn, kf, ekf, ukf, lc, tc, fatci or all" in line
 
 
 def test_host_unknown_config_name(capsys, pty_path):
@@ -90,7 +90,7 @@ def test_office_config_is_the_survey_of_scenarios_md():
         1: (1.3, 1.6), 2: (10.8, 1.6), 3: (10.8, 5.4), 4: (1.3, 5.4)}
     assert cfg.vehicles[0].start == (6.0, 1.8) and cfg.vehicles[0].heading_deg == 0.0
     assert cfg.latitude_deg == 34.316 and cfg.gravity == 9.7952
-    assert cfg.filters == BUILT_IN
+    assert cfg.filters == DEFAULT
 
 
 def test_corridor_config_starts_at_the_origin():

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from navtwin.host.tracks import BUILT_IN
+from navtwin.host.tracks import DEFAULT
 
 from ..lines import Lines
 from . import lab_bytes
@@ -97,7 +97,7 @@ def test_host_process_on_fed_ptys_stops_on_signal_and_replays_byte_for_byte(tmp_
     summary = json.loads(host.err.lines[-1])["summary"]
     assert summary["counts"]["imu"] == 600 and summary["counts"]["reports"] == 240
     live = _replay_equals_live(tmp_path)
-    assert _filters(live) == set(BUILT_IN)
+    assert _filters(live) == set(DEFAULT)
     for m in masters.values():
         os.close(m)
 
@@ -121,7 +121,7 @@ def test_office_emulator_and_host_live_then_replay(tmp_path):
     summary = json.loads(host.err.lines[-1])["summary"]
     assert summary["counts"]["imu"] > 1000 and summary["counts"]["reports"] > 400
     live = _replay_equals_live(tmp_path)
-    assert _filters(live) == set(BUILT_IN)
+    assert _filters(live) == set(DEFAULT)
     # physical consistency, free of the unknown offset between the two processes' clocks:
     # the tightly coupled filters stay near the path the emulated vehicle actually drove
     truth = np.genfromtxt(tmp_path / "emu" / "truth.csv", delimiter=",", names=True)

@@ -10,11 +10,11 @@ import pytest
 
 from navtwin.host.estimator import Estimate, Estimator, EstimatorConfig
 from navtwin.host.measurements import Exchange, ImuSample, Restart
-from navtwin.host.tracks import BUILT_IN
+from navtwin.host.tracks import DEFAULT
 
 from .navsynth import GRAVITY, OFFICE_ANCHORS, ellipse, exchanges, noisy_imu, perfect_imu, record
 
-FILTER_NAMES = BUILT_IN
+FILTER_NAMES = DEFAULT
 
 ALIGN = 3.0
 

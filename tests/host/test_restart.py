@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 
 from navtwin.host import replay as host_replay
-from navtwin.host.tracks import BUILT_IN as FILTER_NAMES
+from navtwin.host.tracks import DEFAULT as FILTER_NAMES
 from navtwin.host.pipeline import Pipeline
 from navtwin.protocols.recording import Recording
 

@@ -18,7 +18,7 @@ from navtwin.host import config as host_config
 from navtwin.host.output import estimate_line
 from navtwin.host.replay import replay
 from navtwin.host.service import TX_PORT, Service
-from navtwin.host.tracks import BUILT_IN
+from navtwin.host.tracks import DEFAULT
 from navtwin.protocols import adis16350, sins
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import XBeeDecoder
@@ -83,7 +83,7 @@ def paced_write(chunks, masters: dict[str, int]) -> dict[str, int]:
 def test_live_run_over_ptys_then_replay_gives_the_same_bytes(tmp_path):
     pairs = {p: pty_pair() for p in ("xbee", "nanoloc")}
     out, status = io.StringIO(), io.StringIO()
-    svc = Service({p: path for p, (_, path) in pairs.items()}, OFFICE, BUILT_IN,
+    svc = Service({p: path for p, (_, path) in pairs.items()}, OFFICE, DEFAULT,
                   out=out, record=tmp_path / "rec", status=status, status_period_s=0.5)
     run = Running(svc)
     wait_for(svc.started.is_set, "the service to open its ports")
@@ -92,7 +92,7 @@ def test_live_run_over_ptys_then_replay_gives_the_same_bytes(tmp_path):
     wait_for(lambda: svc.bytes == total, "the service to process every byte")
     summary = run.stop()
     live = out.getvalue()
-    assert {json.loads(x)["filter"] for x in live.splitlines()} == set(BUILT_IN)
+    assert {json.loads(x)["filter"] for x in live.splitlines()} == set(DEFAULT)
     assert summary["counts"]["imu"] == 300 and summary["counts"]["reports"] == 120
     got = []
     replay(Recording(tmp_path / "rec"), lambda es: got.extend(map(estimate_line, es)))

@@ -1,0 +1,99 @@
+"""Error-state Kalman filter on the strapdown (001 sections 2 and 4.2), closed loop.
+
+State (001 eq. 3, horizontal: the strapdown holds the vehicle on the floor, 000 eq. 5)::
+
+    x = [dp_x, dp_y, dv_x, dv_y, dA_x, dA_y, dA_z, e_1 .. e_m]
+
+dp, dv: the strapdown's position and velocity errors (computed minus true, nav frame); dA:
+its attitude error (C_computed = exp(dA x) C_true); e_i: optional random-walk states (001
+eq. 17, the NLOS error of anchor i's range). Between updates the nav part of x is zero: each
+update's correction is fed back into the strapdown and that part reset (closed loop), so
+the predict propagates P alone (eq. 26 maps zero to zero and leaves the e_i unchanged).
+
+Predict over one IMU interval T with the nav-frame specific force f^n (001 eqs. 4-6, 27)::
+
+    F = [[I, T I, -(f^n x)_h T^2/2], [0, I, -(f^n x)_h T], [0, 0, I]]   (+ I on the e_i)
+    P = F P F^T + G Q G^T
+
+(f^n x)_h is the two horizontal rows of the skew matrix. W = [gyro angle noise, accel noise]
+over T, variances ``gyro_psd`` T and ``accel_psd`` / T (the random walks' densities squared);
+with isotropic noise G Q G^T does not depend on C_b^n (its rows are orthonormal):
+Q_pp = accel_psd T^3/4, Q_pv = accel_psd T^2/2, Q_vv = accel_psd T, Q_AA = gyro_psd T I,
+Q_ee = e_psd T.
+
+Update (001 eqs. 28-30, Joseph form, chi-square gated like host.filters.kf)::
+
+    y = z - H x,  S = H P H^T + R,  K = P H^T S^-1,  x = x + K y,
+    P = (I - K H) P (I - K H)^T + K R K^T
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from .innovation import Innovation, gated
+from .linalg import inverse
+
+NAV = 7  # dp (2), dv (2), dA (3)
+P, V, A = slice(0, 2), slice(2, 4), slice(4, 7)
+
+
+@lru_cache(maxsize=32)
+def process_noise(dt: float, gyro_psd: float, accel_psd: float, extra_psd: float, extra: int) -> np.ndarray:
+    """G Q G^T over dt (module doc); cached: the IMU period recurs. Read-only."""
+    n = NAV + extra
+    Q = np.zeros((n, n))
+    i2 = np.eye(2)
+    Q[P, P] = accel_psd * dt**3 / 4 * i2
+    Q[P, V] = Q[V, P] = accel_psd * dt**2 / 2 * i2
+    Q[V, V] = accel_psd * dt * i2
+    Q[A, A] = gyro_psd * dt * np.eye(3)
+    Q[NAV:, NAV:] = extra_psd * dt * np.eye(extra)
+    Q.flags.writeable = False
+    return Q
+
+
+class ErrorStateFilter:
+    """x, P of the module doc; ``extra`` random-walk states of density ``extra_psd``."""
+
+    def __init__(self, P0: np.ndarray, *, gyro_psd: float, accel_psd: float, extra: int = 0,
+                 extra_psd: float = 0.0):
+        self.n = n = NAV + extra
+        self.x = np.zeros(n)
+        self.P = np.array(P0, dtype=float)
+        self._noise = (float(gyro_psd), float(accel_psd), float(extra_psd), int(extra))
+        self._F = np.eye(n)
+        self._I = np.eye(n)
+
+    def predict(self, dt: float, f_n) -> None:
+        """Over one IMU interval dt with the specific force f_n = (f_x, f_y, f_z), nav frame."""
+        fx, fy, fz = f_n
+        F = self._F
+        # -(f x) rows x and y: [[0, f_z, -f_y], [-f_z, 0, f_x]]
+        h = 0.5 * dt * dt
+        F[0, 2] = F[1, 3] = dt
+        F[0, 5], F[0, 6], F[1, 4], F[1, 6] = fz * h, -fy * h, -fz * h, fx * h
+        F[2, 5], F[2, 6], F[3, 4], F[3, 6] = fz * dt, -fy * dt, -fz * dt, fx * dt
+        self.P = F.dot(self.P).dot(F.T) + process_noise(dt, *self._noise)
+
+    def update(self, z: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float | None = None) -> Innovation:
+        """Correct with z = H x + v, v ~ N(0, R) (H: dim(z) x n); the state is unchanged
+        when the gate rejects it."""
+        y = z - H.dot(self.x)
+        PHT = self.P.dot(H.T)
+        S = H.dot(PHT) + R
+        SI = inverse(S)
+        inn = gated(y, S, SI, gate)
+        if inn.accepted:
+            K = PHT.dot(SI)
+            self.x = self.x + K.dot(y)
+            I_KH = self._I - K.dot(H)
+            self.P = I_KH.dot(self.P).dot(I_KH.T) + K.dot(R).dot(K.T)
+        return inn
+
+    def take_nav(self) -> np.ndarray:
+        """The nav part of x (to feed back into the strapdown), reset to zero."""
+        dx = self.x[:NAV].copy()
+        self.x[:NAV] = 0.0
+        return dx

@@ -1,0 +1,190 @@
+"""Paper 001's tracks (docs/filters.md): the fuzzy system against scikit-fuzzy, lc and tc
+consistent (NEES) on data that follow their own model, and on the emulated
+corridor-outage lc drifting while anchor 2 is silent where tc and fatci hold."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from navtwin.host.estimator import Estimator, EstimatorConfig
+from navtwin.host.filters.fuzzy import FuzzySystem
+from navtwin.host.measurements import Exchange, ImuSample
+from navtwin.host.tracks.fatci import FatciSettings, FatciTrack
+from navtwin.host.tracks.lc import LcTrack
+from navtwin.host.tracks.tc import TcSettings
+
+from .navsynth import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS, ellipse, exchanges, noisy_imu, perfect_imu
+
+skfuzzy = pytest.importorskip("skfuzzy")
+
+
+# -- the fuzzy system ----------------------------------------------------------------------
+
+def skfuzzy_inference(inputs, outputs, sigma, points=4001):
+    """001's SISO system written with scikit-fuzzy's own pieces (trimf, interp_membership,
+    fmin/fmax, defuzz centroid) on a finer output universe than ours."""
+    a, b, c = inputs
+    x = float(np.clip(sigma, a, c))
+    u_in = np.linspace(a, c, points)
+    w = [skfuzzy.interp_membership(u_in, skfuzzy.trimf(u_in, t), x) for t in ([a, a, b], [a, b, c], [b, c, c])]
+    a, b, c = outputs
+    u = np.linspace(a, c, points)
+    sets = [skfuzzy.trimf(u, t) for t in ([a, a, b], [a, b, c], [b, c, c])]
+    joined = np.fmax.reduce([np.fmin(wj, s) for wj, s in zip(w, sets)])
+    return skfuzzy.defuzz(u, joined, "centroid")
+
+
+@pytest.mark.parametrize("inputs, outputs", [
+    (FatciSettings().sigma_sets_m, FatciSettings().s_sets),  # the defaults
+    ((0.05, 0.2, 0.6), (0.5, 1.0, 4.0)),  # uneven sets
+])
+def test_the_fuzzy_system_equals_scikit_fuzzy(inputs, outputs):
+    fis = FuzzySystem(inputs, outputs)
+    sweep = np.linspace(0.0, 1.2 * inputs[2], 97)  # beyond both ends of the universe too
+    ours = fis(sweep)
+    assert ours.shape == sweep.shape
+    want = [skfuzzy_inference(inputs, outputs, s) for s in sweep]
+    np.testing.assert_allclose(ours, want, atol=1e-3, rtol=0)
+    assert float(fis(sweep[40])) == pytest.approx(ours[40])  # a scalar gives the same
+
+
+def test_fatci_r_is_s_to_the_b_times_the_nominal_r():
+    est = Estimator(EstimatorConfig(filters=("fatci",)))
+    s = FatciSettings()
+    track = FatciTrack(est, s)
+    fis = FuzzySystem(s.sigma_sets_m, s.s_sets)
+    for d in (1.0, 5.0, 12.0, 30.0):
+        sigma = s.sigma_poly_m[0] + s.sigma_poly_m[1] * d
+        assert track.range_variance(0, d) == pytest.approx(float(fis(sigma)) ** s.b * 0.4**2, rel=1e-4)
+
+
+def test_fatci_takes_sigma_of_d_from_the_estimators_calibration():
+    class Calibration:  # host.calibration.Calibration's interface
+        scale, bias = 1.0, {}
+
+        @staticmethod
+        def sigma(d):
+            return 0.7  # MO fully: S is the MO set's centroid
+
+    est = Estimator(EstimatorConfig(filters=("fatci",)))
+    est.calibration = Calibration()
+    track = FatciTrack(est)
+    s = track.settings
+    assert track.range_variance(2, 3.0) == pytest.approx(((s.s_sets[1] + 2 * s.s_sets[2]) / 3) ** s.b * 0.16,
+                                                         rel=1e-4)
+
+
+# -- consistency on data that follow the filters' model ----------------------------------
+
+ALIGN_S = 5.0
+DURATION_S = 40.0
+RANGE_SIGMA = 0.15
+NLOS_SIGMA, NLOS_WALK = 0.1, 0.01
+NOISE = dict(gyro_noise_deg_rt_hr=4.2, accel_noise_m_s_rt_hr=2.0, attitude_sigma_deg=0.02)
+RUNS = 20
+
+
+def model_run(track: str, seed: int, lone_after: float | None = None):
+    """One run whose truth follows the error-state model: a perfect IMU at rest (so the
+    alignment is exact), then white gyro and accelerometer noise of the filter's densities;
+    the start off by the configured p0_sigma; ranges with white noise of range_sigma_m and,
+    for tc, each anchor's NLOS random walk of the filter's sigma and walk; from
+    ``lone_after`` s on anchor 1's ranges alone. Returns the estimates' (t, error of
+    (x, y, vx, vy), cov)."""
+    rng = np.random.default_rng(seed)
+    traj = lambda t: ellipse(t, omega=0.1, t_start=ALIGN_S + 1.0, ramp=4.0)  # noqa: E731
+    t = np.arange(0.0, DURATION_S, 0.01)
+    tr = traj(t)
+    gyro, accel = perfect_imu(tr)
+    moving = t >= ALIGN_S
+    ng, na = noisy_imu(gyro, accel, rng, arw_deg_rt_hr=NOISE["gyro_noise_deg_rt_hr"],
+                       vrw_m_s_rt_hr=NOISE["accel_noise_m_s_rt_hr"])
+    gyro[moving], accel[moving] = ng[moving], na[moving]
+    sp = 0.1
+    start = tr.p[0] + rng.normal(0.0, sp, 2)
+    ex = exchanges(traj, OFFICE_ANCHORS, duration=DURATION_S, sigma=RANGE_SIGMA, rng=rng, t0=0.003)
+    if track == "tc":  # e_i(k+1) = e_i(k) + w (001 eq. 17), per exchange of anchor i
+        walk = {a: rng.normal(0.0, NLOS_SIGMA) for a in OFFICE_ANCHORS}
+        last = {a: 0.0 for a in OFFICE_ANCHORS}
+        noisy = []
+        for te, a, d in ex:
+            walk[a] += rng.normal(0.0, NLOS_WALK * math.sqrt(te - last[a]))
+            last[a] = te
+            noisy.append((te, a, d + walk[a]))
+        ex = noisy
+    if lone_after is not None:
+        ex = [(te, a, d) for te, a, d in ex if te < lone_after or a == 1]
+    settings = (TcSettings(nlos_sigma_m=NLOS_SIGMA, nlos_walk_m_rt_s=NLOS_WALK, **NOISE) if track == "tc"
+                else LcTrack.Settings(**NOISE))
+    cfg = EstimatorConfig(anchors=OFFICE_ANCHORS, latitude_deg=LATITUDE_DEG, gravity=GRAVITY,
+                          start=tuple(start), heading0_rad=0.0, alignment_s=ALIGN_S,
+                          range_sigma_m=RANGE_SIGMA, wsn_method="toa", p0_sigma=(sp, 1e-3, 0.1),
+                          filters=(track,), settings={track: settings})
+    est = Estimator(cfg)
+    records = [(ti, 0, ImuSample(ti, g, f)) for ti, g, f in zip(t, gyro, accel)]
+    records += [(te, 1, Exchange(te, a, d)) for te, a, d in ex]
+    out = []
+    for _, _, rec in sorted(records, key=lambda r: r[:2]):
+        out += est.feed(rec)
+    rows = []
+    for e in out:
+        if e.t < ALIGN_S + 1.0 or round(e.t * 10) % 10:  # moving, once a second
+            continue
+        k = int(round(e.t * 100))
+        err = np.array([e.x - tr.p[k, 0], e.y - tr.p[k, 1], e.vx - tr.v[k, 0], e.vy - tr.v[k, 1]])
+        rows.append((e.t, err, np.array(e.cov).reshape(4, 4)))
+    return rows
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("track", ["lc", "tc"])
+def test_nees_is_within_its_95_percent_chi_square_bounds(track):
+    runs = [model_run(track, seed) for seed in range(RUNS)]
+    nees = np.array([[err.dot(np.linalg.solve(cov, err)) for _, err, cov in run] for run in runs])
+    mean = nees.mean(axis=0)  # over the runs, at each instant
+    lo, hi = chi2.ppf([0.025, 0.975], 4 * RUNS) / RUNS
+    inside = (mean >= lo) & (mean <= hi)
+    # a consistent filter has 95 % of the instants inside; each instant is one test
+    assert inside.mean() >= 0.85, (lo, hi, np.round(mean, 2))
+    assert lo <= mean.mean() <= hi
+
+
+@pytest.mark.slow
+def test_a_lone_anchor_still_aids_tc_where_lc_has_no_fix():
+    lone = 12.0
+    final = {}
+    for track in ("lc", "tc"):
+        final[track] = [np.hypot(*run[-1][1][:2]) for run in (model_run(track, seed, lone) for seed in range(5))]
+    # 28 s on anchor 1 alone: lc coasts on its strapdown, tc still takes every range
+    assert np.mean(final["tc"]) < 0.5 * np.mean(final["lc"]), final
+
+
+# -- corridor-outage: anchor 2 silent 18-23 s and 40-45 s ----------------------------------
+
+OUTAGES = ((18.0, 23.0), (40.0, 45.0))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_on_corridor_outage_lc_drifts_while_anchor_2_is_silent_and_tc_holds(seed):
+    from navtwin.emulator.scenario import load_scenario
+    from navtwin.emulator.world import World
+    from navtwin.lab.run import run_in_memory
+
+    estimates, _ = run_in_memory("corridor-outage", seed, filters=("lc", "tc", "fatci"))
+    w = World(load_scenario("corridor-outage"), seed)
+    truth = w.truth(0, w.duration_ns)
+    tt = truth["t"] * 1e-9
+    worst = {}
+    for e in estimates:
+        if any(a <= e.t <= b for a, b in OUTAGES):
+            err = math.hypot(e.x - np.interp(e.t, tt, truth["x"]), e.y - np.interp(e.t, tt, truth["y"]))
+            worst[e.filter] = max(worst.get(e.filter, 0.0), err)
+    # lc has no fix for most of each window (three anchors left in a corridor: the WSN
+    # refuses them) and coasts on the strapdown; tc and fatci take the three ranges
+    assert worst["lc"] > 1.5, worst
+    assert worst["tc"] < 1.0 and worst["fatci"] < 1.0, worst
+    assert worst["lc"] > 2 * max(worst["tc"], worst["fatci"]), worst
