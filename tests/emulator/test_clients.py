@@ -57,7 +57,7 @@ def test_reopened_port_delivers_fresh_bytes_not_stale_ones(lab):
     # nanoLOC reports (40 per second) on another port rather than sleeping
     with serial.Serial(lab.ports["nanoloc"], 115200, timeout=1) as ser:
         reports, _ = read_frames(ser, nanoloc_decoder(), 20)
-    assert len(reports) == 20
+    assert len(reports) >= 20  # one read may finish several (a loaded box batches them)
     # opened with os.open: no pyserial input flush, so any stale byte would be read
     fd = os.open(lab.ports["sins"], os.O_RDONLY | os.O_NOCTTY)
     try:
@@ -213,7 +213,7 @@ def test_nothing_a_client_does_kills_the_emulator(tmp_path):
             os.close(hog)
         with serial.Serial(lab.ports["sins"], 115200, timeout=1) as ser:  # still serving
             frames, _ = read_frames(ser, sins_decoder(), 20)
-        assert len(frames) == 20
+        assert len(frames) >= 20  # one read may finish several
         summary = lab.stop()
     assert summary["done"] and summary["interrupted"]
     assert summary["ports"]["xbee"]["dropped_overflow"] > 0
