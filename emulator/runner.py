@@ -465,6 +465,8 @@ class Emulation:
         return getattr(self, f"_op_{req['op']}")(req)
 
     def _op_status(self, req: dict) -> dict:
+        for n in [n for n, (f, _) in self.live.items() if f.end_s * SEC <= self._now_ns]:
+            self._end_live(n)  # over: no longer live
         return {"virtual_s": self._now_ns / SEC, "duration_s": self.end_ns / SEC,
                 "t0_monotonic_ns": self.t0_monotonic_ns, "ports": {
                     n: {"plugged": p.plugged, "attached": p.attached, "pts": p.pts,
@@ -547,13 +549,16 @@ class Emulation:
         if any(n not in self.live for n in ids):
             raise ControlError(f"no live fault {req['id']!r}; the live ones are {list(self.live)}")
         for n in ids:
-            fault, wrapper = self.live.pop(n)
-            if wrapper is not None:
-                (self.inbound if wrapper.direction == "to_device" else
-                 self.lines[fault.port]).wrappers.remove(wrapper)
-            elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
-                self.world.remove(fault)
+            self._end_live(n)
         return {"cleared": ids}
+
+    def _end_live(self, n: int) -> None:
+        fault, wrapper = self.live.pop(n)
+        if wrapper is not None:
+            (self.inbound if wrapper.direction == "to_device" else
+             self.lines[fault.port]).wrappers.remove(wrapper)
+        elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
+            self.world.remove(fault)
 
     def _port(self, req: dict) -> PtyPort:
         port = self.ports.get(req.get("port"))

@@ -182,3 +182,18 @@ def test_a_live_line_fault_garbles_the_port_until_cleared_and_the_ledger_has_it(
     ledger = Recording(rec).faults()
     assert ledger and {e["kind"] for e in ledger} == {"bit_errors"}
     assert all(e["port"] == "sins" and e["fault"] is None for e in ledger)
+
+
+def test_a_live_fault_that_has_ended_is_no_longer_listed(tmp_path):
+    with emulate("office", duration=60, link_dir=tmp_path / "links") as lab:
+        short = lab.fault("bit_errors", 0.3, port="sins", ber=1e-4)
+        long = lab.fault("bit_errors", port="nanoloc", ber=1e-4)  # until cleared
+        end = time.monotonic() + DEADLINE_S
+        while (st := lab.status())["virtual_s"] <= short["end_s"]:
+            assert time.monotonic() < end, "the emulator's time did not pass the fault's end"
+            time.sleep(0.05)
+        assert [f["id"] for f in st["faults"]] == [long["id"]]
+        with pytest.raises(ControlError, match="no live fault"):
+            lab.clear(short["id"])
+        assert lab.clear()["cleared"] == [long["id"]]
+        lab.stop()
