@@ -48,7 +48,6 @@ from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
-from scipy.stats import chi2 as chi2_distribution
 
 from .filters.linalg import solve
 
@@ -134,7 +133,9 @@ def tdoa_whitening(sigma: float, m: int) -> np.ndarray:
 @lru_cache(maxsize=64)
 def chi2_gate(dof: int, probability: float) -> float:
     """Squared-Mahalanobis threshold passing *probability* of consistent innovations."""
-    return float(chi2_distribution.ppf(probability, dof))
+    from scipy.stats import chi2  # here: scipy.stats costs every navtwin command ~0.7 s to import
+
+    return float(chi2.ppf(probability, dof))
 
 
 @dataclass(frozen=True, slots=True)
