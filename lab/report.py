@@ -211,7 +211,7 @@ def figures(run: dict) -> dict[str, str]:
     for ax, n in zip(axes, names):
         e = run["estimates"][n]
         ax.plot(truth["x"], truth["y"], "k-", lw=1.5, label="truth")
-        ax.plot(e["x"], e["y"], "-", color=colours[n], lw=1, label=n)
+        ax.plot(e["x"], e["y"], "-", color=colours[n], lw=1, label=n, gid=f"track-{n}")
         ax.plot(anchors[:, 0], anchors[:, 1], "r^", ms=8, label="anchors")
         ax.set(xlim=(xs.min() - margin, xs.max() + margin), ylim=(ys.min() - margin, ys.max() + margin),
                aspect="equal", title=n, xlabel="x (m)", ylabel="y (m)")
@@ -225,10 +225,11 @@ def figures(run: dict) -> dict[str, str]:
     fig, ax = plt.subplots(figsize=(11, 4.2))
     for n in names:
         e = run["estimates"][n]
-        ax.plot(e["t"] + off, evaluate.error(truth, e, off), lw=1, color=colours[n], label=n)
+        ax.plot(e["t"] + off, evaluate.error(truth, e, off), lw=1, color=colours[n], label=n,
+                gid=f"error-{n}")
     if "bound" in run:
         b = run["bound"]
-        ax.plot(b["t"], b["rms"], "k--", lw=1.2, label="PCRB (RMS, ranges only)")
+        ax.plot(b["t"], b["rms"], "k--", lw=1.2, label="PCRB (RMS, ranges only)", gid="pcrb")
     ax.set(xlabel="scenario time (s)", ylabel="position error (m)", yscale="log",
            ylim=(0.005, None), title="horizontal position error against truth")
     ax.grid(True, which="both", alpha=0.3)
@@ -241,7 +242,7 @@ def figures(run: dict) -> dict[str, str]:
         lo, hi = evaluate.NEES_BAND_95
         fig, axes = _grid(len(series), (5.5, 3.0), cols=2)
         for ax, (n, (t, q)) in zip(axes, series.items()):
-            ax.plot(t, q, ".", ms=2, color=colours[n])
+            ax.plot(t, q, ".", ms=2, color=colours[n], gid=f"nees-{n}")
             ax.axhspan(lo, hi, color="0.85", zorder=0, label="95 % band, 2 dof")
             ax.axhline(2.0, color="0.4", lw=0.8)
             ax.set(yscale="log", title=f"{n}: NEES", xlabel="scenario time (s)", ylabel="NEES")
@@ -256,7 +257,8 @@ def figures(run: dict) -> dict[str, str]:
         for ax, (n, kinds) in zip(axes, by.items()):
             for i, (kind, (dim, t, q, ok)) in enumerate(sorted(kinds.items())):
                 c = f"C{i}"
-                ax.plot(t[ok], q[ok], ".", ms=2, color=c, label=f"{kind} ({dim} dof)")
+                ax.plot(t[ok], q[ok], ".", ms=2, color=c, label=f"{kind} ({dim} dof)",
+                        gid=f"nis-{n}-{kind}")
                 ax.plot(t[~ok], q[~ok], "x", ms=4, color=c)
                 lo, hi = chi2.ppf([0.025, 0.975], dim)
                 ax.hlines([lo, hi], t.min(), t.max(), colors=c, linestyles="--", lw=0.8)
@@ -278,9 +280,10 @@ def nis_series(run: dict) -> dict[str, dict[str, tuple]]:
                 (r["t"] + run["offset_s"], r["nis"], r["accepted"]))
     out: dict = {}
     for n in sorted(rows):
-        for (kind, dim), v in sorted(rows[n].items()):
+        dims = Counter(kind for kind, _ in rows[n])  # a kind of several dimensions (TDOA with
+        for (kind, dim), v in sorted(rows[n].items()):  # an anchor out): one entry each
             a = np.array(v, dtype=float)
-            out.setdefault(n, {})[kind if kind not in out.get(n, {}) else f"{kind}/{dim}"] = (
+            out.setdefault(n, {})[kind if dims[kind] == 1 else f"{kind}/{dim}"] = (
                 int(dim), a[:, 0], a[:, 1], a[:, 2].astype(bool))
     return out
 
