@@ -37,7 +37,7 @@ from navtwin.protocols.recording import FAULTS
 
 from . import evaluate
 from .audit import AuditError, audit
-from .report import write_report
+from .report import ReportError, write_report
 
 HOST_STOP_S = 30.0
 
@@ -147,8 +147,11 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
         except AuditError as e:
             report["audit"] = {"ok": False, "error": str(e)}
     (d / "report.json").write_text(json.dumps(report, indent=2) + "\n")
-    if plot and report.get("plot"):  # matplotlib is there: the full report too
-        report["html"] = str(write_report(d)["html"])
+    if plot and report.get("plot") and report["errors"]:  # matplotlib is there: the full report
+        try:
+            report["html"] = str(write_report(d)["html"])
+        except ReportError as e:
+            raise LabError(f"the report failed: {e}") from None
     return report
 
 
