@@ -43,6 +43,9 @@ def register(sub) -> None:
                    help="record every chunk read, with its arrival time, in a new directory, "
                         "not a symbolic link ('navtwin replay DIR' then gives the same output); "
                         "flushed every 0.5 s, so a killed run leaves a replayable recording")
+    p.add_argument("--innovations", metavar="FILE",
+                   help="also write one JSON line per fusion-track update (t, vehicle, filter, "
+                        "kind, dim, nis, accepted) to FILE; the estimates are the same without")
     p.add_argument("--duration", type=number(0, MAX_DURATION_S, above=True), metavar="S",
                    help=f"stop after S seconds of wall time, S {span(0, MAX_DURATION_S, True)} "
                         "(default: run until SIGINT/SIGTERM)")
@@ -79,14 +82,14 @@ def config_and_filters(args, default_config: bool):
     return cfg, args.filters
 
 
-def open_out(spec: str):
+def open_out(spec: str, option: str = "--out"):
     try:
         return open_output(spec)
     except OSError as e:
-        raise UsageError(f"--out {spec}: {e.strerror}; choose a writable file or -") from None
+        raise UsageError(f"{option} {spec}: {e.strerror}; choose a writable file or -") from None
 
 
-def close_out(out) -> str | None:
+def close_out(out, option: str = "--out") -> str | None:
     """Close (or flush, for stdout) the estimate output; the failure, if any, as one line."""
     try:
         out.flush() if out is sys.stdout else out.close()
@@ -98,7 +101,7 @@ def close_out(out) -> str | None:
                 out.close()  # what could not be written is lost: close the file all the same
             except OSError:
                 pass
-        return f"--out {write_failure(out.name, e)}"
+        return f"{option} {write_failure(out.name, e)}"
     return None
 
 
@@ -111,12 +114,15 @@ def run(args) -> int:
         raise UsageError("no input port; give --xbee PORT and/or --sins PORT, and --nanoloc PORT")
     cfg, filters = config_and_filters(args, default_config=True)
     out = open_out(args.out)
+    innovations = None
     stop = threading.Event()
     error = None
     try:
+        if args.innovations:
+            innovations = open_out(args.innovations, "--innovations")
         service = Service(ports, cfg, filters or cfg.filters, out=out, escaped=args.escaped,
                           baud=args.baud, record=args.record, status=sys.stderr,
-                          status_period_s=args.status_period)
+                          status_period_s=args.status_period, innovations=innovations)
         with stop_on_signals(stop):
             service.run(stop, duration_s=args.duration)
     except StartError as e:
@@ -124,8 +130,10 @@ def run(args) -> int:
     finally:
         # the run's own write error comes first; closing may fail on what was left buffered
         error = close_out(out)
+        if innovations is not None:
+            error = error or close_out(innovations, "--innovations")
     if service.error is not None:
-        where = "--out" if isinstance(service.error, OutputError) else "--record"
+        where = service.error.option if isinstance(service.error, OutputError) else "--record"
         raise UsageError(f"{where} {service.error}")
     if error:
         raise UsageError(error)

@@ -24,7 +24,8 @@ def register(sub) -> None:
     p.add_argument("--filters", metavar="LIST", type=_filter_list,
                    help="the host's --filters, which checks the names (default: its config's)")
     p.add_argument("--dir", metavar="DIR", help="run directory (default: a new private temp dir)")
-    p.add_argument("--no-plot", dest="plot", action="store_false", help="skip report.png")
+    p.add_argument("--no-plot", dest="plot", action="store_false",
+                   help="skip report.png and report.html/.md")
     p.set_defaults(func=run)
 
 
@@ -62,4 +63,5 @@ def print_report(report: dict) -> None:
         print("\naudit of the host against the fault ledger:\n" +
               (audit_report(a) if "ports" in a else f"not possible: {a['error']}"), end="")
     print(f"\nrun directory: {report['dir']}" + (f"\nplot: {report['plot']}" if report.get("plot")
-                                                  else ""))
+                                                  else "") +
+          (f"\nreport: {report['html']}" if report.get("html") else ""))

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -223,6 +223,9 @@ class Estimator:
         self._at_rest = np.zeros(4)
         self._i2 = np.eye(2)
         self._gyro_limit = math.radians(cfg.gyro_range_dps)
+        # opt-in: fn(t, filter, kind, dim, nis, accepted) per gated fusion update (the NIS
+        # the report draws); None costs the tracks one attribute test
+        self.on_innovation: Callable | None = None
         self.counts: Counter = Counter()
         self.input_rejections: Counter = Counter()
         self.emitted: Counter = Counter()

@@ -12,6 +12,8 @@ the pure WSN track; ``cov`` is the estimator's covariance of (x, y, vx, vy), row
 ``extrapolated`` is true when the track had no aiding for the estimator's
 ``extrapolated_after_s`` before ``t`` (a position update for kf/ekf/ukf, a fix for wsn, an
 IMU sample for sins), or the track waits to re-initialise: the estimate is a prediction only.
+Innovations (opt-in, ``navtwin host --innovations FILE``): one JSON line per gated update of
+a fusion track, :func:`innovation_line`; writing them changes no estimate.
 Status, progress and summary lines go to stderr as one JSON
 object each, ``{"status": {...}}``, ``{"progress": {...}}``, ``{"summary": {...}}``; they
 carry wall-clock figures (rates, latency) and are not part of the deterministic output.
@@ -35,6 +37,19 @@ def estimate_line(e) -> str:
                        "yaw": None if e.yaw is None else float(e.yaw),
                        "cov": np.asarray(e.cov, dtype=float).tolist(),
                        "extrapolated": bool(e.extrapolated)},
+                      separators=(",", ":")) + "\n"
+
+
+INNOVATION_KEYS = ("t", "vehicle", "filter", "kind", "dim", "nis", "accepted")
+
+
+def innovation_line(t: float, vehicle: int, filter: str, kind: str, dim: int, nis: float,
+                    accepted: bool) -> str:
+    """The line of one gated fusion update (``navtwin host --innovations``): its time (the
+    measurement's, host time), kind ("accel", "fix", "tdoa", "range"...), the measurement's
+    dimension, NIS = y^T S^-1 y and whether it passed the chi-square gate."""
+    return json.dumps(dict(zip(INNOVATION_KEYS, (float(t), int(vehicle), str(filter), str(kind),
+                                                 int(dim), float(nis), bool(accepted)))),
                       separators=(",", ":")) + "\n"
 
 

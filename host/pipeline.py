@@ -44,6 +44,7 @@ from __future__ import annotations
 import heapq
 import math
 from collections import Counter
+from functools import partial
 from typing import Any, Callable
 
 from navtwin.protocols import adis16350, nanoloc, sins, xbee
@@ -61,6 +62,11 @@ DB_PERIOD_S = 5.0  # AT query period, in arrival time
 #: ATAP1 would switch it under the host)
 AT_QUERIES = (b"DB", b"AP")
 T_US_TICK_S = 1e-6
+
+
+def _with_vehicle(fn: Callable, vehicle: int, t, filter, kind, dim, nis, accepted) -> None:
+    """An estimator's innovation, passed on with its vehicle's number."""
+    fn(t, vehicle, filter, kind, dim, nis, accepted)
 
 
 class Vehicle:
@@ -100,7 +106,8 @@ class Pipeline:
 
     def __init__(self, config: HostConfig, filters: tuple[str, ...] | None = None, *,
                  inputs: tuple[str, ...] = INPUTS, escaped: bool = True,
-                 make_estimator: Callable | None = None, db_period_s: float = DB_PERIOD_S) -> None:
+                 make_estimator: Callable | None = None, db_period_s: float = DB_PERIOD_S,
+                 on_innovation: Callable | None = None) -> None:
         unknown = set(inputs) - set(INPUTS)
         if unknown:
             raise ValueError(f"unknown input {sorted(unknown)[0]!r}; use {', '.join(INPUTS)}")
@@ -109,6 +116,9 @@ class Pipeline:
         make_estimator = make_estimator or Estimator  # EstimatorConfig -> estimator
         self.vehicles = [Vehicle(n, v, make_estimator(config.estimator_config(self.filters, n)))
                          for n, v in enumerate(config.vehicles, 1)]
+        if on_innovation is not None:  # opt-in: fn(t, vehicle, filter, kind, dim, nis, accepted)
+            for v in self.vehicles:
+                v.estimator.on_innovation = partial(_with_vehicle, on_innovation, v.number)
         self._by_router = {v.router: v for v in self.vehicles if v.router is not None}
         self._by_tag = {v.tag: v for v in self.vehicles if v.tag is not None}
         self.inputs = tuple(p for p in INPUTS if p in inputs)

@@ -48,7 +48,7 @@ from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter, write_failure
 
 from .config import HostConfig
-from .output import Latency, estimate_line, info_line
+from .output import Latency, estimate_line, info_line, innovation_line
 from .pipeline import INPUTS, Pipeline
 
 READ_TIMEOUT_S = 0.1  # how often a reader looks at the stop flag
@@ -59,7 +59,12 @@ HOST_SOURCE = "navtwin host"  # a host recording's meta "source"
 
 
 class OutputError(Exception):
-    """The estimate output cannot be written: one line naming it and the fix."""
+    """The estimate (or innovation) output cannot be written: one line naming it and the fix;
+    ``option`` is the command line's name of that output."""
+
+    def __init__(self, message: str, option: str = "--out") -> None:
+        super().__init__(message)
+        self.option = option
 
 
 class StartError(Exception):
@@ -231,7 +236,8 @@ class Service:
                  out: TextIO, escaped: bool = True, baud: int = DEFAULT_BAUD,
                  record: str | os.PathLike | None = None, status: TextIO | None = None,
                  status_period_s: float = 2.0, make_estimator=None,
-                 on_lines: Callable[[str, int, int], None] | None = None) -> None:
+                 on_lines: Callable[[str, int, int], None] | None = None,
+                 innovations: TextIO | None = None) -> None:
         unknown = set(ports) - set(INPUTS)
         if unknown or not ports:
             raise ValueError(f"ports must be some of {', '.join(INPUTS)}")
@@ -241,8 +247,10 @@ class Service:
         # on_lines(port, bytes of that port processed, monotonic ns) after each batch of lines
         self.on_lines = on_lines
         self.escaped, self.baud = escaped, baud
+        self.innovations = innovations  # the fusion tracks' innovation lines, if given
         self.pipeline = Pipeline(config, self.filters, inputs=tuple(self.ports), escaped=escaped,
-                                 make_estimator=make_estimator)
+                                 make_estimator=make_estimator,
+                                 on_innovation=None if innovations is None else self._innovation)
         self.latency = Latency()
         self.record_dir = None if record is None else Path(record)
         self.recorder: RecordingWriter | None = None
@@ -390,6 +398,13 @@ class Service:
             self.latency.add(done - t_read)
             if self.on_lines is not None:
                 self.on_lines(port, self.bytes[port], done)
+
+    def _innovation(self, *fields) -> None:
+        try:
+            self.innovations.write(innovation_line(*fields))
+        except OSError as e:
+            raise OutputError(write_failure(getattr(self.innovations, "name", "the innovations"), e),
+                              "--innovations") from None
 
     # -- reporting ---------------------------------------------------------------------------
     def _info(self, kind: str, body: dict) -> None:

@@ -19,6 +19,28 @@ from scipy.stats import chi2
 PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
 PAPER_MAX_ERROR_M = {"sins": 1.27, "wsn": 0.94}
 
+#: The published figures the report puts beside ours, by scenario (keys of
+#: :func:`position_errors`). 001's loosely coupled filter is our kf, its tightly coupled one
+#: our ekf and ukf (both measure the ranges); FATCI has no track here. From
+#: shared/specs/scenarios.md.
+_001_LC = {"max": 0.3748, "mean": 0.0956, "x_var": 0.0077, "y_var": 0.0052}
+_001_TC = {"max": 0.2344, "mean": 0.0682, "x_var": 0.0049, "y_var": 0.0011}
+PAPER_FIGURES = {
+    "office": {"paper": "000", "note": "section 3.3 and 4.3, mean error of each filter and max "
+               "of the pure SINS and WSN on the office run (its variances are of the error "
+               "magnitude, not per axis, and are not shown)",
+               "figures": {n: {"mean": m, **({"max": PAPER_MAX_ERROR_M[n]}
+                                              if n in PAPER_MAX_ERROR_M else {})}
+                           for n, m in PAPER_MEAN_ERROR_M.items()}},
+    "corridor": {"paper": "001", "note": "Table 1, the corridor's two loops; loosely coupled "
+                 "(LC) beside kf, tightly coupled (TC) beside ekf and ukf (FATCI: max 0.1488, "
+                 "mean 0.0384 m has no track here)",
+                 "figures": {"kf": _001_LC, "ekf": _001_TC, "ukf": _001_TC}},
+    "corridor-outage": {"paper": "001", "note": "max error with anchor 2 silent twice; LC beside "
+                        "kf, TC beside ekf and ukf (FATCI 0.15 m has no track here)",
+                        "figures": {"kf": {"max": 1.49}, "ekf": {"max": 0.25}, "ukf": {"max": 0.25}}},
+}
+
 
 def load_truth(path: str | Path) -> dict[str, np.ndarray]:
     with open(path, newline="") as f:

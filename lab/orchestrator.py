@@ -12,9 +12,11 @@ Everything lands in one run directory (private, 0700)::
     DIR/emulator/       the emulator's recording: port bytes, truth.csv, scenario.toml
     DIR/host/           the host's recording ('navtwin replay DIR/host' gives the same lines)
     DIR/estimates.jsonl the host's estimate lines
+    DIR/innovations.jsonl the fusion tracks' innovations (NIS), 'navtwin host --innovations'
     DIR/host.log        the host's status lines and its final summary
     DIR/report.json     errors per filter, with the paper's figures
     DIR/report.png      tracks and errors over time (with matplotlib)
+    DIR/report.html, report.md  the run's report (with matplotlib; lab.report, 'navtwin report')
 """
 from __future__ import annotations
 
@@ -37,6 +39,7 @@ from navtwin.protocols.recording import FAULTS
 from . import evaluate
 from .live import LiveErrors, Tail
 from .audit import AuditError, audit
+from .report import ReportError, write_report
 
 HOST_STOP_S = 30.0
 
@@ -130,6 +133,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
             cmd = [sys.executable, "-m", "navtwin", "host", "--xbee", lab.ports["xbee"],
                    "--nanoloc", lab.ports["nanoloc"], "--config", config,
                    "--record", str(d / "host"), "--out", str(d / "estimates.jsonl"),
+                   "--innovations", str(d / "innovations.jsonl"),
                    "--status-period", str(min(watch.tick_s, 2.0))]
             if filters is not None:
                 cmd += ["--filters", filters]
@@ -206,6 +210,11 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
         except AuditError as e:
             report["audit"] = {"ok": False, "error": str(e)}
     (d / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    if plot and report.get("plot") and report["errors"]:  # matplotlib is there: the full report
+        try:
+            report["html"] = str(write_report(d)["html"])
+        except ReportError as e:
+            raise LabError(f"the report failed: {e}") from None
     return report
 
 

@@ -55,12 +55,15 @@ def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,
 
 def run_in_memory(scenario: str | Path | Scenario, seed: int | None = None, *,
                   config=None, filters: tuple[str, ...] | None = None,
-                  duration: float | None = None, make_estimator=None) -> tuple[list, Pipeline]:
+                  duration: float | None = None, make_estimator=None,
+                  on_innovation=None) -> tuple[list, Pipeline]:
     """The host's estimates on the emulated lab of *scenario* and *seed* (the scenario's
     shipped host config and its filters unless *config*/*filters* are given; the whole
-    scenario unless *duration* s), and the pipeline (its ``stats()``)."""
+    scenario unless *duration* s), and the pipeline (its ``stats()``); *on_innovation* as
+    for the :class:`~host.pipeline.Pipeline`."""
     kw, chunks = lab_chunks(scenario, seed, duration=duration, config=config, filters=filters)
-    pipe = Pipeline(kw.pop("config"), kw.pop("filters"), make_estimator=make_estimator, **kw)
+    pipe = Pipeline(kw.pop("config"), kw.pop("filters"), make_estimator=make_estimator,
+                    on_innovation=on_innovation, **kw)
     estimates: list = []
     drive(pipe, chunks, estimates.extend)
     return estimates, pipe

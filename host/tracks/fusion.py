@@ -112,6 +112,8 @@ class FusionTrack(Track):
         f = self.filter
         try:
             inn = f.update(z, R, meas, chi2_gate(meas.dim, cfg.gate_probability))
+            if est.on_innovation is not None:
+                est.on_innovation(t, self.name, kind, meas.dim, inn.nis, inn.accepted)
             if not inn.accepted:
                 gated_for = t - self._gated_since.setdefault(kind, t)
                 if gated_for > cfg.gate_reopen_s and kind not in POSITION_KINDS:

@@ -5,6 +5,8 @@ import sys
 
 import pytest
 
+from navtwin.lab.report import fmt
+
 pytestmark = [pytest.mark.pty, pytest.mark.slow]
 
 
@@ -31,6 +33,18 @@ def test_lab_runs_and_reports_against_truth(tmp_path):
     live = [json.loads(x) for x in p.stderr.decode().splitlines() if x.startswith("{")]
     assert any(set(x.get("error_m", {})) == set(errors) for x in live)
     assert any("host" in x for x in live)
+    # the host wrote its innovations; --no-plot made no report, navtwin report makes it from
+    # the live run's files, with the run's host-time offset: the numbers of report.json
+    inn = [json.loads(x) for x in (d / "innovations.jsonl").read_text().splitlines()]
+    assert {r["filter"] for r in inn} == {"kf", "ekf", "ukf"}
+    assert not (d / "report.html").exists()
+    made = subprocess.run([sys.executable, "-m", "navtwin", "report", str(d)],
+                          capture_output=True, timeout=120)
+    assert made.returncode == 0, made.stderr.decode()[-2000:]
+    md = (d / "report.md").read_text()
+    for name, e in errors.items():
+        assert fmt(e["mean"]) in md and fmt(e["max"]) in md, name
+    assert f"| host time offset (s) | {report['time_offset_s']:.6f} |" in md
 
 
 def test_lab_reports_a_bad_scenario_in_one_line(tmp_path):
