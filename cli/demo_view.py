@@ -72,11 +72,11 @@ class LiveView(Watch):
 
     def _tracks(self, tracks: dict) -> Table:
         t = Table(title="tracks: position error against truth (m)", title_justify="left")
-        for col in ("track", "now", "mean", "max", "estimates", "paper 000 mean"):
+        pub = evaluate.PAPER_FIGURES.get(self.info.get("scenario"), {})
+        for col in ("track", "now", "mean", "max", "estimates",
+                    f"paper {pub['paper']} mean (max)" if pub else "paper"):
             t.add_column(col, justify="left" if col == "track" else "right")
-        office = self.info.get("scenario") == "office"
         for name, e in sorted(tracks.items()):
-            paper = evaluate.PAPER_MEAN_ERROR_M.get(name) if office else None
             t.add_row(name, _m(e.last), _m(e.mean), _m(e.max), str(e.n),
-                      "" if paper is None else f"{paper:.2f}")
+                      evaluate.paper_cell(self.info.get("scenario"), name))
         return t

@@ -57,7 +57,8 @@ def print_report(report: dict) -> None:
     from navtwin.lab import evaluate
     from navtwin.lab.audit import report as audit_report
 
-    print(evaluate.table(report["errors"]) if report["errors"] else "no estimates to compare")
+    print(evaluate.table(report["errors"], report["emulator"].get("scenario"))
+          if report["errors"] else "no estimates to compare")
     if "audit" in report:  # the scenario injected faults
         a = report["audit"]
         print("\naudit of the host against the fault ledger:\n" +

@@ -19,12 +19,9 @@ from scipy.stats import chi2
 PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
 PAPER_MAX_ERROR_M = {"sins": 1.27, "wsn": 0.94}
 
-#: The published figures the report puts beside ours, by scenario (keys of
-#: :func:`position_errors`). 001's loosely coupled filter is our kf, its tightly coupled one
-#: our ekf and ukf (both measure the ranges); FATCI has no track here. From
-#: shared/specs/scenarios.md.
-_001_LC = {"max": 0.3748, "mean": 0.0956, "x_var": 0.0077, "y_var": 0.0052}
-_001_TC = {"max": 0.2344, "mean": 0.0682, "x_var": 0.0049, "y_var": 0.0011}
+#: The published figures the report and the sweep put beside ours, by scenario: per track,
+#: keys of :func:`position_errors`. Paper 001's LC, TC and FATCI are our lc, tc and fatci.
+#: From shared/specs/scenarios.md.
 PAPER_FIGURES = {
     "office": {"paper": "000", "note": "section 3.3 and 4.3, mean error of each filter and max "
                "of the pure SINS and WSN on the office run (its variances are of the error "
@@ -32,13 +29,15 @@ PAPER_FIGURES = {
                "figures": {n: {"mean": m, **({"max": PAPER_MAX_ERROR_M[n]}
                                               if n in PAPER_MAX_ERROR_M else {})}
                            for n, m in PAPER_MEAN_ERROR_M.items()}},
-    "corridor": {"paper": "001", "note": "Table 1, the corridor's two loops; loosely coupled "
-                 "(LC) beside kf, tightly coupled (TC) beside ekf and ukf (FATCI: max 0.1488, "
-                 "mean 0.0384 m has no track here)",
-                 "figures": {"kf": _001_LC, "ekf": _001_TC, "ukf": _001_TC}},
-    "corridor-outage": {"paper": "001", "note": "max error with anchor 2 silent twice; LC beside "
-                        "kf, TC beside ekf and ukf (FATCI 0.15 m has no track here)",
-                        "figures": {"kf": {"max": 1.49}, "ekf": {"max": 0.25}, "ukf": {"max": 0.25}}},
+    "corridor": {"paper": "001", "note": "Table 1, the corridor's two loops",
+                 "figures": {"lc": {"max": 0.3748, "mean": 0.0956, "x_var": 0.0077, "y_var": 0.0052},
+                             "tc": {"max": 0.2344, "mean": 0.0682, "x_var": 0.0049, "y_var": 0.0011},
+                             "fatci": {"max": 0.1488, "mean": 0.0384, "x_var": 0.0017,
+                                       "y_var": 0.0002}}},
+    "corridor-outage": {"paper": "001", "note": "section 5.3, max error with anchor 2 silent "
+                        "from 18 to 23 s and from 40 to 45 s",
+                        "figures": {"lc": {"max": 1.49}, "tc": {"max": 0.25},
+                                    "fatci": {"max": 0.15}}},
 }
 
 
@@ -137,14 +136,21 @@ def position_errors(truth: dict, estimates: dict, offset_s: float = 0.0,
     return out
 
 
-def table(errors: dict[str, dict[str, float]]) -> str:
-    """A text table of the errors beside paper 000's figures."""
-    lines = [f"{'filter':<7}{'mean m':>9}{'max m':>9}{'rms m':>9}{'n':>7}   paper 000 mean (max)"]
+def paper_cell(scenario: str | None, name: str) -> str:
+    """The published mean (max) of track *name* on *scenario*, as text ('' if none)."""
+    fig = PAPER_FIGURES.get(scenario, {}).get("figures", {}).get(name, {})
+    return " ".join(f"{fig[k]:.2f}" if k == "mean" else f"({fig[k]:.2f})"
+                    for k in ("mean", "max") if k in fig)
+
+
+def table(errors: dict[str, dict[str, float]], scenario: str | None = "office") -> str:
+    """A text table of the errors beside the paper's figures for *scenario* (PAPER_FIGURES)."""
+    pub = PAPER_FIGURES.get(scenario)
+    head = f"paper {pub['paper']} mean (max)" if pub else ""
+    lines = [f"{'filter':<7}{'mean m':>9}{'max m':>9}{'rms m':>9}{'n':>7}   {head}".rstrip()]
     for name, e in errors.items():
-        paper = PAPER_MEAN_ERROR_M.get(name)
-        ref = "" if paper is None else f"{paper:.2f}" + (
-            f" ({PAPER_MAX_ERROR_M[name]:.2f})" if name in PAPER_MAX_ERROR_M else "")
-        lines.append(f"{name:<7}{e['mean']:9.3f}{e['max']:9.3f}{e['rms']:9.3f}{e['n']:7d}   {ref}")
+        lines.append(f"{name:<7}{e['mean']:9.3f}{e['max']:9.3f}{e['rms']:9.3f}{e['n']:7d}   "
+                     f"{paper_cell(scenario, name)}".rstrip())
     return "\n".join(lines)
 
 

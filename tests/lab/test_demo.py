@@ -9,6 +9,7 @@ import pytest
 
 from navtwin.emulator.truth import HEADER, csv_rows
 from navtwin.emulator.world import World
+from navtwin.host import tracks
 from navtwin.host.output import estimate_line
 from navtwin.lab import evaluate
 from navtwin.lab.live import LiveErrors, Tail
@@ -67,7 +68,7 @@ def test_demo_runs_every_track_and_ends_with_the_table_and_the_run_directory(tmp
     assert p.returncode == 0, p.stderr.decode()[-2000:]
     out, err = p.stdout.decode(), p.stderr.decode()
     report = json.loads((d / "report.json").read_text())
-    assert set(report["errors"]) == {"sins", "wsn", "kf", "ekf", "ukf"}  # every track
+    assert set(report["errors"]) == set(tracks.names())  # every track
     rows = {line.split()[0]: line.split()[1:] for line in out.splitlines() if line.strip()}
     for name, e in report["errors"].items():  # the table on stdout is the report's
         assert rows[name][:2] == [f"{e['mean']:.3f}", f"{e['max']:.3f}"]
