@@ -18,6 +18,15 @@ from scipy.stats import chi2
 #: Paper 000, section 3.3 and 4.3: mean position error (m) on the office run.
 PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
 PAPER_MAX_ERROR_M = {"sins": 1.27, "wsn": 0.94}
+#: The published figures per scenario (the sweep's tables put them beside ours): the paper, mean
+#: and max error (m) per track, and the paper's own name of a track where it differs. Paper 001's
+#: corridor, Table 1: its LC (loosely coupled) is our kf, its TC (tightly coupled) our ekf; its
+#: FATCI has no track yet (mean 0.0384, max 0.1488).
+PAPER_FIGURES = {
+    "office": {"paper": "000", "mean": PAPER_MEAN_ERROR_M, "max": PAPER_MAX_ERROR_M},
+    "corridor": {"paper": "001", "mean": {"kf": 0.0956, "ekf": 0.0682},
+                 "max": {"kf": 0.3748, "ekf": 0.2344}, "label": {"kf": "LC", "ekf": "TC"}},
+}
 
 
 def load_truth(path: str | Path) -> dict[str, np.ndarray]:
