@@ -43,7 +43,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from scipy.stats import t as student_t
 
-from navtwin import __version__
+from navtwin.protocols import __version__
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
 from navtwin.host.output import estimate_line
 from navtwin.host.replay import emulator_settings

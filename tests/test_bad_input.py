@@ -125,6 +125,12 @@ CASES = {
     "lab --duration nan": (["lab", "--duration", "nan", "--dir", "run"], {}, ["--duration"]),
     "lab --seed -1": (["lab", "--seed", "-1", "--dir", "run"], {}, ["--seed"]),
     "lab --filters ''": (["lab", "--filters", "", "--dir", "run"], {}, ["--filters"]),
+    # navtwin sweep
+    "sweep --seeds 5..2": (["sweep", "--seeds", "5..2"], {}, ["--seeds", "A <= B"]),
+    "sweep --filters kf,nope": (["sweep", "--seeds", "1..2", "--filters", "kf,nope"], {},
+                                ["--filters", "nope"]),
+    "sweep --scheduler unreachable": (["sweep", "--seeds", "1..2", "--scheduler",
+                                       "tcp://127.0.0.1:1"], {}, ["--scheduler", "LocalCluster"]),
     # navtwin decode
     "decode --baud 0": (["decode", "x.bin", "--format", "sins", "--baud", "0"],
                         {"x.bin": ""}, ["--baud", "[50, 4000000]"]),
