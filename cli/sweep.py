@@ -114,7 +114,7 @@ def run(args) -> int:
         raise UsageError(str(e)) from None
     summary = sweep.summarise(result.rows, result.filters)
     if args.results:
-        sweep.write_block(args.results, sc.name, sweep.markdown(summary, sc.name))
+        sweep.write_block(args.results, sc.name, sweep.markdown(summary, sc.name, result.meta))
     if args.json:
         print(json.dumps(_finite({"summary": summary, "out": str(result.out),
                                   "computed_tasks": result.tasks, "meta": result.meta})))

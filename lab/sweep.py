@@ -72,14 +72,19 @@ class SweepError(Exception):
 
 
 def code_version() -> str:
-    """navtwin's version, plus ``git describe`` of its checkout when there is one."""
-    root = Path(__file__).resolve().parent.parent
+    """navtwin's version, plus ``git describe`` of its checkout when there is one, with
+    ``-dirty`` when a .py or .toml file differs from it (edited docs do not change a cell)."""
+    root = str(Path(__file__).resolve().parent.parent)
     try:
-        out = subprocess.run(["git", "-C", str(root), "describe", "--always", "--dirty"],
-                             capture_output=True, text=True, timeout=10)
+        head = subprocess.run(["git", "-C", root, "describe", "--always"], capture_output=True,
+                              text=True, timeout=10)
+        diff = subprocess.run(["git", "-C", root, "diff", "--quiet", "HEAD", "--", "*.py",
+                               "*.toml"], capture_output=True, timeout=10)
     except (OSError, subprocess.SubprocessError):
         return __version__
-    return f"{__version__}+{out.stdout.strip()}" if out.returncode == 0 else __version__
+    if head.returncode != 0:
+        return __version__
+    return f"{__version__}+{head.stdout.strip()}" + ("-dirty" if diff.returncode else "")
 
 
 def scenario_hash(sc: Scenario) -> str:
@@ -367,13 +372,21 @@ def table(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def markdown(summary: dict, scenario: str) -> str:
+def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
     """The summary as Markdown tables, with the published figures of *scenario*'s paper
-    (evaluate.PAPER_FIGURES) beside ours."""
+    (evaluate.PAPER_FIGURES) beside ours; first a line naming the sweep of *meta* (a
+    Result's) when given."""
     paper = evaluate.PAPER_FIGURES.get(scenario)
     cols = list(FIGURES.values())
     extra = [f"{paper['paper']} mean m", f"{paper['paper']} max m"] if paper else []
-    lines = ["| filter | seeds | " + " | ".join(cols + extra) + " |",
+    lines = []
+    if meta:
+        a, b = meta["seeds"]
+        time = "" if meta["duration_s"] is None else f", first {meta['duration_s']:g} s"
+        lines += [f"`{scenario}`, seeds {a}..{b}{time}; navtwin {meta['code_version']}, "
+                  f"scenario sha256 {meta['scenario_hash'][:12]}; ± is the 95 % Student-t "
+                  "half-width over seeds.", ""]
+    lines += ["| filter | seeds | " + " | ".join(cols + extra) + " |",
              "|---|---:|" + "---:|" * (len(cols) + len(extra))]
     for f, s in summary["filters"].items():
         cells = [_ci(s[m]) for m in FIGURES]
