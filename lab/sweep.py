@@ -400,8 +400,12 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
     for p in summary["pairs"]:
         lines.append(f"| {p['a']} - {p['b']} | {p['seeds']} | {_ci((p['diff'], p['half']), 4)} "
                      f"| {p['better'] + ' better' if p['better'] else 'not decided'} |")
-    lines += ["", f"Ranking by mean error (`<`: the paired 95 % CI excludes 0; `~`: it does not): "
-              f"`{summary['ranking']}`"]
+    rank = (f"Ranking by mean error (`<`: the paired 95 % CI excludes 0; `~`: it does not): "
+            f"`{summary['ranking']}`")
+    if paper:
+        published = sorted(paper["mean"], key=paper["mean"].get)
+        rank += f"; {paper['paper']}'s by its published means: `{' < '.join(published)}`"
+    lines += ["", rank]
     return "\n".join(lines)
 
 
