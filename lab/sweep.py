@@ -402,7 +402,7 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
                      f"| {p['better'] + ' better' if p['better'] else 'not decided'} |")
     rank = (f"Ranking by mean error (`<`: the paired 95 % CI excludes 0; `~`: it does not): "
             f"`{summary['ranking']}`")
-    if paper:
+    if paper and paper["mean"]:
         published = sorted(paper["mean"], key=paper["mean"].get)
         rank += f"; {paper['paper']}'s by its published means: `{' < '.join(published)}`"
     lines += ["", rank]
