@@ -12,7 +12,7 @@ number of workers, change no cell::
     print(sweep.table(sweep.summarise(result.rows, result.filters)))
 
 Tasks are chunks of seeds worth at least :data:`MIN_TASK_VIRTUAL_S` of scenario time (about
-0.3 s of work here; Dask's overhead is about 1 ms a task): one seed a task for the shipped
+0.2 s of work here; Dask's overhead is about 1 ms a task): one seed a task for the shipped
 scenarios, several for a short ``duration``. A seed that raises is run once more in its task; a
 task lost with its worker is resubmitted once by Dask (``retries=1``); a cell that fails twice
 is a row with ``status`` "failed" and the error's line, never dropped.
@@ -51,7 +51,7 @@ from navtwin.host.replay import emulator_settings
 from . import evaluate
 from .run import run_in_memory, truth
 
-#: Scenario seconds a task holds at least (seeds chunked): ~0.3 s of work at ~0.03 s per second.
+#: Scenario seconds a task holds at least (seeds chunked): 0.2-0.7 s of work here.
 MIN_TASK_VIRTUAL_S = 10.0
 #: Seconds to wait for a named scheduler before refusing it.
 CONNECT_TIMEOUT_S = 10.0
