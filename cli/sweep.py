@@ -1,4 +1,4 @@
-"""``navtwin sweep``: the arguments of :func:`navtwin.lab.sweep.run`, a progress bar, and the table."""
+"""``navtwin sweep``: the arguments of :func:`navtwin.lab.sweep.run`, a progress bar, the table."""
 from __future__ import annotations
 
 import argparse

@@ -180,9 +180,9 @@ class Client:
             try:
                 self.client = DaskClient(address, timeout=f"{CONNECT_TIMEOUT_S}s")
             except (OSError, TimeoutError, ValueError) as e:
-                raise SweepError(f"--scheduler {address}: no scheduler answered ({_error_line(e)}); "
-                                 "start one (dask scheduler) or omit --scheduler for a "
-                                 "LocalCluster") from None
+                raise SweepError(f"--scheduler {address}: no scheduler answered "
+                                 f"({_error_line(e)}); start one (dask scheduler) or omit "
+                                 "--scheduler for a LocalCluster") from None
         else:
             import logging
 
@@ -315,7 +315,8 @@ def mean_ci(values) -> tuple[float, float]:
         return math.nan, math.nan
     if v.size < 2:
         return float(v.mean()), math.nan
-    return float(v.mean()), float(student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+    half = student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)
+    return float(v.mean()), float(half)
 
 
 def summarise(rows: list[dict], filters: Iterable[str]) -> dict:

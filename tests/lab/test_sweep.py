@@ -108,7 +108,8 @@ def test_the_cli_prints_json_and_writes_the_results_block(tmp_path, capsys):
     obj = json.loads(capsys.readouterr().out)
     assert obj["computed_tasks"] == 1 and set(obj["summary"]["filters"]) == {"kf", "ekf"}
     text = doc.read_text()
-    assert text.startswith("# Results\n\nmine\n\n<!-- results:office -->\n`office`, seeds 1..2, first 2 s")
+    assert text.startswith("# Results\n\nmine\n\n<!-- results:office -->\n"
+                           "`office`, seeds 1..2, first 2 s")
     assert "\n| filter | seeds |" in text
     assert text.endswith("<!-- /results:office -->\n\nafter\n") and "old" not in text
 
