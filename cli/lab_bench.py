@@ -48,6 +48,14 @@ def main(argv: list[str] | None = None) -> int:
     k.add_argument("--faults", action="store_true",
                    help="inject lab.soak.SOAK_FAULTS periodically, record the host and audit it "
                         "(no emulator restart then)")
+    sw = sub.add_parser("sweep", help="seeds/s of navtwin sweep, serial and on a LocalCluster")
+    sw.add_argument("--scenario", default="office")
+    sw.add_argument("--seeds", type=number(1, 1000, integer=True), default=8,
+                    help="1 to 1000 (default 8)")
+    sw.add_argument("--workers", type=number(1, 64, integer=True), default=2,
+                    help="LocalCluster workers, 1 to 64 (default 2)")
+    sw.add_argument("--duration", type=number(0, 3600, above=True),
+                    help="seconds of each run (default: the whole scenario)")
     args = p.parse_args(argv)
     if args.what == "latency":
         result = latency(args.seconds, args.filters)
@@ -56,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
                   else office_replay(args.seconds, args.filters))
     elif args.what == "in-memory":
         result = in_memory(args.scenario, args.seeds)
+    elif args.what == "sweep":
+        result = bench.sweep_rate(args.scenario, args.seeds, args.workers, args.duration)
     else:
         from navtwin.lab.soak import soak
 

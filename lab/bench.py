@@ -5,13 +5,15 @@ and the live soak (not tests: they measure, they do not assert).
     python -m navtwin.cli.lab_bench replay [DIR] [--seconds 60] [--filters all]
     python -m navtwin.cli.lab_bench in-memory [--scenario office] [--seeds 3]
     python -m navtwin.cli.lab_bench soak [--seconds 600] [--dir DIR]
+    python -m navtwin.cli.lab_bench sweep [--scenario office] [--seeds 8] [--workers 2]
 
 ``latency``: :func:`navtwin.host.bench.bench_latency` fed the office lab's first --seconds, made in
 memory (:func:`navtwin.lab.run.lab_chunks`). ``replay``: :func:`navtwin.host.bench.bench_replay` over DIR (a
 host or emulator recording), by default over a host recording of the office lab's first
 --seconds. ``in-memory``: seeds per second of the whole scenario through the host, in memory
 (:func:`navtwin.lab.run.run_in_memory`) against ``navtwin emulate --speed max --record`` then
-``navtwin replay`` (the disk in between). ``soak``: :func:`navtwin.lab.soak.soak`. Each prints one
+``navtwin replay`` (the disk in between). ``soak``: :func:`navtwin.lab.soak.soak`. ``sweep``: seeds
+per second of :func:`navtwin.lab.sweep.run`, serial and on a LocalCluster. Each prints one
 JSON object.
 """
 from __future__ import annotations
@@ -66,6 +68,29 @@ def in_memory(scenario: str = "office", seeds: int = 3) -> dict:
             "speedup": round(disk_s / memory_s, 2)}
 
 
+def sweep_rate(scenario: str = "office", seeds: int = 8, workers: int = 2,
+               duration: float | None = None) -> dict:
+    """Seeds per second of a sweep, in this process and on a LocalCluster of *workers* (its
+    start-up timed apart), and their ratio; the two tables are checked equal."""
+    from . import sweep
+
+    t = time.perf_counter()
+    serial = sweep.run(scenario, range(1, seeds + 1), duration=duration, serial=True)
+    serial_s = time.perf_counter() - t
+    t = time.perf_counter()
+    with sweep.Client(workers=workers) as client:
+        start_s = time.perf_counter() - t
+        t = time.perf_counter()
+        spread = sweep.run(scenario, range(1, seeds + 1), duration=duration, client=client)
+        cluster_s = time.perf_counter() - t
+    return {"benchmark": "lab-sweep", "scenario": scenario, "seeds": seeds, "workers": workers,
+            "virtual_s": duration or load_scenario(scenario).duration_s, "tasks": serial.tasks,
+            "serial_seeds_per_s": round(seeds / serial_s, 3),
+            "cluster_seeds_per_s": round(seeds / cluster_s, 3),
+            "cluster_start_s": round(start_s, 2), "ratio": round(serial_s / cluster_s, 2),
+            "same_cells": spread.rows == serial.rows}
+
+
 def benchmarks() -> dict:
     """The lab's benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks)."""
     def host_latency(quick: bool = False) -> dict:
@@ -86,5 +111,9 @@ def benchmarks() -> dict:
 
         return soak(120.0 if quick else 600.0)
 
+    def lab_sweep(quick: bool = False) -> dict:
+        """emulator+host: office seeds/s of navtwin sweep, serial and on 2 LocalCluster workers"""
+        return sweep_rate("office", 4 if quick else 8, 2, 20.0 if quick else None)
+
     return {"host-latency": host_latency, "host-replay": host_replay,
-            "lab-in-memory": lab_in_memory, "lab-soak": lab_soak}
+            "lab-in-memory": lab_in_memory, "lab-soak": lab_soak, "lab-sweep": lab_sweep}

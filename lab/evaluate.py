@@ -18,7 +18,6 @@ from scipy.stats import chi2
 #: Paper 000, section 3.3 and 4.3: mean position error (m) on the office run.
 PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
 PAPER_MAX_ERROR_M = {"sins": 1.27, "wsn": 0.94}
-
 #: The published figures the report and the sweep put beside ours, by scenario: per track,
 #: keys of :func:`position_errors`. Paper 001's LC, TC and FATCI are our lc, tc and fatci.
 #: From shared/specs/scenarios.md.

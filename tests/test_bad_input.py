@@ -130,6 +130,12 @@ CASES = {
     "demo --filters ''": (["demo", "--filters", "", "--dir", "run"], {}, ["--filters"]),
     "demo --scenario nowhere": (["demo", "--scenario", "nowhere", "--config", "office",
                                  "--dir", "run"], {}, ["nowhere"]),
+    # navtwin sweep
+    "sweep --seeds 5..2": (["sweep", "--seeds", "5..2"], {}, ["--seeds", "A <= B"]),
+    "sweep --filters kf,nope": (["sweep", "--seeds", "1..2", "--filters", "kf,nope"], {},
+                                ["--filters", "nope"]),
+    "sweep --scheduler unreachable": (["sweep", "--seeds", "1..2", "--scheduler",
+                                       "tcp://127.0.0.1:1"], {}, ["--scheduler", "LocalCluster"]),
     # navtwin decode
     "decode --baud 0": (["decode", "x.bin", "--format", "sins", "--baud", "0"],
                         {"x.bin": ""}, ["--baud", "[50, 4000000]"]),

@@ -22,4 +22,4 @@ def test_in_memory_run_takes_the_filters_and_duration_it_is_given():
 def test_the_lab_registers_its_benchmarks():
     from navtwin.lab.bench import benchmarks
 
-    assert {"host-latency", "host-replay", "lab-in-memory", "lab-soak"} <= set(benchmarks())
+    assert {"host-latency", "host-replay", "lab-in-memory", "lab-soak", "lab-sweep"} <= set(benchmarks())

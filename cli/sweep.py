@@ -1,0 +1,161 @@
+"""``navtwin sweep``: the arguments of :func:`navtwin.lab.sweep.run`, a progress bar, the table."""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import sys
+import tempfile
+
+from navtwin.common.limits import SEEDS, span
+
+from .emulate import DURATION_HELP, duration
+from .main import UsageError, number
+
+#: Seeds a sweep takes at most (its cells are held in memory).
+MAX_SEEDS = 100_000
+
+DESCRIPTION = """\
+Monte Carlo sweep: run the scenario once per seed in virtual time (the emulator into the host's
+pipeline in memory: no PTY, no file per seed), score each filter against truth, and print per
+filter the mean over seeds of its mean, max and RMS error and mean NEES, each with a 95 %
+Student-t interval, and the paired per-seed differences of mean error that decide a ranking.
+Runs on dask.distributed: a LocalCluster of --workers processes by default, the scheduler of
+--scheduler (or of Dask's config, scheduler-address) when one is named. Any number of workers
+gives the same table. One row per (scenario, seed, filter) goes to --out DIR as Parquet; a
+re-run into the same DIR computes only the cells it lacks (a DIR holding another scenario,
+code version, duration or filter set is refused)."""
+
+
+def seed_range(text: str) -> range:
+    """``A..B`` (both included) or one seed ``N``, each in SEEDS."""
+    a, dots, b = text.partition("..")
+    seed = number(*SEEDS, integer=True)
+    lo = seed(a.strip())
+    hi = seed(b.strip()) if dots else lo
+    if hi < lo:
+        raise argparse.ArgumentTypeError(f"{text}: the range ends before it starts; write A..B "
+                                         "with A <= B, e.g. 1..100")
+    if hi - lo >= MAX_SEEDS:
+        raise argparse.ArgumentTypeError(f"{text}: {hi - lo + 1} seeds; a sweep takes at most "
+                                         f"{MAX_SEEDS}, split it into several --out runs")
+    return range(lo, hi + 1)
+
+
+def filter_names(text: str) -> tuple[str, ...]:
+    from navtwin.host import tracks
+
+    names = tracks.names()
+    if text.strip() == "all":
+        return names
+    chosen = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
+    unknown = [n for n in chosen if n not in names]
+    if unknown or not chosen:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: {'unknown filter ' + ', '.join(unknown) if unknown else 'no filter given'}"
+            f"; give a comma list of {', '.join(names)}, or all")
+    return chosen
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sweep", help="Monte Carlo sweep of a scenario over seeds, on "
+                       "dask.distributed, with confidence intervals", description=DESCRIPTION)
+    p.add_argument("--scenario", default="office", metavar="NAME|FILE",
+                   help="a shipped scenario (office, corridor, corridor-outage) or a TOML file")
+    p.add_argument("--seeds", required=True, type=seed_range, metavar="A..B",
+                   help=f"the seeds, both ends included, each {span(*SEEDS)}, e.g. 1..100")
+    p.add_argument("--filters", type=filter_names, metavar="LIST",
+                   help="comma list of tracks, or all (default: the scenario's host config's)")
+    p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: Dask's "
+                            "config scheduler-address, else a LocalCluster)")
+    where.add_argument("--workers", type=number(1, 1024, integer=True), metavar="N",
+                       help="LocalCluster worker processes, one thread each (default: the cores)")
+    where.add_argument("--serial", action="store_true",
+                       help="run every seed in this process, without Dask (the same table)")
+    p.add_argument("--out", metavar="DIR",
+                   help="the Parquet directory (default: a new private temp dir); a re-run into "
+                        "it computes only the cells it lacks")
+    p.add_argument("--results", metavar="FILE",
+                   help="also write the table as Markdown between <!-- results:SCENARIO --> and "
+                        "<!-- /results:SCENARIO --> in FILE (e.g. docs/results.md), leaving "
+                        "the rest of FILE as it is")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object (the summary, the output's path and metadata) "
+                        "instead of the table")
+    p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from navtwin.emulator.scenario import ScenarioError, load_scenario
+    from navtwin.lab import sweep
+
+    try:
+        sc = load_scenario(args.scenario)
+    except ScenarioError as e:
+        raise UsageError(str(e)) from None
+    if args.duration is not None and args.duration > sc.duration_s:
+        raise UsageError(f"--duration {args.duration:g}: longer than {sc.name}'s "
+                         f"{sc.duration_s:g} s; give at most that or omit it")
+    try:
+        with contextlib.ExitStack() as stack:
+            # the cluster first: a scheduler that does not answer is refused before any bar
+            client = None if args.serial else stack.enter_context(
+                sweep.Client(args.scheduler, args.workers))
+            out = args.out or tempfile.mkdtemp(prefix=f"navtwin-sweep-{sc.name}-")
+            progress = stack.enter_context(_progress(args.quiet))
+            result = sweep.run(sc, args.seeds, args.filters, duration=args.duration, out=out,
+                               client=client, serial=args.serial, progress=progress)
+    except sweep.SweepError as e:
+        raise UsageError(str(e)) from None
+    summary = sweep.summarise(result.rows, result.filters)
+    if args.results:
+        sweep.write_block(args.results, sc.name, sweep.markdown(summary, sc.name, result.meta))
+    if args.json:
+        print(json.dumps(_finite({"summary": summary, "out": str(result.out),
+                                  "computed_tasks": result.tasks, "meta": result.meta})))
+    else:
+        print(sweep.table(summary))
+        print(f"\nParquet: {result.out} ({result.tasks} tasks computed)")
+    return 0
+
+
+def _finite(obj):
+    """*obj* with NaN (an interval of fewer than 2 seeds) as null: JSON has no NaN."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return None if isinstance(obj, float) and math.isnan(obj) else obj
+
+
+class _progress:
+    """A rich progress bar on stderr, as a ``progress(done, total)`` callback."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.bar = None
+        if not quiet:
+            from rich.console import Console
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                       TimeElapsedColumn, TimeRemainingColumn)
+
+            self.bar = Progress(TextColumn("seeds"), BarColumn(), MofNCompleteColumn(),
+                                TimeElapsedColumn(), TimeRemainingColumn(),
+                                console=Console(file=sys.stderr))
+            self.task = self.bar.add_task("seeds", total=None)
+
+    def __enter__(self):
+        return self
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.bar is not None:  # started by the first count: after run() has checked --out
+            self.bar.start()
+            self.bar.update(self.task, completed=done, total=total)
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.stop()

@@ -1,0 +1,430 @@
+"""Monte Carlo sweeps: one scenario over many seeds, in virtual time, on dask.distributed.
+
+Each seed is one in-memory run (:func:`navtwin.lab.run.run_in_memory`: no PTY, no file) scored
+by :func:`navtwin.lab.evaluate.position_errors`; each (scenario, seed, filter) is one cell, a row
+of the Parquet output. A seed's randomness comes from the seed alone: every draw of the emulator
+is from ``emulator.rng.stream(seed, name)``, a Generator on ``SeedSequence(seed,
+spawn_key=(crc32(name),))``, and the host draws nothing, so the worker that runs a seed, and the
+number of workers, change no cell::
+
+    from navtwin.lab import sweep
+    result = sweep.run("office", range(1, 11), out="sweeps/office")   # a LocalCluster
+    print(sweep.table(sweep.summarise(result.rows, result.filters)))
+
+Tasks are chunks of seeds worth at least :data:`MIN_TASK_VIRTUAL_S` of scenario time (about
+0.2 s of work here; Dask's overhead is about 1 ms a task): one seed a task for the shipped
+scenarios, several for a short ``duration``. A seed that raises is run once more in its task; a
+task lost with its worker is resubmitted once by Dask (``retries=1``); a cell that fails twice
+is a row with ``status`` "failed" and the error's line, never dropped.
+
+The output directory holds one Parquet file per run (``part-NNNN.parquet``, a row group per
+task as it completes) whose metadata (:data:`META_KEY`) names the code version, the scenario's
+hash (sha256 of its canonical TOML, :meth:`Scenario.to_toml`), the seeds, the filters and the
+duration. A run into a directory that holds a sweep computes only the cells it lacks (failed
+ones again); a directory holding a sweep of another scenario hash, code version, duration or
+filter set (the tracks of one run share the estimator, so a cell depends on its companions in
+the last bits) is refused (:class:`SweepError`).
+"""
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import subprocess
+import tomllib
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from hashlib import sha256
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from scipy.stats import t as student_t
+
+from navtwin.protocols import __version__
+from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
+from navtwin.host.output import estimate_line
+from navtwin.host.replay import emulator_settings
+
+from . import evaluate
+from .run import run_in_memory, truth
+
+#: Scenario seconds a task holds at least (seeds chunked): 0.2-0.7 s of work here.
+MIN_TASK_VIRTUAL_S = 10.0
+#: Seconds to wait for a named scheduler before refusing it.
+CONNECT_TIMEOUT_S = 10.0
+#: The Parquet files' key-value metadata key (a JSON object).
+META_KEY = b"navtwin.sweep"
+#: Per-seed figures of position_errors kept per cell.
+METRICS = ("mean", "max", "rms", "n", "x_min", "x_max", "x_var", "y_min", "y_max", "y_var",
+           "nees_mean", "nees_in_band")
+SCHEMA = pa.schema([("scenario", pa.string()), ("seed", pa.int64()), ("filter", pa.string()),
+                    ("status", pa.string()), ("error", pa.string())] +
+                   [(m, pa.int64() if m == "n" else pa.float64()) for m in METRICS])
+#: The figures summarised over seeds, with their table headings.
+FIGURES = {"mean": "mean m", "max": "max m", "rms": "RMSE m", "nees_mean": "NEES"}
+
+
+class SweepError(Exception):
+    """A sweep that cannot start: one line naming the problem and the fix."""
+
+
+def code_version() -> str:
+    """navtwin's version, plus ``git describe`` of its checkout when there is one, with
+    ``-dirty`` when a .py or .toml file differs from it (edited docs do not change a cell)."""
+    root = str(Path(__file__).resolve().parent.parent)
+    try:
+        head = subprocess.run(["git", "-C", root, "describe", "--always"], capture_output=True,
+                              text=True, timeout=10)
+        diff = subprocess.run(["git", "-C", root, "diff", "--quiet", "HEAD", "--", "*.py",
+                               "*.toml"], capture_output=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return __version__
+    if head.returncode != 0:
+        return __version__
+    return f"{__version__}+{head.stdout.strip()}" + ("-dirty" if diff.returncode else "")
+
+
+def scenario_hash(sc: Scenario) -> str:
+    return sha256(sc.to_toml().encode("utf-8")).hexdigest()
+
+
+def default_filters(sc: Scenario) -> tuple[str, ...]:
+    """The filters of the scenario's shipped host config."""
+    return tuple(emulator_settings(sc.name, {p: dict(v) for p, v in sc.ports.items()})["filters"])
+
+
+@functools.lru_cache(maxsize=4)
+def _scenario(text: str, name: str) -> Scenario:
+    # tasks carry the canonical TOML (a Scenario does not pickle); parsed once per worker
+    return parse_scenario(tomllib.loads(text), name)
+
+
+def seed_cells(sc: Scenario, seed: int, filters: tuple[str, ...],
+               duration: float | None) -> list[dict]:
+    """The cells of one seed: one in-memory run, each filter's position_errors."""
+    estimates, _ = run_in_memory(sc, seed, filters=filters, duration=duration)
+    errors = evaluate.position_errors(truth(sc, seed),
+                                      evaluate.load_estimates(map(estimate_line, estimates)))
+    rows = []
+    for name in filters:
+        e = errors.get(name)
+        rows.append(_row(sc.name, seed, name, e) if e else
+                    _failed(sc.name, seed, name, "no estimates inside the truth's time span"))
+    return rows
+
+
+def _row(scenario: str, seed: int, name: str, e: dict) -> dict:
+    return {"scenario": scenario, "seed": seed, "filter": name, "status": "ok", "error": None,
+            **{m: e[m] for m in METRICS}}
+
+
+def _failed(scenario: str, seed: int, name: str, error: str) -> dict:
+    return {"scenario": scenario, "seed": seed, "filter": name, "status": "failed",
+            "error": error, **dict.fromkeys(METRICS)}
+
+
+def _error_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
+
+
+def run_chunk(text: str, name: str, seeds: list[int], filters: tuple[str, ...],
+              duration: float | None) -> list[dict]:
+    """One task: the cells of *seeds*; a seed that raises is run once more, then its cells
+    are failed rows with the error's line."""
+    sc = _scenario(text, name)
+    rows = []
+    for seed in seeds:
+        for attempt in (1, 2):
+            try:
+                rows += seed_cells(sc, seed, filters, duration)
+                break
+            except Exception as e:  # noqa: BLE001 - any failure of a cell is reported as a row
+                if attempt == 2:
+                    rows += [_failed(name, seed, f, _error_line(e)) for f in filters]
+    return rows
+
+
+def chunk_seeds(seeds: list[int], scenario_s: float) -> list[list[int]]:
+    """*seeds* in tasks of at least MIN_TASK_VIRTUAL_S of scenario time each."""
+    per = max(1, math.ceil(MIN_TASK_VIRTUAL_S / scenario_s))
+    return [seeds[i:i + per] for i in range(0, len(seeds), per)]
+
+
+@dataclass
+class Result:
+    """A sweep's rows (requested cells, seed then filter order), what it computed, its output."""
+    rows: list[dict]
+    filters: tuple[str, ...]
+    meta: dict
+    tasks: int = 0
+    out: Path | None = None
+    part: Path | None = field(default=None)
+
+
+class Client:
+    """A dask.distributed client: on the scheduler at *address* (or Dask's own
+    ``scheduler-address`` config), else on a new LocalCluster of *workers* processes (default:
+    this machine's cores) with one thread each. A context manager that closes what it started."""
+
+    def __init__(self, address: str | None = None, workers: int | None = None) -> None:
+        import dask
+        from distributed import Client as DaskClient, LocalCluster
+
+        address = address or dask.config.get("scheduler-address", None)
+        self.cluster = None
+        if address:
+            try:
+                self.client = DaskClient(address, timeout=f"{CONNECT_TIMEOUT_S}s")
+            except (OSError, TimeoutError, ValueError) as e:
+                raise SweepError(f"--scheduler {address}: no scheduler answered "
+                                 f"({_error_line(e)}); start one (dask scheduler) or omit "
+                                 "--scheduler for a LocalCluster") from None
+        else:
+            import logging
+
+            self.cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
+                                        threads_per_worker=1, processes=True,
+                                        dashboard_address=None, silence_logs=logging.ERROR)
+            self.client = DaskClient(self.cluster)
+        self.address = self.client.scheduler.address
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def read_out(out: Path) -> tuple[list[dict], list[dict]]:
+    """The metadata and rows of every readable part in *out*, oldest first (a part without its
+    footer, from a killed run, is skipped: its cells are computed again)."""
+    metas, rows = [], []
+    for part in sorted(out.glob("part-*.parquet")):
+        try:
+            f = pq.ParquetFile(part)
+            metas.append(json.loads(f.schema_arrow.metadata[META_KEY]))
+            rows += f.read().to_pylist()
+        except (OSError, KeyError, TypeError, ValueError, pa.ArrowException):
+            continue
+    return metas, rows
+
+
+def _check_same(out: Path, metas: list[dict], meta: dict) -> None:
+    for m in metas:
+        for key, what in (("scenario_hash", "scenario hash"), ("code_version", "code version"),
+                          ("duration_s", "duration"), ("filters", "filter set")):
+            if m.get(key) != meta[key]:
+                raise SweepError(f"--out {out}: holds a sweep of another {what} ({m.get(key)} "
+                                 f"there, {meta[key]} now); choose another --out or remove it")
+
+
+def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable[str] | None = None,
+        *, duration: float | None = None, out: str | Path | None = None,
+        client: Client | None = None, serial: bool = False,
+        progress: Callable[[int, int], None] | None = None) -> Result:
+    """Sweep *scenario* over *seeds*: in this process if *serial*, else on *client* (a new
+    LocalCluster if None). Rows stream into *out*/part-NNNN.parquet when *out* is given, and
+    only the cells *out* lacks are computed. *progress(done, total)* counts seeds."""
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    seeds = sorted(set(int(s) for s in seeds))
+    filters = tuple(filters) if filters else default_filters(sc)
+    meta = {"code_version": code_version(), "scenario": sc.name, "scenario_hash": scenario_hash(sc),
+            "seeds": [seeds[0], seeds[-1]] if seeds else [], "filters": list(filters),
+            "duration_s": duration}
+    done: dict[tuple[int, str], dict] = {}
+    if out is not None:
+        out = Path(out)
+        if out.exists() and not out.is_dir():
+            raise SweepError(f"--out {out}: not a directory; pass a directory path")
+        out.mkdir(parents=True, exist_ok=True)
+        metas, old = read_out(out)
+        _check_same(out, metas, meta)
+        for r in old:  # a later part's cell replaces an earlier (failed) one
+            done[(r["seed"], r["filter"])] = r
+    wanted = [(s, f) for s in seeds for f in filters]
+    todo = [s for s in seeds if any(done.get((s, f), {}).get("status") != "ok" for f in filters)]
+    tasks = chunk_seeds(todo, duration or sc.duration_s)
+    text = sc.to_toml()
+    writer = part = None
+    if out is not None and tasks:
+        n = max([int(p.stem.split("-")[1]) for p in out.glob("part-*.parquet")
+                 if p.stem.split("-")[1].isdigit()] + [-1]) + 1
+        part = out / f"part-{n:04d}.parquet"
+        writer = pq.ParquetWriter(part, SCHEMA.with_metadata({META_KEY: json.dumps(meta)}))
+    finished = len(seeds) - len(todo)
+
+    def take(rows: list[dict]) -> None:
+        nonlocal finished
+        for r in rows:
+            done[(r["seed"], r["filter"])] = r
+        if writer is not None:
+            writer.write_table(pa.Table.from_pylist(rows, schema=SCHEMA))
+        finished += len({r["seed"] for r in rows})
+        if progress:
+            progress(finished, len(seeds))
+
+    if progress:
+        progress(finished, len(seeds))
+    try:
+        if serial:
+            for chunk in tasks:
+                take(run_chunk(text, sc.name, chunk, filters, duration))
+        elif tasks:
+            own = client is None
+            client = client or Client()
+            try:
+                _on_dask(client, tasks, text, sc.name, filters, duration, take)
+            finally:
+                if own:
+                    client.__exit__()
+    finally:
+        if writer is not None:
+            writer.close()
+    rows = [done[c] for c in wanted]
+    return Result(rows, filters, meta, len(tasks), out, part)
+
+
+def _on_dask(client: Client, tasks, text, name, filters, duration, take) -> None:
+    from distributed import as_completed
+
+    n = len(tasks)
+    futures = client.client.map(run_chunk, [text] * n, [name] * n, tasks, [filters] * n,
+                                [duration] * n, pure=False, retries=1)
+    chunk_of = {f.key: c for f, c in zip(futures, tasks)}
+    for f in as_completed(futures):
+        if f.status == "finished":
+            take(f.result())
+        else:  # lost twice (e.g. its worker died): its cells are failed rows
+            err = _error_line(f.exception())
+            take([_failed(name, s, flt, err) for s in chunk_of[f.key] for flt in filters])
+        f.release()
+
+
+# ---------------------------------------------------------------- the table over seeds
+
+def mean_ci(values) -> tuple[float, float]:
+    """Mean and the half-width of its two-sided 95 % Student-t interval (NaN below 2 values)."""
+    v = np.asarray(values, dtype=float)
+    if v.size == 0:
+        return math.nan, math.nan
+    if v.size < 2:
+        return float(v.mean()), math.nan
+    half = student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)
+    return float(v.mean()), float(half)
+
+
+def summarise(rows: list[dict], filters: Iterable[str]) -> dict:
+    """Per filter, over its seeds: the mean of each per-seed figure (FIGURES) with its 95 % t
+    half-width, the seeds and failures; and per pair of filters the per-seed difference of mean
+    error (a - b) over the seeds both have, its mean and 95 % t half-width, and which filter it
+    decides for (the CI excludes 0) or None. ``ranking``: the filters by mean error, each joined
+    to the next by "<" (decided) or "~" (not)."""
+    filters = tuple(filters)
+    ok = {f: {r["seed"]: r for r in rows if r["filter"] == f and r["status"] == "ok"}
+          for f in filters}
+    per = {}
+    for f in filters:
+        cells = [ok[f][s] for s in sorted(ok[f])]
+        per[f] = {"seeds": len(cells), "failed": sum(1 for r in rows if r["filter"] == f
+                                                     and r["status"] != "ok")}
+        for m in FIGURES:
+            per[f][m] = mean_ci([r[m] for r in cells if r[m] is not None])
+    pairs = []
+    for i, a in enumerate(filters):
+        for b in filters[i + 1:]:
+            common = sorted(set(ok[a]) & set(ok[b]))
+            d, h = mean_ci([ok[a][s]["mean"] - ok[b][s]["mean"] for s in common])
+            decided = None if not (abs(d) > h) else (a if d < 0 else b)
+            pairs.append({"a": a, "b": b, "seeds": len(common), "diff": d, "half": h,
+                          "better": decided})
+    order = sorted((f for f in filters if per[f]["seeds"]), key=lambda f: per[f]["mean"][0])
+    ranking = order[:1]
+    for a, b in zip(order, order[1:]):
+        p = next(p for p in pairs if {p["a"], p["b"]} == {a, b})
+        ranking += ["<" if p["better"] else "~", b]
+    return {"filters": per, "pairs": pairs, "ranking": " ".join(ranking)}
+
+
+def _ci(v: tuple[float, float], digits: int = 3) -> str:
+    m, h = v
+    if math.isnan(m):
+        return "-"
+    return f"{m:.{digits}f}" + ("" if math.isnan(h) else f" ± {h:.{digits}f}")
+
+
+def table(summary: dict) -> str:
+    """The summary as a text table: figures with 95 % half-widths, then the pairs."""
+    head = f"{'filter':<8}{'seeds':>6}{'failed':>7}" + "".join(f"{h:>19}" for h in FIGURES.values())
+    lines = [head]
+    for f, s in summary["filters"].items():
+        lines.append(f"{f:<8}{s['seeds']:>6}{s['failed']:>7}" +
+                     "".join(f"{_ci(s[m]):>19}" for m in FIGURES))
+    lines += ["", "paired difference of mean error (m, a - b, 95 % CI):"]
+    for p in summary["pairs"]:
+        verdict = f"{p['better']} better" if p["better"] else "not decided"
+        lines.append(f"  {p['a']:>5} - {p['b']:<5} {_ci((p['diff'], p['half']), 4):>20}  {verdict}")
+    lines.append(f"ranking: {summary['ranking']}")
+    return "\n".join(lines)
+
+
+def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
+    """The summary as Markdown tables, with the published figures of *scenario*'s paper
+    (evaluate.PAPER_FIGURES) beside ours; first a line naming the sweep of *meta* (a
+    Result's) when given."""
+    paper = evaluate.PAPER_FIGURES.get(scenario)
+    cols = list(FIGURES.values())
+    extra = [f"{paper['paper']} mean m", f"{paper['paper']} max m"] if paper else []
+    lines = []
+    if meta:
+        a, b = meta["seeds"]
+        time = "" if meta["duration_s"] is None else f", first {meta['duration_s']:g} s"
+        lines += [f"`{scenario}`, seeds {a}..{b}{time}; navtwin {meta['code_version']}, "
+                  f"scenario sha256 {meta['scenario_hash'][:12]}; ± is the 95 % Student-t "
+                  "half-width over seeds.", ""]
+    lines += ["| filter | seeds | " + " | ".join(cols + extra) + " |",
+             "|---|---:|" + "---:|" * (len(cols) + len(extra))]
+    for f, s in summary["filters"].items():
+        cells = [_ci(s[m]) for m in FIGURES]
+        if paper:
+            fig = paper["figures"].get(f, {})
+            cells += [_paper(fig.get("mean")), _paper(fig.get("max"))]
+        failed = f" ({s['failed']} failed)" if s["failed"] else ""
+        lines.append(f"| {f} | {s['seeds']}{failed} | " + " | ".join(cells) + " |")
+    lines += ["", "| a - b | seeds | mean error difference m (95 % CI) | decides |",
+              "|---|---:|---:|---|"]
+    for p in summary["pairs"]:
+        lines.append(f"| {p['a']} - {p['b']} | {p['seeds']} | {_ci((p['diff'], p['half']), 4)} "
+                     f"| {p['better'] + ' better' if p['better'] else 'not decided'} |")
+    rank = (f"Ranking by mean error (`<`: the paired 95 % CI excludes 0; `~`: it does not): "
+            f"`{summary['ranking']}`")
+    means = {f: v["mean"] for f, v in paper["figures"].items() if "mean" in v} if paper else {}
+    if means:
+        published = sorted(means, key=means.get)
+        rank += f"; {paper['paper']}'s by its published means: `{' < '.join(published)}`"
+    lines += ["", rank]
+    return "\n".join(lines)
+
+
+def _paper(v: float | None) -> str:
+    return "" if v is None else f"{v:.4g}"
+
+
+def write_block(path: str | Path, key: str, text: str) -> None:
+    """Put *text* between ``<!-- results:KEY -->`` and ``<!-- /results:KEY -->`` in *path*
+    (appended with its markers if they are not there), leaving the rest as written."""
+    path = Path(path)
+    doc = path.read_text(encoding="utf-8") if path.exists() else ""
+    start, end = f"<!-- results:{key} -->", f"<!-- /results:{key} -->"
+    block = f"{start}\n{text.rstrip()}\n{end}"
+    i, j = doc.find(start), doc.find(end)
+    if i >= 0 and j > i:
+        doc = doc[:i] + block + doc[j + len(end):]
+    else:
+        doc = doc.rstrip() + ("\n\n" if doc.strip() else "") + block + "\n"
+    path.write_text(doc, encoding="utf-8")

@@ -1,0 +1,154 @@
+"""Sweeps: the same cells on any number of workers, resumed, failures kept, the interval math."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from scipy import stats
+
+from navtwin.cli.main import main
+from navtwin.emulator.scenario import load_scenario
+from navtwin.lab import evaluate, sweep
+
+#: Short runs: 5 s of office is two seeds a task (MIN_TASK_VIRTUAL_S), so chunks are exercised.
+SHORT = 5.0
+
+
+def test_two_workers_give_the_serial_table_bit_for_bit(tmp_path):
+    serial = sweep.run("office", range(1, 5), duration=SHORT, serial=True, out=tmp_path / "serial")
+    with sweep.Client(workers=2) as client:
+        assert len(client.client.scheduler_info()["workers"]) == 2
+        spread = sweep.run("office", range(1, 5), duration=SHORT, client=client,
+                           out=tmp_path / "dask")
+    assert serial.tasks == spread.tasks == 2  # 4 seeds in chunks of 2
+    assert all(r["status"] == "ok" for r in serial.rows)
+    assert spread.rows == serial.rows  # every cell, float for float
+    assert sweep.table(sweep.summarise(spread.rows, spread.filters)) == \
+        sweep.table(sweep.summarise(serial.rows, serial.filters))
+    key = lambda r: (r["seed"], r["filter"])  # noqa: E731 - tasks finish in any order
+    for result in (serial, spread):
+        f = pq.ParquetFile(result.part)
+        assert sorted(f.read().to_pylist(), key=key) == sorted(serial.rows, key=key)
+        meta = json.loads(f.schema_arrow.metadata[sweep.META_KEY])
+        assert meta["scenario_hash"] == sweep.scenario_hash(load_scenario("office"))
+        assert meta["seeds"] == [1, 4] and meta["filters"] == list(serial.filters)
+        assert meta["code_version"].startswith(sweep.__version__)
+
+
+def _counting(monkeypatch, fail: set[int] = frozenset()) -> list[int]:
+    """Record the seeds sweep.seed_cells is called with; raise for those in *fail*."""
+    calls, real = [], sweep.seed_cells
+
+    def seed_cells(sc, seed, filters, duration):
+        calls.append(seed)
+        if seed in fail:
+            raise RuntimeError(f"boom on seed {seed}\nsecond line")
+        return real(sc, seed, filters, duration)
+
+    monkeypatch.setattr(sweep, "seed_cells", seed_cells)
+    return calls
+
+
+def test_a_rerun_computes_only_the_cells_it_lacks(tmp_path, monkeypatch):
+    calls = _counting(monkeypatch)
+    first = sweep.run("office", [1, 2], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path)
+    assert first.tasks == 1 and calls == [1, 2]  # 2 s a seed: both in one task
+    calls.clear()
+    more = sweep.run("office", [1, 2, 3], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path)
+    assert more.tasks == 1 and calls == [3]
+    assert more.rows[:4] == first.rows
+    calls.clear()
+    again = sweep.run("office", [1, 2, 3], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path)
+    assert again.tasks == 0 and calls == [] and again.part is None
+    assert again.rows == more.rows
+    assert more.rows == sweep.run("office", [1, 2, 3], ("kf", "wsn"), duration=2.0,
+                                  serial=True).rows
+    assert len(list(tmp_path.glob("part-*.parquet"))) == 2
+
+
+def test_a_failing_cell_is_retried_once_then_kept_as_a_failed_row(tmp_path, monkeypatch):
+    calls = _counting(monkeypatch, fail={2})
+    result = sweep.run("office", [1, 2, 3], ("kf", "ekf"), duration=2.0, serial=True, out=tmp_path)
+    assert calls == [1, 2, 2, 3]
+    failed = [r for r in result.rows if r["status"] == "failed"]
+    assert [(r["seed"], r["filter"]) for r in failed] == [(2, "kf"), (2, "ekf")]
+    assert {r["error"] for r in failed} == {"RuntimeError: boom on seed 2"}
+    assert all(r["mean"] is None for r in failed)
+    s = sweep.summarise(result.rows, result.filters)["filters"]
+    assert s["kf"]["seeds"] == 2 and s["kf"]["failed"] == 1
+    stored = pq.read_table(result.part).to_pylist()
+    assert sorted((r["seed"], r["filter"], r["status"]) for r in stored) == sorted(
+        (r["seed"], r["filter"], r["status"]) for r in result.rows)
+    monkeypatch.undo()  # the fault is gone: a re-run computes the failed seed
+    calls = _counting(monkeypatch)
+    healed = sweep.run("office", [1, 2, 3], ("kf", "ekf"), duration=2.0, serial=True, out=tmp_path)
+    assert calls == [2] and all(r["status"] == "ok" for r in healed.rows)
+
+
+def test_an_out_dir_of_another_sweep_is_refused(tmp_path, capsys):
+    sweep.run("office", [1], ("kf",), duration=2.0, serial=True, out=tmp_path)
+    with pytest.raises(sweep.SweepError, match="another duration"):
+        sweep.run("office", [1], ("kf",), duration=3.0, serial=True, out=tmp_path)
+    rc = main(["sweep", "--scenario", "corridor", "--seeds", "1", "--filters", "kf",
+               "--duration", "2", "--serial", "--quiet", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and f"--out {tmp_path}" in err[0] and "scenario hash" in err[0]
+
+
+def test_the_cli_prints_json_and_writes_the_results_block(tmp_path, capsys):
+    doc = tmp_path / "results.md"
+    doc.write_text("# Results\n\nmine\n\n<!-- results:office -->\nold\n<!-- /results:office -->\n"
+                   "\nafter\n")
+    rc = main(["sweep", "--seeds", "1..2", "--filters", "kf,ekf", "--duration", "2",
+               "--serial", "--quiet", "--json", "--out", str(tmp_path / "o"),
+               "--results", str(doc)])
+    assert rc == 0
+    obj = json.loads(capsys.readouterr().out)
+    assert obj["computed_tasks"] == 1 and set(obj["summary"]["filters"]) == {"kf", "ekf"}
+    text = doc.read_text()
+    assert text.startswith("# Results\n\nmine\n\n<!-- results:office -->\n"
+                           "`office`, seeds 1..2, first 2 s")
+    assert "\n| filter | seeds |" in text
+    assert text.endswith("<!-- /results:office -->\n\nafter\n") and "old" not in text
+
+
+def test_the_interval_is_students_t_on_the_per_seed_figures():
+    v = np.random.default_rng(7).normal(0.3, 0.05, 17)
+    m, h = sweep.mean_ci(v)
+    lo, hi = stats.t.interval(0.95, len(v) - 1, loc=v.mean(), scale=stats.sem(v))
+    assert m == pytest.approx(v.mean(), abs=1e-15)
+    assert (m - h, m + h) == pytest.approx((lo, hi), rel=1e-12)
+    assert np.isnan(sweep.mean_ci([1.0])[1])
+
+
+def _rows(means: dict[str, list[float]]) -> list[dict]:
+    return [sweep._row("x", seed, f, dict.fromkeys(sweep.METRICS, 1.0) | {"mean": m})
+            for f, ms in means.items() for seed, m in enumerate(ms)]
+
+
+def test_paired_differences_decide_a_ranking_only_where_the_interval_excludes_zero():
+    rng = np.random.default_rng(3)
+    base = rng.normal(0.5, 0.2, 30)  # a shared per-seed difficulty the pairing removes
+    rows = _rows({"a": list(base), "b": list(base + 0.01 + rng.normal(0, 0.005, 30)),
+                  "c": list(base + 0.01 + rng.normal(0, 0.5, 30))})
+    s = sweep.summarise(rows, ("a", "b", "c"))
+    pair = {(p["a"], p["b"]): p for p in s["pairs"]}
+    d = base - np.array([r["mean"] for r in rows if r["filter"] == "b"])
+    lo, hi = stats.t.interval(0.95, 29, loc=d.mean(), scale=stats.sem(d))
+    ab = pair[("a", "b")]
+    assert (ab["diff"] - ab["half"], ab["diff"] + ab["half"]) == pytest.approx((lo, hi))
+    assert ab["better"] == "a" and hi < 0
+    assert pair[("b", "c")]["better"] is None  # c's noise hides the same 0.01 m
+    assert "a < b" in s["ranking"] and "~" in s["ranking"]
+
+
+def test_the_markdown_puts_the_papers_figures_beside_ours():
+    rows = _rows({"lc": [0.1, 0.2, 0.15], "tc": [0.09, 0.19, 0.14]})
+    md = sweep.markdown(sweep.summarise(rows, ("lc", "tc")), "corridor")
+    assert "| 001 mean m | 001 max m |" in md
+    paper = evaluate.PAPER_FIGURES["corridor"]["figures"]
+    assert f"| {paper['lc']['mean']:.4g} | {paper['lc']['max']:.4g} |" in md
+    assert "| tc - lc |" not in md and "| lc - tc | 3 |" in md
+    assert md.endswith("; 001's by its published means: `fatci < tc < lc`")
