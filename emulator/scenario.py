@@ -116,6 +116,9 @@ class Trajectory:
                                positive("set a positive turn radius", hi=MAX_COORD_M))
     transition_m: float = key(0.5, "m", "length of the clothoid entering and leaving each turn "
                               "(continuous curvature)", non_negative(hi=MAX_COORD_M))
+    step_m: float = key(0.0, "m", "move this far, then rest dwell_s, and so on (001's calibration "
+                        "walk); 0 = drive without stopping", non_negative(hi=MAX_COORD_M))
+    dwell_s: float = key(2.5, "s", "rest after each step_m move", positive(hi=MAX_DURATION_S))
 
     def __post_init__(self):
         n = len(self.waypoints)
@@ -138,7 +141,9 @@ class Trajectory:
                                            "waypoint (the start); put the start on a straight "
                                            "leg between the last and the second waypoint")
         path = geometry.Path(self.waypoints, self.closed, self.turn_radius_m, self.transition_m)
-        geometry.SpeedProfile(self.alignment_s, self.speed_m_s, self.accel_m_s2, path.length * self.loops)
+        if not self.step_m:  # a stepped walk needs no room to ramp up to speed
+            geometry.SpeedProfile(self.alignment_s, self.speed_m_s, self.accel_m_s2,
+                                  path.length * self.loops)
 
 
 @dataclass(frozen=True)
