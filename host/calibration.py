@@ -166,7 +166,7 @@ def build_file(path: str | Path, suffix: str, make):
     """Read the TOML at *path* (or the shipped ``<name><suffix>.toml``) and *make* it; every
     problem a one-line CalibrationError."""
     path = Path(path)
-    if not path.suffix and not path.exists():
+    if not path.suffix and not path.is_file():
         path = CALIBRATION_DIR / f"{path}{suffix}.toml"
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
