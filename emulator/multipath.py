@@ -30,10 +30,10 @@ class Multipath:
     """eps of one anchor; :meth:`error` is called with that anchor's exchanges in order."""
 
     def __init__(self, spec, anchor_id: int, seed: int) -> None:
-        field = stream(seed, f"nanoloc.anchor.{anchor_id}.field")
+        rng = stream(seed, f"nanoloc.anchor.{anchor_id}.field")
         m = spec.features
-        self.w = field.standard_normal((m, 2)) / spec.corr_length_m
-        self.phi = field.uniform(0.0, 2.0 * math.pi, m)
+        self.w = rng.standard_normal((m, 2)) / spec.corr_length_m
+        self.phi = rng.uniform(0.0, 2.0 * math.pi, m)
         self.amplitude = spec.field_sigma_m * math.sqrt(2.0 / m)
         self.drift_rng = stream(seed, f"nanoloc.anchor.{anchor_id}.drift")
         self.drift_sigma = spec.drift_sigma_m

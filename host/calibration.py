@@ -118,7 +118,7 @@ class Calibration:
     sigma_span_m: tuple[float, float]
     scale_ci95: float = 0.0
     bias_ci95: Mapping[int, float] = field(default_factory=dict)
-    source: str = ""  # where it was read from (messages, the recording's meta)
+    source: str = field(default="", compare=False)  # where it was read from (messages)
 
     def sigma(self, d):
         """Range standard deviation (m) at distance(s) *d* (m)."""
