@@ -39,6 +39,9 @@ def register(sub) -> None:
                    help="the coordinator runs API mode 1 (AP=1); default API mode 2, escaped")
     p.add_argument("--baud", type=baud, default=DEFAULT_BAUD, help=BAUD_HELP)
     common_options(p)
+    p.add_argument("--calibration", metavar="NAME|FILE",
+                   help="001's range calibration ('navtwin calibrate'): its f and c_i correct "
+                        "every range (default: the config's [calibration], if any)")
     p.add_argument("--record", metavar="DIR",
                    help="record every chunk read, with its arrival time, in a new directory, "
                         "not a symbolic link ('navtwin replay DIR' then gives the same output); "
@@ -82,6 +85,16 @@ def config_and_filters(args, default_config: bool):
     return cfg, args.filters
 
 
+def with_calibration(cfg, spec: str):
+    """*cfg* with the calibration file *spec* in place of its own range correction."""
+    from navtwin.host.calibration import CalibrationError, load
+
+    try:
+        return host_config.with_calibration(cfg, load(spec))
+    except (CalibrationError, ConfigError) as e:
+        raise UsageError(f"--calibration {e}") from None
+
+
 def open_out(spec: str, option: str = "--out"):
     try:
         return open_output(spec)
@@ -113,6 +126,8 @@ def run(args) -> int:
     if not ports:
         raise UsageError("no input port; give --xbee PORT and/or --sins PORT, and --nanoloc PORT")
     cfg, filters = config_and_filters(args, default_config=True)
+    if args.calibration:
+        cfg = with_calibration(cfg, args.calibration)
     out = open_out(args.out)
     innovations = None
     stop = threading.Event()

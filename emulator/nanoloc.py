@@ -18,7 +18,8 @@ tof_k = |tag(t_k) - anchor| / c (3-D, at the moment of leg k's transmission). Th
 errors d_k carry 001's range model d~ = f d + c_i + eps_NLOS + D (001 eq. 13)::
 
     d_k = (f - 1) tof_k + (c_i + eps) / c + n_k,   n_k ~ N(0, (2 sigma(d_k) / c)^2),
-    sigma(d) = sigma0 + sigma_per_m d,   eps ~ Exp(mean bias_m) inside an ``nlos`` fault
+    sigma(d) = sigma0 + sigma_per_m d,   eps = the anchor's multipath error (emulator.multipath,
+    when [ranging.multipath] is enabled) + Exp(mean bias_m) inside an ``nlos`` fault
 
 so c (tau1 - tau2 + tau3 - tau4) / 4 = f d + c_i + eps + D with D ~ N(0, sigma(d)^2) plus the
 clock terms of wire-formats.md section 3: (1 + (e_A + e_T)/2) on the time of flight and
@@ -46,6 +47,7 @@ from navtwin.protocols.serial import char_ns
 from .clock import Clock, serial_queue
 from .rng import stream
 from .faults import acting_on
+from .multipath import Multipath
 
 PS_PER_S = 1e12
 RSSI_NONE = -128  # dBm reported with a timeout: nothing was received
@@ -79,6 +81,7 @@ class Anchor:
         self.network_us0 = first / 1e3
         self.faults = tuple(acting_on(sc.faults, "anchor", anchor=spec.id))
         self.rng = stream(seed, f"nanoloc.anchor.{spec.id}")
+        self.multipath = Multipath(r.multipath, spec.id, seed) if r.multipath.enabled else None
 
     def draw(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, np.ndarray]:
         """Cycle numbers of the exchanges starting in [lo_ns, hi_ns) and their random draws
@@ -140,6 +143,10 @@ class NanolocNetwork:
                 hits.append((f, on if acted is None else acted))
         timeout, attenuation = effect.timeout, effect.attenuation_db
         bias = np.array([a.bias for a in self.anchors])[idx] + effect.bias_m
+        for i, a in enumerate(self.anchors):
+            if a.multipath is not None:
+                mine = idx == i  # an anchor's exchanges are in time order within its run
+                bias[mine] += a.multipath.error(t0[mine], tag[mine, 0, :2])
         sigma = r.sigma0_m + r.sigma_per_m * d
         det = (r.scale - 1) * tof + (bias / SPEED_OF_LIGHT)[:, None] + 2 * sigma / SPEED_OF_LIGHT * z[:, 2:6]
         rt1 = tof[:, 0] + det[:, 0] + p_t + tof[:, 1] + det[:, 1]

@@ -116,6 +116,9 @@ class Trajectory:
                                positive("set a positive turn radius", hi=MAX_COORD_M))
     transition_m: float = key(0.5, "m", "length of the clothoid entering and leaving each turn "
                               "(continuous curvature)", non_negative(hi=MAX_COORD_M))
+    step_m: float = key(0.0, "m", "move this far, then rest dwell_s, and so on (001's calibration "
+                        "walk); 0 = drive without stopping", non_negative(hi=MAX_COORD_M))
+    dwell_s: float = key(2.5, "s", "rest after each step_m move", positive(hi=MAX_DURATION_S))
 
     def __post_init__(self):
         n = len(self.waypoints)
@@ -138,7 +141,9 @@ class Trajectory:
                                            "waypoint (the start); put the start on a straight "
                                            "leg between the last and the second waypoint")
         path = geometry.Path(self.waypoints, self.closed, self.turn_radius_m, self.transition_m)
-        geometry.SpeedProfile(self.alignment_s, self.speed_m_s, self.accel_m_s2, path.length * self.loops)
+        if not self.step_m:  # a stepped walk needs no room to ramp up to speed
+            geometry.SpeedProfile(self.alignment_s, self.speed_m_s, self.accel_m_s2,
+                                  path.length * self.loops)
 
 
 @dataclass(frozen=True)
@@ -229,6 +234,23 @@ class Clocks:
 
 
 @dataclass(frozen=True)
+class Multipath:
+    """eps of 001 eq. 13 (emulator.multipath): per anchor, a field over the tag's position
+    plus a Gauss-Markov drift; off unless ``enabled``."""
+
+    enabled: bool = key(False, "", "add the NLOS/multipath error eps to every range")
+    field_sigma_m: float = key(0.12, "m", "1 sigma of the position-dependent part (per anchor)",
+                               non_negative(hi=10))
+    corr_length_m: float = key(1.5, "m", "its correlation length L: exp(-r^2 / (2 L^2))",
+                               positive(hi=MAX_COORD_M))
+    features: int = key(64, "", "random Fourier features of that field", between(1, 4096))
+    drift_sigma_m: float = key(0.08, "m", "1 sigma of the time-varying part (per anchor)",
+                               non_negative(hi=10))
+    drift_corr_s: float = key(10.0, "s", "its correlation time (first-order Gauss-Markov)",
+                              positive(hi=1e9))
+
+
+@dataclass(frozen=True)
 class Ranging:
     cycle_ms: float = key(100.0, "ms", "TDMA cycle: every anchor ranges the tag once per cycle",
                           between(1, 10000))
@@ -259,6 +281,7 @@ class Ranging:
     path_loss_exponent: float = key(2.0, "", "n of 003 eq. 1", between(1, 6))
     shadowing_db: float = key(2.0, "dB", "sigma of the log-normal shadowing of 003 eq. 1",
                           non_negative(hi=100))
+    multipath: Multipath = Multipath()
 
     def __post_init__(self):
         if len(set(self.slot_order)) != len(self.slot_order):

@@ -12,7 +12,8 @@ closed loop closes exactly and its laps repeat.
 
 Speed. At rest for ``alignment_s``; then v = V (3x^2 - 2x^3), x = time / T_r over a ramp of
 T_r = 1.5 V / a_peak (continuous acceleration, peak a_peak); cruise; the mirror ramp stops
-the vehicle at the end of the last lap, where it stays.
+the vehicle at the end of the last lap, where it stays. With ``step_m`` (001's calibration
+walk) it moves instead step by step, resting ``dwell_s`` after each move (SteppedProfile).
 
 Kinematics in the navigation frame (x, y the area's, z up; see emulator.scenario):
 velocity v t, acceleration (dv/dt) t + k v^2 n (t tangent, n its left normal), yaw = psi,
@@ -202,6 +203,48 @@ class SpeedProfile:
         return s, v, a
 
 
+class SteppedProfile:
+    """001 sect. 3.3's calibration walk: at rest for *alignment_s*, then moves of *step* m,
+    each a minimum-jerk move s = step (10 x^3 - 15 x^4 + 6 x^5), x = time / T (speed and
+    acceleration continuous, zero at both ends; peak speed 1.875 step / T, peak acceleration
+    5.7735 step / T^2, T the shortest that keeps both within *speed* and *accel*), each
+    followed by *dwell* s at rest; the last move may be shorter, so the walk ends at
+    *distance*."""
+
+    PEAK_V, PEAK_A = 1.875, 10.0 / math.sqrt(3.0)  # of the unit move over unit time
+
+    def __init__(self, alignment_s: float, speed: float, accel: float, distance: float,
+                 step: float, dwell: float) -> None:
+        self.t1, self.step, self.dwell, self.distance = alignment_s, step, dwell, distance
+        self.moves = max(1, math.ceil(distance / step - 1e-9))
+        self.move_s = max(self.PEAK_V * step / speed, math.sqrt(self.PEAK_A * step / accel))
+        self.period = self.move_s + dwell
+        self.t4 = alignment_s + (self.moves - 1) * self.period + self.move_s  # at rest for good
+
+    def rests(self) -> list[tuple[float, float, float]]:
+        """(from s, to s, arc length) of each rest: the alignment, then after every move
+        (the last lasts for ever: to = inf)."""
+        out = [(0.0, self.t1, 0.0)]
+        for k in range(self.moves):
+            start = self.t1 + k * self.period + self.move_s
+            end = start + self.dwell if k < self.moves - 1 else math.inf
+            out.append((start, end, min((k + 1) * self.step, self.distance)))
+        return out
+
+    def evaluate(self, t):
+        """(s, v, dv/dt) at true time(s) *t* in seconds (1-D array)."""
+        t = np.asarray(t, dtype=float)
+        k = np.clip(np.floor((t - self.t1) / self.period), 0, self.moves - 1)
+        length = np.minimum(self.step, self.distance - k * self.step)  # this move's
+        x = np.clip((t - self.t1 - k * self.period) / self.move_s, 0.0, 1.0)
+        x = np.where(t < self.t1, 0.0, x)
+        tm = self.move_s
+        s = k * self.step + length * x ** 3 * (10 - 15 * x + 6 * x * x)
+        v = length / tm * 30 * x * x * (1 - x) ** 2
+        a = length / tm ** 2 * 60 * x * (1 - x) * (1 - 2 * x)
+        return s, v, a
+
+
 class Kinematics(NamedTuple):
     """True state at some instants, navigation frame (x, y area, z up); rates in body axes."""
 
@@ -219,8 +262,10 @@ class Trajectory:
 
     def __init__(self, spec, height: float) -> None:
         self.path = Path(spec.waypoints, spec.closed, spec.turn_radius_m, spec.transition_m)
-        self.speed = SpeedProfile(spec.alignment_s, spec.speed_m_s, spec.accel_m_s2,
-                                  self.path.length * spec.loops)
+        distance = self.path.length * spec.loops
+        self.speed = SteppedProfile(spec.alignment_s, spec.speed_m_s, spec.accel_m_s2, distance,
+                                    spec.step_m, spec.dwell_s) if spec.step_m else \
+            SpeedProfile(spec.alignment_s, spec.speed_m_s, spec.accel_m_s2, distance)
         self.height = height
 
     def kinematics(self, t_ns) -> Kinematics:

@@ -33,6 +33,9 @@ written once; docs/host.md's key table is generated from it, :func:`markdown_tab
     [timing]
     hold_s = 0.02                  # reorder hold for ranges (docs/host.md, "time order")
 
+    [calibration]                  # optional: 001's f, c_i, sigma(d) (host.calibration)
+    file = "corridor"              # a shipped calibration or a path (relative to this file)
+
 Vehicles. ``[vehicle]`` is the lab's one vehicle; a lab with several lists them as
 ``[[vehicles]]`` tables of the same keys (not both). Vehicles are numbered from 1 in that
 order (the ``vehicle`` of each estimate line); with more than one, each names its ``tag``
@@ -56,7 +59,9 @@ from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_C
 from navtwin.protocols.adis16350 import GYRO_LSB_DPS
 from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, each, key, one_of, rows
 
+from . import calibration as range_calibration
 from . import tracks
+from .calibration import Calibration, CalibrationError
 from .estimator import EstimatorConfig, Tuning
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
@@ -144,6 +149,7 @@ class HostConfig:
     tuning: Tuning = Tuning()  # the estimator's shared settings
     range_bias_m: dict[int, float] = field(default_factory=dict)
     settings: dict[str, object] = field(default_factory=dict)  # track name -> its Settings
+    calibration: Calibration | None = None  # replaces range_scale and range_bias_m
 
     # the lab's words, as the pipeline and the service use them
     @property
@@ -165,7 +171,8 @@ class HostConfig:
             anchors=self.anchors, tag_height=v.tag_height, latitude_deg=self.latitude_deg,
             gravity=self.gravity, start=v.start, heading0_rad=math.radians(v.heading_deg),
             gyro_range_dps=v.gyro_range_dps, range_bias_m=dict(self.range_bias_m),
-            filters=tuple(filters or self.filters), settings=dict(self.settings), vehicle=vehicle)
+            filters=tuple(filters or self.filters), settings=dict(self.settings), vehicle=vehicle,
+            calibration=self.calibration)
 
     def to_dict(self) -> dict:
         """JSON-able form, the TOML file's layout (a recording's meta); :func:`from_dict`
@@ -178,7 +185,21 @@ class HostConfig:
             filters["range_bias_m"] = {str(a): c for a, c in sorted(self.range_bias_m.items())}
         for name, s in self.settings.items():
             filters[name] = _plain(s)
-        return {"name": self.name, **doc, "filters": filters}
+        out = {"name": self.name, **doc, "filters": filters}
+        if self.calibration is not None:  # inline: a recording replays without the file
+            out["calibration"] = self.calibration.to_dict()
+        return out
+
+
+def with_calibration(config: HostConfig, calibration: Calibration) -> HostConfig:
+    """*config* with *calibration* (``navtwin host --calibration``) replacing its range
+    correction, checked as a [calibration] section is."""
+    unknown = sorted(set(calibration.bias) - set(config.anchors))
+    if unknown:
+        raise ConfigError(f"{calibration.source} calibrates anchor {unknown[0]}, which is not in "
+                          f"the config's [[anchors]]; use the calibration of this lab")
+    tuning = dataclasses.replace(config.tuning, range_scale=1.0)
+    return dataclasses.replace(config, tuning=tuning, range_bias_m={}, calibration=calibration)
 
 
 def _plain(obj):
@@ -250,7 +271,7 @@ def load(name_or_path: str | None = None) -> HostConfig:
         raise ConfigError(f"{path}: not valid TOML ({e}); fix the syntax") from None
     except (ValueError, RecursionError) as e:  # tomllib's limits: an integer's digits, nesting
         raise ConfigError(f"{path}: {limit_problem(e)}; shorten it") from None
-    return _parse(doc, str(path), path.stem)
+    return _parse(doc, str(path), path.stem, path.parent)
 
 
 # -- checking -------------------------------------------------------------------------------
@@ -273,15 +294,31 @@ def parse_filters(spec, where: str = "--filters") -> tuple[str, ...]:
     return tuple(n for n in known if n in names)
 
 
-def _parse(doc: dict, source: str, name: str) -> HostConfig:
+def _parse(doc: dict, source: str, name: str, directory: Path | None = None) -> HostConfig:
     try:
-        return _config(doc, name)
-    except (ConfigError, Invalid) as e:
+        return _config(doc, name, directory)
+    except (ConfigError, Invalid, CalibrationError) as e:
         raise ConfigError(f"{source}: {e}") from None
 
 
-def _config(doc: dict, name: str) -> HostConfig:
-    known = [f.name for f in dataclasses.fields(Lab)] + ["vehicle", "filters"]
+def _calibration(table, directory: Path | None) -> Calibration:
+    """``[calibration]``: ``file = NAME|PATH`` (relative to the config's directory), or the
+    calibration itself inline (a recording's meta)."""
+    if not isinstance(table, dict):
+        raise ConfigError('[calibration] must be a table like file = "corridor"')
+    if "file" not in table:
+        return range_calibration.parse(table, "[calibration]")
+    if set(table) != {"file"} or not isinstance(table["file"], str) or not table["file"]:
+        raise ConfigError('[calibration] file must be the only key, a calibration name or path '
+                          'in quotes like file = "corridor"')
+    path = Path(table["file"])
+    if directory is not None and path.suffix and not path.is_absolute():
+        path = directory / path
+    return range_calibration.load(path)
+
+
+def _config(doc: dict, name: str, directory: Path | None = None) -> HostConfig:
+    known = [f.name for f in dataclasses.fields(Lab)] + ["vehicle", "filters", "calibration"]
     for section in doc:
         if section not in known:
             raise ConfigError(f"unknown section [{section}]; use {', '.join(sorted(known))}")
@@ -309,7 +346,15 @@ def _config(doc: dict, name: str) -> HostConfig:
     if tuning.reference_anchor not in anchors:
         raise ConfigError(f"[filters] reference_anchor must be one of the [[anchors]] ids "
                           f"{sorted(anchors)}, not {tuning.reference_anchor}")
-    config = HostConfig(name=name, lab=lab, tuning=tuning, settings=settings, **kw)
+    if "calibration" in doc:
+        kw["calibration"] = _calibration(doc["calibration"], directory)
+        if "range_bias_m" in kw or tuning.range_scale != 1.0:
+            raise ConfigError("[filters] range_scale or range_bias_m is set beside [calibration], "
+                              "which gives both; remove them or the [calibration] section")
+    config = HostConfig(name=name, lab=lab, tuning=tuning, settings=settings,
+                        **{k: v for k, v in kw.items() if k != "calibration"})
+    if "calibration" in kw:
+        config = with_calibration(config, kw["calibration"])
     try:  # the estimator's own checks judge what spans sections (3 anchors at least)
         config.estimator_config()
     except (ValueError, TypeError) as e:
@@ -378,7 +423,10 @@ def markdown_table() -> str:
     lines = ["| key | unit | default | valid | meaning |", "|---|---|---|---|---|"]
     extra = [("filters.enabled", "", "sins,wsn,kf,ekf,ukf", "track names (host.tracks)", "the tracks to run"),
              ("filters.range_bias_m", "m", "{}", f"per anchor id, in [{RANGE_BIAS_M[0]}, "
-              f"{RANGE_BIAS_M[1]}]", "c_i of 001: distance = (reported - c_i) / f")]
+              f"{RANGE_BIAS_M[1]}]", "c_i of 001: distance = (reported - c_i) / f"),
+             ("calibration.file", "", "none", "a name in host/calibrations or a path",
+              "001's calibration (navtwin calibrate): its f and c_i replace range_scale and "
+              "range_bias_m, its sigma(d) is est.calibration.sigma")]
     all_rows = rows(Lab) + extra + rows(Tuning, "filters.")
     for track in tracks.BUILT_IN:
         all_rows += rows(tracks.get(track).Settings, f"filters.{track}.")

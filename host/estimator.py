@@ -58,6 +58,7 @@ from navtwin.protocols import sins as sins_format
 from navtwin.protocols.nanoloc import STATUS_TIMEOUT, is_complete
 
 from . import tracks
+from .calibration import Calibration
 from .filters import ACCELERATION, ConstantAcceleration, Linear, Ranges
 from .measurements import Exchange, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
 from .sins import Alignment, AlignmentResult, Strapdown
@@ -156,6 +157,7 @@ class EstimatorConfig(Tuning):
     filters: tuple[str, ...] = tracks.DEFAULT
     settings: Mapping[str, object] = field(default_factory=dict)  # track name -> its Settings
     vehicle: int = 1  # which vehicle of the lab (host config): its estimates say so
+    calibration: Calibration | None = None  # 001's f, c_i, sigma(d): replaces range_scale, range_bias_m
 
     def __post_init__(self):
         unknown = [f for f in self.filters if f not in tracks.BUILT_IN]
@@ -217,7 +219,9 @@ class Estimator:
         self.reinit_count = 0  # every re-initialisation: one int to watch for a new one
         self._tilt_growth = (cfg.tilt_inflation * cfg.gravity * cfg.tilt_rate_sigma) ** 2
         self._accel_var = cfg.accel_sigma_m_s2**2
-        self._range_bias = {int(a): float(c) for a, c in cfg.range_bias_m.items()}
+        self.calibration = cal = cfg.calibration  # the tracks read its sigma(d)
+        self._range_scale = cal.scale if cal else cfg.range_scale
+        self._range_bias = dict(cal.bias) if cal else {int(a): float(c) for a, c in cfg.range_bias_m.items()}
         sv, sa = cfg.stationary_sigma
         self._r_stationary = np.diag([sv**2, sv**2, sa**2, sa**2])
         self._at_rest = np.zeros(4)
@@ -289,7 +293,7 @@ class Estimator:
         elif not (math.isfinite(distance_m) and 0.0 < distance_m <= self.cfg.max_range_m):
             self.input_rejections["range_implausible"] += 1
         else:
-            d = (float(distance_m) - self._range_bias.get(anchor, 0.0)) / self.cfg.range_scale
+            d = (float(distance_m) - self._range_bias.get(anchor, 0.0)) / self._range_scale
             if self._range:
                 m = Range(t_s, np.array([d]), np.array([[self.cfg.range_sigma_m**2]]),
                           Ranges(self.layout, (anchor,), (max(self.t - t_s, 0.0),)))

@@ -62,7 +62,8 @@ def test_acceleration_and_rate_are_continuous(lab):
                       ("rate", lambda k: k.rate)):
         step_coarse = np.max(np.abs(np.diff(get(coarse), axis=0)))
         step_fine = np.max(np.abs(np.diff(get(fine), axis=0)))
-        assert step_coarse > 0 and step_fine < step_coarse / 6, name
+        # a straight line (the calibration walk) never turns: its rate is 0 throughout
+        assert step_fine < step_coarse / 6 or step_coarse == step_fine == 0, name
     speed = np.hypot(tr["vx"], tr["vy"])
     heading = np.arctan2(tr["vy"], tr["vx"])
     moving = speed > 1e-6

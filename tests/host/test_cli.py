@@ -1,4 +1,5 @@
 """`navtwin host` / `navtwin replay` arguments and host config files: one-line errors."""
+import dataclasses
 import json
 import math
 import os
@@ -160,8 +161,9 @@ def test_configs_recorded_in_the_first_layout_still_load(root):
     """Host recordings made before the config had sections hold a flat config
     (fixtures/host-config-v1: written by navtwin 0.1's HostConfig.to_dict)."""
     v1 = json.loads((root / "fixtures" / "host-config-v1" / "configs.json").read_text())
-    for name in ("office", "corridor"):
-        assert host_config.from_dict(v1[name]).to_dict() == host_config.load(name).to_dict()
+    for name in ("office", "corridor"):  # the corridor's calibration came later
+        shipped = dataclasses.replace(host_config.load(name), calibration=None)
+        assert host_config.from_dict(v1[name]).to_dict() == shipped.to_dict()
     tuned = host_config.from_dict(v1["tuned"])
     assert (tuned.settings["ukf"].alpha, tuned.settings["ukf"].kappa) == (0.5, 0.0)
     assert tuned.settings["sins"].vrw_m_s_rt_hr == 3.0

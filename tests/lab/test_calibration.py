@@ -1,0 +1,70 @@
+"""001's calibration on the emulated lab: the walk recovers the emulator's f and c_i, the
+shipped step table and calibration file are what the command makes, and the calibrated
+corridor's WSN error drops."""
+import pytest
+
+from navtwin.cli.main import main
+from navtwin.emulator.runner import Emulation
+from navtwin.emulator.scenario import load_scenario
+from navtwin.host import calibration as cal
+from navtwin.host import config as host_config
+from navtwin.lab import calibration as lab
+
+pytestmark = pytest.mark.slow  # emulated runs of 190 s and 127 s
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return lab.gateway_bytes("calibration")
+
+
+def test_shipped_step_table_is_the_calibration_walks():
+    shipped = cal.CALIBRATION_DIR / "corridor-steps.toml"
+    assert shipped.read_text() == cal.steps_toml(lab.step_table("calibration"))
+    assert cal.load_steps("corridor") == lab.step_table("calibration")
+
+
+@pytest.mark.parametrize("seed", [None, 1, 2])
+def test_calibration_recovers_the_emulators_f_and_c_within_its_intervals(walk, seed):
+    """The scenario's f = 1.05 and c_i inside the fit's 95 % intervals; the range sd follows
+    sigma(d) = 0.1 + 0.01 d within 15 % (a drift of 2 s and the sd's own bias are in it)."""
+    sc = load_scenario("calibration")
+    data = walk if seed is None else lab.gateway_bytes(sc, seed)
+    result = lab.calibrate(data, cal.load_steps("corridor"), host_config.load("corridor"))
+    c = result.calibration
+    assert abs(c.scale - sc.ranging.scale) < c.scale_ci95
+    for a in sc.anchors:
+        assert abs(c.bias[a.id] - a.range_bias_m) < c.bias_ci95[a.id], a.id
+    for d in (2.0, 8.0, 16.0):
+        assert c.sigma(d) == pytest.approx(sc.ranging.sigma0_m + sc.ranging.sigma_per_m * d, rel=0.15)
+    before, after = result.range_error_m
+    assert before == pytest.approx(0.66, rel=0.2) and after == pytest.approx(0.18, rel=0.25)
+
+
+def test_rerunning_the_command_reproduces_the_shipped_calibration(tmp_path, capsys):
+    """host/calibrations/corridor.toml is `navtwin calibrate --scenario calibration`'s output."""
+    out = tmp_path / "corridor.toml"
+    assert main(["calibrate", "--scenario", "calibration", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "mean range error" in printed and "0.66 -> 0.18" in printed
+    assert out.read_text() == (cal.CALIBRATION_DIR / "corridor.toml").read_text()
+
+
+def test_calibrate_reads_a_recording_as_it_runs_a_scenario(tmp_path, walk, capsys):
+    sc = load_scenario("calibration")
+    with Emulation(sc, None, speed=None, ports=False, record=tmp_path / "rec") as emu:
+        emu.run()
+    assert lab.recorded_bytes(tmp_path / "rec") == walk
+    assert main(["calibrate", str(tmp_path / "rec"), "--out", str(tmp_path / "c.toml")]) == 0
+    capsys.readouterr()
+    assert cal.load(tmp_path / "c.toml").bias == cal.load("corridor").bias
+
+
+def test_with_the_calibration_the_corridors_wsn_error_drops():
+    """The corridor's wsn track against the emulator's truth: mean and variance of the
+    position error fall with the shipped calibration (figures: docs/emulator-models.md)."""
+    config = host_config.load("corridor")
+    before = lab.wsn_errors("corridor", 3, config, None)
+    after = lab.wsn_errors("corridor", 3, config, config.calibration)
+    assert after["mean"] < 0.9 * before["mean"]
+    assert after["variance"] < before["variance"]
