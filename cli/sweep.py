@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import contextlib
 import json
 import math
@@ -82,7 +83,8 @@ def register(sub) -> None:
     p.add_argument("--results", metavar="FILE",
                    help="also write the table as Markdown between <!-- results:SCENARIO --> and "
                         "<!-- /results:SCENARIO --> in FILE (e.g. docs/results.md), leaving "
-                        "the rest of FILE as it is")
+                        "the rest of FILE as it is; for a scenario file SCENARIO is its name "
+                        "without .toml")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object (the summary, the output's path and metadata) "
                         "instead of the table")
@@ -114,7 +116,10 @@ def run(args) -> int:
         raise UsageError(str(e)) from None
     summary = sweep.summarise(result.rows, result.filters)
     if args.results:
-        sweep.write_block(args.results, sc.name, sweep.markdown(summary, sc.name, result.meta))
+        # a scenario file's block is named by the file (a variant of office keeps office's
+        # paper and host config but has a table of its own)
+        key = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
+        sweep.write_block(args.results, key, sweep.markdown(summary, sc.name, result.meta))
     if args.json:
         print(json.dumps(_finite({"summary": summary, "out": str(result.out),
                                   "computed_tasks": result.tasks, "meta": result.meta})))

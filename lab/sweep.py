@@ -65,6 +65,11 @@ SCHEMA = pa.schema([("scenario", pa.string()), ("seed", pa.int64()), ("filter", 
                    [(m, pa.int64() if m == "n" else pa.float64()) for m in METRICS])
 #: The figures summarised over seeds, with their table headings.
 FIGURES = {"mean": "mean m", "max": "max m", "rms": "RMSE m", "nees_mean": "NEES"}
+#: Paper 001 Table 1's rows (statistic -> the per-seed figures it is made of), for the
+#: scenarios whose paper gives per-axis variances.
+TABLE_1 = {"x error range (m)": ("x_min", "x_max"), "x error variance (m²)": ("x_var",),
+           "y error range (m)": ("y_min", "y_max"), "y error variance (m²)": ("y_var",),
+           "max error (m)": ("max",), "average error (m)": ("mean",)}
 
 
 class SweepError(Exception):
@@ -333,7 +338,7 @@ def summarise(rows: list[dict], filters: Iterable[str]) -> dict:
         cells = [ok[f][s] for s in sorted(ok[f])]
         per[f] = {"seeds": len(cells), "failed": sum(1 for r in rows if r["filter"] == f
                                                      and r["status"] != "ok")}
-        for m in FIGURES:
+        for m in {**FIGURES, **dict.fromkeys(k for ks in TABLE_1.values() for k in ks)}:
             per[f][m] = mean_ci([r[m] for r in cells if r[m] is not None])
     pairs = []
     for i, a in enumerate(filters):
@@ -401,6 +406,7 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
     for p in summary["pairs"]:
         lines.append(f"| {p['a']} - {p['b']} | {p['seeds']} | {_ci((p['diff'], p['half']), 4)} "
                      f"| {p['better'] + ' better' if p['better'] else 'not decided'} |")
+    lines += _table_1(summary, paper)
     rank = (f"Ranking by mean error (`<`: the paired 95 % CI excludes 0; `~`: it does not): "
             f"`{summary['ranking']}`")
     means = {f: v["mean"] for f, v in paper["figures"].items() if "mean" in v} if paper else {}
@@ -409,6 +415,28 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
         rank += f"; {paper['paper']}'s by its published means: `{' < '.join(published)}`"
     lines += ["", rank]
     return "\n".join(lines)
+
+
+def _table_1(summary: dict, paper: dict | None) -> list[str]:
+    """Paper 001 Table 1's layout (rows: statistics; columns: the tracks it has figures for,
+    ours with 95 % half-widths over seeds, the paper's in parentheses) when *paper* gives
+    per-axis variances; [] otherwise."""
+    figs = paper["figures"] if paper else {}
+    cols = [f for f in figs if "x_var" in figs[f] and f in summary["filters"]]
+    if not cols:
+        return []
+    out = ["", f"Paper {paper['paper']} Table 1's layout: each figure is the mean over seeds of "
+           f"that seed's figure, ± its 95 % half-width; ({paper['paper']}'s published figure).", "",
+           "| statistic | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
+    for label, keys in TABLE_1.items():
+        cells = []
+        for f in cols:
+            s, digits = summary["filters"][f], 4
+            cell = " ... ".join(_ci(s[k], digits) for k in keys)
+            pub = figs[f].get({"max": "max", "mean": "mean"}.get(keys[0], keys[0]))
+            cells.append(cell + ("" if pub is None else f" ({pub:.4g})"))
+        out.append(f"| {label} | " + " | ".join(cells) + " |")
+    return out
 
 
 def _paper(v: float | None) -> str:

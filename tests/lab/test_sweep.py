@@ -152,3 +152,18 @@ def test_the_markdown_puts_the_papers_figures_beside_ours():
     assert f"| {paper['lc']['mean']:.4g} | {paper['lc']['max']:.4g} |" in md
     assert "| tc - lc |" not in md and "| lc - tc | 3 |" in md
     assert md.endswith("; 001's by its published means: `fatci < tc < lc`")
+
+
+def test_corridor_markdown_has_001_table_1_in_its_layout_with_the_papers_figures():
+    rng = np.random.default_rng(5)
+    rows = [sweep._row("corridor", seed, f, {m: float(rng.random()) for m in sweep.METRICS})
+            for f in ("lc", "tc", "fatci") for seed in range(6)]
+    s = sweep.summarise(rows, ("lc", "tc", "fatci"))
+    md = sweep.markdown(s, "corridor")
+    paper = evaluate.PAPER_FIGURES["corridor"]["figures"]
+    assert "| statistic | lc | tc | fatci |" in md
+    row = next(line for line in md.splitlines() if line.startswith("| x error variance"))
+    for f in ("lc", "tc", "fatci"):
+        m, h = sweep.mean_ci([r["x_var"] for r in rows if r["filter"] == f])
+        assert f"{m:.4f} ± {h:.4f} ({paper[f]['x_var']:.4g})" in row
+    assert "Table 1" not in sweep.markdown(sweep.summarise(rows, ("lc",)), "office")
