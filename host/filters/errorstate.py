@@ -32,8 +32,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .innovation import Innovation, gated
-from .linalg import inverse
+from .innovation import Innovation, joseph_correct
 
 NAV = 7  # dp (2), dv (2), dA (3)
 P, V, A = slice(0, 2), slice(2, 4), slice(4, 7)
@@ -80,16 +79,7 @@ class ErrorStateFilter:
     def update(self, z: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float | None = None) -> Innovation:
         """Correct with z = H x + v, v ~ N(0, R) (H: dim(z) x n); the state is unchanged
         when the gate rejects it."""
-        y = z - H.dot(self.x)
-        PHT = self.P.dot(H.T)
-        S = H.dot(PHT) + R
-        SI = inverse(S)
-        inn = gated(y, S, SI, gate)
-        if inn.accepted:
-            K = PHT.dot(SI)
-            self.x = self.x + K.dot(y)
-            I_KH = self._I - K.dot(H)
-            self.P = I_KH.dot(self.P).dot(I_KH.T) + K.dot(R).dot(K.T)
+        self.x, self.P, inn = joseph_correct(self.x, self.P, self._I, z - H.dot(self.x), H, R, gate)
         return inn
 
     def take_nav(self) -> np.ndarray:

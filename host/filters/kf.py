@@ -21,8 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .innovation import Innovation, gated
-from .linalg import inverse
+from .innovation import Innovation, joseph_correct
 from .model import ConstantAcceleration, Linear
 
 
@@ -43,13 +42,5 @@ class KalmanFilter:
         return self._correct(np.asarray(z, float) - H.dot(self.x), H, np.asarray(R, float), gate)
 
     def _correct(self, y: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float | None) -> Innovation:
-        PHT = self.P.dot(H.T)
-        S = H.dot(PHT) + R
-        SI = inverse(S)
-        inn = gated(y, S, SI, gate)
-        if inn.accepted:
-            K = PHT.dot(SI)
-            self.x = self.x + K.dot(y)
-            I_KH = self._I - K.dot(H)
-            self.P = I_KH.dot(self.P).dot(I_KH.T) + K.dot(R).dot(K.T)
+        self.x, self.P, inn = joseph_correct(self.x, self.P, self._I, y, H, R, gate)
         return inn
