@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 import contextlib
 import json
 import math
 import sys
 import tempfile
+from pathlib import Path
 
 from navtwin.common.limits import SEEDS, span
 
