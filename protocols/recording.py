@@ -67,7 +67,17 @@ FLUSH_BYTES = 1 << 20  # buffered bytes (all files) that make the writer flush b
 MAX_CHUNK = 1 << 24  # no writer makes a chunk this big: a larger size is not a chunk
 PORT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")  # a file stem in DIR, no path
 _MAX_INDEX_LINE = 100  # four integers and three commas
-_INT = re.compile(rb"[0-9]{1,19}")
+# an index line: offset,size,t_device_ns,t_wall_ns (the times may be empty), CR LF or LF
+_ENTRY = re.compile(rb"([0-9]{1,19}),([0-9]{1,19}),([0-9]{0,19}),([0-9]{0,19})\r*\n")
+
+
+def _entry_problem(line: bytes) -> str:
+    """Why an index line that is not an entry is not one."""
+    fields = line.rstrip(b"\r\n").split(b",")
+    if len(fields) != 4:
+        return f"expected offset,size,t_device_ns,t_wall_ns, got {_text(line)!r}"
+    return (f"expected non-negative integers offset,size,t_device_ns,t_wall_ns, "
+            f"got {_text(line)!r}")
 
 _FIX = {errno.ENOSPC: "the filesystem is full; free space or write to another filesystem",
         errno.EDQUOT: "the disk quota is used up; free space or write elsewhere",
@@ -475,40 +485,39 @@ class Recording:
             if fh.readline(_MAX_INDEX_LINE + 1).rstrip(b"\r\n") != INDEX_HEADER.encode():
                 raise RecordingError(f"{index}:1: the first line must be {INDEX_HEADER!r}; "
                                      f"restore the index or re-record")
-            offset, last = 0, {"t_device_ns": -1, "t_wall_ns": -1}
+            offset, last_dev, last_wall = 0, -1, -1
 
             def damaged(n: int, problem: str):
                 raise RecordingError(f"{index}:{n}: {problem}; the index is damaged: "
                                      f"re-record, or restore {index.name}")
             for n, line in _numbered_lines(fh, _MAX_INDEX_LINE, damaged, first=2):
-                def bad(problem: str):
-                    damaged(n, problem)
                 if line is None:
                     yield n, None, "a partial last index line", None, None
                     return
-                fields = line.rstrip(b"\r\n").split(b",")
-                if len(fields) != 4:
-                    bad(f"expected offset,size,t_device_ns,t_wall_ns, got {_text(line)!r}")
-                if not all(_INT.fullmatch(f) for f in fields[:2]) or \
-                        not all(f == b"" or _INT.fullmatch(f) for f in fields[2:]):
-                    bad(f"expected non-negative integers offset,size,t_device_ns,t_wall_ns, "
-                        f"got {_text(line)!r}")
-                off, size = int(fields[0]), int(fields[1])
-                times = [None if f == b"" else int(f) for f in fields[2:]]
+                m = _ENTRY.fullmatch(line)  # one match a line: an hour's index is 600k lines
+                if m is None:
+                    damaged(n, _entry_problem(line))
+                off, size, dev, wall = m.groups()
+                off, size = int(off), int(size)
+                dev = int(dev) if dev else None
+                wall = int(wall) if wall else None
                 if off != offset:
-                    bad(f"offset {off} is not where the previous chunk ends ({offset})")
+                    damaged(n, f"offset {off} is not where the previous chunk ends ({offset})")
                 if not 0 < size <= MAX_CHUNK:
-                    bad(f"size {size} is not in 1..{MAX_CHUNK}")
-                for key, t in zip(last, times):
-                    if t is not None:
-                        if t < last[key]:
-                            bad(f"{key} {t} is before the previous chunk's ({last[key]})")
-                        last[key] = t
+                    damaged(n, f"size {size} is not in 1..{MAX_CHUNK}")
+                if dev is not None:
+                    if dev < last_dev:
+                        damaged(n, f"t_device_ns {dev} is before the previous chunk's ({last_dev})")
+                    last_dev = dev
+                if wall is not None:
+                    if wall < last_wall:
+                        damaged(n, f"t_wall_ns {wall} is before the previous chunk's ({last_wall})")
+                    last_wall = wall
                 if off + size > data_size:
                     yield n, None, f"chunks past the end of {port}.bin ({data_size} bytes)", \
                         None, None
                     return
-                yield n, off, size, *times
+                yield n, off, size, dev, wall
                 offset = off + size
 
     def _scan(self, port: str) -> None:
