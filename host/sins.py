@@ -254,11 +254,13 @@ class Strapdown:
         """Closed-loop feedback of an error-state filter (001 sect. 2): remove the estimated
         errors (computed minus true) of the horizontal position ``dp`` and velocity ``dv``
         and the attitude error ``da`` (rad, nav frame: C_computed = exp(da x) C_true)."""
+        # plain floats: numpy scalars here would make every later step several times slower
+        (dpx, dpy), (dvx, dvy), (dax, day, daz) = map(float, dp), map(float, dv), map(float, da)
         x, y, z = self._p
         vx, vy, vz = self._v
-        self._p = (x - dp[0], y - dp[1], z)
-        self._v = (vx - dv[0], vy - dv[1], vz)
-        qw, qx, qy, qz = quat_multiply(quat_from_rotvec((-da[0], -da[1], -da[2])), self._q)
+        self._p = (x - dpx, y - dpy, z)
+        self._v = (vx - dvx, vy - dvy, vz)
+        qw, qx, qy, qz = quat_multiply(quat_from_rotvec((-dax, -day, -daz)), self._q)
         norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
         self._q = (qw / norm, qx / norm, qy / norm, qz / norm)
 

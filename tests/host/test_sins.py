@@ -146,3 +146,20 @@ def test_aligned_bias_makes_a_biased_gyro_hold_heading():
         sins.step(DT if k > 499 else 0.0, gyro[k], accel[k])
     assert abs(sins.yaw) < 1e-9
     assert np.abs(sins.p[:2] - tr.p[0]).max() < 1e-6
+
+
+def test_correct_removes_the_estimated_errors_and_keeps_plain_floats():
+    """001's closed-loop feedback: p - dp, v - dv, and C = exp(-da x) C_computed (scipy's
+    rotation, independent), from the numpy arrays an error-state filter gives. The state
+    stays Python floats: numpy scalars in it made every later step about 4x slower."""
+    q = quat_from_euler(0.01, -0.02, 0.9)
+    sins = Strapdown(position=(6.0, 1.8), velocity=(0.3, -0.1, 0.0), q=q, latitude_deg=LATITUDE_DEG,
+                     gravity=GRAVITY)
+    dp, dv, da = np.array([0.2, -0.1]), np.array([0.05, 0.02]), np.array([1e-3, -2e-3, 0.03])
+    sins.correct(dp, dv, da)
+    np.testing.assert_allclose(sins.p, (5.8, 1.9, 0.0), atol=1e-15)
+    np.testing.assert_allclose(sins.v, (0.25, -0.12, 0.0), atol=1e-15)
+    want = Rotation.from_rotvec(-da) * Rotation.from_quat(np.roll(q, -1))
+    np.testing.assert_allclose(quat_to_dcm(sins.q), want.as_matrix(), atol=1e-14)
+    state = (*sins._p, *sins._v, *sins._q)
+    assert {type(c) for c in state} == {float}
