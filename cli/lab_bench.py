@@ -37,6 +37,8 @@ def main(argv: list[str] | None = None) -> int:
     rep.add_argument("--seconds", type=number(1, 3600), default=60.0,
                      help="length of the default recording, 1 to 3600 (default 60)")
     rep.add_argument("--filters", **filters)
+    rep.add_argument("--runs", type=number(1, 100, integer=True), default=5,
+                     help="replays, their median wall time counts, 1 to 100 (default 5)")
     mem = sub.add_parser("in-memory", help="seeds/s in memory vs recorded and replayed")
     mem.add_argument("--scenario", default="office")
     mem.add_argument("--seeds", type=number(1, 1000, integer=True), default=3,
@@ -60,8 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.what == "latency":
         result = latency(args.seconds, args.filters)
     elif args.what == "replay":
-        result = (bench_replay(args.directory, args.filters) if args.directory
-                  else office_replay(args.seconds, args.filters))
+        result = (bench_replay(args.directory, args.filters, args.runs) if args.directory
+                  else office_replay(args.seconds, args.filters, runs=args.runs))
     elif args.what == "in-memory":
         result = in_memory(args.scenario, args.seeds)
     elif args.what == "sweep":

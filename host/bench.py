@@ -6,7 +6,8 @@ gateway); this process writes the chunks to the masters at their arrival times a
 measures, for every batch of estimate lines, the time from the write of the chunk holding
 the last byte the host had processed to the moment the lines were written (p50/p99/max).
 ``bench_replay``: the pipeline over a recording (a host or emulator recording), in multiples
-of real time = recorded span / wall time. ``write_host_recording``: chunks as ``navtwin host
+of real time = recorded span / median wall time (``replay_speeds``: several filter sets
+over one recording, their runs interleaved). ``write_host_recording``: chunks as ``navtwin host
 --record`` records them.
 """
 from __future__ import annotations
@@ -96,20 +97,38 @@ def bench_latency(config: HostConfig, filters, chunks, seconds: float) -> dict:
             "host_side": service.latency.overall()}
 
 
-def bench_replay(directory: str | os.PathLike, filters=None) -> dict:
+def bench_replay(directory: str | os.PathLike, filters=None, runs: int = 1) -> dict:
     """Replay speed of the recording in *directory* (the recorded run's filters unless
-    *filters*), in multiples of real time."""
+    *filters*), in multiples of real time: the median wall time of *runs* replays."""
+    return replay_speeds(directory, {"replay": filters}, runs)["replay"]
+
+
+def replay_speeds(directory: str | os.PathLike, sets: dict, runs: int = 1) -> dict:
+    """``bench_replay`` of each of *sets* (name -> filters, None: the recorded run's), the
+    runs interleaved (set a, set b, set a, ...) so that a drift in the machine's speed
+    weighs on every set alike; name -> its result."""
     rec = Recording(directory)
-    lines = [0]
     stamps = [t_ns for _, _, t_ns in replay_chunks(rec, settings(rec)["inputs"])]
-    t = time.perf_counter()
-    overrides = {"filters": tuple(filters)} if filters else {}
-    pipe = replay(rec, lambda es: lines.__setitem__(0, lines[0] + len(es)), **overrides)
-    wall = time.perf_counter() - t
     recorded_s = (max(stamps) - min(stamps)) / 1e9
-    return {"benchmark": "replay", "recording": str(directory), "recorded_s": round(recorded_s, 3),
-            "wall_s": round(wall, 3), "x_real_time": round(recorded_s / wall, 1),
-            "lines": lines[0], "filters": list(pipe.filters)}
+    walls: dict[str, list[float]] = {name: [] for name in sets}
+    lines, used = {}, {}
+    for _ in range(runs):
+        for name, filters in sets.items():
+            count = [0]
+            t = time.perf_counter()
+            pipe = replay(rec, lambda es: count.__setitem__(0, count[0] + len(es)),
+                          **({"filters": tuple(filters)} if filters else {}))
+            walls[name].append(time.perf_counter() - t)
+            lines[name], used[name] = count[0], list(pipe.filters)
+    out = {}
+    for name, w in walls.items():
+        wall = float(np.median(w))
+        out[name] = {"benchmark": "replay", "recording": str(directory),
+                     "recorded_s": round(recorded_s, 3), "runs": runs, "wall_s": round(wall, 3),
+                     "wall_s_range": [round(min(w), 3), round(max(w), 3)],
+                     "x_real_time": round(recorded_s / wall, 1), "lines": lines[name],
+                     "filters": used[name]}
+    return out
 
 
 def benchmarks() -> dict:
