@@ -31,8 +31,8 @@ _BUILT_IN = {
 }
 BUILT_IN = tuple(_BUILT_IN)
 #: What runs when no filters are named: 000's tracks. 001's error-state tracks (lc, ...) run
-#: when named (``--filters``, ``[filters] enabled``): each costs about what the three CA
-#: filters together cost (docs/filters.md, "Speed").
+#: when named (``--filters``, ``[filters] enabled``): together they add about 0.6 of the
+#: five's replay time (docs/lab.md, "Replay with all eight tracks").
 DEFAULT = ("sins", "wsn", "kf", "ekf", "ukf")
 GROUP = "navtwin.tracks"
 _registered: dict[str, type[Track]] = {}
