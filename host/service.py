@@ -122,7 +122,8 @@ def read_chunk(ser: serial.SerialBase) -> bytes:
     which a second reader can take bytes: one soak chunk had a frame, then a byte from five
     frames later). A readable tty with nothing to read (another reader was first, or a
     hang-up) raises, as pyserial does. Elsewhere (``in_waiting`` is 0/1 on sockets) the
-    first byte is waited for and the rest taken without waiting."""
+    first byte is waited for and the rest taken without waiting; a port that goes away after
+    some of them (a socket's peer closed) gives those bytes, and raises at the next read."""
     fd = getattr(ser, "fd", None)
     if fd is not None:
         if not select.select([fd], [], [], ser.timeout)[0]:
@@ -135,8 +136,11 @@ def read_chunk(ser: serial.SerialBase) -> bytes:
             raise serial.SerialException("readable but no data waiting")
         return data
     data = ser.read(1)
-    while data and len(data) < MAX_CHUNK and (n := ser.in_waiting):
-        data += ser.read(n)
+    try:
+        while data and len(data) < MAX_CHUNK and (n := ser.in_waiting):
+            data += ser.read(n)
+    except serial.SerialException:
+        pass  # the bytes before the end are the stream's: the next read meets the end again
     return data
 
 

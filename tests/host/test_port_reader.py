@@ -370,3 +370,23 @@ def test_a_chunk_is_contiguous_in_the_stream_while_a_second_reader_takes_bytes()
             os.close(fd)
     assert chunks >= 200, f"only {chunks} chunks read"
     assert not broken, f"{len(broken)} of {chunks} chunks skip bytes: {broken[:3]}"
+
+
+def test_a_socket_that_closes_after_its_bytes_gives_them_then_ends():
+    """A socket port (pyserial's socket://) whose peer sent bytes and closed: the host's read
+    hands over every byte before the end, and only the next read meets the end (the old read
+    raised at the end and lost the chunk it had gathered: a frame per reconnect)."""
+    import socket
+
+    payload = bytes(range(256)) * 4
+    server = socket.create_server(("127.0.0.1", 0))
+    with server, serial.serial_for_url(f"socket://127.0.0.1:{server.getsockname()[1]}",
+                                       timeout=5) as ser:
+        conn, _ = server.accept()
+        conn.sendall(payload)
+        conn.close()  # on loopback the bytes and the end are queued at the reader by now
+        got = b""
+        with pytest.raises(serial.SerialException):
+            while len(got) <= len(payload):
+                got += service.read_chunk(ser)
+    assert got == payload
