@@ -179,16 +179,22 @@ def test_replay_of_a_host_killed_with_sigkill(tmp_path):
     from navtwin.host.pipeline import Pipeline
     from navtwin.host.replay import chunks, settings
 
-    d = tmp_path / "rec"
-    host = Host(["--record", d, "--status-period", "60"], ["xbee", "nanoloc"])
-    host.feed(lab_bytes.office(60.0, 5), pause_s=0.001)
+    d, out = tmp_path / "rec", tmp_path / "live.jsonl"
+    # the lines to a file: a stdout pipe nobody reads would fill and stall the host
+    host = Host(["--record", d, "--out", out, "--status-period", "60"], ["xbee", "nanoloc"])
+    office = list(lab_bytes.office(60.0, 5))
+    host.feed(office, pause_s=0.001)  # 8,400 chunks: 8 s or more
+    # a fifth of the coordinator's bytes recorded and flushed as the host runs (bytes, not
+    # index lines: a loaded host reads fewer, bigger chunks)
+    fifth = sum(len(data) for port, data, _ in office if port == "xbee") // 5
     deadline = time.monotonic() + DEADLINE_S
-    while (d / "xbee.csv").read_bytes().count(b"\n") < 300:  # flushed as the host runs
+    while not (d / "xbee.bin").exists() or (d / "xbee.bin").stat().st_size < fifth:
         assert host.proc.poll() is None and time.monotonic() < deadline, host.err
         time.sleep(0.02)
     host.proc.kill()
-    code, live, err = host.finish()
+    code, _, err = host.finish()
     assert code == -signal.SIGKILL
+    live = out.read_text()
     rec = Recording(d)
     assert not rec.complete
     # the recording holds what the live run processed, in order: the same lines, cut
