@@ -79,6 +79,7 @@ def _entry_problem(line: bytes) -> str:
     return (f"expected non-negative integers offset,size,t_device_ns,t_wall_ns, "
             f"got {_text(line)!r}")
 
+
 _FIX = {errno.ENOSPC: "the filesystem is full; free space or write to another filesystem",
         errno.EDQUOT: "the disk quota is used up; free space or write elsewhere",
         errno.EFBIG: "the file is larger than allowed (ulimit -f or the filesystem's limit); "
