@@ -78,7 +78,6 @@ POWER_UP_START_NS = 5 * MS
 ADDRESS_TIMEOUT_NS = 1_600 * MS  # unicast timeout (50 x NH + 100 ms, NH = 0x1E)
 BROADCAST_PAYLOAD_EXTRA = 8  # a ZB broadcast carries 8 bytes more than NP
 DIGI_PROFILE = 0xC105
-DIGI_MANUFACTURER = 0x101E
 DIGI_DATA = (0xE8, 0xE8, 0x0011, DIGI_PROFILE)  # endpoints, cluster, profile of 0x91 data
 ZDO_RX_OPTIONS = 0x01  # a ZDO answer is an acknowledged unicast
 # Serial transmit buffer. S2B's size is undocumented (the S1's 100 B does not apply): 512 B
@@ -144,7 +143,7 @@ PARAMS: dict[str, Param] = {
     "EE": Param(1, 0, valid=_range(0, 1)), "SM": Param(1, 0, valid=_one_of(0)),
     "SN": Param(2, 1, valid=_range(1, 0xFFFF)), "SP": Param(2, 0x20, valid=_range(0x20, 0xAF0)),
     "ST": Param(2, 0x1388, valid=_range(1, 0xFFFE)),
-    # serial interfacing
+    # serial interfacing; AP and BD come from the scenario (the factory's are 1 and 3)
     "AP": Param(1, 2, valid=_one_of(1, 2)), "AO": Param(1, 0, valid=_one_of(0, 1, 3)),
     "BD": Param(4, 7, valid=lambda v: v <= 7 or 0x80 <= v <= 0xE1000),
     "NB": Param(1, 0, valid=_range(0, 3)), "SB": Param(1, 0, valid=_range(0, 1)),
@@ -457,7 +456,7 @@ class Coordinator:
             value = (r["MY"].to_bytes(2, "big") + r["SH"].to_bytes(4, "big")
                      + r["SL"].to_bytes(4, "big") + bytes(r["NI"]) + b"\x00"
                      + (0xFFFE).to_bytes(2, "big") + bytes((node.device_type, 0))
-                     + DIGI_PROFILE.to_bytes(2, "big") + DIGI_MANUFACTURER.to_bytes(2, "big")
+                     + DIGI_PROFILE.to_bytes(2, "big") + xbee.DIGI_MANUFACTURER.to_bytes(2, "big")
                      + (r["DD"].to_bytes(4, "big") if no & 1 else b""))
             out.append(Output(t_ns + delay + latency,
                               self._at_reply(fid, raw_cmd, AtStatus.OK, value)))

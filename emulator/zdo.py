@@ -16,16 +16,17 @@ from __future__ import annotations
 
 from typing import Callable
 
+from navtwin.protocols.xbee import DIGI_MANUFACTURER
+
 RESPONSE = 0x8000  # a ZDO answer's cluster: the request's with bit 15 set
 SUCCESS = 0x00
 DEVICE_NOT_FOUND = 0x81
 NODE_DESC_REQ = 0x0002
 
-DIGI_MANUFACTURER = 0x101E
 FREQ_2400_MHZ = 0x40  # byte 1: frequency band bit 3 (of bits 3-7), APS flags 0
-# MAC capabilities of a mains-powered router: full-function device, mains, receiver on when
-# idle, allocate address (bits 1, 2, 3, 7)
-ROUTER_MAC_CAPABILITIES = 0x8E
+# MAC capabilities of a mains-powered router (the only remote node emulated): full-function
+# device, mains, receiver on when idle, allocate address (bits 1, 2, 3, 7)
+MAC_CAPABILITIES = 0x8E
 # Buffer and transfer sizes of the EM250's EmberZNet stack: not in Digi's manual (uncertain;
 # digi-xbee reads them but only the logical type decides the role).
 MAX_BUFFER = 0x52
@@ -35,7 +36,7 @@ MAX_TRANSFER = 0x0052
 def node_descriptor(logical_type: int) -> bytes:
     """The 13-byte node descriptor of an S2B: logical type 0 coordinator, 1 router, 2 end
     device; no complex or user descriptor, no server roles."""
-    return (bytes((logical_type, FREQ_2400_MHZ, ROUTER_MAC_CAPABILITIES))
+    return (bytes((logical_type, FREQ_2400_MHZ, MAC_CAPABILITIES))
             + DIGI_MANUFACTURER.to_bytes(2, "little") + bytes((MAX_BUFFER,))
             + MAX_TRANSFER.to_bytes(2, "little") + (0).to_bytes(2, "little")  # server mask
             + MAX_TRANSFER.to_bytes(2, "little") + bytes((0,)))  # descriptor capabilities
@@ -45,7 +46,8 @@ def node_descriptor(logical_type: int) -> bytes:
 SERVICES: dict[int, Callable[[int], bytes]] = {NODE_DESC_REQ: node_descriptor}
 
 
-def answer(cluster: int, data: bytes, addr16: int, logical_type: int) -> tuple[int, bytes] | None:
+def answer(cluster: int, data: bytes, addr16: int,
+           logical_type: int) -> tuple[int, bytes] | None:
     """(answer cluster, payload) of the node at *addr16* to the ZDO request *data* on
     *cluster*, or None when it does not answer."""
     service = SERVICES.get(cluster)
