@@ -24,11 +24,15 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--repeat", type=repeat, default=3, help="1 to 1000 (default 3)")
     d = sub.add_parser("digi-open", help="digi-xbee XBeeDevice.open() time on the coordinator")
     d.add_argument("--repeat", type=repeat, default=10, help="1 to 1000 (default 10)")
+    r = sub.add_parser("digi-router", help="digi-xbee read_device_info() time on the router")
+    r.add_argument("--repeat", type=repeat, default=10, help="1 to 1000 (default 10)")
     args = p.parse_args(argv)
     if args.what == "jitter":
         result = bench.jitter(args.seconds, args.scenario)
     elif args.what == "speed":
         result = bench.speed(args.scenario, repeat=args.repeat)
+    elif args.what == "digi-router":
+        result = bench.digi_router(args.repeat)
     else:
         result = bench.digi_open(args.repeat)
     print(json.dumps(result))

@@ -15,6 +15,9 @@
     and reports how many times faster than real time it ran.
 ``python -m navtwin.cli.emulator_bench digi-open [--repeat 10]``
     times digi-xbee's ``XBeeDevice(port, 115200).open()`` on the coordinator's port.
+``python -m navtwin.cli.emulator_bench digi-router [--repeat 10]``
+    times digi-xbee's ``RemoteZigBeeDevice.read_device_info()`` on the router, through the
+    coordinator (remote AT, then the ZDO node descriptor that gives its role).
 
 ``navtwin bench uart-rx``
     bytes per second the client-UART model (emulator.uart_rx) turns into what a client at
@@ -162,6 +165,33 @@ def digi_open(repeat: int = 10, scenario: str = "office") -> dict:
             "min_s": min(times), "median_s": float(np.median(times)), "max_s": max(times)}
 
 
+def digi_router(repeat: int = 10, scenario: str = "office") -> dict:
+    """How long digi-xbee's ``read_device_info()`` on the router takes, and the role it got."""
+    from digi.xbee.devices import RemoteZigBeeDevice, XBeeDevice
+    from digi.xbee.models.address import XBee64BitAddress
+
+    from .api import emulate
+    from .scenario import load_scenario
+
+    sc = load_scenario(scenario)
+    (router, *_) = sc.routers_for(sc.seed)
+    addr64 = XBee64BitAddress((router["SH"] << 32 | router["SL"]).to_bytes(8, "big"))
+    times = []
+    with emulate(scenario, speed="realtime") as lab:
+        dev = XBeeDevice(lab.ports["xbee"], 115200)
+        dev.open()
+        try:
+            for _ in range(repeat):
+                remote = RemoteZigBeeDevice(dev, addr64)
+                t = time.perf_counter()
+                remote.read_device_info()
+                times.append(time.perf_counter() - t)
+        finally:
+            dev.close()
+    return {"benchmark": "digi-router", "repeat": repeat, "role": remote.get_role().description,
+            "min_s": min(times), "median_s": float(np.median(times)), "max_s": max(times)}
+
+
 def uart_rx(chunks: int = 3000, seed: int = 1) -> dict:
     """Throughput of Receiver + tty_bytes against the line rate it must keep up with."""
     from .uart_rx import Framing, Receiver, tty_bytes
@@ -197,9 +227,14 @@ def benchmarks() -> dict:
         """emulator: digi-xbee XBeeDevice.open() on the coordinator (goal < 1.5 s)"""
         return digi_open(3 if quick else 10)
 
+    def digi_xbee_router(quick: bool = False) -> dict:
+        """emulator: digi-xbee read_device_info() on the router, Role.ROUTER (goal < 2 s)"""
+        return digi_router(3 if quick else 10)
+
     def uart_rx_model(quick: bool = False) -> dict:
         """emulator: client-UART model throughput vs the 11.5 kB/s line (goal >= 5x)"""
         return uart_rx(500 if quick else 3000)
 
     return {"emulator-speed": emulator_speed, "emulator-jitter": emulator_jitter,
-            "digi-open": digi_xbee_open, "uart-rx": uart_rx_model}
+            "digi-open": digi_xbee_open, "digi-router": digi_xbee_router,
+            "uart-rx": uart_rx_model}

@@ -13,7 +13,9 @@ bit 0 is set) and answers the host's API frames as XBee ZB firmware 21A7 does
 0x10 0x11   transmit request -> 0x8B after the link's delivery time: 0x00 delivered,
             0x21 network ACK failure (retries exhausted), 0x74 payload over NP,
             0x24 address not found (unknown 64-bit address), 0x25 route not found
-            (unknown 16-bit address), 0x23 self-addressed; broadcasts always 0x00
+            (unknown 16-bit address), 0x23 self-addressed; broadcasts always 0x00.
+            A 0x11 to the router's ZDO endpoint (0, profile 0) is also answered by the
+            router's stack (emulator.zdo): a 0x91 from it when AO bit 0 is set
 0x17        remote AT command to the router -> 0x97 with the router's register value,
             status 4 when the request or the answer is lost or the address is unknown
 ==========  ===========================================================================
@@ -36,7 +38,11 @@ discovery on its NT timeout, as with real hardware).
 Role question: digi-xbee's ``open()`` reads CE after HV, VR, SH, SL, NI, MY. A 2x7x module
 answers CE with status 2, which costs digi-xbee an 8 s ZDO fallback; this coordinator
 answers CE = 1, so ``open()`` reports ``Role.COORDINATOR`` at once. The router (reached by
-0x17) answers CE with status 2, as 22A7 firmware does.
+0x17) answers CE with status 2, as 22A7 firmware does; digi-xbee then asks the router for its
+ZDO node descriptor, which the router answers with logical type 1 (``Role.ROUTER``).
+
+Both modules answer the S2B's AT registers (``PARAMS``: the I/O pins D0-D7 and P0-P2, IR,
+IC and the rest XCTU reads) with the factory defaults of Digi's ZB manual.
 
 Changes of AP (escaping) and BD (UART rate) take effect after the OK answer has gone out
 (immediately when the request had frame ID 0). AP 0 (transparent) is not emulated and is
@@ -44,7 +50,6 @@ refused with status 3. Sets on the router are stored and answered but do not cha
 device model (its packetisation keeps the scenario's RO and NP).
 
 Power-up: modem status 0x00 (hardware reset) at t = 0, then 0x06 (coordinator started).
-DB (RSSI of the last packet) is a fixed -40 dBm (0x28): the link model has no RSSI.
 
 Serial transmit buffer: an RF packet whose frame does not fit in the ``SERIAL_TX_BUFFER``
 bytes still queued for the UART when it arrives is dropped whole and counted
@@ -63,6 +68,8 @@ from navtwin.protocols import xbee
 from navtwin.protocols.stream import Frame, XBeeDecoder
 from navtwin.protocols.xbee import AtStatus, DeliveryStatus, FrameType, ModemStatus
 
+from . import zdo
+
 MS = 1_000_000
 RESPONSE_DELAY_NS = 3 * MS
 RESET_NS = 100 * MS  # FR: software reset until modem status 0x01
@@ -71,8 +78,8 @@ POWER_UP_START_NS = 5 * MS
 ADDRESS_TIMEOUT_NS = 1_600 * MS  # unicast timeout (50 x NH + 100 ms, NH = 0x1E)
 BROADCAST_PAYLOAD_EXTRA = 8  # a ZB broadcast carries 8 bytes more than NP
 DIGI_PROFILE = 0xC105
-DIGI_MANUFACTURER = 0x101E
 DIGI_DATA = (0xE8, 0xE8, 0x0011, DIGI_PROFILE)  # endpoints, cluster, profile of 0x91 data
+ZDO_RX_OPTIONS = 0x01  # a ZDO answer is an acknowledged unicast
 # Serial transmit buffer. S2B's size is undocumented (the S1's 100 B does not apply): 512 B
 # holds two maximal escaped 0x90 frames or ten SINS packets, and drains in 0.53 s at 9600.
 SERIAL_TX_BUFFER = 512
@@ -81,9 +88,11 @@ TEXT = 0  # Param.size of a text register
 
 @dataclass(frozen=True)
 class Param:
-    """An AT register: answer width in bytes (TEXT for NI), writable, valid values."""
+    """An AT register: answer width in bytes (TEXT for NI), factory default (None: set by the
+    module's identity, or absent), writable, valid values."""
 
     size: int
+    default: Any = None
     writable: bool = True
     valid: Callable[[Any], bool] = lambda v: True
 
@@ -96,34 +105,65 @@ def _one_of(*values: int) -> Callable[[int], bool]:
     return lambda v: v in values
 
 
-#: The registers of a ZB 2x7x module that this emulation answers (xbee-api-facts.md sect. 2).
+def _read_only(size: int, default: Any = None) -> Param:
+    return Param(size, default, writable=False)
+
+
+def _pin(default: int, *functions: int) -> Param:
+    """A pin configuration register (D0-D7, P0-P2): 0 disabled/unmonitored input, 3 digital
+    input, 4/5 digital output low/high, plus the pin's own *functions* (1 its alternate
+    function, 2 analog input, 6/7 RS-485 enable)."""
+    return Param(1, default, valid=_one_of(0, 3, 4, 5, *functions))
+
+
+#: The registers of an XBee-PRO S2B with ZB 2x7x firmware that this emulation answers, with
+#: the factory defaults of Digi's "XBee/XBee-PRO ZB RF Modules" manual (90000976, rev. J,
+#: 2012, "XBee Command Reference Tables"; I/O table p. 134 of the 2011 edition for IR, IC,
+#: P0-P2) and xbee-api-facts.md sect. 2. Local (0x08/0x09) and remote (0x17) AT use the same
+#: table, so the coordinator and the router answer alike. A name that is not here, or has no
+#: default and no identity value (CE on the router, as 2x7x has none), is "invalid command".
 PARAMS: dict[str, Param] = {
-    "SH": Param(4, False), "SL": Param(4, False), "MY": Param(2, False), "MP": Param(2, False),
-    "HV": Param(2, False), "VR": Param(2, False), "OP": Param(8, False), "OI": Param(2, False),
-    "CH": Param(1, False), "AI": Param(1, False), "NP": Param(2, False), "DB": Param(1, False),
-    "CE": Param(1, False),
-    "NI": Param(TEXT, valid=lambda v: len(v) <= 20 and all(0x20 <= b < 0x7F for b in v)),
-    "AP": Param(1, valid=_one_of(1, 2)),
-    "AO": Param(1, valid=_one_of(0, 1, 3)),
-    "BD": Param(4, valid=lambda v: v <= 7 or 0x80 <= v <= 0xE1000),
-    "NT": Param(1, valid=_range(0x20, 0xFF)),
-    "NO": Param(1, valid=_range(0, 7)),
-    "ID": Param(8), "DH": Param(4), "DL": Param(4), "DD": Param(4),
-    "SC": Param(2, valid=_range(1, 0xFFFF)), "SD": Param(1, valid=_range(0, 7)),
-    "ZS": Param(1, valid=_range(0, 2)), "NJ": Param(1), "NH": Param(1),
-    "BH": Param(1, valid=_range(0, 0x1E)), "PL": Param(1, valid=_range(0, 4)),
-    "PM": Param(1, valid=_range(0, 1)), "EE": Param(1, valid=_range(0, 1)),
-    "SM": Param(1, valid=_one_of(0)), "RO": Param(1),
+    # identity and network state: read-only
+    "SH": _read_only(4), "SL": _read_only(4), "HV": _read_only(2), "VR": _read_only(2),
+    "MY": _read_only(2, 0xFFFE), "MP": _read_only(2, 0xFFFE), "OP": _read_only(8, 0),
+    "OI": _read_only(2, 0), "CH": _read_only(1, 0x0C), "AI": _read_only(1, 0x00),
+    "NP": _read_only(2, 0x54), "CE": _read_only(1),
+    "DB": _read_only(1, 0x28),  # fixed -40 dBm: the link model has no RSSI
+    # addressing and networking
+    "NI": Param(TEXT, b" ", valid=lambda v: len(v) <= 20 and all(0x20 <= b < 0x7F for b in v)),
+    "ID": Param(8, 0), "DH": Param(4, 0), "DL": Param(4, 0), "DD": Param(4, 0x30000),
+    "NT": Param(1, 0x3C, valid=_range(0x20, 0xFF)), "NO": Param(1, 0, valid=_range(0, 7)),
+    "SC": Param(2, 0x1FFE, valid=_range(1, 0x7FFF)), "SD": Param(1, 3, valid=_range(0, 7)),
+    "ZS": Param(1, 0, valid=_range(0, 2)), "NJ": Param(1, 0xFF), "NH": Param(1, 0x1E),
+    "BH": Param(1, 0, valid=_range(0, 0x1E)), "AR": Param(1, 0xFF),
+    "JV": Param(1, 0, valid=_range(0, 1)), "NW": Param(2, 0, valid=_range(0, 0x64FF)),
+    "JN": Param(1, 0, valid=_range(0, 1)),
+    # RF, security, sleep
+    "PL": Param(1, 4, valid=_range(0, 4)), "PM": Param(1, 1, valid=_range(0, 1)),
+    "EE": Param(1, 0, valid=_range(0, 1)), "SM": Param(1, 0, valid=_one_of(0)),
+    "SN": Param(2, 1, valid=_range(1, 0xFFFF)), "SP": Param(2, 0x20, valid=_range(0x20, 0xAF0)),
+    "ST": Param(2, 0x1388, valid=_range(1, 0xFFFE)),
+    # serial interfacing; AP and BD come from the scenario (the factory's are 1 and 3)
+    "AP": Param(1, 2, valid=_one_of(1, 2)), "AO": Param(1, 0, valid=_one_of(0, 1, 3)),
+    "BD": Param(4, 7, valid=lambda v: v <= 7 or 0x80 <= v <= 0xE1000),
+    "NB": Param(1, 0, valid=_range(0, 3)), "SB": Param(1, 0, valid=_range(0, 1)),
+    "RO": Param(1, 3),
+    "D7": _pin(1, 1, 6, 7),  # CTS flow control
+    "D6": _pin(0, 1),  # RTS flow control
+    # I/O
+    "D0": _pin(1, 1, 2),  # commissioning button
+    "D1": _pin(0, 2), "D2": _pin(0, 2), "D3": _pin(0, 2), "D4": _pin(0),
+    "D5": _pin(1, 1),  # associated indicator LED
+    "P0": _pin(1, 1),  # RSSI PWM output
+    "P1": _pin(0), "P2": _pin(0),
+    "IR": Param(2, 0, valid=lambda v: v == 0 or 0x32 <= v <= 0xFFFF),  # sample period, ms
+    "IC": Param(2, 0), "LT": Param(1, 0, valid=lambda v: v == 0 or 0x0A <= v <= 0xFF),
+    "RP": Param(1, 0x28), "V+": Param(2, 0),
 }
 EXECUTE = ("AC", "WR", "RE", "FR")  # and ND, which answers differently
 
-#: Register values of a fresh ZB module (where the identity does not set them).
-DEFAULTS: dict[str, Any] = {
-    "MY": 0xFFFE, "MP": 0xFFFE, "AI": 0x00, "NP": 0x54, "DB": 0x28, "CH": 0x0C,
-    "ID": 0, "OP": 0, "OI": 0, "NI": b" ", "AP": 2, "AO": 0, "BD": 7, "NT": 0x3C,
-    "NO": 0, "DH": 0, "DL": 0, "DD": 0x30000, "SC": 0x7FFF, "SD": 3, "ZS": 0, "NJ": 0xFF,
-    "NH": 0x1E, "BH": 0, "PL": 4, "PM": 1, "EE": 0, "SM": 0, "RO": 3,
-}
+#: Register values of a fresh module (where the identity does not set them).
+DEFAULTS: dict[str, Any] = {k: p.default for k, p in PARAMS.items() if p.default is not None}
 
 
 class Registers:
@@ -416,7 +456,7 @@ class Coordinator:
             value = (r["MY"].to_bytes(2, "big") + r["SH"].to_bytes(4, "big")
                      + r["SL"].to_bytes(4, "big") + bytes(r["NI"]) + b"\x00"
                      + (0xFFFE).to_bytes(2, "big") + bytes((node.device_type, 0))
-                     + DIGI_PROFILE.to_bytes(2, "big") + DIGI_MANUFACTURER.to_bytes(2, "big")
+                     + DIGI_PROFILE.to_bytes(2, "big") + xbee.DIGI_MANUFACTURER.to_bytes(2, "big")
                      + (r["DD"].to_bytes(4, "big") if no & 1 else b""))
             out.append(Output(t_ns + delay + latency,
                               self._at_reply(fid, raw_cmd, AtStatus.OK, value)))
@@ -439,6 +479,7 @@ class Coordinator:
         np_limit = self.registers.values["NP"]
         retries = discovery = 0
         to16 = dest16
+        answers: list[Output] = []
         if dest64 == xbee.BROADCAST64:
             status = (DeliveryStatus.PAYLOAD_TOO_LARGE
                       if len(data) > np_limit + BROADCAST_PAYLOAD_EXTRA else DeliveryStatus.SUCCESS)
@@ -458,11 +499,29 @@ class Coordinator:
             status = DeliveryStatus.SUCCESS if delivered else DeliveryStatus.NETWORK_ACK_FAILURE
             to16 = node.addr16 if delivered else 0xFFFD
             discovery = 0x01 if dest16 == xbee.UNKNOWN16 else 0x00
+            if delivered and f.get("dest_endpoint") == 0 and f.get("profile") == 0:
+                answers = self._zdo(t_ns + latency, f, node)
         if fid == 0:
-            return []
+            return answers
         return [Output(t, Reply(xbee.frame_data(
             FrameType.TRANSMIT_STATUS, frame_id=fid, dest16=to16, retries=min(retries, 0xFF),
-            delivery=status, discovery=discovery)))]
+            delivery=status, discovery=discovery))), *answers]
+
+    def _zdo(self, t_ns: int, f: dict, node: Remote) -> list[Output]:
+        """The node's answer to a ZDO request it received at *t_ns* (emulator.zdo): a 0x91
+        when it comes back over the link and AO bit 0 is set (ZB firmware passes ZDO
+        answers to the host only then; AO is taken when the request is sent)."""
+        answer = zdo.answer(f["cluster"], f["data"], node.addr16, node.device_type)
+        if answer is None or not self.registers.values["AO"] & 1:
+            return []
+        cluster, payload = answer
+        back, _, latency = self.link.unicast(t_ns, len(payload))
+        if not back:
+            return []
+        return [Output(t_ns + max(self.response_delay_ns, latency), Reply(xbee.frame_data(
+            FrameType.EXPLICIT_RX, src64=node.addr64, src16=node.addr16, src_endpoint=0,
+            dest_endpoint=0, cluster=cluster, profile=0, options=ZDO_RX_OPTIONS,
+            data=payload)))]
 
     # -- remote AT --------------------------------------------------------------------------
     def _remote_at(self, t_ns: int, f: dict) -> list[Output]:

@@ -26,6 +26,7 @@ MAX_FRAME_DATA = 0xFFFF  # what the length field can say; decoders bound it lowe
 BROADCAST64 = 0x000000000000FFFF
 COORDINATOR64 = 0x0000000000000000
 UNKNOWN16 = 0xFFFE
+DIGI_MANUFACTURER = 0x101E  # in ND answers, 0x95 frames and ZDO node descriptors
 
 #: BD register: the standard interface rates by code 0-7; a larger BD value (0x80 up) is the
 #: rate itself (a non-standard rate).

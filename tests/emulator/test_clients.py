@@ -118,6 +118,52 @@ def test_digi_xbee_open_role_data_and_transmit(lab):
         dev.close()
 
 
+def test_digi_xbee_reads_the_remote_router_as_an_s2b_router(lab):
+    """read_device_info on the router: every AT read answered (CE: "invalid command", as ZB
+    2x7x has none), then the ZDO node descriptor gives the role; then the I/O settings."""
+    from digi.xbee.devices import RemoteZigBeeDevice, XBeeDevice
+    from digi.xbee.io import IOLine, IOMode
+    from digi.xbee.models.address import XBee64BitAddress
+    from digi.xbee.models.protocol import Role
+
+    dev = XBeeDevice(lab.ports["xbee"], 115200)
+    dev.open()
+    answers = []  # (command, status) of every 0x97
+
+    def remote_at_answer(packet):
+        if packet.get_frame_type_value() == 0x97:
+            answers.append((packet.command, packet.status))
+
+    try:
+        dev.add_packet_received_callback(remote_at_answer)
+        remote = RemoteZigBeeDevice(dev, XBee64BitAddress(ROUTER64.to_bytes(8, "big")))
+        reader = threading.Thread(target=remote.read_device_info, daemon=True)
+        t = time.perf_counter()
+        reader.start()
+        reader.join(DEADLINE)  # the answer-less ZDO fallback took 2 x 12 s
+        print(f"read_device_info on the router took {time.perf_counter() - t:.3f} s")
+        assert not reader.is_alive()
+        assert remote.get_role() == Role.ROUTER
+        assert remote.get_node_id() == "SINS-ROUTER"
+        assert remote.get_16bit_addr().address == ROUTER["MY"].to_bytes(2, "big")
+        assert {c for c, _ in answers} >= {"HV", "VR", "SH", "SL", "NI", "MY", "CE"}
+        assert all(s.code == 0 for c, s in answers if c != "CE")
+        assert all(s.code == 2 for c, s in answers if c == "CE")
+
+        # what digi-xbee's I/O API reads, with the S2B's factory defaults
+        io = {line: remote.get_io_configuration(line) for line in (
+            IOLine.DIO0_AD0, IOLine.DIO1_AD1, IOLine.DIO2_AD2, IOLine.DIO3_AD3,
+            IOLine.DIO4_AD4, IOLine.DIO5_AD5, IOLine.DIO6, IOLine.DIO7,
+            IOLine.DIO10_PWM0, IOLine.DIO11_PWM1, IOLine.DIO12)}
+        special = {IOLine.DIO0_AD0, IOLine.DIO5_AD5, IOLine.DIO7, IOLine.DIO10_PWM0}
+        assert io == {line: IOMode.SPECIAL_FUNCTIONALITY if line in special else IOMode.DISABLED
+                      for line in io}
+        assert remote.get_io_sampling_rate() == 0  # IR: no periodic sampling
+        assert remote.get_parameter("IC") == bytearray(2)  # no line monitored for changes
+    finally:
+        dev.close()
+
+
 def test_python_xbee_reads_rx_frames_and_answers(lab):
     from xbee import ZigBee
 

@@ -284,6 +284,72 @@ def test_remote_at_to_unknown_address_is_status_4():
     assert digi(frame).status.code == 4 and t == 3 * MS + ADDRESS_TIMEOUT_NS
 
 
+# The S2B's factory defaults, restated from Digi's "XBee/XBee-PRO ZB RF Modules" manual
+# (90000976 rev. J, XBee Command Reference Tables): what XCTU reads from a module it has
+# discovered (its whole parameter list), and digi-xbee's get_io_configuration and friends.
+S2B_DEFAULTS = {
+    "D0": 1, "D1": 0, "D2": 0, "D3": 0, "D4": 0, "D5": 1, "D6": 0, "D7": 1,  # button, LED, CTS
+    "P0": 1, "P1": 0, "P2": 0,  # RSSI PWM
+    "IR": 0, "IC": 0, "LT": 0, "RP": 0x28, "V+": 0,
+    "NB": 0, "SB": 0, "AO": 0, "DD": 0x30000, "NT": 0x3C, "NO": 0, "NH": 0x1E, "NJ": 0xFF,
+    "SC": 0x1FFE, "SD": 3, "ZS": 0, "JV": 0, "NW": 0, "JN": 0, "AR": 0xFF,
+    "PL": 4, "PM": 1, "EE": 0, "SM": 0, "SN": 1, "SP": 0x20, "ST": 0x1388,
+}
+
+
+@pytest.mark.parametrize("cmd,value", S2B_DEFAULTS.items())
+def test_router_and_coordinator_answer_the_s2b_parameters_with_factory_defaults(cmd, value):
+    c = make()
+    (_, remote), = emit(c, c.host(0, remote_at(cmd.encode())))
+    (_, local), = emit(c, c.host(0, at(cmd.encode())))
+    for p in (digi(remote), digi(local)):
+        assert (p.status.code, int.from_bytes(p.command_value, "big")) == (0, value)
+
+
+@pytest.mark.parametrize("cmd,value,status", [(b"D0", b"\x02", 0), (b"D4", b"\x02", 3),
+                                              (b"D7", b"\x07", 0), (b"P1", b"\x01", 3),
+                                              (b"IR", b"\x00\x31", 3), (b"IR", b"\x03\xE8", 0)])
+def test_router_io_settings_are_checked_like_the_manual_says(cmd, value, status):
+    c = make()
+    (_, frame), = emit(c, c.host(0, remote_at(cmd, value)))
+    assert digi(frame).status.code == status
+    (_, frame), = emit(c, c.host(0, remote_at(cmd)))
+    assert (digi(frame).command_value == value) == (status == 0)
+
+
+def node_desc_req(fid=1, nwk=0x7D84, dest16=0x7D84):
+    return xbee.build(0x11, True, frame_id=fid, dest64=ROUTER64, dest16=dest16, src_endpoint=0,
+                      dest_endpoint=0, cluster=0x0002, profile=0, radius=0, options=0,
+                      data=bytes((fid,)) + nwk.to_bytes(2, "little"))
+
+
+def test_router_answers_the_zdo_node_descriptor_request_as_a_router():
+    link = FakeLink((True, 0, 6 * MS), (True, 0, 5 * MS))
+    c = make(link)
+    emit(c, c.host(0, at(b"AO", b"\x01")))  # digi-xbee sets AO = 1 for ZDO
+    (t1, status), (t2, answer) = emit(c, c.host(0, node_desc_req(fid=9)))
+    assert (t1, t2) == (6 * MS, 11 * MS) and link.calls == [(0, 3), (6 * MS, 17)]
+    assert digi(status).transmit_status.code == 0x00
+    p = digi(answer)
+    assert type(p).__name__ == "ExplicitRXIndicatorPacket"
+    assert (p.x64bit_source_addr.address, p.x16bit_source_addr.address) == \
+        (ROUTER64.to_bytes(8, "big"), b"\x7d\x84")
+    assert (p.source_endpoint, p.dest_endpoint, p.cluster_id, p.profile_id) == (0, 0, 0x8002, 0)
+    data = bytes(p.rf_data)
+    assert data[:4] == bytes((9, 0x00, 0x84, 0x7D))  # transaction, SUCCESS, NWK address (LE)
+    assert len(data) == 4 + 13 and data[4] & 0x07 == 1  # logical type: router
+    assert data[7:9] == bytes((0x1E, 0x10))  # Digi's manufacturer code
+
+
+def test_zdo_answer_needs_ao_bit_0_and_the_nodes_own_address():
+    c = make()
+    (_, status), = emit(c, c.host(0, node_desc_req()))  # AO = 0: the 0x8B only
+    assert digi(status).transmit_status.code == 0x00
+    emit(c, c.host(0, at(b"AO", b"\x01")))
+    _, (_, answer) = emit(c, c.host(0, node_desc_req(nwk=0x1234)))
+    assert bytes(digi(answer).rf_data) == bytes((1, 0x81, 0x34, 0x12))  # DEVICE_NOT_FOUND
+
+
 def test_node_discovery_reports_the_router_within_nt():
     c = make()
     (t, frame), = emit(c, c.host(0, at(b"ND", fid=9)))  # the router's answer, nothing else
