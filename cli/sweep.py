@@ -22,8 +22,9 @@ Monte Carlo sweep: run the scenario once per seed in virtual time (the emulator 
 pipeline in memory: no PTY, no file per seed), score each filter against truth, and print per
 filter the mean over seeds of its mean, max and RMS error and mean NEES, each with a 95 %
 Student-t interval, and the paired per-seed differences of mean error that decide a ranking.
-Runs on dask.distributed: a LocalCluster of --workers processes by default, the scheduler of
---scheduler (or of Dask's config, scheduler-address) when one is named. Any number of workers
+Runs on dask.distributed: by default a LocalCluster of --workers processes that only this sweep
+can use (loopback, TLS on temporary credentials), else the scheduler of --scheduler (or of
+Dask's config, scheduler-address), with your Dask security config. Any number of workers
 gives the same table. One row per (scenario, seed, filter) goes to --out DIR as Parquet; a
 re-run into the same DIR computes only the cells it lacks (a DIR holding another scenario,
 code version, duration or filter set is refused)."""

@@ -172,12 +172,14 @@ class Result:
 
 class Client:
     """A dask.distributed client: on the scheduler at *address* (or Dask's own
-    ``scheduler-address`` config), else on a new LocalCluster of *workers* processes (default:
-    this machine's cores) with one thread each. A context manager that closes what it started."""
+    ``scheduler-address`` config), with the security of Dask's config, else on a new
+    LocalCluster of *workers* processes (default: this machine's cores) with one thread each,
+    private to this process (:func:`private_cluster`). A context manager that closes what it
+    started."""
 
     def __init__(self, address: str | None = None, workers: int | None = None) -> None:
         import dask
-        from distributed import Client as DaskClient, LocalCluster
+        from distributed import Client as DaskClient
 
         address = address or dask.config.get("scheduler-address", None)
         self.cluster = None
@@ -189,11 +191,7 @@ class Client:
                                  f"({_error_line(e)}); start one (dask scheduler) or omit "
                                  "--scheduler for a LocalCluster") from None
         else:
-            import logging
-
-            self.cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
-                                        threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR)
+            self.cluster = private_cluster(workers or os.cpu_count() or 1)
             self.client = DaskClient(self.cluster)
         self.address = self.client.scheduler.address
 
@@ -204,6 +202,26 @@ class Client:
         self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+
+
+def private_cluster(workers: int):
+    """A LocalCluster of *workers* processes, one thread each, that only this process can use:
+    its scheduler, nannies and workers listen on loopback with mutual TLS on credentials made
+    for it in memory (``Security.temporary()``), so another local user who connects cannot
+    run code as ours (a plain LocalCluster takes any connection to 127.0.0.1)."""
+    import logging
+
+    from distributed import LocalCluster
+    from distributed.security import Security
+
+    try:
+        security = Security.temporary()
+    except ImportError:
+        raise SweepError("the sweep's private cluster needs cryptography: pip install "
+                         "'navtwin[sweep]', or give --serial") from None
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                        host="127.0.0.1", protocol="tls://", security=security,
+                        dashboard_address=None, silence_logs=logging.ERROR)
 
 
 def read_out(out: Path) -> tuple[list[dict], list[dict]]:

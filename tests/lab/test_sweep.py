@@ -37,6 +37,28 @@ def test_two_workers_give_the_serial_table_bit_for_bit(tmp_path):
         assert meta["code_version"].startswith(sweep.__version__)
 
 
+def test_the_local_cluster_runs_no_work_for_a_client_without_its_credentials():
+    """Another local user reached a sweep's LocalCluster on 127.0.0.1 and ran code as ours:
+    now a plain client, one on TCP, and one with TLS credentials of its own are all refused,
+    while the sweep runs on it."""
+    from distributed import Client as DaskClient
+    from distributed.security import Security
+
+    with sweep.Client(workers=1) as client:
+        info = client.client.scheduler_info()
+        listening = [client.address, *info["workers"],
+                     *(w["nanny"] for w in info["workers"].values())]
+        assert all(a.startswith("tls://127.0.0.1:") for a in listening), listening
+        port = client.address.rpartition(":")[2]
+        for address, security in ((client.address, None), (f"tcp://127.0.0.1:{port}", None),
+                                  (client.address, Security.temporary())):
+            with pytest.raises((OSError, TypeError)):
+                with DaskClient(address, security=security, timeout="5s") as intruder:
+                    intruder.submit(print, "ran").result(timeout=5)
+        result = sweep.run("office", [1], ("kf",), duration=2.0, client=client)
+    assert [r["status"] for r in result.rows] == ["ok"]
+
+
 def _counting(monkeypatch, fail: set[int] = frozenset()) -> list[int]:
     """Record the seeds sweep.seed_cells is called with; raise for those in *fail*."""
     calls, real = [], sweep.seed_cells
