@@ -105,6 +105,8 @@ def run(args) -> int:
         raise UsageError(f"--duration {args.duration:g}: longer than {sc.name}'s "
                          f"{sc.duration_s:g} s; give at most that or omit it")
     try:
+        if args.results:  # before the work: a file it cannot write would end it at the end
+            sweep.check_block(args.results)
         with contextlib.ExitStack() as stack:
             # the cluster first: a scheduler that does not answer is refused before any bar
             client = None if args.serial else stack.enter_context(
@@ -116,17 +118,21 @@ def run(args) -> int:
     except sweep.SweepError as e:
         raise UsageError(str(e)) from None
     summary = sweep.summarise(result.rows, result.filters)
-    if args.results:
-        # a scenario file's block is named by the file (a variant of office keeps office's
-        # paper and host config but has a table of its own)
-        key = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
-        sweep.write_block(args.results, key, sweep.markdown(summary, sc.name, result.meta))
     if args.json:
         print(json.dumps(_finite({"summary": summary, "out": str(result.out),
                                   "computed_tasks": result.tasks, "meta": result.meta})))
     else:
         print(sweep.table(summary))
         print(f"\nParquet: {result.out} ({result.tasks} tasks computed)")
+    if args.results:
+        # a scenario file's block is named by the file (a variant of office keeps office's
+        # paper and host config but has a table of its own)
+        key = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
+        try:
+            sweep.write_block(args.results, key, sweep.markdown(summary, sc.name, result.meta))
+        except sweep.SweepError as e:  # e.g. its file system went read-only during the run
+            raise UsageError(f"{e}; the cells are kept in {result.out} (a re-run with that "
+                             "--out computes none again)") from None
     return 0
 
 

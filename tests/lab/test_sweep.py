@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -189,3 +191,56 @@ def test_corridor_markdown_has_001_table_1_in_its_layout_with_the_papers_figures
         m, h = sweep.mean_ci([r["x_var"] for r in rows if r["filter"] == f])
         assert f"{m:.4f} ± {h:.4f} ({paper[f]['x_var']:.4g})" in row
     assert "Table 1" not in sweep.markdown(sweep.summarise(rows, ("lc",)), "office")
+
+
+def _one_line_exit_2(capsys, argv: list[str]) -> str:
+    rc = main(argv)
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert rc == 2 and captured.out == "" and len(lines) == 1, captured.err
+    return lines[0]
+
+
+def test_an_out_that_holds_anything_but_parts_is_refused(tmp_path, capsys):
+    rec = tmp_path / "recording"  # e.g. an emulator's recording directory
+    rec.mkdir()
+    (rec / "recording.json").write_text("{}")
+    (rec / "sins.bin").write_bytes(b"\xaa" * 10)
+    line = _one_line_exit_2(capsys, ["sweep", "--seeds", "1", "--filters", "kf", "--duration",
+                                     "2", "--serial", "--quiet", "--out", str(rec)])
+    assert f"--out {rec}: holds recording.json and 1 more" in line
+    assert sorted(p.name for p in rec.iterdir()) == ["recording.json", "sins.bin"]
+    assert (rec / "sins.bin").read_bytes() == b"\xaa" * 10
+
+
+def test_a_results_file_that_cannot_be_written_is_refused_before_the_work(tmp_path, capsys,
+                                                                         monkeypatch):
+    calls = _counting(monkeypatch)
+    out = tmp_path / "o"
+    for results in (tmp_path, tmp_path / "nowhere" / "results.md"):
+        line = _one_line_exit_2(capsys, ["sweep", "--seeds", "1", "--filters", "kf", "--duration",
+                                         "2", "--serial", "--quiet", "--out", str(out),
+                                         "--results", str(results)])
+        assert f"--results {results}: " in line and "omit --results" in line
+    assert calls == [] and not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_results_on_a_read_only_file_system_is_refused_before_the_work(tmp_path):
+    """The sweep ran to its end, then wrote --results into a read-only mount: a traceback.
+    Here a read-only tmpfs in a user and mount namespace of its own (unshare -rm)."""
+    ro, out = tmp_path / "ro", tmp_path / "o"
+    ro.mkdir()
+    probe = subprocess.run(["unshare", "-rm", "sh", "-c", f"mount -t tmpfs -o ro none {ro}"],
+                           capture_output=True, text=True)
+    if probe.returncode != 0:
+        pytest.skip(f"no read-only mount here: {probe.stderr.strip()}")
+    script = (f"mount -t tmpfs -o ro none {ro} && exec {sys.executable} -m navtwin sweep "
+              f"--seeds 1 --filters kf --duration 2 --serial --quiet --out {out} "
+              f"--results {ro}/results.md")
+    p = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 2 and p.stdout == "", p.stderr
+    assert p.stderr.strip() == (f"navtwin sweep: error: --results {ro}/results.md: Read-only "
+                                "file system; give a file you can write, or omit --results")
+    assert not out.exists()  # refused before any cell was computed
