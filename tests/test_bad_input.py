@@ -121,6 +121,12 @@ CASES = {
     "scenario anchor id = 0": scenario_case("[[anchors]]\nid = 0\nx = 1.0\ny = 1.0\n", "id"),
     "scenario fault start_s = 1e308": scenario_case(
         '[[faults]]\nkind = "link_loss"\nstart_s = 1e308\nend_s = 2e308\n', "start_s"),
+    "scenario board_reset on vehicle 7 of 1": scenario_case(
+        '[[faults]]\nkind = "board_reset"\nvehicle = 7\nstart_s = 0.0\nend_s = 1.0\n',
+        "[[faults]] #1 vehicle 7", "vehicle 1 only"),
+    "emulate --fault router_rejoin:vehicle=2": (
+        emulate("--duration", "1", "--fault", "router_rejoin:vehicle=2,start_s=0,end_s=1"), {},
+        ["--fault", "vehicle 2", "vehicle 1 only"]),
     # navtwin lab
     "lab --duration nan": (["lab", "--duration", "nan", "--dir", "run"], {}, ["--duration"]),
     "lab --seed -1": (["lab", "--seed", "-1", "--dir", "run"], {}, ["--seed"]),
