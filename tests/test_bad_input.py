@@ -142,6 +142,9 @@ CASES = {
                                 ["--filters", "nope"]),
     "sweep --scheduler unreachable": (["sweep", "--seeds", "1..2", "--scheduler",
                                        "tcp://127.0.0.1:1"], {}, ["--scheduler", "LocalCluster"]),
+    # navtwin calibrate
+    "calibrate on a recording that is no calibration walk": (
+        ["calibrate", GOLDEN, "--out", "c.toml"], {}, ["f = -0.05286", "no calibration walk"]),
     # navtwin decode
     "decode --baud 0": (["decode", "x.bin", "--format", "sins", "--baud", "0"],
                         {"x.bin": ""}, ["--baud", "[50, 4000000]"]),
