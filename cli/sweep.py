@@ -90,7 +90,7 @@ def register(sub) -> None:
                    help="print one JSON object (the summary, the output's path and metadata) "
                         "instead of the table")
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extra="sweep")
 
 
 def run(args) -> int:

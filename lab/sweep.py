@@ -217,13 +217,10 @@ def private_cluster(workers: int):
     from distributed import LocalCluster
     from distributed.security import Security
 
-    try:
-        security = Security.temporary()
-    except ImportError:
-        raise SweepError("the sweep's private cluster needs cryptography: pip install "
-                         "'navtwin[sweep]', or give --serial") from None
+    import cryptography  # noqa: F401  the sweep extra's; Security.temporary() needs it
+
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        host="127.0.0.1", protocol="tls://", security=security,
+                        host="127.0.0.1", protocol="tls://", security=Security.temporary(),
                         dashboard_address=None, silence_logs=logging.ERROR)
 
 
