@@ -75,10 +75,10 @@ def run(args) -> int:
                  (f"{args.evaluate} wsn variance (m^2)", tuple(r["variance"] for r in runs),
                   PAPER["wsn_variance"], ".4f"),
                  (f"{args.evaluate} wsn mean (m)", tuple(r["mean"] for r in runs), None, ".3f")]
-    print(f"{'':<30}{'before':>9}{'after':>9}   paper 001")
+    print(f"{'':<30}{'before':>10}{'after':>10}   paper 001")
     for name, (b, a), paper, fmt in rows:
         ref = f"{paper[0]:g} -> {paper[1]:g}" if paper else ""
-        print(f"{name:<30}{b:9{fmt}}{a:9{fmt}}   {ref}")
+        print(f"{name:<30}{_cell(b, fmt)}{_cell(a, fmt)}   {ref}")
     header = (f"navtwin calibrate: 001's LSR of f and c_i, range sd of degree {args.sigma_degree}\n"
               f"from {source}, steps {args.steps}, config {args.config}")
     try:
@@ -88,3 +88,12 @@ def run(args) -> int:
         raise UsageError(f"--out {args.out}: {e.strerror}; choose a writable path") from None
     print(f"wrote {args.out}")
     return 0
+
+
+def _cell(value: float, fmt: str, width: int = 10) -> str:
+    """*value* right-aligned in *width* with a space before it, in *fmt*, or in 4 significant
+    digits when *fmt* would not fit: columns never run together."""
+    text = f"{value:{fmt}}"
+    if len(text) >= width:
+        text = f"{value:.4g}"
+    return f"{text:>{width}}"

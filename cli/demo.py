@@ -10,7 +10,7 @@ import threading
 
 from .emulate import SEED_HELP, duration, seed
 from .lab import _filter_list, print_report
-from .main import UsageError, stop_on_signals
+from .main import UsageError, missing_extra, stop_on_signals
 
 DEFAULT_DURATION_S = 60.0
 
@@ -36,7 +36,7 @@ def register(sub) -> None:
     p.add_argument("--dir", metavar="DIR", help="run directory (default: a new private temp dir)")
     p.add_argument("--json", action="store_true",
                    help="JSON status lines on stderr instead of the live view (as 'navtwin lab')")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extra="demo")
 
 
 def run(args) -> int:
@@ -47,9 +47,10 @@ def run(args) -> int:
     else:
         try:
             from .demo_view import LiveView
-        except ImportError:
-            raise UsageError("navtwin demo draws with rich, which is not installed: "
-                             "pip install 'navtwin[demo]', or give --json") from None
+        except ModuleNotFoundError as e:
+            if (line := missing_extra(e, "demo")) is None:
+                raise
+            raise UsageError(f"{line}, or give --json") from None
         watch = LiveView()
     stop = threading.Event()
     try:

@@ -3,7 +3,9 @@
 Each subcommand is registered in the ``navtwin.commands`` entry-point group
 (``pyproject.toml``), so this dispatcher imports none of them by name and a user's package can
 add one. A subcommand module provides ``register(subparsers)``, which adds its parser and sets
-``func(args) -> int``; it reports bad input by raising :class:`UsageError`.
+``func(args) -> int``; it reports bad input by raising :class:`UsageError`. A command that needs
+an extra (``pyproject.toml``'s optional dependencies) sets ``extra`` too: a module of it that is
+not installed is then one line naming the extra (:func:`missing_extra`), exit status 2.
 """
 from __future__ import annotations
 
@@ -72,6 +74,16 @@ def _sigterm_as_interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+def missing_extra(e: ModuleNotFoundError, extra: str | None) -> str | None:
+    """The line for *e*, a module that is not installed, when the command's *extra* installs
+    it; None for one of navtwin's own modules or a command without an extra (a broken
+    install, whose traceback is the report)."""
+    name = (e.name or "").partition(".")[0]
+    if not extra or not name or name == "navtwin":
+        return None
+    return f"needs {name}, which is not installed; pip install 'navtwin[{extra}]'"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="navtwin", description="Firmware-in-the-loop emulator of a SINS/WSN "
                     "positioning lab, and the lab computer's fusion service.")
@@ -93,6 +105,11 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args) or 0
     except UsageError as e:
         print(f"navtwin {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as e:
+        if (line := missing_extra(e, getattr(args, "extra", None))) is None:
+            raise
+        print(f"navtwin {args.command}: error: {line}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 0

@@ -35,12 +35,13 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from navtwin.host.replay import replay
+    from navtwin.host.replay import replay, settings
 
     cfg, filters = config_and_filters(args, default_config=False)
     try:
         rec = Recording(args.directory, salvage=args.salvage)
-    except RecordingError as e:
+        settings(rec, config=cfg, filters=filters, escaped=args.escaped)  # before --out opens
+    except (RecordingError, ConfigError) as e:
         raise UsageError(str(e)) from None
     if (note := rec.skipped_line()) is not None:
         print(f"navtwin replay: {note}", file=sys.stderr)

@@ -17,14 +17,11 @@ def register(sub) -> None:
                        description=DESCRIPTION)
     p.add_argument("run_dir", metavar="RUN_DIR", help="a run directory of navtwin lab")
     p.add_argument("--out", metavar="DIR", help="where to write them (default: RUN_DIR)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extra="plot")
 
 
 def run(args) -> int:
-    try:
-        import matplotlib  # noqa: F401  the plots
-    except ImportError:
-        raise UsageError("navtwin report needs matplotlib; pip install 'navtwin[plot]'") from None
+    import matplotlib  # noqa: F401  the plots: missing, it is refused before any work
     from navtwin.lab.report import ReportError, write_report
 
     try:

@@ -22,8 +22,9 @@ Monte Carlo sweep: run the scenario once per seed in virtual time (the emulator 
 pipeline in memory: no PTY, no file per seed), score each filter against truth, and print per
 filter the mean over seeds of its mean, max and RMS error and mean NEES, each with a 95 %
 Student-t interval, and the paired per-seed differences of mean error that decide a ranking.
-Runs on dask.distributed: a LocalCluster of --workers processes by default, the scheduler of
---scheduler (or of Dask's config, scheduler-address) when one is named. Any number of workers
+Runs on dask.distributed: by default a LocalCluster of --workers processes that only this sweep
+can use (loopback, TLS on temporary credentials), else the scheduler of --scheduler (or of
+Dask's config, scheduler-address), with your Dask security config. Any number of workers
 gives the same table. One row per (scenario, seed, filter) goes to --out DIR as Parquet; a
 re-run into the same DIR computes only the cells it lacks (a DIR holding another scenario,
 code version, duration or filter set is refused)."""
@@ -89,7 +90,7 @@ def register(sub) -> None:
                    help="print one JSON object (the summary, the output's path and metadata) "
                         "instead of the table")
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extra="sweep")
 
 
 def run(args) -> int:
@@ -104,6 +105,8 @@ def run(args) -> int:
         raise UsageError(f"--duration {args.duration:g}: longer than {sc.name}'s "
                          f"{sc.duration_s:g} s; give at most that or omit it")
     try:
+        if args.results:  # before the work: a file it cannot write would end it at the end
+            sweep.check_block(args.results)
         with contextlib.ExitStack() as stack:
             # the cluster first: a scheduler that does not answer is refused before any bar
             client = None if args.serial else stack.enter_context(
@@ -115,17 +118,21 @@ def run(args) -> int:
     except sweep.SweepError as e:
         raise UsageError(str(e)) from None
     summary = sweep.summarise(result.rows, result.filters)
-    if args.results:
-        # a scenario file's block is named by the file (a variant of office keeps office's
-        # paper and host config but has a table of its own)
-        key = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
-        sweep.write_block(args.results, key, sweep.markdown(summary, sc.name, result.meta))
     if args.json:
         print(json.dumps(_finite({"summary": summary, "out": str(result.out),
                                   "computed_tasks": result.tasks, "meta": result.meta})))
     else:
         print(sweep.table(summary))
         print(f"\nParquet: {result.out} ({result.tasks} tasks computed)")
+    if args.results:
+        # a scenario file's block is named by the file (a variant of office keeps office's
+        # paper and host config but has a table of its own)
+        key = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
+        try:
+            sweep.write_block(args.results, key, sweep.markdown(summary, sc.name, result.meta))
+        except sweep.SweepError as e:  # e.g. its file system went read-only during the run
+            raise UsageError(f"{e}; the cells are kept in {result.out} (a re-run with that "
+                             "--out computes none again)") from None
     return 0
 
 

@@ -421,10 +421,15 @@ class Scenario:
         if self.ranging.slot_ms * len(self.slot_order) > self.ranging.cycle_ms:
             raise Invalid("[ranging] slot_ms", f"x {len(self.slot_order)} anchors exceeds cycle_ms "
                                                f"{self.ranging.cycle_ms:g}; shorten the slots")
+        vehicles = range(1, len(self.vehicles) + 1)
         for i, f in enumerate(self.faults):
             if getattr(f, "anchor", None) is not None and f.anchor not in ids:
                 raise Invalid(f"[[faults]] #{i + 1} anchor", f"{f.anchor} is not in [[anchors]]; "
                                                              "name an anchor id")
+            if getattr(f, "vehicle", None) is not None and f.vehicle not in vehicles:
+                has = f"vehicles 1 to {len(vehicles)}" if len(vehicles) > 1 else "vehicle 1 only"
+                raise Invalid(f"[[faults]] #{i + 1} vehicle", f"{f.vehicle}: the scenario has "
+                                                              f"{has}; name one of its vehicles")
         if baud_rate(self.xbee.router.BD) != self.board.baud:
             raise Invalid("[xbee.router] BD", f"{baud_rate(self.xbee.router.BD)} bit/s differs from the "
                                               f"board's {self.board.baud}; match [board] baud")

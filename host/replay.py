@@ -51,7 +51,14 @@ def settings(rec: Recording, *, config: HostConfig | None = None,
     if is_host_recording(rec):
         h = _host_meta(rec)
         cfg = config or host_config.from_dict(h["config"], f"{rec.directory}: recorded config")
-        return {"config": cfg, "filters": filters or tuple(h["filters"]),
+        # the recorded names checked here: a track of a package not installed now
+        where = (f"{rec.directory / 'recording.json'}: the recorded filters (override them "
+                 "with --filters)")
+        for port in h["inputs"]:  # an index without its arrival column, before any estimate
+            for c in rec.chunks(port):
+                _arrival(rec, c)
+                break
+        return {"config": cfg, "filters": filters or host_config.parse_filters(h["filters"], where),
                 "inputs": tuple(h["inputs"]),
                 "escaped": h["escaped"] if escaped is None else escaped}
     ports = rec.meta.get("ports", {})
@@ -90,10 +97,19 @@ def chunks(rec: Recording, inputs: tuple[str, ...]) -> Iterator[tuple[str, bytes
     """``(port, bytes, arrival ns)`` in processing order."""
     if is_host_recording(rec):
         for c in rec.merged(list(inputs)):
-            yield c.port, c.data, c.t_wall_ns
+            yield c.port, c.data, _arrival(rec, c)
         return
     bauds = {p: rec.meta.get("ports", {}).get(p, {}).get("baud", DEFAULT_BAUD) for p in inputs}
     yield from arrivals({p: _device_times(rec, p) for p in inputs}, bauds)
+
+
+def _arrival(rec: Recording, c) -> int:
+    """A host recording's chunk's arrival time: the host stamps every read it records."""
+    if c.t_wall_ns is None:
+        raise RecordingError(f"{rec.directory}: port {c.port!r} chunk at offset {c.offset} has "
+                             "no arrival time (t_wall_ns), which a host recording needs; "
+                             "re-record, or restore its index")
+    return c.t_wall_ns
 
 
 def _device_times(rec: Recording, port: str) -> Iterator[tuple[bytes, int]]:

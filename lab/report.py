@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
+from navtwin.common.limits import number_problem
 from navtwin.emulator.scenario import ScenarioError, load_scenario
 from navtwin.host import config as host_config
 from navtwin.host.config import ConfigError
@@ -69,11 +70,25 @@ def cell(e: dict, key: str) -> str:
 
 # -- reading the run ---------------------------------------------------------------------
 
-def _json(path: Path, default=None):
+def _json(path: Path) -> dict:
+    """The JSON object in *path*, {} when there is no such file (a run stopped before writing
+    it); anything else there is refused: its figures (the time offset) would be silently lost."""
     try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return default
+        obj = json.loads(path.read_text())
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as e:
+        obj = e
+    if not isinstance(obj, dict):
+        raise ReportError(f"{path}: not the JSON object navtwin lab writes "
+                          f"({_what(obj)}); re-run navtwin lab")
+    return obj
+
+
+def _what(obj) -> str:
+    if isinstance(obj, OSError):
+        return obj.strerror or type(obj).__name__
+    return "unreadable JSON" if isinstance(obj, ValueError) else f"a JSON {type(obj).__name__}"
 
 
 def _jsonl(path: Path) -> list[dict]:
@@ -89,7 +104,7 @@ def _jsonl(path: Path) -> list[dict]:
 
 
 def _host_config(d: Path, scenario: str):
-    meta = _json(d / "host" / "recording.json", {}).get("host", {})
+    meta = _json(d / "host" / "recording.json").get("host", {})
     try:
         if "config" in meta:
             return host_config.from_dict(meta["config"], "the host recording's config")
@@ -129,11 +144,18 @@ def collect(run_dir: str | Path) -> dict:
                           f"({type(e).__name__}: {e}); re-run navtwin lab") from None
     if not estimates:
         raise ReportError(f"{d}/estimates.jsonl: no estimate; the host wrote none (see host.log)")
-    report = _json(d / "report.json", {})
-    offset = float(report.get("time_offset_s", 0.0))
+    report = _json(d / "report.json")
+    offset = report.get("time_offset_s", 0.0)
+    if problem := number_problem(offset):
+        raise ReportError(f"{d}/report.json: time_offset_s {offset!r} {problem}; re-run "
+                          "navtwin lab")
+    for key in ("emulator", "audit"):
+        if not isinstance(report.get(key, {}), dict):
+            raise ReportError(f"{d}/report.json: {key} is not the JSON object navtwin lab "
+                              "writes; re-run navtwin lab")
     logs = _jsonl(d / "host.log")
     summaries = [x["summary"] for x in logs if "summary" in x]
-    recording = _json(d / "emulator" / "recording.json", {})
+    recording = _json(d / "emulator" / "recording.json")
     cfg = _host_config(d, sc.name)
     run = {"dir": str(d), "scenario": sc, "truth": truth, "estimates": estimates,
            "offset_s": offset, "errors": evaluate.position_errors(truth, estimates, offset),

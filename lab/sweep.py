@@ -31,6 +31,7 @@ import functools
 import json
 import math
 import os
+import re
 import subprocess
 import tomllib
 from collections.abc import Callable, Iterable
@@ -57,6 +58,8 @@ MIN_TASK_VIRTUAL_S = 10.0
 CONNECT_TIMEOUT_S = 10.0
 #: The Parquet files' key-value metadata key (a JSON object).
 META_KEY = b"navtwin.sweep"
+#: The name of a part, the only thing a sweep's output directory holds.
+PART = re.compile(r"part-(\d+)\.parquet")
 #: Per-seed figures of position_errors kept per cell.
 METRICS = ("mean", "max", "rms", "n", "x_min", "x_max", "x_var", "y_min", "y_max", "y_var",
            "nees_mean", "nees_in_band")
@@ -172,12 +175,14 @@ class Result:
 
 class Client:
     """A dask.distributed client: on the scheduler at *address* (or Dask's own
-    ``scheduler-address`` config), else on a new LocalCluster of *workers* processes (default:
-    this machine's cores) with one thread each. A context manager that closes what it started."""
+    ``scheduler-address`` config), with the security of Dask's config, else on a new
+    LocalCluster of *workers* processes (default: this machine's cores) with one thread each,
+    private to this process (:func:`private_cluster`). A context manager that closes what it
+    started."""
 
     def __init__(self, address: str | None = None, workers: int | None = None) -> None:
         import dask
-        from distributed import Client as DaskClient, LocalCluster
+        from distributed import Client as DaskClient
 
         address = address or dask.config.get("scheduler-address", None)
         self.cluster = None
@@ -189,11 +194,7 @@ class Client:
                                  f"({_error_line(e)}); start one (dask scheduler) or omit "
                                  "--scheduler for a LocalCluster") from None
         else:
-            import logging
-
-            self.cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
-                                        threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR)
+            self.cluster = private_cluster(workers or os.cpu_count() or 1)
             self.client = DaskClient(self.cluster)
         self.address = self.client.scheduler.address
 
@@ -206,11 +207,28 @@ class Client:
             self.cluster.close()
 
 
+def private_cluster(workers: int):
+    """A LocalCluster of *workers* processes, one thread each, that only this process can use:
+    its scheduler, nannies and workers listen on loopback with mutual TLS on credentials made
+    for it in memory (``Security.temporary()``), so another local user who connects cannot
+    run code as ours (a plain LocalCluster takes any connection to 127.0.0.1)."""
+    import logging
+
+    from distributed import LocalCluster
+    from distributed.security import Security
+
+    import cryptography  # noqa: F401  the sweep extra's; Security.temporary() needs it
+
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                        host="127.0.0.1", protocol="tls://", security=Security.temporary(),
+                        dashboard_address=None, silence_logs=logging.ERROR)
+
+
 def read_out(out: Path) -> tuple[list[dict], list[dict]]:
     """The metadata and rows of every readable part in *out*, oldest first (a part without its
     footer, from a killed run, is skipped: its cells are computed again)."""
     metas, rows = [], []
-    for part in sorted(out.glob("part-*.parquet")):
+    for part in sorted(p for p in out.iterdir() if PART.fullmatch(p.name)):
         try:
             f = pq.ParquetFile(part)
             metas.append(json.loads(f.schema_arrow.metadata[META_KEY]))
@@ -218,6 +236,24 @@ def read_out(out: Path) -> tuple[list[dict], list[dict]]:
         except (OSError, KeyError, TypeError, ValueError, pa.ArrowException):
             continue
     return metas, rows
+
+
+def _check_out(out: Path) -> None:
+    """*out* made if missing; refused if it holds anything but a sweep's parts (a recording's
+    or the user's files would be mixed with ours, and read as parts)."""
+    if out.exists() and not out.is_dir():
+        raise SweepError(f"--out {out}: not a directory; pass a directory path")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        others = sorted(p.name for p in out.iterdir() if not (PART.fullmatch(p.name)
+                                                              and p.is_file()))
+    except OSError as e:
+        raise SweepError(f"--out {out}: {e.strerror}; choose a writable directory") from None
+    if others:
+        more = f" and {len(others) - 1} more" if len(others) > 1 else ""
+        raise SweepError(f"--out {out}: holds {others[0]}{more}, not only a sweep's "
+                         "part-NNNN.parquet files; choose a new or empty directory, or that "
+                         "of an earlier sweep")
 
 
 def _check_same(out: Path, metas: list[dict], meta: dict) -> None:
@@ -245,9 +281,7 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
     done: dict[tuple[int, str], dict] = {}
     if out is not None:
         out = Path(out)
-        if out.exists() and not out.is_dir():
-            raise SweepError(f"--out {out}: not a directory; pass a directory path")
-        out.mkdir(parents=True, exist_ok=True)
+        _check_out(out)
         metas, old = read_out(out)
         _check_same(out, metas, meta)
         for r in old:  # a later part's cell replaces an earlier (failed) one
@@ -258,10 +292,13 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
     text = sc.to_toml()
     writer = part = None
     if out is not None and tasks:
-        n = max([int(p.stem.split("-")[1]) for p in out.glob("part-*.parquet")
-                 if p.stem.split("-")[1].isdigit()] + [-1]) + 1
+        n = max([int(m[1]) for p in out.iterdir() if (m := PART.fullmatch(p.name))] + [-1]) + 1
         part = out / f"part-{n:04d}.parquet"
-        writer = pq.ParquetWriter(part, SCHEMA.with_metadata({META_KEY: json.dumps(meta)}))
+        try:
+            writer = pq.ParquetWriter(part, SCHEMA.with_metadata({META_KEY: json.dumps(meta)}))
+        except OSError as e:
+            raise SweepError(f"--out {out}: cannot write {part.name} ({e}); choose a writable "
+                             "directory") from None
     finished = len(seeds) - len(todo)
 
     def take(rows: list[dict]) -> None:
@@ -443,11 +480,40 @@ def _paper(v: float | None) -> str:
     return "" if v is None else f"{v:.4g}"
 
 
+def check_block(path: str | Path) -> None:
+    """Refuse, before any work, a *path* that :func:`write_block` could not rewrite: one it
+    cannot read as text or open for writing (a read-only file system, a directory, no such
+    folder). A missing file is created and removed again to prove its folder takes it."""
+    path = Path(path)
+    try:
+        if path.exists():
+            path.read_text(encoding="utf-8")
+            with open(path, "r+b"):  # opened for writing, not truncated
+                pass
+        else:
+            with open(path, "xb"):
+                pass
+            path.unlink()
+    except (OSError, UnicodeDecodeError) as e:
+        raise _unwritable(path, e) from None
+
+
+def _unwritable(path: Path, e: OSError | UnicodeDecodeError) -> SweepError:
+    if isinstance(e, UnicodeDecodeError):
+        return SweepError(f"--results {path}: not UTF-8 text; give a Markdown file such as "
+                          "docs/results.md")
+    return SweepError(f"--results {path}: {e.strerror or e}; give a file you can write, or "
+                      "omit --results")
+
+
 def write_block(path: str | Path, key: str, text: str) -> None:
     """Put *text* between ``<!-- results:KEY -->`` and ``<!-- /results:KEY -->`` in *path*
     (appended with its markers if they are not there), leaving the rest as written."""
     path = Path(path)
-    doc = path.read_text(encoding="utf-8") if path.exists() else ""
+    try:
+        doc = path.read_text(encoding="utf-8") if path.exists() else ""
+    except (OSError, UnicodeDecodeError) as e:
+        raise _unwritable(path, e) from None
     start, end = f"<!-- results:{key} -->", f"<!-- /results:{key} -->"
     block = f"{start}\n{text.rstrip()}\n{end}"
     i, j = doc.find(start), doc.find(end)
@@ -455,4 +521,7 @@ def write_block(path: str | Path, key: str, text: str) -> None:
         doc = doc[:i] + block + doc[j + len(end):]
     else:
         doc = doc.rstrip() + ("\n\n" if doc.strip() else "") + block + "\n"
-    path.write_text(doc, encoding="utf-8")
+    try:
+        path.write_text(doc, encoding="utf-8")
+    except OSError as e:
+        raise _unwritable(path, e) from None

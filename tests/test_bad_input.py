@@ -121,6 +121,12 @@ CASES = {
     "scenario anchor id = 0": scenario_case("[[anchors]]\nid = 0\nx = 1.0\ny = 1.0\n", "id"),
     "scenario fault start_s = 1e308": scenario_case(
         '[[faults]]\nkind = "link_loss"\nstart_s = 1e308\nend_s = 2e308\n', "start_s"),
+    "scenario board_reset on vehicle 7 of 1": scenario_case(
+        '[[faults]]\nkind = "board_reset"\nvehicle = 7\nstart_s = 0.0\nend_s = 1.0\n',
+        "[[faults]] #1 vehicle 7", "vehicle 1 only"),
+    "emulate --fault router_rejoin:vehicle=2": (
+        emulate("--duration", "1", "--fault", "router_rejoin:vehicle=2,start_s=0,end_s=1"), {},
+        ["--fault", "vehicle 2", "vehicle 1 only"]),
     # navtwin lab
     "lab --duration nan": (["lab", "--duration", "nan", "--dir", "run"], {}, ["--duration"]),
     "lab --seed -1": (["lab", "--seed", "-1", "--dir", "run"], {}, ["--seed"]),
@@ -136,6 +142,9 @@ CASES = {
                                 ["--filters", "nope"]),
     "sweep --scheduler unreachable": (["sweep", "--seeds", "1..2", "--scheduler",
                                        "tcp://127.0.0.1:1"], {}, ["--scheduler", "LocalCluster"]),
+    # navtwin calibrate
+    "calibrate on a recording that is no calibration walk": (
+        ["calibrate", GOLDEN, "--out", "c.toml"], {}, ["f = -0.05286", "no calibration walk"]),
     # navtwin decode
     "decode --baud 0": (["decode", "x.bin", "--format", "sins", "--baud", "0"],
                         {"x.bin": ""}, ["--baud", "[50, 4000000]"]),
@@ -371,3 +380,42 @@ def test_every_estimator_number_has_a_range_and_docs_state_it():
         assert valid, key  # every key's rule is stated
     doc = (ROOT / "docs" / "host.md").read_text()
     assert table in doc
+
+
+#: Runs ``navtwin`` with the modules of argv[1] (comma list) not installed, as in a wheel
+#: installed without the extra that brings them.
+WITHOUT = ("import sys\nfor m in sys.argv[1].split(','):\n    sys.modules[m] = None\n"
+           "from navtwin.cli.main import main\nsys.exit(main(sys.argv[2:]))")
+#: command argv, modules missing, the extra its line must name
+MISSING_EXTRAS = {
+    "sweep without pyarrow": (["sweep", "--seeds", "1", "--serial", "--quiet", "--duration", "2",
+                               "--filters", "kf", "--out", "o"], "pyarrow", "sweep"),
+    "sweep without distributed": (["sweep", "--seeds", "1", "--workers", "1", "--quiet",
+                                   "--duration", "2", "--filters", "kf", "--out", "o"],
+                                  "distributed", "sweep"),
+    "sweep without cryptography": (["sweep", "--seeds", "1", "--workers", "1", "--quiet",
+                                    "--duration", "2", "--filters", "kf", "--out", "o"],
+                                   "cryptography", "sweep"),
+    "sweep without rich": (["sweep", "--seeds", "1", "--serial", "--duration", "2",
+                            "--filters", "kf", "--out", "o"], "rich", "sweep"),
+    "report without matplotlib": (["report", "run"], "matplotlib", "plot"),
+    "demo without rich": (["demo", "--duration", "2", "--dir", "run"], "rich", "demo"),
+    "bench without digi-xbee": (["bench", "digi-open", "--quick"], "digi", "test"),
+}
+
+
+@pytest.mark.parametrize("case", list(MISSING_EXTRAS))
+def test_a_command_whose_extra_is_missing_names_it(tmp_path, case):
+    """Installed from a wheel without extras, 'navtwin sweep' ended in ModuleNotFoundError."""
+    argv, modules, extra = MISSING_EXTRAS[case]
+    prepare(tmp_path, {})
+    before = _tree(tmp_path)
+    p = subprocess.run([sys.executable, "-c", WITHOUT, modules, *argv], cwd=tmp_path,
+                       env={**os.environ, **_env(tmp_path)}, stdin=subprocess.DEVNULL,
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and p.stdout == "", p.stderr[-2000:]
+    lines = [x for x in p.stderr.splitlines() if not x.startswith("running ")]  # bench's
+    assert len(lines) == 1 and f"needs {modules}, which is not installed" in lines[0], lines
+    line = lines[0]
+    assert f"pip install 'navtwin[{extra}]'" in line, line
+    assert _tree(tmp_path) == before  # refused before anything was made

@@ -118,3 +118,39 @@ def test_replay_runs_an_emulator_recording_through_the_pipeline(tmp_path):
     replay(rec, lambda es: None, make_estimator=lambda _: est)
     assert sum(c[0] == "imu" for c in est.calls) == 200
     assert sum(c[0] == "range" for c in est.calls) == 80
+
+
+def _broken_copy(host_recording, tmp_path, unknown_filter=False, untimed=slice(0, 0)):
+    """A copy of the host recording whose meta names an unknown filter, or whose xbee index
+    has no arrival time on the lines *untimed*."""
+    import shutil
+
+    d = tmp_path / "rec"
+    shutil.copytree(host_recording[0], d)
+    if unknown_filter:
+        meta = json.loads((d / "recording.json").read_text())
+        meta["host"]["filters"].append("nope")
+        (d / "recording.json").write_text(json.dumps(meta))
+    head, *lines = (d / "xbee.csv").read_text().splitlines()
+    lines[untimed] = [line.rpartition(",")[0] + "," for line in lines[untimed]]
+    (d / "xbee.csv").write_text("\n".join([head, *lines]) + "\n")
+    return d
+
+
+@pytest.mark.parametrize("case, words", [
+    ({"unknown_filter": True}, ["recording.json: the recorded filters", "'nope'", "--filters"]),
+    ({"untimed": slice(None)}, ["port 'xbee' chunk at offset 0", "t_wall_ns"]),
+    ({"untimed": slice(5, 6)}, ["port 'xbee' chunk at offset", "t_wall_ns"])])
+def test_a_host_recording_it_cannot_replay_is_one_line_and_exit_2(host_recording, tmp_path,
+                                                                 capsys, case, words):
+    from navtwin.cli.main import main
+
+    d = _broken_copy(host_recording, tmp_path, **case)
+    out = tmp_path / "mine.jsonl"
+    out.write_text("the user's lines\n")
+    argv = ["replay", str(d)] + (["--out", str(out)] if "unknown_filter" in case
+                                 or case["untimed"] == slice(None) else [])
+    assert main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert out.read_text() == "the user's lines\n"  # refused before --out was opened

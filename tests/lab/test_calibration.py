@@ -68,3 +68,16 @@ def test_with_the_calibration_the_corridors_wsn_error_drops():
     after = lab.wsn_errors("corridor", 3, config, config.calibration)
     assert after["mean"] < 0.9 * before["mean"]
     assert after["variance"] < before["variance"]
+
+
+def test_the_table_keeps_its_columns_apart_whatever_the_figures(monkeypatch, tmp_path, capsys):
+    """A variance of 1.5e6 m^2 ran into the figure before it ("0.4450383729339541500416")."""
+    c = cal.load("corridor")
+    wide = cal.Result(c, None, (6.98, 6.43), (10.874, 53.125), (0.445, 1500416.0), (1.0, 2.0), 160)
+    monkeypatch.setattr(lab, "recorded_bytes", lambda directory: b"")
+    monkeypatch.setattr(lab, "calibrate", lambda *a, **k: wide)
+    assert main(["calibrate", "rec", "--out", str(tmp_path / "c.toml")]) == 0
+    rows = {line[:30].strip(): line[30:].split() for line in capsys.readouterr().out.splitlines()}
+    assert [float(v) for v in rows["WSN-only variance (m^2)"][:2]] == pytest.approx([0.445, 1.5e6])
+    assert [float(v) for v in rows["WSN-only max error (m)"][:2]] == pytest.approx([10.874, 53.125])
+    assert rows["mean range error (m)"] == ["6.980", "6.430", "0.66", "->", "0.18"]

@@ -151,3 +151,22 @@ def test_cli_bad_run_dir_is_one_line_and_exit_2(tmp_path):
     assert p.returncode == 2
     assert p.stdout == "" and len(p.stderr.strip().splitlines()) == 1
     assert "emulator/truth.csv" in p.stderr
+
+
+@pytest.mark.parametrize("text, words", [("[]", "a JSON list"), ("{", "unreadable JSON"),
+                                         ('{"time_offset_s": "1"}', "time_offset_s '1'"),
+                                         ('{"audit": [1]}', "audit")])
+def test_a_report_json_that_is_no_lab_report_is_one_line_and_exit_2(run_dir, tmp_path, capsys,
+                                                                    text, words):
+    from navtwin.cli.main import main
+
+    d = tmp_path / "run"
+    shutil.copytree(run_dir, d)
+    (d / "report.json").write_text(text)
+    before = sorted(p.name for p in d.rglob("*"))
+    assert main(["report", str(d)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert captured.out == "" and len(lines) == 1, captured.err
+    assert f"{d}/report.json" in lines[0] and words in lines[0] and "re-run" in lines[0]
+    assert sorted(p.name for p in d.rglob("*")) == before  # no report written over it

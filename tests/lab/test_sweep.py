@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -35,6 +37,28 @@ def test_two_workers_give_the_serial_table_bit_for_bit(tmp_path):
         assert meta["scenario_hash"] == sweep.scenario_hash(load_scenario("office"))
         assert meta["seeds"] == [1, 4] and meta["filters"] == list(serial.filters)
         assert meta["code_version"].startswith(sweep.__version__)
+
+
+def test_the_local_cluster_runs_no_work_for_a_client_without_its_credentials():
+    """Another local user reached a sweep's LocalCluster on 127.0.0.1 and ran code as ours:
+    now a plain client, one on TCP, and one with TLS credentials of its own are all refused,
+    while the sweep runs on it."""
+    from distributed import Client as DaskClient
+    from distributed.security import Security
+
+    with sweep.Client(workers=1) as client:
+        info = client.client.scheduler_info()
+        listening = [client.address, *info["workers"],
+                     *(w["nanny"] for w in info["workers"].values())]
+        assert all(a.startswith("tls://127.0.0.1:") for a in listening), listening
+        port = client.address.rpartition(":")[2]
+        for address, security in ((client.address, None), (f"tcp://127.0.0.1:{port}", None),
+                                  (client.address, Security.temporary())):
+            with pytest.raises((OSError, TypeError)):
+                with DaskClient(address, security=security, timeout="5s") as intruder:
+                    intruder.submit(print, "ran").result(timeout=5)
+        result = sweep.run("office", [1], ("kf",), duration=2.0, client=client)
+    assert [r["status"] for r in result.rows] == ["ok"]
 
 
 def _counting(monkeypatch, fail: set[int] = frozenset()) -> list[int]:
@@ -167,3 +191,56 @@ def test_corridor_markdown_has_001_table_1_in_its_layout_with_the_papers_figures
         m, h = sweep.mean_ci([r["x_var"] for r in rows if r["filter"] == f])
         assert f"{m:.4f} ± {h:.4f} ({paper[f]['x_var']:.4g})" in row
     assert "Table 1" not in sweep.markdown(sweep.summarise(rows, ("lc",)), "office")
+
+
+def _one_line_exit_2(capsys, argv: list[str]) -> str:
+    rc = main(argv)
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert rc == 2 and captured.out == "" and len(lines) == 1, captured.err
+    return lines[0]
+
+
+def test_an_out_that_holds_anything_but_parts_is_refused(tmp_path, capsys):
+    rec = tmp_path / "recording"  # e.g. an emulator's recording directory
+    rec.mkdir()
+    (rec / "recording.json").write_text("{}")
+    (rec / "sins.bin").write_bytes(b"\xaa" * 10)
+    line = _one_line_exit_2(capsys, ["sweep", "--seeds", "1", "--filters", "kf", "--duration",
+                                     "2", "--serial", "--quiet", "--out", str(rec)])
+    assert f"--out {rec}: holds recording.json and 1 more" in line
+    assert sorted(p.name for p in rec.iterdir()) == ["recording.json", "sins.bin"]
+    assert (rec / "sins.bin").read_bytes() == b"\xaa" * 10
+
+
+def test_a_results_file_that_cannot_be_written_is_refused_before_the_work(tmp_path, capsys,
+                                                                         monkeypatch):
+    calls = _counting(monkeypatch)
+    out = tmp_path / "o"
+    for results in (tmp_path, tmp_path / "nowhere" / "results.md"):
+        line = _one_line_exit_2(capsys, ["sweep", "--seeds", "1", "--filters", "kf", "--duration",
+                                         "2", "--serial", "--quiet", "--out", str(out),
+                                         "--results", str(results)])
+        assert f"--results {results}: " in line and "omit --results" in line
+    assert calls == [] and not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_results_on_a_read_only_file_system_is_refused_before_the_work(tmp_path):
+    """The sweep ran to its end, then wrote --results into a read-only mount: a traceback.
+    Here a read-only tmpfs in a user and mount namespace of its own (unshare -rm)."""
+    ro, out = tmp_path / "ro", tmp_path / "o"
+    ro.mkdir()
+    probe = subprocess.run(["unshare", "-rm", "sh", "-c", f"mount -t tmpfs -o ro none {ro}"],
+                           capture_output=True, text=True)
+    if probe.returncode != 0:
+        pytest.skip(f"no read-only mount here: {probe.stderr.strip()}")
+    script = (f"mount -t tmpfs -o ro none {ro} && exec {sys.executable} -m navtwin sweep "
+              f"--seeds 1 --filters kf --duration 2 --serial --quiet --out {out} "
+              f"--results {ro}/results.md")
+    p = subprocess.run(["unshare", "-rm", "sh", "-c", script], capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 2 and p.stdout == "", p.stderr
+    assert p.stderr.strip() == (f"navtwin sweep: error: --results {ro}/results.md: Read-only "
+                                "file system; give a file you can write, or omit --results")
+    assert not out.exists()  # refused before any cell was computed
