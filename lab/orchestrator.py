@@ -51,7 +51,7 @@ class LabError(RuntimeError):
 def run_dir(path: str | os.PathLike | None) -> Path:
     if path is None:
         return Path(tempfile.mkdtemp(prefix="navtwin-lab-"))  # mode 0700
-    d = Path(path)
+    d = Path(path).absolute()  # the host is a process of its own: no path may hang on cwd
     if d.exists() and (not d.is_dir() or any(d.iterdir())):
         raise LabError(f"--dir {d}: exists and is not an empty directory; choose a new one")
     d.mkdir(mode=0o700, parents=True, exist_ok=True)

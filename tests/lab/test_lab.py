@@ -12,8 +12,10 @@ pytestmark = [pytest.mark.pty, pytest.mark.slow]
 
 def test_lab_runs_and_reports_against_truth(tmp_path):
     d = tmp_path / "run"
+    # a relative --dir, as users type it: the host (a process of its own) must find the links
     p = subprocess.run([sys.executable, "-m", "navtwin", "lab", "--duration", "16",
-                        "--dir", str(d), "--no-plot"], capture_output=True, timeout=180)
+                        "--dir", "run", "--no-plot"], capture_output=True, timeout=180,
+                       cwd=tmp_path)
     assert p.returncode == 0, p.stderr.decode()[-2000:]
     report = json.loads((d / "report.json").read_text())
     errors = report["errors"]
