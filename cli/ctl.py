@@ -5,6 +5,7 @@ import json
 import sys
 
 from navtwin.common.limits import MAX_DURATION_S
+from navtwin.protocols.linkdir import default_link_dir
 
 from .main import UsageError, number
 
@@ -26,8 +27,6 @@ live faults have no start_s/end_s: they start now."""
 
 
 def register(sub) -> None:
-    from navtwin.emulator.pty import default_link_dir
-
     p = sub.add_parser("ctl", help="control a running emulator: faults, unplug, status",
                        description=DESCRIPTION, formatter_class=_raw())
     p.add_argument("--link-dir", metavar="DIR", default=None,
@@ -51,8 +50,6 @@ def _raw():
 
 def run_ctl(args) -> int:
     from navtwin.emulator.control import Control, ControlError
-    from navtwin.emulator.pty import default_link_dir
-    from navtwin.emulator.scenario import ScenarioError, parse_fault
 
     op, arg = args.op, args.arg
     needs = {"fault": "the fault as KIND:key=value,...", "unplug": "the port (sins, xbee, "
@@ -64,6 +61,8 @@ def run_ctl(args) -> int:
         raise UsageError("--duration goes with ctl fault and ctl reset only")
     request: dict = {}
     if op == "fault":
+        from navtwin.emulator.scenario import ScenarioError, parse_fault  # only a fault needs it
+
         try:
             request["fault"] = parse_fault(arg, "ctl fault")
         except ScenarioError as e:

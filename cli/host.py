@@ -7,12 +7,7 @@ import sys
 import threading
 
 from navtwin.common.limits import MAX_DURATION_S, span
-from navtwin.host import config as host_config
-from navtwin.host import tracks
-from navtwin.host.config import ConfigError
-from navtwin.host.output import KEYS, open_output
 from navtwin.protocols.ports import DEFAULT_BAUD
-from navtwin.protocols.recording import write_failure
 
 from .main import BAUD_HELP, UsageError, baud, number, stop_on_signals
 
@@ -22,9 +17,16 @@ PORT_HELP = ("a device path (/dev/ttyUSB0, an emulator PTY link) or a pyserial U
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "host", help="run the lab computer's fusion service on live serial ports",
-        description="Read the coordinator (API mode; or the SINS board's direct line) and the "
+    p = sub.add_parser("host", help="run the lab computer's fusion service on live serial "
+                       "ports", options=_options)
+    p.set_defaults(func=run)
+
+
+def _options(p) -> None:
+    from navtwin.host.output import KEYS
+
+    p.description = (
+        "Read the coordinator (API mode; or the SINS board's direct line) and the "
         "nanoLOC gateway, fuse IMU and ranges, and write one JSON line per estimate: "
         "{" + ",".join(f'"{k}"' for k in KEYS) + "}. A status line goes to stderr every few "
         "seconds; a port that disappears is reopened every 0.5 s while the filters keep their "
@@ -55,10 +57,12 @@ def register(sub) -> None:
     p.add_argument("--status-period", type=number(*STATUS_PERIODS, above=True), default=2.0,
                    metavar="S", help="seconds between status lines on stderr, "
                                      f"{span(*STATUS_PERIODS, True)} (default 2)")
-    p.set_defaults(func=run)
 
 
 def common_options(p, recorded: bool = False) -> None:
+    from navtwin.host import config as host_config
+    from navtwin.host import tracks
+
     src = "the recorded run's" if recorded else "the config's"
     p.add_argument("--config", metavar="NAME|FILE",
                    help=f"host config: {', '.join(host_config.shipped())} or a TOML file "
@@ -71,6 +75,9 @@ def common_options(p, recorded: bool = False) -> None:
 
 
 def _filters(text: str) -> tuple[str, ...]:
+    from navtwin.host import config as host_config
+    from navtwin.host.config import ConfigError
+
     try:
         return host_config.parse_filters(text)
     except ConfigError as e:
@@ -78,6 +85,9 @@ def _filters(text: str) -> tuple[str, ...]:
 
 
 def config_and_filters(args, default_config: bool):
+    from navtwin.host import config as host_config
+    from navtwin.host.config import ConfigError
+
     try:
         cfg = host_config.load(args.config) if (args.config or default_config) else None
     except ConfigError as e:
@@ -87,7 +97,9 @@ def config_and_filters(args, default_config: bool):
 
 def with_calibration(cfg, spec: str):
     """*cfg* with the calibration file *spec* in place of its own range correction."""
+    from navtwin.host import config as host_config
     from navtwin.host.calibration import CalibrationError, load
+    from navtwin.host.config import ConfigError
 
     try:
         return host_config.with_calibration(cfg, load(spec))
@@ -96,6 +108,8 @@ def with_calibration(cfg, spec: str):
 
 
 def open_out(spec: str, option: str = "--out"):
+    from navtwin.host.output import open_output
+
     try:
         return open_output(spec)
     except OSError as e:
@@ -104,6 +118,8 @@ def open_out(spec: str, option: str = "--out"):
 
 def close_out(out, option: str = "--out") -> str | None:
     """Close (or flush, for stdout) the estimate output; the failure, if any, as one line."""
+    from navtwin.protocols.recording import write_failure
+
     try:
         out.flush() if out is sys.stdout else out.close()
     except BrokenPipeError:

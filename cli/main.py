@@ -5,7 +5,9 @@ Each subcommand is registered in the ``navtwin.commands`` entry-point group
 add one. A subcommand module provides ``register(subparsers)``, which adds its parser and sets
 ``func(args) -> int``; it reports bad input by raising :class:`UsageError`. A command that needs
 an extra (``pyproject.toml``'s optional dependencies) sets ``extra`` too: a module of it that is
-not installed is then one line naming the extra (:func:`missing_extra`), exit status 2.
+not installed is then one line naming the extra (:func:`missing_extra`), exit status 2. Every
+command registers every time, so register() imports nothing heavy: ``func`` imports the library
+it runs, and options whose help needs a library are added by ``options`` (:class:`Parser`).
 """
 from __future__ import annotations
 
@@ -28,6 +30,31 @@ class UsageError(Exception):
 
 
 class Parser(argparse.ArgumentParser):
+    """*options* (a subcommand's ``add_parser(..., options=fn)``): fn(parser) adds the options
+    whose help needs a library module, when this parser is first used: ``navtwin --version``
+    and every other subcommand do not import it (docs/performance.md)."""
+
+    def __init__(self, *args, options=None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._options = options
+
+    def _add_options(self) -> None:
+        if self._options is not None:
+            add, self._options = self._options, None
+            add(self)
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._add_options()
+        return super().parse_known_args(args, namespace)
+
+    def format_usage(self):
+        self._add_options()
+        return super().format_usage()
+
+    def format_help(self):
+        self._add_options()
+        return super().format_help()
+
     def error(self, message):  # one line naming the problem and where to look for the fix
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 

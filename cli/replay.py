@@ -5,23 +5,23 @@ from __future__ import annotations
 import sys
 import time
 
-from navtwin.host.config import ConfigError
-from navtwin.host.output import estimate_line, info_line
-from navtwin.protocols.recording import Recording, RecordingError, write_failure
-
 from .host import close_out, common_options, config_and_filters, open_out
 from .main import UsageError
 
 
 def register(sub) -> None:
     r = sub.add_parser(
-        "replay", help="run the host's pipeline over a recording",
+        "replay", help="run the host's pipeline over a recording", options=_options,
         description="Feed a recording through the host's pipeline and write the estimate lines. "
         "A recording made by 'navtwin host --record' gives exactly the live run's lines (its "
         "config, filters and API mode are in the recording; --config and --filters override "
         "them). An emulator recording "
         "('navtwin emulate --record') is run with arrival = the time each chunk's last byte "
         "leaves the UART: a deterministic offline run, not equal to any live run.")
+    r.set_defaults(func=run)
+
+
+def _options(r) -> None:
     r.add_argument("directory", metavar="DIR", help="the recording directory")
     r.add_argument("--salvage", action="store_true",
                    help="replay the intact prefix of a recording that is marked complete but "
@@ -31,11 +31,13 @@ def register(sub) -> None:
     r.add_argument("--api1", dest="escaped", action="store_const", const=False, default=None,
                    help="the coordinator in an emulator recording ran API mode 1 "
                         "(default: as its meta says, else 2)")
-    r.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from navtwin.host.config import ConfigError
+    from navtwin.host.output import estimate_line, info_line
     from navtwin.host.replay import replay, settings
+    from navtwin.protocols.recording import Recording, RecordingError, write_failure
 
     cfg, filters = config_and_filters(args, default_config=False)
     try:

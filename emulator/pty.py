@@ -46,7 +46,7 @@ import tty
 from collections.abc import Iterable
 from pathlib import Path
 
-from navtwin.protocols.linkdir import LOCK
+from navtwin.protocols.linkdir import LOCK, default_link_dir
 from navtwin.protocols.ports import DEFAULT_BAUD
 
 from .uart_rx import Framing
@@ -65,14 +65,6 @@ CSIZE_BITS = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
 
 class LinkDirError(ValueError):
     """A link directory the emulator must not use; the message is one line with the fix."""
-
-
-def default_link_dir() -> Path:
-    """``$XDG_RUNTIME_DIR/navtwin`` when that directory exists, else ``/tmp/navtwin-<uid>``."""
-    runtime = os.environ.get("XDG_RUNTIME_DIR")
-    if runtime and os.path.isdir(runtime):
-        return Path(runtime) / "navtwin"
-    return Path("/tmp") / f"navtwin-{os.getuid()}"
 
 
 class LinkDir:

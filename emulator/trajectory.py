@@ -25,7 +25,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from scipy.special import fresnel
 
 from navtwin.common.schema import Invalid
 
@@ -49,6 +48,8 @@ def _chord(psi0, k0, c, u):
         out[arc] = (np.exp(1j * (p + k * uu)) - np.exp(1j * p)) / (1j * k)
     spiral = c != 0
     if spiral.any():
+        from scipy.special import fresnel  # 0.3 CPU-s to import: only for clothoids
+
         p, k, cc, uu = psi0[spiral], k0[spiral], c[spiral], u[spiral]
         b = k / cc  # psi = psi0 - c b^2 / 2 + c (v + b)^2 / 2
         scale = np.sqrt(math.pi / np.abs(cc))

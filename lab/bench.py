@@ -127,5 +127,13 @@ def benchmarks() -> dict:
         """emulator+host: office seeds/s of navtwin sweep, serial and on 2 LocalCluster workers"""
         return sweep_rate("office", 4 if quick else 8, 2, 20.0 if quick else None)
 
+    def startup(quick: bool = False) -> dict:
+        """navtwin: CPU-s to --version, ctl status and emulate's ready line vs importing numpy
+        (goal <= 2x)"""
+        from .startup import startup as measure
+
+        return measure(3 if quick else 7)
+
     return {"host-latency": host_latency, "host-replay": host_replay,
-            "lab-in-memory": lab_in_memory, "lab-soak": lab_soak, "lab-sweep": lab_sweep}
+            "lab-in-memory": lab_in_memory, "lab-soak": lab_soak, "lab-sweep": lab_sweep,
+            "startup": startup}

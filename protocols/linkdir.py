@@ -18,6 +18,14 @@ from pathlib import Path
 LOCK = ".lock"
 
 
+def default_link_dir() -> Path:
+    """``$XDG_RUNTIME_DIR/navtwin`` when that directory exists, else ``/tmp/navtwin-<uid>``."""
+    runtime = os.environ.get("XDG_RUNTIME_DIR")
+    if runtime and os.path.isdir(runtime):
+        return Path(runtime) / "navtwin"
+    return Path("/tmp") / f"navtwin-{os.getuid()}"
+
+
 def navtwin_link_dir(path: str | os.PathLike) -> Path | None:
     """The link directory if *path* is a navtwin link (a symlink in a directory holding
     :data:`LOCK`), else None: a device path, a pyserial URL, a missing file."""

@@ -9,7 +9,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg import lapack
 
 
 @lru_cache(maxsize=16)
@@ -19,9 +18,19 @@ def _identity(m: int) -> np.ndarray:
     return eye
 
 
+def _gesv(A: np.ndarray, B: np.ndarray):
+    """LAPACK's dgesv, imported on the first solve: scipy.linalg costs a process about 0.3
+    CPU-s to import, and most navtwin commands (--help, ctl, emulate) never solve anything."""
+    global _gesv
+    from scipy.linalg import lapack
+
+    _gesv = lapack.dgesv
+    return _gesv(A, B)
+
+
 def solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """A^-1 B (B a vector or a matrix); raises LinAlgError if A is singular."""
-    x, info = lapack.dgesv(A, B)[2:]
+    x, info = _gesv(A, B)[2:]
     if info > 0:
         raise np.linalg.LinAlgError("singular matrix")
     return x

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from navtwin.common.earth import EARTH_RATE
-from navtwin.emulator.imu import Adis16350, bartlett_taps
+from navtwin.emulator.imu import Adis16350, bartlett_taps, fir, fir_steady_state, gauss_markov
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.trajectory import Trajectory
 from navtwin.protocols import adis16350 as adis
@@ -40,6 +40,39 @@ def test_bartlett_taps_have_the_datasheet_response(n):
     dtft = np.abs(np.exp(-2j * np.pi * np.outer(f, np.arange(len(h)))) @ h)
     expected = (np.sin(np.pi * n * f) / (n * np.sin(np.pi * f))) ** 2
     assert np.allclose(dtft, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("n", [1, 2, 4, 8, 16, 32, 64])
+def test_fir_is_scipys_lfilter_to_the_bit(n):
+    """The board's FIR in numpy gives lfilter's floats exactly (the golden recordings were made
+    with lfilter): the steady start, blocks of every length (1 sample, shorter and longer than
+    the filter) and the delays carried between them. scipy is the oracle here only."""
+    from scipy.signal import lfilter, lfilter_zi
+
+    taps = bartlett_taps(n)
+    x = np.random.default_rng(n).normal(0.0, 3.0, (3000, 3))
+    want_zi = lfilter_zi(taps, [1.0]) if n > 1 else np.empty(0)  # it refuses a 1-tap filter
+    assert fir_steady_state(taps).tobytes() == want_zi.tobytes()
+    want = got = want_zi[:, None] * x[0]
+    for block in np.split(x, sorted({1, 3, 2 * n, 2 * n + 1, 1000, 2999})):
+        out, want = lfilter(taps, [1.0], block, axis=0, zi=want)
+        mine, got = fir(taps, block, got)
+        assert mine.tobytes() == out.tobytes() and got.tobytes() == want.tobytes()
+
+
+def test_bias_process_is_scipys_lfilter_to_the_bit():
+    """The Gauss-Markov bias recursion in plain floats gives lfilter's floats exactly, over
+    blocks of one and many samples, the state carried between them."""
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(7)
+    phi, drive = math.exp(-1 / 819.2 / 100.0), 1e-5
+    want = got = phi * rng.normal(0.0, 1e-3, 3)
+    for block in np.split(rng.standard_normal((5000, 3)), [1, 2, 100, 4000]):
+        out, zf = lfilter([drive], [1.0, -phi], block, axis=0, zi=want[None, :])
+        mine = gauss_markov(phi, got, drive * block)
+        want, got = zf[0], phi * mine[-1]
+        assert mine.tobytes() == out.tobytes() and got.tobytes() == want.tobytes()
 
 
 def _imu(sc):

@@ -67,16 +67,20 @@ def events(seconds: float, wsn: str, seed: int = 7):
 
 
 def run_pair(ours, step_theirs, get_theirs, evs):
-    worst = 0.0
+    """Both filters through *evs*: x and P agree within ATOL after every step. The steps are
+    compared together at the end (a per-step assert_allclose was half of these tests' time)."""
+    mine, theirs = [], []
     for dt, z, R, meas in evs:
         ours.predict(dt)
         ours.update(z, R, meas)
         step_theirs(dt, z, R, meas)
         x, P = get_theirs()
-        np.testing.assert_allclose(ours.x, np.ravel(x), rtol=0, atol=ATOL)
-        np.testing.assert_allclose(ours.P, P, rtol=0, atol=ATOL)
-        worst = max(worst, np.abs(ours.x - np.ravel(x)).max())
-    return worst
+        mine.append(np.concatenate((ours.x, np.ravel(ours.P))))
+        theirs.append(np.concatenate((np.ravel(x), np.ravel(P))))
+    gap = np.abs(np.array(mine) - np.array(theirs))
+    bad = np.flatnonzero(~(gap <= ATOL).all(axis=1))  # NaN is a difference too
+    assert len(bad) == 0, f"step {bad[0]} of {len(evs)}: x, P differ by {np.nanmax(gap[bad[0]])}"
+    return gap[:, :len(X0)].max()
 
 
 def test_kf_matches_filterpy_kalmanfilter():

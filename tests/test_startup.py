@@ -1,0 +1,60 @@
+"""Start-up: a navtwin process imports what its command needs and no more. Every test, ``ctl``
+call and lab start pays the imports; the CPU figures are the benchmark's (``navtwin bench
+startup``, docs/performance.md), these tests assert the imports only."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from navtwin.emulator.api import emulate
+
+#: What no quick command needs: scipy alone cost every process 0.4-1.2 CPU-s.
+HEAVY = {"numpy", "scipy", "matplotlib", "rich", "construct", "serial", "dask", "distributed",
+         "pyarrow"}
+#: What no --help needs (the host's options name its configs and tracks: numpy may come).
+NEVER_FOR_HELP = HEAVY - {"numpy", "construct"}
+
+PROBE = """
+import json, sys
+from navtwin.cli.main import main
+try:
+    code = main(sys.argv[2:])
+except SystemExit as e:
+    code = e.code
+with open(sys.argv[1], "w") as f:
+    json.dump({"code": code, "modules": sorted({m.split(".")[0] for m in sys.modules})}, f)
+"""
+
+
+def imports_of(tmp_path, *argv) -> tuple[int, set[str], str]:
+    """Exit status, top-level modules imported, and stdout of ``navtwin ARGV``."""
+    out = tmp_path / "modules.json"
+    done = subprocess.run([sys.executable, "-c", PROBE, str(out), *argv], capture_output=True,
+                          text=True, timeout=120)
+    probe = json.loads(out.read_text())
+    return probe["code"], set(probe["modules"]), done.stdout
+
+
+def test_version_imports_nothing_heavy(tmp_path):
+    code, modules, stdout = imports_of(tmp_path, "--version")
+    assert code == 0 and stdout.startswith("navtwin ")
+    assert modules & HEAVY == set()
+
+
+def test_ctl_status_imports_nothing_heavy(tmp_path):
+    links = tmp_path / "links"
+    with emulate("office", duration=60, link_dir=links):
+        code, modules, stdout = imports_of(tmp_path, "ctl", "status", "--link-dir", str(links))
+    assert code == 0 and json.loads(stdout)["ok"] is True
+    assert modules & HEAVY == set()
+
+
+@pytest.mark.parametrize("command", ["audit", "bench", "calibrate", "ctl", "decode", "demo",
+                                     "emulate", "host", "replay", "lab", "report", "sweep"])
+def test_help_imports_no_scipy(tmp_path, command):
+    code, modules, stdout = imports_of(tmp_path, command, "--help")
+    assert code == 0 and "usage: navtwin" in stdout
+    assert modules & NEVER_FOR_HELP == set()
