@@ -29,8 +29,10 @@ class ProgressLines(Watch):
     def tick(self, state: dict) -> None:
         emu, host, tracks = state["emulator"], state["host"], state["tracks"]
         parts = [f"{min(emu['virtual_s'], self.total_s):5.1f} / {self.total_s:g} s" if emu
-                 else f"{state['elapsed_s']:5.1f} s since the start"]
-        if host:
+                 else f"{state['elapsed_s']:5.1f} s of wall time"]
+        if not host:
+            parts.append("waiting for the host's first status line")
+        else:
             parts.append("ports " + ", ".join(f"{name} {p['state']} {p['frames_per_s']:.0f}/s"
                                               for name, p in host["ports"].items()))
             errors = {k: sum(v.values()) for k, v in host.get("errors", {}).items() if v}
