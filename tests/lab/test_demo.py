@@ -79,9 +79,11 @@ def test_demo_runs_every_track_and_ends_with_the_table_and_the_run_directory(tmp
     lines = out.splitlines()
     assert lines[:2] == [PHASES["starting"], f"running office (seed {report['emulator']['seed']})"
                          f" for 8 s in real time; run directory {d}"], out[:2000]
-    ticks = [line for line in lines if re.match(r" *[\d.]+ / 8 s", line)]
-    assert ticks and "ports xbee " in ticks[-1] and "nanoloc " in ticks[-1], out[:3000]
-    assert all(f"{name} " in ticks[-1].split("error now (m)")[1] for name in report["errors"])
+    ticks = [line for line in lines if re.match(r" *[\d.]+ (/ 8 s|s of wall time)", line)]
+    # a host slow to start on a loaded machine may miss the first ticks, not every one
+    live = [line for line in ticks if "error now (m)" in line]
+    assert live and "ports xbee " in live[-1] and "nanoloc " in live[-1], out[:3000]
+    assert all(f"{name} " in live[-1].split("error now (m)")[1] for name in report["errors"])
     end = lines.index(PHASES["ended"])
     assert lines.index(ticks[-1]) < end < lines.index(PHASES["reporting"]) < lines.index(
         next(line for line in lines if line.startswith("filter")))
