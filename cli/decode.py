@@ -38,7 +38,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from navtwin.protocols.decode import decode
+    from navtwin.protocols.decode import decode, printed
     from navtwin.protocols.recording import RecordingError
 
     stop = threading.Event()
@@ -50,7 +50,8 @@ def run(args) -> int:
             for rec in records:
                 if args.errors_only and "format" in rec and "error" not in rec:
                     continue
-                sys.stdout.write(json.dumps(rec, separators=(",", ":")) + "\n")
+                sys.stdout.write(json.dumps(printed(rec, args.gyro_range),
+                                            separators=(",", ":")) + "\n")
                 if args.follow:
                     sys.stdout.flush()
     except FileNotFoundError:

@@ -2,10 +2,12 @@
 
 The lab is :func:`navtwin.lab.orchestrator.run_lab`'s, with every track on; the view
 (``cli/demo_view.py``, imported only here: rich is the ``demo`` extra) draws its
-:class:`~navtwin.lab.orchestrator.Watch` state.
+:class:`~navtwin.lab.orchestrator.Watch` state; when stdout is not a terminal (``| tee
+lab.log``, CI), ``cli/demo_lines.py`` prints it there as plain lines instead.
 """
 from __future__ import annotations
 
+import sys
 import threading
 
 from .emulate import SEED_HELP, duration, seed
@@ -44,6 +46,10 @@ def run(args) -> int:
 
     if args.json:
         watch = Watch()
+    elif not sys.stdout.isatty():
+        from .demo_lines import ProgressLines
+
+        watch = ProgressLines()
     else:
         try:
             from .demo_view import LiveView
@@ -62,3 +68,4 @@ def run(args) -> int:
         raise UsageError(str(e)) from None
     print_report(report)
     return 0
+

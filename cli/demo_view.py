@@ -9,7 +9,7 @@ from rich.table import Table
 from rich.text import Text
 
 from navtwin.lab import evaluate
-from navtwin.lab.orchestrator import Watch
+from navtwin.lab.orchestrator import PHASES, Watch
 
 
 def _m(v: float) -> str:
@@ -27,6 +27,7 @@ class LiveView(Watch):
                                  TimeElapsedColumn(), console=self.console)
         self.task = self.progress.add_task("starting", total=1.0)
         self.info: dict = {}
+        self.frame: list = []  # the parts of the view last drawn
         self.live = Live(self.progress, console=self.console, refresh_per_second=4, transient=False)
 
     def __exit__(self, *exc) -> None:
@@ -35,18 +36,27 @@ class LiveView(Watch):
             if not self.console.is_terminal:
                 self.console.line()  # the last frame was printed without one
 
+    def phase(self, name: str) -> None:
+        if not self.info:  # before the view starts: a line of its own
+            self.console.print(PHASES[name], style="dim")
+            return
+        self.frame.append(Text(PHASES[name], style="bold"))  # under the last frame
+        self.live.update(Group(*self.frame))
+
     def started(self, info: dict) -> None:
         self.info = info
         self.progress.update(self.task, description=f"{info['scenario']} (seed {info['seed']})",
                              total=info["duration_s"])
-        self.live.update(Group(Text(f"run directory {info['dir']}", style="dim"), self.progress))
+        self.frame = [Text(f"run directory {info['dir']}", style="dim"), self.progress]
+        self.live.update(Group(*self.frame))
         self.live.start()
 
     def tick(self, state: dict) -> None:
         emu, host = state["emulator"], state["host"]
         if emu:
             self.progress.update(self.task, completed=min(emu["virtual_s"], emu["duration_s"]))
-        parts = [Text(f"run directory {self.info.get('dir', '')}", style="dim"), self.progress]
+        self.frame = parts = [Text(f"run directory {self.info.get('dir', '')}", style="dim"),
+                              self.progress]
         if host:
             parts += [self._ports(host), Text(
                 f"IMU {host['imu_per_s']:.0f}/s, exchanges {host['reports_per_s']:.0f}/s, "

@@ -79,6 +79,15 @@ def _wait_log(path: Path, pred, timeout: float) -> bool:
     return False
 
 
+#: The lab's phases around its live ticks, and what each means to whoever watches.
+PHASES = {
+    "starting": "starting the emulator and the host",
+    "ended": "the run has ended: the emulator has closed its ports, so the host shows them "
+             "down (the end of the run, not a failure)",
+    "reporting": "writing the report",
+}
+
+
 class Watch:
     """What the lab shows while it runs. This one, ``navtwin lab``'s, prints a JSON line when
     it starts and every ``tick_s``: the host's last status line and each track's latest error
@@ -94,6 +103,10 @@ class Watch:
 
     def __exit__(self, *exc) -> None:
         """The run is over (a view that holds the terminal gives it back)."""
+
+    def phase(self, name: str) -> None:
+        """One of :data:`PHASES` begins (the live ticks run between "running" and "ended")."""
+        print(json.dumps({"lab": name}), file=self.out, flush=True)
 
     def started(self, info: dict) -> None:
         """*info*: ``dir``, ``scenario``, ``seed``, ``duration_s``, ``ports``."""
@@ -127,6 +140,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
         raise LabError(f"no host config for scenario {scenario!r}; give --config NAME|FILE")
     d = run_dir(directory)
     log = d / "host.log"
+    watch.phase("starting")
     try:
         with emulate(scenario, seed=seed, speed="realtime", duration=duration,
                      link_dir=d / "links", record=d / "emulator") as lab:
@@ -144,6 +158,8 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
                 "scenario", "seed", "duration_s", "ports")}})
             try:
                 _watch(lab, host, log, d, watch, stop)
+                if host.poll() is None:  # a host that died is a failure, reported below
+                    watch.phase("ended")
                 done = lab.stop()
                 # the emulator's ports are gone once it has ended: a host that has read all
                 # they held reports them down; then it is told to stop
@@ -158,6 +174,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
     if not summaries:
         tail = _log_lines(log)[-1:] or [{"text": "no output"}]
         raise LabError(f"the host failed: {tail[0].get('text', tail[0])}; see {log}")
+    watch.phase("reporting")
     return _report(d, summaries[-1], done, plot)
 
 

@@ -242,20 +242,21 @@ def figures(run: dict) -> dict[str, str]:
     fig.tight_layout()
     out["tracks"] = _svg(fig, "tracks")
 
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(11, 4.2))
-    for n in names:
-        e = run["estimates"][n]
-        ax.plot(e["t"] + off, evaluate.error(truth, e, off), lw=1, color=colours[n], label=n,
+    # the error, one small panel per track on one scale: overlaid, pairs that agree hid each other
+    errors = {n: evaluate.error(truth, run["estimates"][n], off) for n in names}
+    top = max(1.0, *(float(np.nanmax(v)) for v in errors.values() if v.size)) * 1.5
+    fig, axes = _grid(len(names), (4.2, 2.6))
+    for ax, n in zip(axes, names):
+        ax.plot(run["estimates"][n]["t"] + off, errors[n], lw=1, color=colours[n], label=n,
                 gid=f"error-{n}")
-    if "bound" in run:
-        b = run["bound"]
-        ax.plot(b["t"], b["rms"], "k--", lw=1.2, label="PCRB (RMS, ranges only)", gid="pcrb")
-    ax.set(xlabel="scenario time (s)", ylabel="position error (m)", yscale="log",
-           ylim=(0.005, None), title="horizontal position error against truth")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, ncol=len(names) + 1, loc="upper left")
+        if "bound" in run:
+            b = run["bound"]
+            ax.plot(b["t"], b["rms"], "k--", lw=1, label="PCRB (RMS, ranges only)",
+                    gid="pcrb" if n == names[0] else f"pcrb-{n}")
+        ax.set(yscale="log", ylim=(0.005, top), title=n, xlabel="scenario time (s)",
+               ylabel="error (m)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     out["error"] = _svg(fig, "error")
 
@@ -321,15 +322,38 @@ def nis_series(run: dict) -> dict[str, dict[str, tuple]]:
     return out
 
 
+def _without_innovation(q: np.ndarray) -> bool:
+    """A kind whose every NIS lies below the plots' edge: the alignment's at-rest updates,
+    whose innovation is nought by construction, so their NIS says nothing of consistency."""
+    return bool((q < NIS_FLOOR).all())
+
+
 def nis_table(run: dict) -> list[tuple]:
-    """(filter, kind, dim, updates, mean NIS, share inside the 95 % band, gated out)."""
+    """(filter, kind, dim, updates, mean NIS, share inside the 95 % band, gated out); kinds
+    without innovations are in :func:`nis_left_out` instead."""
     out = []
     for n, kinds in nis_series(run).items():
         for kind, (dim, _, q, ok) in kinds.items():
+            if _without_innovation(q):
+                continue
             lo, hi = chi2.ppf([0.025, 0.975], dim)
             out.append((n, kind, dim, len(q), float(q.mean()), float(((q >= lo) & (q <= hi)).mean()),
                         int((~ok).sum())))
     return out
+
+
+def nis_left_out(run: dict) -> str:
+    """The note under the NIS table naming the kinds it leaves out, or ''."""
+    left: dict[str, int] = {}
+    for kinds in nis_series(run).values():
+        for kind, (_, _, q, _) in kinds.items():
+            if _without_innovation(q):
+                left[kind] = left.get(kind, 0) + q.size
+    if not left:
+        return ""
+    return ("Left out: " + ", ".join(f"{k} ({n} updates)" for k, n in sorted(left.items())) +
+            f", whose every NIS is below {NIS_FLOOR:g}: the alignment's at-rest updates, whose "
+            "innovation is nought by construction, so their NIS says nothing of consistency.")
 
 
 # -- tables ------------------------------------------------------------------------------
@@ -391,9 +415,38 @@ def _counts(run: dict) -> list[tuple[str, str]]:
             "reports_duplicate", "ranges_late", "db_answers")
     rows = [(k, str(c.get(k, 0))) for k in keys]
     rows += [("max late range (ms)", fmt(s.get("max_late_ms"))), ("link (dBm)", str(s.get("link_dbm"))),
-             ("reconnects", json.dumps(s.get("reconnects", {}))),
-             ("latency (ms)", json.dumps(s.get("latency", {})))]
+             ("reconnects", ", ".join(f"{k} {v}" for k, v in s.get("reconnects", {}).items())
+              or "–"),
+             ("host latency (ms)", _latency(s.get("latency") or {}))]
     return rows
+
+
+def _latency(lat: dict) -> str:
+    """The host's read-to-estimate latency: p50, p99 and max in ms, over n estimates."""
+    if not lat.get("n"):
+        return "–"
+    return (f"p50 {lat['p50_ms']:.3f}, p99 {lat['p99_ms']:.3f}, max {lat['max_ms']:.3f} "
+            f"(n {lat['n']})")
+
+
+def paper_note(run: dict) -> str:
+    """What the paper's figures are of, and whether this run is long enough to set beside
+    them: their experiment's duration against the scenario time this run covers."""
+    paper = run["paper"]
+    if not paper:
+        return ""
+    run_s = float(run["truth"]["t"][-1] - run["truth"]["t"][0])
+    text = (f"Paper {paper['paper']}: {paper['note']}. Its experiment: {paper['experiment']}, "
+            f"{paper['duration_s']:g} s.")
+    if run_s < SHORT_RUN * paper["duration_s"]:
+        text += (f" This run covers {run_s:.1f} s of it, too short to set beside those figures "
+                 "as equals: they are of the whole experiment, and errors that grow with time "
+                 "(the SINS drift, a bias) have not grown as far here.")
+    return text
+
+
+#: A run that covers less than this share of its paper's experiment is said to be too short.
+SHORT_RUN = 0.95
 
 
 # -- output ------------------------------------------------------------------------------
@@ -412,6 +465,8 @@ def markdown(run: dict) -> str:
              "## Accuracy (paper 001 Table 1's layout)", "",
              _md_table(["statistic", *names], [(label, *(t for _, t in cells))
                                                for _, label, cells in accuracy_rows(run)])]
+    if paper_note(run):
+        parts += ["", paper_note(run)]
     if "bound" in run:
         b = run["bound"]
         parts += ["", f"Posterior Cramer-Rao bound (ranges only, docs/report.md): RMS position "
@@ -422,6 +477,8 @@ def markdown(run: dict) -> str:
                   _md_table(["filter", "kind", "dof", "updates", "mean NIS", "inside 95 %",
                              "gated out"], [(n, k, d, u, fmt(m), fmt(b), g)
                                             for n, k, d, u, m, b, g in nis_table(run)])]
+        if nis_left_out(run):
+            parts += ["", nis_left_out(run)]
     parts += ["", "## Link and ranging", "",
               _md_table(["port", "emulator frames", "emulator bytes", "host frames", "host bytes",
                          "host errors"], link_rows(run))]
@@ -492,8 +549,8 @@ def html_page(run: dict, figs: dict[str, str]) -> str:
     body += ["<h2>Accuracy (paper 001 Table 1's layout)</h2>",
              _html_table(["statistic", *names], [(label, *(t for _, t in cells)) for _, label, cells in acc],
                          acc_attr, ["paper" if k.startswith("paper:") else "" for k, _, _ in acc])]
-    if run["paper"]:
-        body.append(f"<p class=note>Paper {e(run['paper']['paper'])}: {e(run['paper']['note'])}</p>")
+    if paper_note(run):
+        body.append(f"<p class=note id=paper-note>{e(paper_note(run))}</p>")
     if "nees" in figs:
         body += ["<h2>NEES against its chi-square band</h2>",
                  "<p class=note>e<sup>T</sup>P<sup>-1</sup>e of each estimate's position error "
@@ -509,6 +566,8 @@ def html_page(run: dict, figs: dict[str, str]) -> str:
                  f"<div class=fig id=fig-nis>{figs['nis']}</div>",
                  _html_table(["filter", "kind", "dof", "updates", "mean NIS", "inside 95 %", "gated out"],
                              [(n, k, d, u, fmt(m), fmt(b), g) for n, k, d, u, m, b, g in nis_table(run)])]
+        if nis_left_out(run):
+            body.append(f"<p class=note>{e(nis_left_out(run))}</p>")
     elif run["innovations"] is None:
         body.append("<p class=note>No innovations.jsonl in this run: no NIS.</p>")
     body += ["<h2>Link and ranging</h2>",

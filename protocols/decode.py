@@ -1,6 +1,7 @@
 """The Python API under ``navtwin decode``: sources of bytes, and frames as JSON-able dicts."""
 from __future__ import annotations
 
+import math
 import os
 import stat
 import sys
@@ -62,6 +63,49 @@ def frame_record(ev: Frame, *, gyro_range: int = 300, with_hex: bool = False) ->
     if with_hex:
         rec["hex"] = ev.raw.hex().upper()
     return rec
+
+
+def _significant(x: float) -> int:
+    """The significant digits of a constant as the datasheet writes it (0.018315: 5)."""
+    return len(f"{x:.12e}".split("e")[0].replace(".", "").rstrip("0"))
+
+
+def _decimals(lsb: float, significant: int = 1) -> int:
+    """The decimals that print multiples of *lsb* to its resolution, given to *significant*
+    digits: 0.07326 deg/s (4 digits) needs 5, so 12 counts print as 0.87912."""
+    return max(0, significant - 1 - math.floor(math.log10(lsb)))
+
+
+def _resolution(gyro_range: int) -> dict[str, int]:
+    """Decimals of each engineering-unit field of a frame record: the ADIS16350's LSBs
+    (converted ones keep their datasheet LSB's digits), and 1 ps in the ranging exchange."""
+    out = {}
+    for key, lsb in (("gyro_dps", adis16350.GYRO_LSB_DPS[gyro_range]),
+                     ("accel_g", adis16350.ACCEL_LSB_G), ("temp_c", adis16350.TEMP_LSB_C),
+                     ("supply_v", adis16350.SUPPLY_LSB_V), ("aux_v", adis16350.AUX_LSB_V)):
+        out[key] = _decimals(lsb, _significant(lsb))
+    digits = _significant(adis16350.GYRO_LSB_DPS[gyro_range])
+    out["gyro_rad_s"] = _decimals(math.radians(adis16350.GYRO_LSB_DPS[gyro_range]), digits)
+    out["accel_m_s2"] = _decimals(adis16350.ACCEL_LSB_G * adis16350.STANDARD_GRAVITY,
+                                  _significant(adis16350.ACCEL_LSB_G))
+    out["distance_m"] = _decimals(nanoloc.distance(1, 0, 0, 0))
+    return out
+
+
+_DECIMALS = {rng: _resolution(rng) for rng in adis16350.GYRO_LSB_DPS}
+
+
+def printed(rec: dict, gyro_range: int = 300) -> dict:
+    """*rec* as ``navtwin decode`` prints it: engineering units rounded to the sensor's
+    resolution (0.87912, not 0.8791200000000001). The records themselves stay exact."""
+    out = dict(rec)
+    for key, places in _DECIMALS[gyro_range].items():
+        v = rec.get(key)
+        if isinstance(v, float):
+            out[key] = round(v, places)
+        elif isinstance(v, list):
+            out[key] = [round(x, places) for x in v]
+    return out
 
 
 def error_record(ev: DecodeError) -> dict:

@@ -9,6 +9,7 @@ are the same package.
 from __future__ import annotations
 
 import ast
+import fnmatch
 import subprocess
 import sys
 import tomllib
@@ -132,16 +133,25 @@ def test_imports_are_resolved_however_written(source, module, expected):
 
 
 def test_the_build_maps_every_package_folder_into_the_namespace():
-    """pyproject's package-dir and packages cover every folder with an __init__.py."""
+    """pyproject's package-dir and packages cover every folder Python imports (one with an
+    __init__.py, or a data folder such as emulator/scenarios, which setuptools warns about
+    when it is not declared), and package-data every data file in them."""
     tool = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
     folder_of = {name: folder for name, folder in tool["package-dir"].items()}
-    want = set()
+    want, data = set(), {}
     for name, folder in folder_of.items():
-        for init in (ROOT / folder).rglob("__init__.py"):
-            rel = init.parent.relative_to(ROOT / folder).parts
-            want.add(".".join((name, *rel)))
+        for d in (ROOT / folder, *(ROOT / folder).rglob("*")):
+            files = [f for f in d.iterdir() if f.is_file()] if d.is_dir() else []
+            if d.name != "__pycache__" and files:
+                package = ".".join((name, *d.relative_to(ROOT / folder).parts))
+                want.add(package)
+                data[package] = [f.name for f in files if f.suffix != ".py"]
     assert set(tool["packages"]) == want
     assert set(folder_of) == {NAMESPACE, *(f"{NAMESPACE}.{p}" for p in packages() if p != NAMESPACE)}
+    for package, names in data.items():
+        globs = tool.get("package-data", {}).get(package, ())
+        for f in names:
+            assert any(fnmatch.fnmatch(f, g) for g in globs), f"{package}: {f} not in package-data"
 
 
 def test_a_user_package_named_host_imports_beside_navtwin(tmp_path):

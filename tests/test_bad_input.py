@@ -386,7 +386,8 @@ def test_every_estimator_number_has_a_range_and_docs_state_it():
 #: installed without the extra that brings them.
 WITHOUT = ("import sys\nfor m in sys.argv[1].split(','):\n    sys.modules[m] = None\n"
            "from navtwin.cli.main import main\nsys.exit(main(sys.argv[2:]))")
-#: command argv, modules missing, the extra its line must name
+#: command argv, modules missing, the extra its line must name (demo needs none of its extra
+#: off a terminal: plain progress lines, and the run without its plots)
 MISSING_EXTRAS = {
     "sweep without pyarrow": (["sweep", "--seeds", "1", "--serial", "--quiet", "--duration", "2",
                                "--filters", "kf", "--out", "o"], "pyarrow", "sweep"),
@@ -399,7 +400,6 @@ MISSING_EXTRAS = {
     "sweep without rich": (["sweep", "--seeds", "1", "--serial", "--duration", "2",
                             "--filters", "kf", "--out", "o"], "rich", "sweep"),
     "report without matplotlib": (["report", "run"], "matplotlib", "plot"),
-    "demo without rich": (["demo", "--duration", "2", "--dir", "run"], "rich", "demo"),
     "bench without digi-xbee": (["bench", "digi-open", "--quick"], "digi", "test"),
 }
 

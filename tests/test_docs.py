@@ -83,6 +83,21 @@ def test_the_docs_check_sees_every_form_the_docs_use():
 
 
 @pytest.mark.pty
+def test_the_readme_python_runs_quietly(tmp_path):
+    """The README's Python block as a newcomer pastes it: it runs, and unplugging the
+    coordinator's cable leaves no open digi-xbee device logging failed reads."""
+    pytest.importorskip("digi.xbee")
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = [body for lang, body in FENCE.findall(text) if lang == "python"]
+    assert len(blocks) == 1
+    p = subprocess.run([sys.executable, "-c", blocks[0]], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=180)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert p.stdout == "Role.COORDINATOR\n"
+    assert len(p.stderr.splitlines()) < 5, p.stderr[:3000]
+
+
+@pytest.mark.pty
 @pytest.mark.slow
 def test_the_tutorial_example_tests_pass():
     """docs/examples/ run as the tutorial runs them: pytest with navtwin's plugin."""

@@ -35,6 +35,7 @@ def test_lab_runs_and_reports_against_truth(tmp_path):
     live = [json.loads(x) for x in p.stderr.decode().splitlines() if x.startswith("{")]
     assert any(set(x.get("error_m", {})) == set(errors) for x in live)
     assert any("host" in x for x in live)
+    assert [x["lab"] for x in live if "lab" in x] == ["starting", "running", "ended", "reporting"]
     # the host wrote its innovations; --no-plot made no report, navtwin report makes it from
     # the live run's files, with the run's host-time offset: the numbers of report.json
     inn = [json.loads(x) for x in (d / "innovations.jsonl").read_text().splitlines()]

@@ -37,7 +37,14 @@ def run_dir(tmp_path_factory):
                                  on_innovation=lambda *f: innovations.append(innovation_line(*f)))
     (d / "estimates.jsonl").write_text("".join(map(estimate_line, estimates)))
     (d / "innovations.jsonl").write_text("".join(innovations))
+    (d / "host.log").write_text(json.dumps({"summary": HOST_SUMMARY}) + "\n")
     return d
+
+
+#: The host's summary line, as navtwin host ends its log (the parts the report shows).
+HOST_SUMMARY = {"counts": {"imu": 1200, "reports": 480}, "link_dbm": -40, "max_late_ms": 1.5,
+                "reconnects": {"xbee": 1, "nanoloc": 0},
+                "latency": {"n": 540, "p50_ms": 0.75, "p99_ms": 3.204, "max_ms": 12.5}}
 
 
 @pytest.fixture(scope="module")
@@ -170,3 +177,23 @@ def test_a_report_json_that_is_no_lab_report_is_one_line_and_exit_2(run_dir, tmp
     assert captured.out == "" and len(lines) == 1, captured.err
     assert f"{d}/report.json" in lines[0] and words in lines[0] and "re-run" in lines[0]
     assert sorted(p.name for p in d.rglob("*")) == before  # no report written over it
+
+
+def test_the_report_reads_as_figures_for_a_newcomer(run_dir, report):
+    md, page = report["md"], report["html"]
+    # latency as figures, not a JSON cell
+    assert "| host latency (ms) | p50 0.750, p99 3.204, max 12.500 (n 540) |" in md
+    assert '{"n"' not in md and "reconnects | xbee 1, nanoloc 0 |" in md
+    # the at-rest updates (NIS ~1e-8) are not rows of 0.0000: a note names them
+    nis = [json.loads(x) for x in (run_dir / "innovations.jsonl").read_text().splitlines()]
+    still = [r for r in nis if r["kind"] == "stationary"]
+    assert still and max(r["nis"] for r in still) < 1e-3
+    assert "| stationary |" not in md and "| 0.0000 |" not in md
+    assert f"Left out: stationary ({len(still)} updates)" in md and "Left out: stationary" in page
+    # one small error panel per track (each its own axes), on one scale
+    error_svg = page[page.index("id=fig-error>"):page.index("</svg>", page.index("id=fig-error>"))]
+    assert len(re.findall(r'<g id="axes_\d+"', error_svg)) == 5
+    # 12 s of office beside paper 000's whole loop: said so
+    note = re.search(r"<p class=note id=paper-note>([^<]*)</p>", page)[1]
+    assert "one loop of the taped line, 70 s" in note and "covers 12.0 s" in note, note
+    assert "too short to set beside those figures" in md

@@ -142,3 +142,27 @@ def test_a_flood_of_7e_is_a_handful_of_lines_and_the_frames_after_it_decode(tmp_
         assert sum(x.get("count", 1) for x in errors if x["error"] == kind) == n
     garbage = [x for x in errors if x["error"] == "garbage"]
     assert sum(x["size"] for x in garbage) == summary["error_bytes"]["garbage"] == 100_000
+
+
+def test_decode_prints_each_value_to_the_sensors_resolution_and_the_api_keeps_it_exact(tmp_path):
+    from navtwin.protocols import adis16350
+    from navtwin.protocols.decode import decode
+
+    # 12 counts of 0.07326 deg/s is 0.8791200000000001 in binary floating point
+    words = adis16350.sample_to_words(gyro_dps=(12 * 0.07326, -7 * 0.07326, 0.0),
+                                      accel_g=(0.0, 3 * 2.522e-3, 1.0), temp_c=(25.1453, 25, 25))
+    f = tmp_path / "s.bin"
+    f.write_bytes(sins.build_sample(5, words))
+    rc, lines, _ = navtwin("decode", "--format", "sins", str(f))
+    assert rc == 0
+    printed = json.dumps(lines[0], separators=(",", ":"))
+    assert '"gyro_dps":[0.87912,-0.51282,0.0]' in printed
+    assert '"accel_g":[0.0,0.007566,1.001234]' in printed and '"temp_c":[25.1453,' in printed
+    exact = next(decode(str(f), "sins"))
+    assert exact["gyro_dps"][0] == 12 * 0.07326 != 0.87912  # only printing rounds
+    for key in ("gyro_rad_s", "accel_m_s2", "supply_v"):
+        assert lines[0][key] == pytest.approx(exact[key], abs=1e-5)
+    (tmp_path / "n.bin").write_bytes(NANOLOC_5M)
+    rc, lines, _ = navtwin("decode", "--format", "nanoloc", str(tmp_path / "n.bin"))
+    exact = next(decode(str(tmp_path / "n.bin"), "nanoloc"))["distance_m"]
+    assert lines[0]["distance_m"] == round(exact, 5) != exact  # 1 ps is 0.07 mm
