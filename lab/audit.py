@@ -168,18 +168,23 @@ def _unseen(emu_size: int, slices: list[tuple[int, int, int]], sizes: list[int],
 
     end = 0
     for k, (h, e, n) in enumerate(slices):
-        i = bisect.bisect_left(starts, h)  # a slice starts with a read
         if k == 0:
             add("before_attach", e)
         elif marks is None:
             add("no_cause_seen", e - end)
         else:
-            now, before = marks[i], marks[i - 1]
-            add("port_down" if now.reconnects > before.reconnects else "second_reader"
-                if now.contended > before.contended else "no_cause_seen", e - end)
+            i = bisect.bisect_left(starts, h)  # a slice starts with a read
+            add(_cause(marks[i - 1], marks[i]), e - end)
         end = e + n
     add("after_last_read" if slices else "before_attach", emu_size - end)
     return causes
+
+
+def _cause(before: Read, now: Read) -> str:
+    """Why the host missed bytes between two of its reads, as far as it saw."""
+    if now.reconnects > before.reconnects:
+        return "port_down"
+    return "second_reader" if now.contended > before.contended else "no_cause_seen"
 
 
 def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
@@ -298,13 +303,15 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
                          "emulator's ports")
     results = []
     for p in ports:
-        chunks = list(host.chunks(p))
-        marks = [c.read for c in chunks] if host.reads[p] else None
-        if marks is not None and None in marks:
+        reads, marks = [], []
+        for c in host.chunks(p):
+            reads.append(c.data)
+            marks.append(c.read)
+        if host.reads[p] and None in marks:
             raise AuditError(f"{host_dir}/{p}.csv: a read without its read columns; a host "
                              f"recording has them on every read: re-record it")
-        results.append(audit_port(p, b"".join(c.data for c in emu.chunks(p)),
-                                  [c.data for c in chunks], entries, escaped, marks))
+        results.append(audit_port(p, b"".join(c.data for c in emu.chunks(p)), reads, entries,
+                                  escaped, marks if host.reads[p] else None))
     old = [p for p in ports if not host.reads[p]]
     notes = [f"{host_dir}: no read columns in {', '.join(f'{p}.csv' for p in old)} (an older "
              f"navtwin's recording): a read lost from it would count as unseen, so its "

@@ -220,3 +220,13 @@ def test_unseen_bytes_are_counted_by_the_cause_the_host_saw():
                         "after_last_read": 124} and r.unseen_bytes == 474
     old = audit_mod.audit_port("xbee", emu, reads, [], True)
     assert old.unseen == {"before_attach": 50, "no_cause_seen": 300, "after_last_read": 124}
+
+
+def test_a_host_read_without_its_read_columns_is_one_line_and_exit_2(run, tmp_path):
+    emu, host = _copy(run, tmp_path)
+    header, *lines = (host / "xbee.csv").read_text().splitlines()
+    lines[5] = ",".join(lines[5].split(",")[:4]) + ",,,"
+    (host / "xbee.csv").write_text("\n".join([header, *lines]) + "\n")
+    out = _navtwin("audit", str(emu), str(host))
+    assert out.returncode == 2 and len(out.stderr.splitlines()) == 1, out.stderr
+    assert "xbee.csv: a read without its read columns" in out.stderr
