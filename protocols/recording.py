@@ -506,8 +506,9 @@ class Recording:
         return b"".join(c.data for c in self.chunks(port))
 
     def _entries(self, port: str, data_size: int) -> Iterator[tuple]:
-        """Validated index entries ``(line, offset, size, t_device, t_wall, read)``; a truncated
-        tail ends it with ``(line, None, why, None, None, None)``."""
+        """Validated index entries ``(line, offset, size, t_device, t_wall, read)`` (*read*: the
+        read columns' fields as matched, parsed only where a chunk is made); a truncated tail
+        ends it with ``(line, None, why, None, None, None)``."""
         index = self.directory / f"{port}.csv"
         try:
             fh = open(index, "rb")
@@ -534,8 +535,7 @@ class Recording:
                 m = _ENTRY.fullmatch(line)  # one match a line: an hour's index is 600k lines
                 if m is None or reads != (m[5] is not None or m[8] is not None):
                     damaged(n, _entry_problem(line, header))
-                off, size, dev, wall = m.groups()[:4]
-                read = None if m[5] is None else Read(int(m[5]), int(m[6]), int(m[7]))
+                off, size, dev, wall, *read = m.groups()
                 off, size = int(off), int(size)
                 dev = int(dev) if dev else None
                 wall = int(wall) if wall else None
@@ -607,7 +607,8 @@ class Recording:
                     if len(blob) != n:
                         raise RecordingError(f"{data_path}: changed while being read; read it "
                                              f"again when nothing writes to it")
-                    yield Chunk(port, off, blob, dev, wall, read)
+                    yield Chunk(port, off, blob, dev, wall,
+                                None if read[0] is None else Read(*map(int, read[:3])))
                     if i == want:
                         return
         except OSError as e:
