@@ -67,8 +67,8 @@ from typing import Iterator, NamedTuple
 from .serial import BAUDS
 
 FORMAT = "navtwin-recording"
-VERSION = 2  # the newest this navtwin reads
 READS_VERSION = 2  # the first with the read columns
+VERSION = READS_VERSION  # the newest this navtwin reads
 META = "recording.json"
 FAULTS = "faults.jsonl"
 DIRECTIONS = ("to_host", "to_device")
