@@ -10,8 +10,10 @@ DESCRIPTION = """\
 Compare an emulator recording (navtwin emulate --record, with its fault ledger faults.jsonl)
 with a host recording of the same run (navtwin host --record): every frame that reached the
 host intact was accepted, every byte the host rejected was touched by an injected fault,
-and every injection that changed bytes was rejected. Prints a one-screen report (or --json)
-and exits 0 when all hold, 1 when one does not."""
+every injection that changed bytes was rejected, and the host's recording holds every read
+the host made, in order (its read columns; an older recording without them gets a note).
+Bytes the host never read are reported as unseen, by the cause the host saw. Prints a
+one-screen report (or --json) and exits 0 when all hold, 1 when one does not."""
 
 
 def register(sub) -> None:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from navtwin.protocols.ports import DEFAULT_BAUD
-from navtwin.protocols.recording import Recording, RecordingWriter
+from navtwin.protocols.recording import Read, Recording, RecordingWriter
 
 from .config import HostConfig
 from .output import percentiles_ms
@@ -34,9 +34,10 @@ def write_host_recording(directory: str | os.PathLike, config: HostConfig, filte
     chunks = list(chunks)
     ports = {p: f"synthetic:{p}" for p in dict.fromkeys(c[0] for c in chunks)}
     meta = recording_meta(config, tuple(filters), escaped, ports, baud)
-    with RecordingWriter(directory, meta) as rec:
+    with RecordingWriter(directory, meta, reads=True) as rec:
         for port, data, t_ns in chunks:
-            rec.port(port).write(data, t_wall_ns=t_ns)
+            w = rec.port(port)
+            w.write(data, t_wall_ns=t_ns, read=Read(w.offset, 0, 0))  # all read, none contended
     return Path(directory)
 
 

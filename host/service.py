@@ -7,7 +7,9 @@ caller's thread takes the chunks in queue order, stamps each with its arrival ti
 ``max(read ns - start ns, previous stamp + 1)`` (one counter for all ports, so stamps are
 unique and increasing), records it, and feeds it to the :class:`navtwin.host.pipeline.Pipeline`.
 The recording therefore holds exactly what was processed, in order: ``navtwin replay``
-gives the same estimates.
+gives the same estimates. Each read carries its read columns (protocols.recording.Read),
+counted by its reader as it reads, not by the recorder: a read lost or reordered between the
+port and the disk shows in them, and ``navtwin audit`` fails on it.
 
 The recording is flushed every ``FLUSH_S`` (a kill loses at most ~1 s of it). A write that
 fails, to the recording or to the estimate output (disk full, EIO, a file size limit), ends
@@ -45,7 +47,8 @@ import serial
 from navtwin.protocols import __version__
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 from navtwin.protocols.ports import DEFAULT_BAUD
-from navtwin.protocols.recording import FLUSH_S, RecordingWriteError, RecordingWriter, write_failure
+from navtwin.protocols.recording import (FLUSH_S, Read, RecordingWriteError, RecordingWriter,
+                                         write_failure)
 
 from .config import HostConfig
 from .output import Latency, estimate_line, info_line, innovation_line
@@ -146,7 +149,8 @@ def read_chunk(ser: serial.SerialBase) -> bytes:
 
 class PortReader(threading.Thread):
     """Owns one port: reads into the queue; on failure closes, reports, reopens. Events go to
-    the queue as ``(event, port, body, read ns)``; data as ``("data", port, bytes, read ns)``."""
+    the queue as ``(event, port, body, read ns)``; data as ``("data", port, (bytes, Read),
+    read ns)``."""
 
     def __init__(self, name: str, url: str, baud: int, ser: serial.SerialBase,
                  chunks: queue.SimpleQueue, stop: threading.Event) -> None:
@@ -159,6 +163,7 @@ class PortReader(threading.Thread):
         self.state = "open"  # "open", "down", or "emulator_gone" (down, and not reopened)
         self.reconnects = 0
         self.contended = 0  # reads that found the bytes taken by another reader
+        self.read_bytes = 0  # bytes read from the port so far, over every reopen
         self.tx_dropped = 0
 
     def _event(self, event: str, **body) -> None:
@@ -196,7 +201,9 @@ class PortReader(threading.Thread):
                     self._quit.wait(RETRY_S)
                     continue
                 if data:
-                    self._chunks.put(("data", self.port, data, time.monotonic_ns()))
+                    read = Read(self.read_bytes, self.reconnects, self.contended)
+                    self.read_bytes += len(data)
+                    self._chunks.put(("data", self.port, (data, read), time.monotonic_ns()))
         finally:
             self._close()
 
@@ -297,7 +304,7 @@ class Service:
     def _start_recording(self) -> None:
         # a new or empty directory, never through a symbolic link (the writer checks)
         try:
-            self.recorder = RecordingWriter(self.record_dir, self.meta())
+            self.recorder = RecordingWriter(self.record_dir, self.meta(), reads=True)
         except RecordingWriteError as e:
             raise StartError(f"--record {e}") from None
 
@@ -356,7 +363,7 @@ class Service:
             except queue.Empty:
                 kind = None
             if kind == "data":
-                self._process(name, data, t_read)
+                self._process(name, *data, t_read)
             elif kind is not None:
                 self._info("status", {"event": kind, "port": name, **data})
             now = time.monotonic_ns()
@@ -369,13 +376,13 @@ class Service:
             if end is not None and now >= end:
                 break
 
-    def _process(self, name: str, data: bytes, t_read: int) -> None:
+    def _process(self, name: str, data: bytes, read: Read, t_read: int) -> None:
         stamp = max(t_read - self._t0, self._last_stamp + 1)
         self._last_stamp = stamp
         self.chunks += 1
         self.bytes[name] += len(data)
         if self.recorder is not None:
-            self.recorder.port(name).write(data, t_wall_ns=stamp)
+            self.recorder.port(name).write(data, t_wall_ns=stamp, read=read)
         self._emit(self.pipeline.feed(name, data, stamp), name, t_read)
         for event in self.pipeline.take_events():  # the coordinator's API mode changed
             self._info("status", event)

@@ -20,11 +20,22 @@ host's decoder made of them. Three checks, each of which can fail:
    kinds that only move bytes in time (latency, bandwidth, slicing) must touch accepted
    frames only.
 
+Wholeness. The host's recording is proven whole by its read columns (protocols.recording,
+``Read``: the bytes its reader had read from the port before each read, counted as it read):
+a read missing from the recording (a gap in ``read_offset``), recorded twice or out of order
+fails the audit, naming the port and the index line. A recording without them (older
+navtwin) is audited as before, with a note that its wholeness is not proven. The last reads
+of a port have no later read to witness them: a run's end is not judged.
+
 Alignment. The host's bytes of a port are located in the emulator's as a sequence of
 slices (a host that attached late sees a suffix; one whose cable was pulled, pieces); bytes
 the host read that the emulator never delivered fail the audit. Bytes the emulator delivered
-that the host never read (before it attached, while unplugged, a PTY overflow) are reported,
-not judged: the frames in them are "unseen".
+that the host never read are reported, not judged: the frames in them are "unseen", counted
+by cause where the host saw it (``unseen``): ``before_attach``, ``port_down`` (the host
+reopened the port before its next read: unplugged, emulator restarted), ``second_reader``
+(the host found bytes taken by another reader before its next read), ``after_last_read``,
+and ``no_cause_seen`` (a PTY overflow, a reader that took bytes unseen; in a recording
+without read columns, every gap between reads).
 
 The xbee port is audited at the API-frame level in the API mode the emulator recorded at its
 start (a run whose coordinator switched mode under the host is not auditable so).
@@ -33,10 +44,11 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass, field
+from itertools import accumulate
 from pathlib import Path
 
 from navtwin.emulator.faults import Fault
-from navtwin.protocols.recording import Recording
+from navtwin.protocols.recording import Read, Recording
 from navtwin.protocols.stream import DecodeError, Frame, XBeeDecoder, nanoloc_decoder, sins_decoder
 
 PORTS = ("sins", "xbee", "nanoloc")
@@ -83,6 +95,7 @@ class PortAudit:
     emulator_bytes: int = 0
     host_bytes: int = 0
     unseen_bytes: int = 0
+    unseen: dict[str, int] = field(default_factory=dict)  # unseen bytes by cause
     frames: int = 0  # frames in the delivered stream, inside what the host saw
     intact: int = 0
     damaged: int = 0
@@ -113,16 +126,83 @@ def _overlaps(ranges: list[tuple[int, int]], starts: list[int], lo: int, hi: int
     return False
 
 
+def wholeness(port: str, sizes: list[int], marks: list[Read]) -> list[str]:
+    """The problems of a host's reads of *port* as recorded (their sizes and read columns, in
+    index order): reads out of order, bytes read and not recorded, or recorded twice."""
+    problems = []
+    back = next((i for i in range(1, len(marks))
+                 if any(a < b for a, b in zip(marks[i], marks[i - 1]))), None)
+    if back is not None:
+        problems.append(f"{port}: the host's reads are out of order in its recording: "
+                        f"{port}.csv line {back + 2} holds the read at byte {marks[back].offset} "
+                        f"of the port, after the read at byte {marks[back - 1].offset}")
+    end, lost, gaps, twice = 0, 0, [], []
+    for i in sorted(range(len(marks)), key=lambda i: marks[i].offset):
+        if marks[i].offset > end:
+            lost += marks[i].offset - end
+            gaps.append((i, end))
+        elif marks[i].offset < end:
+            twice.append(i)
+        end = max(end, marks[i].offset + sizes[i])
+    if gaps:
+        i, at = gaps[0]
+        problems.append(f"{port}: {lost} bytes the host read are missing from its recording "
+                        f"({len(gaps)} gaps; the first at byte {at} of the port, before "
+                        f"{port}.csv line {i + 2})")
+    if twice:
+        problems.append(f"{port}: {len(twice)} reads repeat bytes the host's recording already "
+                        f"holds (the first at {port}.csv line {twice[0] + 2})")
+    return problems
+
+
+def _unseen(emu_size: int, slices: list[tuple[int, int, int]], sizes: list[int],
+            marks: list[Read] | None) -> dict[str, int]:
+    """The emulator's bytes between the slices the host saw, by cause (module docstring): a
+    gap's cause is what the host counted between the reads on either side of it."""
+    starts = list(accumulate(sizes, initial=0))  # where each read starts in the host's bytes
+    causes: dict[str, int] = {}
+
+    def add(cause: str, n: int) -> None:
+        if n:
+            causes[cause] = causes.get(cause, 0) + n
+
+    end = 0
+    for k, (h, e, n) in enumerate(slices):
+        if k == 0:
+            add("before_attach", e)
+        elif marks is None:
+            add("no_cause_seen", e - end)
+        else:
+            i = bisect.bisect_left(starts, h)  # a slice starts with a read
+            add(_cause(marks[i - 1], marks[i]), e - end)
+        end = e + n
+    add("after_last_read" if slices else "before_attach", emu_size - end)
+    return causes
+
+
+def _cause(before: Read, now: Read) -> str:
+    """Why the host missed bytes between two of its reads, as far as it saw."""
+    if now.reconnects > before.reconnects:
+        return "port_down"
+    return "second_reader" if now.contended > before.contended else "no_cause_seen"
+
+
 def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
-               escaped: bool) -> PortAudit:
+               escaped: bool, marks: list[Read] | None = None) -> PortAudit:
+    """The audit of one port (module docstring); *marks*: the reads' read columns, when the
+    host's recording has them."""
     host = b"".join(reads)
     r = PortAudit(port, len(emu), len(host))
+    sizes = [len(x) for x in reads]
+    if marks is not None:
+        r.problems += wholeness(port, sizes, marks)
     slices, foreign = align(reads, emu)
     if foreign:
         r.problems.append(f"{port}: the host read {foreign} bytes the emulator never sent "
                           "(are these recordings of the same run?)")
     seen = [(e, e + n) for _, e, n in slices]
     r.unseen_bytes = len(emu) - sum(n for _, _, n in slices)
+    r.unseen = _unseen(len(emu), slices, sizes, marks)
     seen_starts = [a for a, _ in seen]
 
     def inside(lo: int, hi: int) -> bool:  # wholly inside one slice the host saw
@@ -221,9 +301,22 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
     if not ports:
         raise AuditError("the recordings share no port with data; record the host on the "
                          "emulator's ports")
-    results = [audit_port(p, b"".join(c.data for c in emu.chunks(p)),
-                          [c.data for c in host.chunks(p)], entries, escaped) for p in ports]
-    return {"ok": all(r.ok for r in results), "ledger_entries": len(entries),
+    results = []
+    for p in ports:
+        reads, marks = [], []
+        for c in host.chunks(p):
+            reads.append(c.data)
+            marks.append(c.read)
+        if host.reads[p] and None in marks:
+            raise AuditError(f"{host_dir}/{p}.csv: a read without its read columns; a host "
+                             f"recording has them on every read: re-record it")
+        results.append(audit_port(p, b"".join(c.data for c in emu.chunks(p)), reads, entries,
+                                  escaped, marks if host.reads[p] else None))
+    old = [p for p in ports if not host.reads[p]]
+    notes = [f"{host_dir}: no read columns in {', '.join(f'{p}.csv' for p in old)} (an older "
+             f"navtwin's recording): a read lost from it would count as unseen, so its "
+             f"wholeness is not proven"] if old else []
+    return {"ok": all(r.ok for r in results), "ledger_entries": len(entries), "notes": notes,
             "ports": {r.port: {k: v for k, v in vars(r).items() if k != "port"} for r in results}}
 
 
@@ -234,8 +327,13 @@ def report(result: dict) -> str:
     lines = [f"{'port':8} " + " ".join(f"{c:>17}" for c in cols)]
     for port, r in result["ports"].items():
         lines.append(f"{port:8} " + " ".join(f"{r[c]:>17}" for c in cols))
+    for port, r in result["ports"].items():
+        if r.get("unseen"):
+            lines.append(f"unseen {port}: " + ", ".join(f"{n} bytes {cause}"
+                                                        for cause, n in r["unseen"].items()))
     problems = [p for r in result["ports"].values() for p in r["problems"]]
     lines.append(f"ledger: {result['ledger_entries']} entries")
+    lines += [f"NOTE {n}" for n in result.get("notes", [])]
     lines += [f"FAIL {p}" for p in problems] or ["PASS: every intact frame was accepted, every "
                                                  "rejected byte was injected, every injection "
                                                  "was rejected"]

@@ -17,7 +17,8 @@ With ``faults`` (``--faults``) the scenario also injects, periodically, the faul
 value errors, a board reset), the host records, and at the end the run is audited
 (lab.audit): nothing the host lost may be unaccounted for. The emulator is then not
 restarted (a host recording spans one emulator run for the audit; restarts have their own
-test), the second reader still takes bytes (the audit sees them as unseen, not lost).
+test), the second reader still takes bytes (the audit sees them as unseen, not lost, and
+as ``second_reader`` where the host saw it take them).
 
 It reports the host's and the emulator's resident memory after warm-up and at the end, the
 host's IMU rate per status period (and the worst period outside the restart), what the
@@ -260,7 +261,7 @@ def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
         audited = {"faults": done.get("faults"), "audit": {
             "ok": result["ok"], "ledger_entries": result["ledger_entries"],
             "ports": {p: {k: r[k] for k in ("frames", "accepted", "rejected_bytes", "injections",
-                                            "unseen_bytes", "problems")}
+                                            "unseen_bytes", "unseen", "problems")}
                       for p, r in result["ports"].items()}},
             "reinit": [v["estimator"]["reinit"] for v in summary.get("vehicles", [])]}
     return {"benchmark": "lab-soak", "seconds": seconds, "dir": str(d), **audited,

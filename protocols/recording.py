@@ -6,6 +6,7 @@ Layout (``docs/emulator.md``, "Recordings")::
                             "ports": {...}, ...}
     DIR/<port>.bin         every byte of the port, in order
     DIR/<port>.csv         one line per chunk: offset,size,t_device_ns,t_wall_ns
+                           (a host's, version 2: ...,read_offset,reconnects,contended)
     DIR/faults.jsonl       the fault ledger (emulator recordings): one JSON object a line
 
 A chunk is one write by a device (emulator) or one read by the host. ``t_device_ns`` is the
@@ -13,6 +14,16 @@ device clock at the chunk's first byte (emulator recordings; empty in host recor
 ``t_wall_ns`` is the wall time of the write (emulator, real time only) or the arrival time
 of the read (host, monotonic ns since the run started). Both are integers, so a replay
 feeds exactly the recorded chunks at exactly the recorded times.
+
+Read columns (version 2, host recordings). Each read also says where it was in what the host
+read from the port, counted by the port's reader as it read (:class:`Read`): ``read_offset``,
+the bytes it had read from the port before this read (since the host started, over every
+reopen), ``reconnects`` and ``contended``, how often it had reopened the port and found its
+bytes taken by another reader. A read missing from the recording leaves a gap in
+``read_offset``, and reordered reads put it out of order: the audit (lab.audit) proves the
+recording whole with them. The columns may be empty (what the host sent, ``xbee.tx``). A
+recording's ``version`` is the oldest that reads it: 2 with the read columns, else 1 (the
+emulator's, byte for byte as before).
 
 Crash safety. ``recording.json`` is written when the recording starts, with
 ``"complete": false``, and replaced atomically at close with ``"complete": true`` (false if
@@ -51,33 +62,36 @@ import stat
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, NamedTuple
 
 from .serial import BAUDS
 
 FORMAT = "navtwin-recording"
-VERSION = 1
+READS_VERSION = 2  # the first with the read columns
+VERSION = READS_VERSION  # the newest this navtwin reads
 META = "recording.json"
 FAULTS = "faults.jsonl"
 DIRECTIONS = ("to_host", "to_device")
 _MAX_FAULT_LINE = 1 << 16
 INDEX_HEADER = "offset,size,t_device_ns,t_wall_ns"
+READS_HEADER = INDEX_HEADER + ",read_offset,reconnects,contended"
 FLUSH_S = 0.5  # callers flush at least this often: a kill loses at most ~1 s of wall time
 FLUSH_BYTES = 1 << 20  # buffered bytes (all files) that make the writer flush by itself
 MAX_CHUNK = 1 << 24  # no writer makes a chunk this big: a larger size is not a chunk
 PORT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")  # a file stem in DIR, no path
-_MAX_INDEX_LINE = 100  # four integers and three commas
-# an index line: offset,size,t_device_ns,t_wall_ns (the times may be empty), CR LF or LF
-_ENTRY = re.compile(rb"([0-9]{1,19}),([0-9]{1,19}),([0-9]{0,19}),([0-9]{0,19})\r*\n")
+_MAX_INDEX_LINE = 160  # seven integers and six commas
+# an index line: offset,size,t_device_ns,t_wall_ns (the times may be empty), then in a host's
+# index read_offset,reconnects,contended (all three, or all empty), CR LF or LF
+_ENTRY = re.compile(rb"([0-9]{1,19}),([0-9]{1,19}),([0-9]{0,19}),([0-9]{0,19})"
+                    rb"(?:,([0-9]{1,19}),([0-9]{1,19}),([0-9]{1,19})|(,,,))?\r*\n")
 
 
-def _entry_problem(line: bytes) -> str:
-    """Why an index line that is not an entry is not one."""
+def _entry_problem(line: bytes, header: str) -> str:
+    """Why an index line that is not an entry of an index with *header* is not one."""
     fields = line.rstrip(b"\r\n").split(b",")
-    if len(fields) != 4:
-        return f"expected offset,size,t_device_ns,t_wall_ns, got {_text(line)!r}"
-    return (f"expected non-negative integers offset,size,t_device_ns,t_wall_ns, "
-            f"got {_text(line)!r}")
+    if len(fields) != header.count(",") + 1:
+        return f"expected {header}, got {_text(line)!r}"
+    return f"expected non-negative integers {header}, got {_text(line)!r}"
 
 
 _FIX = {errno.ENOSPC: "the filesystem is full; free space or write to another filesystem",
@@ -117,6 +131,13 @@ class RecordingWriteError(Exception):
         self.written = written
 
 
+class Read(NamedTuple):
+    """Where a host's read was in what it read from its port (the module docstring)."""
+    offset: int  # bytes read from the port before it
+    reconnects: int  # reopens of the port before it
+    contended: int  # reads before it that found the bytes taken by another reader
+
+
 @dataclass(frozen=True, slots=True)
 class Chunk:
     port: str
@@ -124,6 +145,7 @@ class Chunk:
     data: bytes
     t_device_ns: int | None
     t_wall_ns: int | None
+    read: Read | None = None  # a host's read columns
 
 
 class _File:
@@ -185,20 +207,25 @@ class PortWriter:
         self._writer = writer
         self._bin = _File(writer, f"{name}.bin", writer.replace)
         self._idx = _File(writer, f"{name}.csv", writer.replace)
-        self._idx.append(INDEX_HEADER.encode() + b"\n")
+        self._idx.append((READS_HEADER if writer.reads else INDEX_HEADER).encode() + b"\n")
         self._idx.flush()  # now: an index on disk always has its header
         self.offset = 0  # bytes written to this port so far (flushed or not)
         self._ends: list[tuple[int, int]] = []  # buffered chunks: (data end, index end)
 
     def write(self, data: bytes, t_device_ns: int | None = None,
-              t_wall_ns: int | None = None) -> None:
-        """Buffer one chunk; may flush (and so raise :class:`RecordingWriteError`)."""
+              t_wall_ns: int | None = None, read: Read | None = None) -> None:
+        """Buffer one chunk (*read*: its read columns, in a writer with ``reads``); may flush
+        (and so raise :class:`RecordingWriteError`)."""
         if not data or self._writer.error is not None:
             return
         if len(data) > MAX_CHUNK:
             raise ValueError(f"a chunk of {len(data)} bytes is over MAX_CHUNK; write it in parts")
-        line = (f"{self.offset},{len(data)},{'' if t_device_ns is None else t_device_ns},"
-                f"{'' if t_wall_ns is None else t_wall_ns}\n").encode()
+        if read is not None and not self._writer.reads:
+            raise ValueError("read columns need a RecordingWriter made with reads=True")
+        fields = [self.offset, len(data), t_device_ns, t_wall_ns]
+        if self._writer.reads:
+            fields += read or (None,) * len(Read._fields)
+        line = (",".join("" if f is None else str(f) for f in fields) + "\n").encode()
         data_end, index_end = self._ends[-1] if self._ends else (0, 0)
         self._ends.append((data_end + len(data), index_end + len(line)))
         self._bin.append(data)
@@ -247,7 +274,8 @@ def _open_dir(directory: Path) -> int:
 
 
 class RecordingWriter:
-    """Write a recording; ``meta`` is free JSON (scenario, seed, port settings, source).
+    """Write a recording; ``meta`` is free JSON (scenario, seed, port settings, source);
+    *reads*: a host's, each chunk one read with its read columns (the module docstring).
 
     Every port of ``meta["ports"]`` gets its files at once, so a silent port is recorded as
     such. The directory must be new or empty unless *replace* (then files of the same names
@@ -257,10 +285,11 @@ class RecordingWriter:
     """
 
     def __init__(self, directory: str | os.PathLike, meta: dict | None = None, *,
-                 replace: bool = False) -> None:
+                 replace: bool = False, reads: bool = False) -> None:
         self.directory = Path(directory)
         self.meta = dict(meta or {})
         self.replace = replace
+        self.reads = reads
         self.ports: dict[str, PortWriter] = {}
         self.files: dict[str, _File] = {}  # other append-only files (truth.csv)
         self.buffered = 0
@@ -306,7 +335,9 @@ class RecordingWriter:
 
     def write_meta(self, complete: bool) -> None:
         ports = self.meta.get("ports", {})
-        meta = {"format": FORMAT, "version": VERSION, **self.meta, "complete": complete,
+        # the oldest version that reads it: an emulator recording is what it always was
+        version = READS_VERSION if self.reads else 1
+        meta = {"format": FORMAT, "version": version, **self.meta, "complete": complete,
                 "ports": {**ports, **{n: ports.get(n, {}) for n in self.ports}},
                 **({"write_error": str(self.error)} if self.error else {})}
         tmp = META + ".tmp"
@@ -458,6 +489,7 @@ class Recording:
         # old writer gave no way to tell, and a normal close is the usual case
         self.complete = self.meta.get("complete", True)
         self.salvage = salvage
+        self.reads: dict[str, bool] = {}  # port -> whether its index has the read columns
         self._intact: dict[str, int] = {}  # port -> chunks to replay
         self.sizes: dict[str, int] = {}  # port -> bytes those chunks hold
         self.skipped: dict[str, dict] = {}  # port -> {"chunks", "bytes", "why"}
@@ -474,8 +506,9 @@ class Recording:
         return b"".join(c.data for c in self.chunks(port))
 
     def _entries(self, port: str, data_size: int) -> Iterator[tuple]:
-        """Validated index entries ``(line, offset, size, t_device, t_wall)``; a truncated tail
-        ends it with ``(line, None, why, None, None)``."""
+        """Validated index entries ``(line, offset, size, t_device, t_wall, read)`` (*read*: the
+        read columns' fields as matched, parsed only where a chunk is made); a truncated tail
+        ends it with ``(line, None, why, None, None, None)``."""
         index = self.directory / f"{port}.csv"
         try:
             fh = open(index, "rb")
@@ -483,9 +516,13 @@ class Recording:
             raise RecordingError(f"{index}: {e.strerror}; the recording lacks the index of port "
                                  f"{port!r}: restore it or re-record") from None
         with fh:
-            if fh.readline(_MAX_INDEX_LINE + 1).rstrip(b"\r\n") != INDEX_HEADER.encode():
-                raise RecordingError(f"{index}:1: the first line must be {INDEX_HEADER!r}; "
-                                     f"restore the index or re-record")
+            headers = [INDEX_HEADER] + [READS_HEADER] * (self.meta["version"] >= READS_VERSION)
+            header = fh.readline(_MAX_INDEX_LINE + 1).rstrip(b"\r\n").decode("ascii", "replace")
+            if header not in headers:
+                raise RecordingError(f"{index}:1: the first line must be "
+                                     f"{' or '.join(map(repr, headers))}; restore the index or "
+                                     f"re-record")
+            reads = self.reads[port] = header == READS_HEADER
             offset, last_dev, last_wall = 0, -1, -1
 
             def damaged(n: int, problem: str):
@@ -493,12 +530,12 @@ class Recording:
                                      f"re-record, or restore {index.name}")
             for n, line in _numbered_lines(fh, _MAX_INDEX_LINE, damaged, first=2):
                 if line is None:
-                    yield n, None, "a partial last index line", None, None
+                    yield n, None, "a partial last index line", None, None, None
                     return
                 m = _ENTRY.fullmatch(line)  # one match a line: an hour's index is 600k lines
-                if m is None:
-                    damaged(n, _entry_problem(line))
-                off, size, dev, wall = m.groups()
+                if m is None or reads != (m[5] is not None or m[8] is not None):
+                    damaged(n, _entry_problem(line, header))
+                off, size, dev, wall, *read = m.groups()
                 off, size = int(off), int(size)
                 dev = int(dev) if dev else None
                 wall = int(wall) if wall else None
@@ -516,9 +553,9 @@ class Recording:
                     last_wall = wall
                 if off + size > data_size:
                     yield n, None, f"chunks past the end of {port}.bin ({data_size} bytes)", \
-                        None, None
+                        None, None, None
                     return
-                yield n, off, size, dev, wall
+                yield n, off, size, dev, wall, read
                 offset = off + size
 
     def _scan(self, port: str) -> None:
@@ -565,12 +602,13 @@ class Recording:
         try:
             with open(data_path, "rb") as data:
                 size = os.fstat(data.fileno()).st_size
-                for i, (_, off, n, dev, wall) in enumerate(self._entries(port, size), 1):
+                for i, (_, off, n, dev, wall, read) in enumerate(self._entries(port, size), 1):
                     blob = data.read(n) if off is not None else b""
                     if len(blob) != n:
                         raise RecordingError(f"{data_path}: changed while being read; read it "
                                              f"again when nothing writes to it")
-                    yield Chunk(port, off, blob, dev, wall)
+                    yield Chunk(port, off, blob, dev, wall,
+                                None if read[0] is None else Read(*map(int, read[:3])))
                     if i == want:
                         return
         except OSError as e:

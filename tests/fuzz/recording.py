@@ -2,7 +2,7 @@
 recording.json, sins.csv and sins.bin come from the input."""
 import json
 
-from navtwin.protocols.recording import META, Recording, RecordingError
+from navtwin.protocols.recording import META, READS_HEADER, Recording, RecordingError
 
 from .harness import Input, check_reader, fixture
 
@@ -22,7 +22,15 @@ def _seeds() -> list[bytes]:
     index = index[:index.rindex(b"\n") + 1]
     data = fixture("golden", "office", "sins.bin", size=1200)  # more than the index names
     incomplete = meta.replace(b"true", b"false")
+    # a host's index: the read columns (version 2), one read reordered
+    lines = index.splitlines()[1:]
+    reads = [line + b",%s,0,0" % line.split(b",")[0] for line in lines]
+    reads[1:3] = [b",".join(a.split(b",")[:4] + b.split(b",")[4:]) for a, b in
+                  zip(reads[1:3], reads[2:0:-1])]
+    host = READS_HEADER.encode() + b"\n" + b"\n".join(reads) + b"\n"
+    v2 = meta.replace(b'"version": 1', b'"version": 2')
     return [_input(meta, index, data, False), _input(incomplete, index + b"1200,30,1", data, True),
+            _input(v2, host, data, False), _input(v2, host + b"1200,30,,,,", data, True),
             _input(meta, index, data[:100], True),
             # json's limits: nesting past the recursion limit, an integer past 4300 digits
             _input(b"[" * 2000 + b"]" * 2000, index, data, False),

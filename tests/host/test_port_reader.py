@@ -26,6 +26,7 @@ import termios
 import threading
 import time
 import tty
+from itertools import accumulate
 
 import pytest
 import serial
@@ -185,9 +186,11 @@ def test_a_second_reader_is_counted_not_taken_for_a_hang_up():
             except serial.SerialException:
                 pass  # the host took them first: the same race, seen from the other side
     assert reader.contended > 0 and took > 0
+    items = []
 
     def kinds():
-        return [chunks.get()[0] for _ in range(chunks.qsize())]
+        items.extend(chunks.get() for _ in range(chunks.qsize()))
+        return [kind for kind, *_ in items]
 
     assert "port_down" not in kinds() and reader.state == "open"
     os.close(master)  # a real hang-up is still one
@@ -195,6 +198,11 @@ def test_a_second_reader_is_counted_not_taken_for_a_hang_up():
     stop.set()
     reader.join(DEADLINE_S)
     assert "port_down" in kinds()
+    # each read says where it was in what this reader read, and the contention before it
+    reads = [body for kind, _, body, _ in items if kind == "data"]
+    offsets, contended = [r.offset for _, r in reads], [r.contended for _, r in reads]
+    assert offsets == list(accumulate((len(d) for d, _ in reads), initial=0))[:len(reads)]
+    assert contended == sorted(contended) and all(c <= reader.contended for c in contended)
 
 
 def test_a_port_another_program_locked_is_refused_with_one_line():

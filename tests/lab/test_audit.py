@@ -1,5 +1,6 @@
 """navtwin audit: a live run of the lab with line faults passes it; each kind of unaccounted
-loss, made on purpose in a copy of the recordings, fails it."""
+loss, made on purpose in a copy of the recordings (a read deleted or reordered too), fails
+it."""
 import json
 import os
 import shutil
@@ -131,3 +132,101 @@ def test_bad_input_is_one_line_and_exit_2(run, tmp_path):
         out = _navtwin("audit", *args)
         assert out.returncode == 2 and len(out.stderr.splitlines()) == 1, out.stderr
         assert want in out.stderr and "Traceback" not in out.stderr
+
+
+def _index(host, port):
+    """The host index's header and lines, as lists of fields."""
+    header, *lines = (host / f"{port}.csv").read_text().splitlines()
+    return header, [line.split(",") for line in lines]
+
+
+def _rewrite(host, port, order):
+    """Rewrite *port* of the host recording with its reads in *order* (indices into its
+    index; left-out reads are deleted), data, offsets and times made to match (the times stay
+    in their lines: they must not go back), read columns kept with their reads."""
+    header, rows = _index(host, port)
+    data = (host / f"{port}.bin").read_bytes()
+    out, text, at = bytearray(), [header], 0
+    for i, line in zip(order, sorted(order)):
+        off, size, *read = rows[i][:2] + rows[i][4:]
+        out += data[int(off):int(off) + int(size)]
+        text.append(",".join([str(at), size, *rows[line][2:4], *read]))
+        at += int(size)
+    (host / f"{port}.bin").write_bytes(bytes(out))
+    (host / f"{port}.csv").write_text("\n".join(text) + "\n")
+
+
+def test_the_host_recording_carries_read_columns_and_unseen_causes(run):
+    result = audit_mod.audit(run / "emulator", run / "host")
+    assert result["ok"] and result["notes"] == []
+    for port, r in result["ports"].items():
+        header, rows = _index(run / "host", port)
+        assert header.endswith(",read_offset,reconnects,contended")
+        # one reader, never unplugged: every read follows the last, and all is whole
+        assert [int(x[4]) for x in rows] == [int(x[0]) for x in rows]
+        assert sum(r["unseen"].values()) == r["unseen_bytes"]
+        assert set(r["unseen"]) <= {"before_attach", "after_last_read"}, r["unseen"]
+
+
+def test_a_read_deleted_from_the_host_recording_fails(run, tmp_path):
+    emu, host = _copy(run, tmp_path)
+    _, rows = _index(host, "nanoloc")
+    gone = len(rows) // 2
+    _rewrite(host, "nanoloc", [i for i in range(len(rows)) if i != gone])
+    out = _navtwin("audit", str(emu), str(host))
+    assert out.returncode == 1, out.stdout
+    assert (f"FAIL nanoloc: {rows[gone][1]} bytes the host read are missing from its recording"
+            f" (1 gaps; the first at byte {rows[gone][4]} of the port, before nanoloc.csv line "
+            f"{gone + 2})") in out.stdout, out.stdout
+
+
+def test_two_reads_swapped_in_the_host_recording_fail(run, tmp_path):
+    emu, host = _copy(run, tmp_path)
+    _, rows = _index(host, "xbee")
+    i = len(rows) // 3
+    order = list(range(len(rows)))
+    order[i], order[i + 1] = i + 1, i
+    _rewrite(host, "xbee", order)
+    result = audit_mod.audit(emu, host)
+    assert not result["ok"]
+    assert (f"xbee: the host's reads are out of order in its recording: xbee.csv line {i + 3} "
+            f"holds the read at byte {rows[i][4]} of the port, after the read at byte "
+            f"{rows[i + 1][4]}") in result["ports"]["xbee"]["problems"]
+    assert not any("missing" in p for p in result["ports"]["xbee"]["problems"])
+
+
+def test_an_old_host_recording_passes_with_a_note(run, tmp_path):
+    emu, host = _copy(run, tmp_path)
+    meta = json.loads((host / "recording.json").read_text())
+    (host / "recording.json").write_text(json.dumps({**meta, "version": 1}))
+    for index in host.glob("*.csv"):  # the index as navtwin before the read columns wrote it
+        lines = index.read_text().splitlines()
+        index.write_text("".join(",".join(x.split(",")[:4]) + "\n" for x in lines))
+    out = _navtwin("audit", str(emu), str(host))
+    assert out.returncode == 0 and "PASS" in out.stdout, out.stdout
+    notes = [x for x in out.stdout.splitlines() if x.startswith("NOTE ")]
+    assert len(notes) == 1 and "wholeness is not proven" in notes[0], out.stdout
+
+
+def test_unseen_bytes_are_counted_by_the_cause_the_host_saw():
+    from navtwin.protocols.recording import Read  # the read columns came with this test
+
+    emu = bytes(range(256)) * 4
+    # read 0 after attach, a second reader took 100 bytes, then the port went down for 200
+    reads = [emu[50:300], emu[400:600], emu[800:900]]
+    marks = [Read(0, 0, 0), Read(250, 0, 3), Read(450, 1, 3)]
+    r = audit_mod.audit_port("xbee", emu, reads, [], True, marks)
+    assert r.unseen == {"before_attach": 50, "second_reader": 100, "port_down": 200,
+                        "after_last_read": 124} and r.unseen_bytes == 474
+    old = audit_mod.audit_port("xbee", emu, reads, [], True)
+    assert old.unseen == {"before_attach": 50, "no_cause_seen": 300, "after_last_read": 124}
+
+
+def test_a_host_read_without_its_read_columns_is_one_line_and_exit_2(run, tmp_path):
+    emu, host = _copy(run, tmp_path)
+    header, *lines = (host / "xbee.csv").read_text().splitlines()
+    lines[5] = ",".join(lines[5].split(",")[:4]) + ",,,"
+    (host / "xbee.csv").write_text("\n".join([header, *lines]) + "\n")
+    out = _navtwin("audit", str(emu), str(host))
+    assert out.returncode == 2 and len(out.stderr.splitlines()) == 1, out.stderr
+    assert "xbee.csv: a read without its read columns" in out.stderr

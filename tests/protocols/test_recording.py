@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from navtwin.protocols.recording import Recording, RecordingError, RecordingWriter
+from navtwin.protocols.recording import Read, Recording, RecordingError, RecordingWriter
 
 
 def test_round_trip_and_merge(tmp_path):
@@ -46,3 +46,55 @@ def test_a_meta_past_jsons_limits_is_a_one_line_error(tmp_path, meta, problem):
     with pytest.raises(RecordingError) as e:
         Recording(tmp_path)
     assert problem in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_hosts_read_columns_round_trip_in_a_version_2_recording(tmp_path):
+    with RecordingWriter(tmp_path / "host", {"ports": {"xbee": {}, "xbee.tx": {}}},
+                         reads=True) as w:
+        w.port("xbee").write(b"ab", t_wall_ns=5, read=Read(0, 0, 0))
+        w.port("xbee").write(b"cde", t_wall_ns=7, read=Read(40, 1, 3))
+        w.port("xbee.tx").write(b"q", t_wall_ns=7)  # sent, not read: empty columns
+    rec = Recording(tmp_path / "host")
+    assert rec.meta["version"] == 2 and rec.reads == {"xbee": True, "xbee.tx": True}
+    assert [(c.data, c.t_wall_ns, c.read) for c in rec.chunks("xbee")] == \
+           [(b"ab", 5, Read(0, 0, 0)), (b"cde", 7, Read(40, 1, 3))]
+    assert [c.read for c in rec.chunks("xbee.tx")] == [None]
+    assert (tmp_path / "host" / "xbee.csv").read_text().splitlines() == [
+        "offset,size,t_device_ns,t_wall_ns,read_offset,reconnects,contended",
+        "0,2,,5,0,0,0", "2,3,,7,40,1,3"]
+    # without read columns the recording is what it always was: version 1, four columns
+    with RecordingWriter(tmp_path / "emu", {"ports": {"xbee": {}}}) as w:
+        w.port("xbee").write(b"ab", t_device_ns=1)
+        with pytest.raises(ValueError, match="reads=True"):
+            w.port("xbee").write(b"cd", t_device_ns=2, read=Read(2, 0, 0))
+    old = Recording(tmp_path / "emu")
+    assert old.meta["version"] == 1 and old.reads == {"xbee": False}
+    assert [c.read for c in old.chunks("xbee")] == [None]
+
+
+@pytest.mark.parametrize("line, problem", [
+    (b"2,3,,7", "expected offset,size,t_device_ns,t_wall_ns,read_offset,reconnects,contended"),
+    (b"2,3,,7,40,,3", "expected non-negative integers offset,size,"),  # two of three
+    (b"2,3,,7,40,1,3,9", "expected offset,size"),
+])
+def test_read_columns_all_or_none_on_every_line(tmp_path, line, problem):
+    with RecordingWriter(tmp_path, {"ports": {"xbee": {}}}, reads=True) as w:
+        w.port("xbee").write(b"ab", t_wall_ns=5, read=Read(0, 0, 0))
+        w.port("xbee").write(b"cde", t_wall_ns=7, read=Read(2, 0, 0))
+    index = (tmp_path / "xbee.csv").read_bytes().splitlines()
+    (tmp_path / "xbee.csv").write_bytes(b"\n".join(index[:2] + [line]) + b"\n")
+    with pytest.raises(RecordingError, match=r"xbee\.csv:3: ") as e:
+        Recording(tmp_path)
+    assert problem in str(e.value)
+
+
+def test_read_columns_in_a_version_1_recording_are_damage(tmp_path):
+    """An older navtwin meets version 2 and says to upgrade; a version 1 recording never has
+    the read columns."""
+    with RecordingWriter(tmp_path, {"ports": {"xbee": {}}}, reads=True) as w:
+        w.port("xbee").write(b"ab", t_wall_ns=5, read=Read(0, 0, 0))
+    meta = json.loads((tmp_path / "recording.json").read_text())
+    (tmp_path / "recording.json").write_text(json.dumps({**meta, "version": 1}))
+    with pytest.raises(RecordingError, match=r"xbee\.csv:1: the first line must be "
+                                             r"'offset,size,t_device_ns,t_wall_ns';"):
+        Recording(tmp_path)
