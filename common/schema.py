@@ -199,6 +199,7 @@ def _how_to_add(path: KeyPath, name: str, tp, meta) -> str:
 
 
 def _unknown(at: str, name: str, known: list[str]) -> Invalid:
+    name = name[:SHOW_CHARS]  # a key of any length (JSON's) is matched and shown by its start
     near = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
     hint = f"did you mean '{near[0]}'?" if near else "known keys: " + ", ".join(known)
     return Invalid(at, f"has an unknown key '{name}'; {hint}")

@@ -35,6 +35,7 @@ MALFORMED = [
     b'{"op":"clear","id":' + b"9" * 4000 + b"}",
     b'{"op":"clear","id":' + b"9" * 5000 + b"}",
     b'{"op":"status","colour":"blue"}',
+    b'{"op":"status","' + b"k" * 60000 + b'":1}',
     b'{"op":["status"]}',
     b"[" * 60000,
     b"\xff\xfe",
