@@ -134,6 +134,10 @@ CASES = {
                                        ["ctl fault ber", "nested too deeply"]),
     "ctl fault ber of 5000 digits": (["ctl", "--link-dir", "links", "fault", LONG_FAULT], {},
                                      ["ctl fault ber", "digits"]),
+    "ctl clear of 5000 digits": (["ctl", "--link-dir", "links", "clear", "9" * 5000], {},
+                                 ["ctl clear", "a fault id is a number"]),
+    "ctl clear ²": (["ctl", "--link-dir", "links", "clear", "\u00b2"], {},
+                    ["ctl clear", "a fault id is a number"]),
     "--fault bytes_per_s=1e-300": (emulate("--duration", "1", "--fault", "bandwidth:port=sins,"
                                            "start_s=0,end_s=1,bytes_per_s=1e-300"), {},
                                    ["--fault", "bytes_per_s"]),
