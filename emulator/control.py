@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from navtwin.common.limits import MAX_DURATION_S
+from navtwin.common.limits import MAX_DURATION_S, limit_problem
 from navtwin.common.schema import REQUIRED, Invalid, build, key, positive
 
 SOCKET = "control"  # its name in the link directory
@@ -101,11 +101,11 @@ def parse_request(line: bytes) -> tuple[str, object]:
     """(op, its arguments) of one request line; ControlError (one line) for anything else."""
     try:
         req = json.loads(line)
-    except (ValueError, UnicodeDecodeError) as e:  # an integer of too many digits included
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ControlError(f"not JSON ({e}); send one JSON object per line") from None
-    except RecursionError:
-        raise ControlError("not JSON: nested too deeply; send one JSON object per line, "
-                           'e.g. {"op": "status"}') from None
+    except (ValueError, RecursionError) as e:  # json's limits: an integer's digits, nesting
+        raise ControlError(f"{limit_problem(e)}; send a shorter request, e.g. "
+                           '{"op": "status"}') from None
     op = req.get("op") if isinstance(req, dict) else None
     if not isinstance(op, str):
         raise ControlError('a request is an object with "op"; e.g. {"op": "status"}')
