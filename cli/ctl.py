@@ -23,7 +23,8 @@ Talk to a running `navtwin emulate` through the control socket in its link direc
                               coordinator (modem status 0x00, 0x06) now, --duration S off
 
 The fault kinds and their settings are those of a scenario's [[faults]] (docs/scenarios.md);
-live faults have no start_s/end_s: they start now."""
+live faults have no start_s/end_s: they start now. A refusal is one line on stderr, exit 2;
+so is "busy", when the lab has all the clients it takes connected: try again."""
 
 
 def register(sub) -> None:
@@ -70,8 +71,8 @@ def run_ctl(args) -> int:
         if args.duration is not None:
             request["duration_s"] = args.duration
     elif op == "clear" and arg is not None:
-        if not arg.isdigit():
-            raise UsageError(f"ctl clear {arg}: a fault id is a number (see ctl status)")
+        if not (arg.isascii() and arg.isdigit() and len(arg) <= 19):  # an int64, as ids are
+            raise UsageError(f"ctl clear {arg[:40]}: a fault id is a number (see ctl status)")
         request["id"] = int(arg)
     elif op in ("unplug", "replug"):
         request["port"] = arg
@@ -79,10 +80,10 @@ def run_ctl(args) -> int:
         request["device"] = arg
         if args.duration is not None:
             request["duration_s"] = args.duration
-    with Control(args.link_dir or default_link_dir(), timeout=args.timeout) as ctl:
-        try:
-            reply = ctl.call(op, **request)
-        except ControlError as e:
-            raise UsageError(str(e)) from None
+    ctl = Control(args.link_dir or default_link_dir(), timeout=args.timeout)
+    try:
+        reply = ctl.call(op, **request)
+    except ControlError as e:  # a refusal, "busy", or no lab to ask
+        raise UsageError(str(e)) from None
     sys.stdout.write(json.dumps(reply, separators=(",", ":")) + "\n")
     return 0

@@ -5,9 +5,10 @@ A table is a dataclass whose fields carry their unit, meaning and checks (:func:
 ONE line naming the key, the problem and the fix; :func:`dump` writes it back as TOML
 (every key, defaults included, so the text is the scenario exactly as run); :func:`rows`
 lists every key for the documentation. Field types understood: bool, int, float, str,
-``float | None`` (optional), fixed and variable tuples of numbers, tuples of points, a
-nested table (dataclass) and an array of tables (``tuple[Table, ...]``; a class attribute
-``KINDS`` maps a ``kind`` key to one dataclass per kind).
+dict (a table passed on as it is), ``float | None`` (optional), fixed and variable tuples
+of numbers, tuples of points, a nested table (dataclass) and an array of tables
+(``tuple[Table, ...]``; a class attribute ``KINDS`` maps a ``kind`` key to one dataclass
+per kind).
 """
 from __future__ import annotations
 
@@ -82,14 +83,28 @@ def key(default: Any, unit: str, doc: str, *checks: Check, hex: int = 0) -> Any:
 
 
 # -- building ----------------------------------------------------------------------------
-def _describe(value: Any) -> str:
+#: how much of a wrong value a message shows: list elements, nesting, string characters
+SHOW_ITEMS, SHOW_DEPTH, SHOW_CHARS = 8, 3, 40
+
+
+def _describe(value: Any, depth: int = 0) -> str:
+    """*value* as a message shows it: short, whatever its size or depth (a control request
+    may nest lists as deep as JSON allows)."""
     if isinstance(value, float):
         return f"{value:g}"
     if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_describe(v) for v in value) + "]"
-    if isinstance(value, int) and len(digits := str(abs(value))) > 20:
+        if depth >= SHOW_DEPTH:
+            return "[...]"
+        shown = [_describe(v, depth + 1) for v in value[:SHOW_ITEMS]]
+        return "[" + ", ".join(shown + ["..."] * (len(value) > SHOW_ITEMS)) + "]"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, int) and not isinstance(value, bool) and \
+            len(digits := str(abs(value))) > 20:
         return f"an integer of {len(digits)} digits"
-    return repr(value) if isinstance(value, str) else str(value)
+    if isinstance(value, str):
+        return repr(value[:SHOW_CHARS]) + ("..." if len(value) > SHOW_CHARS else "")
+    return str(value)
 
 
 def _is_table(tp) -> bool:
@@ -106,6 +121,8 @@ def _example(tp) -> tuple[str, str]:
         return "true or false", "true"
     if tp is str:
         return "a string", '"text"'
+    if tp is dict:  # a table kept as it is, for its reader to build (a live fault's settings)
+        return "a table", '{"kind": "bit_errors"}'
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
         return _example(next(a for a in args if a is not type(None)))
@@ -138,6 +155,10 @@ def _convert(value: Any, tp, at: str) -> Any:
         return float(value)
     if tp is str:
         if not isinstance(value, str):
+            raise wrong
+        return value
+    if tp is dict:
+        if not isinstance(value, dict):
             raise wrong
         return value
     origin, args = typing.get_origin(tp), typing.get_args(tp)
@@ -178,6 +199,7 @@ def _how_to_add(path: KeyPath, name: str, tp, meta) -> str:
 
 
 def _unknown(at: str, name: str, known: list[str]) -> Invalid:
+    name = name[:SHOW_CHARS]  # a key of any length (JSON's) is matched and shown by its start
     near = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
     hint = f"did you mean '{near[0]}'?" if near else "known keys: " + ", ".join(known)
     return Invalid(at, f"has an unknown key '{name}'; {hint}")
@@ -190,7 +212,7 @@ def build(cls, data: Any, path: KeyPath = ()):
     kinds = getattr(cls, "KINDS", None)
     if kinds is not None:
         kind = data.get("kind")
-        if kind not in kinds:
+        if not isinstance(kind, str) or kind not in kinds:
             names = ", ".join(repr(k) for k in kinds)
             raise Invalid(where(path, "kind"), f"must be one of {names} (got {_describe(kind)}); "
                                                f"set kind to one of {names}")

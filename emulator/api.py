@@ -138,8 +138,6 @@ class Lab:
         self.close()
 
     def close(self) -> None:
-        if hasattr(self, "control"):
-            self.control.close()
         self.process.stdout.close()
         self._stderr.close()
 

@@ -54,12 +54,12 @@ import threading
 import time
 from typing import Callable
 
-from navtwin.common.limits import MAX_DURATION_S, SPEEDS, span
+from navtwin.common.limits import SPEEDS, span
 from navtwin.protocols.ports import NAMES as PORT_NAMES
 from navtwin.common.schema import Invalid, build
 from navtwin.protocols.recording import FAULTS, FLUSH_S, RecordingWriteError, RecordingWriter
 
-from .control import SOCKET as CONTROL_SOCKET, ControlError, ControlServer
+from .control import SOCKET as CONTROL_SOCKET, ControlError, ControlServer, Inject
 from .coordinator import Coordinator, Remote, identity_registers
 from .faults import Fault, LineFault, acting_on
 from .ledger import Ledger
@@ -461,10 +461,11 @@ class Emulation:
                 self.progress(view.status())
 
     # -- live control (emulator.control) ------------------------------------------------------
-    def _control(self, req: dict) -> dict:
-        return getattr(self, f"_op_{req['op']}")(req)
+    def _control(self, op: str, args) -> dict:
+        """Do control request *op* with *args*, its table of control.OPS (types checked)."""
+        return getattr(self, f"_op_{op}")(args)
 
-    def _op_status(self, req: dict) -> dict:
+    def _op_status(self, args) -> dict:
         for n in [n for n, (f, _) in self.live.items() if f.end_s * SEC <= self._now_ns]:
             self._end_live(n)  # over: no longer live
         return {"virtual_s": self._now_ns / SEC, "duration_s": self.end_ns / SEC,
@@ -477,25 +478,22 @@ class Emulation:
         fault, _ = self.live[n]
         return {"id": n, "kind": fault.KIND, "start_s": fault.start_s, "end_s": fault.end_s}
 
-    def _op_fault(self, req: dict) -> dict:
+    def _op_fault(self, args) -> dict:
         """A fault from now on: a line fault from the next chunk, a device fault from the
-        world's next block (what is generated, up to ~2 s ahead when paced, stays)."""
-        spec, duration = req.get("fault"), req.get("duration_s")
-        if not isinstance(spec, dict) or {"start_s", "end_s"} & set(spec):
+        world's next block (what is generated, up to ~2 s ahead when paced, stays). It is
+        built and applied before the reply, so a fault the lab cannot take is refused."""
+        spec, duration = args.fault, args.duration_s
+        if {"start_s", "end_s"} & set(spec):
             raise ControlError('give "fault" as {"kind": ..., settings} without start_s/end_s '
                                '(a live fault starts now; "duration_s" sets its length)')
-        if duration is not None and (isinstance(duration, bool) or not isinstance(duration, (int, float))
-                                     or not 0 < duration <= MAX_DURATION_S):
-            raise ControlError(f"duration_s must be a number in (0, {MAX_DURATION_S:g}] s, not "
-                               f"{duration!r}")
-        kind = Fault.KINDS.get(spec.get("kind"))
-        # a line or coordinator fault acts on what has not been sent: from now; the world's
-        # models on what they have not generated
-        start = self._now_ns if kind is not None and kind.ACTS_ON in ("line", "coordinator") \
-            else self.world.generated_ns
-        end = MAX_DURATION_S if duration is None else start / SEC + duration
         try:
-            fault = build(Fault, {**spec, "start_s": start / SEC, "end_s": end}, (("fault", 0),))
+            kind = type(build(Fault, spec, (("fault", 0),)))  # the settings, checked
+            # a line or coordinator fault acts on what has not been sent: from now; the
+            # world's models on what they have not generated
+            start = self._now_ns if kind.ACTS_ON in ("line", "coordinator") \
+                else self.world.generated_ns
+            end = {} if duration is None else {"end_s": start / SEC + duration}
+            fault = build(Fault, {**spec, "start_s": start / SEC, **end}, (("fault", 0),))
         except Invalid as e:
             raise ControlError(str(e)) from None
         if getattr(fault, "anchor", None) is not None and \
@@ -524,13 +522,13 @@ class Emulation:
     RESETS = {"board": "board_reset", "coordinator": "coordinator_reset"}
     RESET_S = 0.5  # a brown-out and the boot after it
 
-    def _op_reset(self, req: dict) -> dict:
-        kind = self.RESETS.get(req.get("device"))
+    def _op_reset(self, args) -> dict:
+        kind = self.RESETS.get(args.device)
         if kind is None:
-            raise ControlError(f"no device {req.get('device')!r} to reset; use one of "
+            raise ControlError(f"no device {args.device[:40]!r} to reset; use one of "
                                f"{', '.join(self.RESETS)}")
-        return self._op_fault({"fault": {"kind": kind},
-                               "duration_s": req.get("duration_s", self.RESET_S)})
+        return self._op_fault(Inject({"kind": kind}, self.RESET_S if args.duration_s is None
+                                     else args.duration_s))
 
     def _power_ups(self, fault) -> list:
         """The coordinator's power-up at the end of each episode of coordinator fault *fault*
@@ -544,10 +542,10 @@ class Emulation:
             t = fault.next_active(up)
         return out
 
-    def _op_clear(self, req: dict) -> dict:
-        ids = list(self.live) if req.get("id") is None else [req["id"]]
+    def _op_clear(self, args) -> dict:
+        ids = list(self.live) if args.id is None else [args.id]
         if any(n not in self.live for n in ids):
-            raise ControlError(f"no live fault {req['id']!r}; the live ones are {list(self.live)}")
+            raise ControlError(f"no live fault {args.id}; the live ones are {list(self.live)}")
         for n in ids:
             self._end_live(n)
         return {"cleared": ids}
@@ -560,21 +558,21 @@ class Emulation:
         elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
             self.world.remove(fault)
 
-    def _port(self, req: dict) -> PtyPort:
-        port = self.ports.get(req.get("port"))
+    def _port(self, args) -> PtyPort:
+        port = self.ports.get(args.port)
         if port is None:
-            raise ControlError(f"no port {req.get('port')!r}; use one of {', '.join(self.ports)}")
+            raise ControlError(f"no port {args.port[:40]!r}; use one of {', '.join(self.ports)}")
         return port
 
-    def _op_unplug(self, req: dict) -> dict:
-        port = self._port(req)
+    def _op_unplug(self, args) -> dict:
+        port = self._port(args)
         port.unplug()
         self.link_dir.unlink(port.name)
         self.links.pop(port.name, None)
         return {"port": port.name, "plugged": False}
 
-    def _op_replug(self, req: dict) -> dict:
-        port = self._port(req)
+    def _op_replug(self, args) -> dict:
+        port = self._port(args)
         if not port.plugged:
             port.replug()
             self.links[port.name] = str(self.link_dir.link(port.name, port.pts))

@@ -603,6 +603,9 @@ def parse_fault(spec: str, where: str = "--fault") -> dict:
             value = tomllib.loads(f"v = {text.strip()}")["v"]
         except tomllib.TOMLDecodeError:
             value = text.strip()  # a bare word: port=sins, direction=to_device
+        except (ValueError, RecursionError) as e:  # tomllib's limits: an integer's digits, nesting
+            raise ScenarioError(f"{where} {name.strip()[:40]}: {limit_problem(e)}; shorten "
+                                "it") from None
         table[name.strip()] = value
     return table
 

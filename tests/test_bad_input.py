@@ -27,6 +27,8 @@ EMULATE = ["emulate", "--speed", "max", "--quiet", "--link-dir", "links"]
 PTY = "{pty}"  # a pseudo-terminal's path, opened by the test: what the host's --baud applies to
 HOST = ["host", "--xbee", PTY, "--out", "estimates.jsonl", "--duration", "2"]
 REPLAY = ["replay", GOLDEN, "--out", "estimates.jsonl"]
+DEEP_FAULT = "bit_errors:port=sins,ber=" + "[" * 3000  # RecursionError in tomllib
+LONG_FAULT = "bit_errors:port=sins,ber=" + "1" * 5000  # past Python's int digits limit
 
 
 def emulate(*args: str, scenario: str = "office") -> list[str]:
@@ -127,6 +129,27 @@ CASES = {
     "emulate --fault router_rejoin:vehicle=2": (
         emulate("--duration", "1", "--fault", "router_rejoin:vehicle=2,start_s=0,end_s=1"), {},
         ["--fault", "vehicle 2", "vehicle 1 only"]),
+    "scenario fault repeat_s = 1e-9": scenario_case(
+        '[[faults]]\nkind = "coordinator_reset"\nend_s = 1e-12\nrepeat_s = 1e-9\n', "repeat_s"),
+    # --fault and ctl fault: values a TOML parser cannot take, values the code cannot take
+    "--fault ber nested 3000 deep": (emulate("--duration", "1", "--fault", DEEP_FAULT), {},
+                                     ["--fault ber", "nested too deeply"]),
+    "--fault ber of 5000 digits": (emulate("--duration", "1", "--fault", LONG_FAULT), {},
+                                   ["--fault ber", "digits"]),
+    "ctl fault ber nested 3000 deep": (["ctl", "--link-dir", "links", "fault", DEEP_FAULT], {},
+                                       ["ctl fault ber", "nested too deeply"]),
+    "ctl fault ber of 5000 digits": (["ctl", "--link-dir", "links", "fault", LONG_FAULT], {},
+                                     ["ctl fault ber", "digits"]),
+    "ctl clear of 5000 digits": (["ctl", "--link-dir", "links", "clear", "9" * 5000], {},
+                                 ["ctl clear", "a fault id is a number"]),
+    "ctl clear ²": (["ctl", "--link-dir", "links", "clear", "\u00b2"], {},
+                    ["ctl clear", "a fault id is a number"]),
+    "--fault bytes_per_s=1e-300": (emulate("--duration", "1", "--fault", "bandwidth:port=sins,"
+                                           "start_s=0,end_s=1,bytes_per_s=1e-300"), {},
+                                   ["--fault", "bytes_per_s"]),
+    "--fault rate_hz=1e-300": (emulate("--duration", "1", "--fault", "garbage:port=sins,"
+                                       "start_s=0,end_s=1,rate_hz=1e-300"), {},
+                               ["--fault", "rate_hz"]),
     # navtwin lab
     "lab --duration nan": (["lab", "--duration", "nan", "--dir", "run"], {}, ["--duration"]),
     "lab --seed -1": (["lab", "--seed", "-1", "--dir", "run"], {}, ["--seed"]),

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from navtwin.common.schema import key, positive
+from navtwin.common.schema import between, key
 from navtwin.protocols.serial import wire_ns
 
 from .base import LineFault, register
@@ -24,7 +24,8 @@ class Bandwidth(LineFault):
     """A bandwidth cap below the line's rate."""
     KIND = "bandwidth"
     CHANGES_BYTES = False  # the bytes arrive intact, later
-    bytes_per_s: float = key(1000.0, "B/s", "the most the line carries", positive(hi=1e7))
+    # from 1 B/s: a chunk's time on the capped line, len / bytes_per_s, stays whole ns
+    bytes_per_s: float = key(1000.0, "B/s", "the most the line carries", between(1, 1e7))
 
     def wrapper(self, rng):
         return _Bandwidth(self, rng)

@@ -5,7 +5,8 @@ load and listed in docs/scenarios.md) with a class attribute ``KIND`` (its ``kin
 name) and ``ACTS_ON`` (the model it acts on, one of :data:`MODELS`), registered with
 :func:`register`.
 
-Schedule (every kind). An episode runs from ``start_s`` to ``end_s`` (exclusive). With
+Schedule (every kind). An episode runs from ``start_s`` to ``end_s`` (exclusive); without
+them a fault lasts the whole run (``start_s`` 0, ``end_s`` the longest run). With
 ``repeat_s`` it recurs: episode k runs from ``start_s + k * repeat_s`` for ``end_s -
 start_s`` seconds (``repeat_s`` longer than that, so episodes never touch), until an episode
 would start at or after ``until_s`` (none: to the end of the run). :meth:`Fault.active`
@@ -35,7 +36,7 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_DURATION_S
-from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative, one_of, positive
+from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative, one_of
 from navtwin.protocols.ports import NAMES as PORT_NAMES
 
 ENTRY_POINTS = "navtwin.faults"
@@ -46,6 +47,11 @@ MODELS = ("anchor", "link", "board", "router", "coordinator", "line")
 DIRECTIONS = ("to_host", "to_device")
 #: the ports whose device reads what the host writes (the others ignore it)
 READING_PORTS = ("xbee",)
+#: The shortest episode and period: the emulator keeps time in integer ns, and a schedule
+#: finer than these only multiplies episodes (each a power-up, a Poisson draw) with nothing
+#: to act on, until a run of seconds takes hours or a float of ns overflows.
+MIN_EPISODE_S = 1e-6
+MIN_REPEAT_S = 1e-3
 
 
 class FaultError(ValueError):
@@ -59,19 +65,25 @@ class Fault:
     KINDS = {}  # kind name -> class, in registration order (common.schema reads it)
     KIND = ""
     ACTS_ON = ""
-    start_s: float = key(REQUIRED, "s", "start of the episode", non_negative(hi=MAX_DURATION_S))
-    end_s: float = key(REQUIRED, "s", "end of the episode (exclusive)",
-                       non_negative(hi=MAX_DURATION_S))
+    start_s: float = key(0.0, "s", "start of the episode", non_negative(hi=MAX_DURATION_S))
+    end_s: float | None = key(None, "s", "end of the episode (exclusive); none = the end of "
+                              "the run", non_negative(hi=MAX_DURATION_S))
 
     repeat_s: float | None = key(None, "s", "period: the episode recurs every repeat_s from "
-                                 "start_s; none = once", positive(hi=MAX_DURATION_S))
+                                 "start_s; none = once", between(MIN_REPEAT_S, MAX_DURATION_S))
     until_s: float | None = key(None, "s", "with repeat_s: no episode starts at or after "
                                 "until_s; none = to the end", non_negative(hi=MAX_DURATION_S))
 
     def __post_init__(self):
-        if self.end_s <= self.start_s:
-            raise Invalid("end_s", f"must be after start_s (got {self.end_s:g} <= {self.start_s:g} s); "
-                                   "make end_s > start_s")
+        if self.end_s is None:
+            if self.repeat_s is not None:
+                raise Invalid("end_s", "is missing; a repeating fault needs the end of its first "
+                                       "episode: add end_s = <s>")
+            # to the end of the run: the longest run ends before this (frozen: set it once)
+            object.__setattr__(self, "end_s", float(MAX_DURATION_S))
+        if self.end_s - self.start_s < MIN_EPISODE_S:
+            raise Invalid("end_s", f"must be after start_s, by {MIN_EPISODE_S:g} s at least (got "
+                                   f"{self.end_s:g} after {self.start_s:g} s); make end_s later")
         length = self.end_s - self.start_s
         if self.repeat_s is not None and self.repeat_s <= length:
             raise Invalid("repeat_s", f"must be longer than the episode ({self.repeat_s:g} <= "

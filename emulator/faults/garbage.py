@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from navtwin.common.schema import Invalid, between, key, positive
+from navtwin.common.schema import Invalid, between, key
 
 from .base import LineFault, register
 from .line import FaultWrapper
@@ -24,8 +24,9 @@ MAX_BURST = 4096
 class Garbage(LineFault):
     """Bursts of garbage: random bytes at a rate, between the chunks."""
     KIND = "garbage"
+    # from one a fortnight: a mean gap of 1e9 / rate_hz ns stays a finite float
     rate_hz: float = key(1.0, "1/s", "bursts per second of episode (a Poisson process)",
-                         positive(hi=1e6))
+                         between(1e-6, 1e6))
     min_bytes: int = key(1, "B", "shortest burst", between(1, MAX_BURST))
     max_bytes: int = key(16, "B", "longest burst", between(1, MAX_BURST))
 
