@@ -496,10 +496,8 @@ class Emulation:
             fault = build(Fault, {**spec, "start_s": start / SEC, **end}, (("fault", 0),))
         except Invalid as e:
             raise ControlError(str(e)) from None
-        if getattr(fault, "anchor", None) is not None and \
-                fault.anchor not in {a.id for a in self.scenario.anchors}:
-            raise ControlError(f"[fault] anchor {fault.anchor} is not in the scenario's "
-                               "[[anchors]]; use one of their ids")
+        if (problem := self.scenario.fault_problem(fault)) is not None:
+            raise ControlError(f"[fault] {problem[0]} {problem[1]}")
         if fault.ACTS_ON == "coordinator" and duration is None:
             raise ControlError("a live coordinator_reset needs duration_s: the radio powers up "
                                "at its end")

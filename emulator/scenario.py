@@ -421,18 +421,23 @@ class Scenario:
         if self.ranging.slot_ms * len(self.slot_order) > self.ranging.cycle_ms:
             raise Invalid("[ranging] slot_ms", f"x {len(self.slot_order)} anchors exceeds cycle_ms "
                                                f"{self.ranging.cycle_ms:g}; shorten the slots")
-        vehicles = range(1, len(self.vehicles) + 1)
         for i, f in enumerate(self.faults):
-            if getattr(f, "anchor", None) is not None and f.anchor not in ids:
-                raise Invalid(f"[[faults]] #{i + 1} anchor", f"{f.anchor} is not in [[anchors]]; "
-                                                             "name an anchor id")
-            if getattr(f, "vehicle", None) is not None and f.vehicle not in vehicles:
-                has = f"vehicles 1 to {len(vehicles)}" if len(vehicles) > 1 else "vehicle 1 only"
-                raise Invalid(f"[[faults]] #{i + 1} vehicle", f"{f.vehicle}: the scenario has "
-                                                              f"{has}; name one of its vehicles")
+            if (problem := self.fault_problem(f)) is not None:
+                raise Invalid(f"[[faults]] #{i + 1} {problem[0]}", problem[1])
         if baud_rate(self.xbee.router.BD) != self.board.baud:
             raise Invalid("[xbee.router] BD", f"{baud_rate(self.xbee.router.BD)} bit/s differs from the "
                                               f"board's {self.board.baud}; match [board] baud")
+
+    def fault_problem(self, f) -> tuple[str, str] | None:
+        """The part fault *f* names that this scenario lacks, as (setting, problem), or None:
+        the one rule for the scenario's [[faults]], --fault and live faults."""
+        if getattr(f, "anchor", None) is not None and f.anchor not in {a.id for a in self.anchors}:
+            return "anchor", f"{f.anchor} is not in [[anchors]]; name an anchor id"
+        n = len(self.vehicles)
+        if getattr(f, "vehicle", None) is not None and not 1 <= f.vehicle <= n:
+            has = f"vehicles 1 to {n}" if n > 1 else "vehicle 1 only"
+            return "vehicle", f"{f.vehicle}: the scenario has {has}; name one of its vehicles"
+        return None
 
     # -- derived views ---------------------------------------------------------------------
     @property

@@ -49,7 +49,7 @@ def test_the_socket_is_private_and_answers_status_and_refuses_bad_requests(tmp_p
             lab.control.call("explode")
         with pytest.raises(ControlError, match=r"kind must be one of"):
             lab.fault("no_such_kind")
-        with pytest.raises(ControlError, match=r"anchor 9 is not in the scenario"):
+        with pytest.raises(ControlError, match=r"anchor 9 is not in \[\[anchors\]\]"):
             lab.fault("anchor_outage", anchor=9)
         with pytest.raises(ControlError, match=r"without start_s/end_s"):
             lab.control.call("fault", fault={"kind": "anchor_outage", "anchor": 1, "start_s": 1})

@@ -32,6 +32,9 @@ MALFORMED = [
     + b"]" * 900 + b"}}",
     b'{"op":"fault","fault":{"kind":"bandwidth","port":"sins","bytes_per_s":1e-300}}',
     b'{"op":"fault","fault":{"kind":"garbage","port":"sins","rate_hz":1e-300}}',
+    # parts the scenario lacks: the scenario's own rule (a board_reset on vehicle 7 was "ok")
+    b'{"op":"fault","fault":{"kind":"board_reset","vehicle":7},"duration_s":1}',
+    b'{"op":"fault","fault":{"kind":"anchor_outage","anchor":9},"duration_s":1}',
     b'{"op":"clear","id":' + b"9" * 4000 + b"}",
     b'{"op":"clear","id":' + b"9" * 5000 + b"}",
     b'{"op":"status","colour":"blue"}',
