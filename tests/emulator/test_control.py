@@ -72,7 +72,7 @@ def test_unplug_hangs_up_the_client_and_replug_brings_the_port_back(tmp_path):
         link = lab.ports["sins"]
         with serial.Serial(link, 115200, timeout=0.2) as ser:
             before = _read_frames(ser, sins_decoder(), 5)
-            assert len(before) == 5
+            assert len(before) >= 5  # one read may decode more: the count is not the point
             assert lab.unplug("sins") == {"ok": True, "port": "sins", "plugged": False}
             assert not os.path.lexists(link)  # the device node is gone
             with pytest.raises(serial.SerialException):
@@ -84,7 +84,7 @@ def test_unplug_hangs_up_the_client_and_replug_brings_the_port_back(tmp_path):
         assert os.readlink(link) == reply["pts"]
         with serial.Serial(link, 115200, timeout=0.2) as ser:
             frames = _read_frames(ser, sins_decoder(), 5)
-            assert len(frames) == 5  # valid SINS frames again, consecutive
+            assert len(frames) >= 5  # valid SINS frames again, consecutive
             assert all(b.fields["seq"] == (a.fields["seq"] + 1) % 65536
                        for a, b in zip(frames, frames[1:]))
         # the board ran on while its cable was out: its counter went on (no wrap in 60 s)
@@ -150,7 +150,7 @@ def test_reset_power_cycles_the_board_under_a_reading_client(tmp_path):
     with emulate("office", duration=60, link_dir=tmp_path / "links") as lab:
         with serial.Serial(lab.ports["sins"], 115200, timeout=0.2) as ser:
             dec = sins_decoder()
-            assert len(_read_frames(ser, dec, 3)) == 3
+            assert len(_read_frames(ser, dec, 3)) >= 3  # one read may hold more
             reply = lab.reset("board", 0.3)
             assert reply["kind"] == "board_reset"
             end = time.monotonic() + DEADLINE_S
@@ -167,7 +167,7 @@ def test_a_live_line_fault_garbles_the_port_until_cleared_and_the_ledger_has_it(
     with emulate("office", duration=60, link_dir=tmp_path / "links", record=rec) as lab:
         with serial.Serial(lab.ports["sins"], 115200, timeout=0.2) as ser:
             dec = sins_decoder()
-            assert len(_read_frames(ser, dec, 5)) == 5
+            assert len(_read_frames(ser, dec, 5)) >= 5
             lab.fault("bit_errors", port="sins", ber=0.01)  # ~2 flipped bits per frame
             end = time.monotonic() + DEADLINE_S
             while time.monotonic() < end and not sum(dec.errors.values()):
@@ -177,7 +177,7 @@ def test_a_live_line_fault_garbles_the_port_until_cleared_and_the_ledger_has_it(
             ser.reset_input_buffer()
             fresh = sins_decoder()
             frames = _read_frames(ser, fresh, 20)
-            assert len(frames) == 20  # clean again
+            assert len(frames) >= 20  # clean again
         lab.stop()
     ledger = Recording(rec).faults()
     assert ledger and {e["kind"] for e in ledger} == {"bit_errors"}
