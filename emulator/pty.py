@@ -9,9 +9,13 @@ Line discipline of the emulated cable (peers-and-pty-facts.md section 5):
 
 * unplugged: while no client has the port open, the device's output is dropped and
   counted (``dropped_unplugged``), as on a line with nothing at the other end;
-* no stale bytes: when a client attaches, whatever an earlier client left unread is
-  flushed (``tcflush(TCIFLUSH)`` on a short-lived ``O_NOCTTY`` slave fd), so the first
-  bytes a new opener reads are fresh;
+* no stale bytes: the slave's input queue outlives its clients (the kernel keeps what a
+  client left unread for the next opener), so it is flushed (``tcflush(TCIFLUSH)`` on a
+  short-lived ``O_NOCTTY`` slave fd) as soon as a client is seen gone, and again when one
+  is seen attaching: a client that reads at once after its open gets only bytes written
+  after it (a bare ``os.read`` or ``cat`` flushes nothing, unlike pyserial). Left open: a
+  client that opens between another's close and the emulator noticing it (the loop wakes
+  on the hang-up, well under a millisecond when idle) gets what that one left;
 * overflow: the master is ``O_NONBLOCK``; when the client does not read and the kernel
   buffer (about 20 KiB) is full, the bytes that do not fit are dropped and counted
   (``dropped_overflow``), as a UART loses what the host does not read. The emulator never
@@ -277,8 +281,12 @@ class PtyPort:
             self.attached = True
             self.attaches += 1
         elif hup and self.attached:
-            self.attached = False
+            self._detach()
         return self.attached
+
+    def _detach(self) -> None:
+        self.attached = False
+        self._flush_stale()  # what the client left must not wait for the next opener
 
     def client_framing(self) -> tuple[Framing | None, int]:
         """The client's (Framing, c_iflag) from the slave's termios; Framing None when
@@ -340,7 +348,8 @@ class PtyPort:
             except OSError as e:
                 if e.errno != errno.EIO:
                     raise
-                self.attached = False
+                if self.attached:
+                    self._detach()
                 break
             if not chunk:
                 break
