@@ -24,9 +24,10 @@ Line discipline of the emulated cable (peers-and-pty-facts.md section 5):
   attached ports are waited on; detached ones are re-checked with :meth:`PtyPort.check`;
 * the client's settings: termios ioctls on the master act on the slave, so
   :meth:`PtyPort.client_framing` reads the baud, data bits, parity and stop bits the client
-  set (one ``tcgetattr``; the runner looks every ``CHECK_NS``). The PTY driver forces CS8
-  and clears PARENB on every set (``pty_set_termios``), so 7 data bits and even parity
-  never show; odd parity does, by the PARODD it leaves behind; baud and CSTOPB show as set.
+  set (one ``tcgetattr``; the runner looks every ``CHECK_NS``), read as a UART reads them
+  (:meth:`Framing.from_cflag`). The PTY driver forces CS8 and clears PARENB on every set
+  (``pty_set_termios``), so 7 data bits and parity never show (the PARODD it leaves is no
+  parity to a UART, whichever client left it); baud and CSTOPB show as set.
 
 :class:`LinkDir` is the directory of stable symlinks (``sins``, ``xbee``, ``nanoloc``) to
 the ``/dev/pts/N`` paths: created 0700, refused when owned by another user or writable by
@@ -64,7 +65,6 @@ SPEED_BAUD = {getattr(termios, n): int(n[1:]) for n in dir(termios)
 BOTHER = 0o010000  # a rate that is no B constant (pyserial's 250000): read it with TCGETS2
 TERMIOS2 = struct.Struct("4IB19s2I")  # struct termios2: flags, c_line, c_cc, c_ispeed, c_ospeed
 TCGETS2 = 2 << 30 | TERMIOS2.size << 16 | ord("T") << 8 | 0x2A  # _IOR('T', 0x2A, termios2)
-CSIZE_BITS = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
 
 
 class LinkDirError(ValueError):
@@ -303,10 +303,7 @@ class PtyPort:
             return None, 0
         if baud is None:
             return None, iflag
-        # PARODD without PARENB: the PTY cleared PARENB of a client that asked for odd parity
-        parity = "O" if cflag & termios.PARODD else "E" if cflag & termios.PARENB else "N"
-        return Framing(baud, CSIZE_BITS[cflag & termios.CSIZE], parity,
-                       2 if cflag & termios.CSTOPB else 1), iflag
+        return Framing.from_cflag(baud, cflag), iflag
 
     def _flush_stale(self) -> None:
         try:

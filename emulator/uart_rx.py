@@ -42,6 +42,7 @@ import numpy as np
 SEC = 1_000_000_000
 EPS = 1e-9  # in bit times: a sample a rounding error before an edge reads the new bit
 PARITIES = ("N", "E", "O")
+CSIZE_BITS = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,6 +56,17 @@ class Framing:
 
     def __str__(self) -> str:
         return f"{self.baud} {self.bits}{self.parity}{self.stop}"
+
+    @classmethod
+    def from_cflag(cls, baud: int, cflag: int) -> "Framing":
+        """The framing a UART takes from a termios ``c_cflag``, as the 8250 driver programs
+        its line control register (serial8250_do_set_termios): PARODD (and CMSPAR's stick
+        parity, not modelled) mean something only under PARENB, so a PARODD a previous
+        client left behind, or ``cfmakeraw`` kept, is no parity; CSIZE and CSTOPB count
+        as set, whoever set them."""
+        parity = ("O" if cflag & termios.PARODD else "E") if cflag & termios.PARENB else "N"
+        return cls(baud, CSIZE_BITS[cflag & termios.CSIZE], parity,
+                   2 if cflag & termios.CSTOPB else 1)
 
     @property
     def frame_bits(self) -> int:
