@@ -16,8 +16,9 @@ from navtwin.emulator.pty import PtyPort
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.uart_rx import ClientView, Framing, Received, Receiver, tty_bytes
+from navtwin.protocols import xbee
 from navtwin.protocols.recording import Recording
-from navtwin.protocols.stream import Frame, sins_decoder
+from navtwin.protocols.stream import Frame, XBeeDecoder, XBeeSinsChain, sins_decoder
 
 LINE = Framing(115200)
 CMSPAR = 0o10000000000  # Linux's stick-parity flag; Python's termios does not name it
@@ -254,6 +255,24 @@ def test_view_events_once_per_change_and_on_a_device_rate_change():
 
 # -- through PTYs -------------------------------------------------------------------------
 
+def bd(value: int, fid: int) -> bytes:
+    """The host's ATBD API frame (escaped, as AP 2 wants it)."""
+    return xbee.build(0x08, True, frame_id=fid, command=b"BD", parameter=bytes((value,)))
+
+
+def test_the_device_reads_a_client_at_another_rate_as_garbage_and_at_its_own_clean():
+    view = ClientView("xbee", Framing(115200))
+    view.settle(Framing(115200), 0)
+    frame = bd(7, 2)
+    assert view.heard(0, frame, Framing(115200)) == frame
+    heard = view.heard(LATER, frame, Framing(9600)) + view.heard(2 * LATER, b"", Framing(9600))
+    assert heard != frame and not [e for e in XBeeDecoder(True).feed(heard)
+                                   if isinstance(e, Frame)]
+    assert view.garbled_host_bytes == len(frame)
+    view.settle(Framing(9600), 0)  # the host follows the device's BD
+    assert view.heard(3 * LATER, frame, Framing(9600)) == frame
+
+
 class Run:
     """An Emulation in a thread; its event lines can be waited for."""
 
@@ -339,3 +358,33 @@ def test_the_recording_keeps_the_devices_bytes_whatever_the_clients_settings(roo
         rt = [(c.data, c.t_device_ns) for c in again.chunks(port)]
         assert rt == [(c.data, c.t_device_ns) for c in gold.chunks(port)
                       if c.t_device_ns < 2_000_000_000], port
+
+
+@pytest.mark.pty
+def test_a_coordinator_at_9600_does_not_understand_a_host_still_at_115200(tmp_path):
+    """ATBD3, then ATBD7 sent at 115200 (garbage to a 9600 UART: no answer, the rate stays),
+    then ATBD7 sent at 9600 (answered: the coordinator is back at 115200)."""
+    run = Run(seed=1, speed=1.0, duration_s=60, link_dir=tmp_path / "links",
+              record=tmp_path / "rec")
+    view = run.emu.views["xbee"]
+    try:
+        with serial.Serial(run.emu.links["xbee"], 115200, timeout=0.2) as ser:
+            ser.write(bd(3, 1))
+            run.wait_for("xbee: client at 115200 8N1, device 9600 8N1")
+            ser.write(bd(7, 2))
+            end = time.monotonic() + DEADLINE
+            while view.garbled_host_bytes < len(bd(7, 2)):
+                assert time.monotonic() < end, "the host's frame never reached the coordinator"
+                time.sleep(0.01)
+            ser.baudrate = 9600
+            run.wait_for("xbee: client at the device's settings (9600 8N1) again")
+            ser.write(bd(7, 3))
+            run.wait_for("xbee: client at 9600 8N1, device 115200 8N1")
+    finally:
+        run.stop.set()
+        run.thread.join(DEADLINE)
+        run.emu.close()
+    chain = XBeeSinsChain(escaped=True)
+    answered = [ev.fields["frame_id"] for c in Recording(tmp_path / "rec").chunks("xbee")
+                for ev in chain.feed(c.data) if ev.format == "xbee" and ev.type == 0x88]
+    assert answered == [1, 3]
