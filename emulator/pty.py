@@ -9,20 +9,33 @@ Line discipline of the emulated cable (peers-and-pty-facts.md section 5):
 
 * unplugged: while no client has the port open, the device's output is dropped and
   counted (``dropped_unplugged``), as on a line with nothing at the other end;
-* no stale bytes: when a client attaches, whatever an earlier client left unread is
-  flushed (``tcflush(TCIFLUSH)`` on a short-lived ``O_NOCTTY`` slave fd), so the first
-  bytes a new opener reads are fresh;
+* no stale bytes: the slave's input queue outlives its clients (the kernel keeps what a
+  client left unread for the next opener), so it is flushed (``tcflush(TCIFLUSH)`` on a
+  short-lived ``O_NOCTTY`` slave fd) as soon as a client is seen gone, and again when one
+  is seen attaching: a client that reads at once after its open gets only bytes written
+  after it (a bare ``os.read`` or ``cat`` flushes nothing, unlike pyserial). Left open: a
+  client that opens between another's close and the emulator noticing it (the loop wakes
+  on the hang-up, well under a millisecond when idle) gets what that one left;
 * overflow: the master is ``O_NONBLOCK``; when the client does not read and the kernel
   buffer (about 20 KiB) is full, the bytes that do not fit are dropped and counted
   (``dropped_overflow``), as a UART loses what the host does not read. The emulator never
   blocks on a client;
+* unplug, as a USB serial adapter's on Linux: the line goes quiet at once (the device's
+  output is dropped as unplugged, the link removed), then the kernel hangs the readers up
+  (the master is closed: ``tty_vhangup``, exactly as ``usb_serial_disconnect`` does):
+  ``poll`` gives POLLHUP|POLLERR, ``read`` end of file, ``write`` EIO. The hang-up waits
+  until the client has read what was sent and the line has been quiet ``HANGUP_QUIET_NS``
+  (at most ``HANGUP_MAX_NS``): a hung-up tty reads 0 bytes forever, so a reader caught
+  between a read and its next poll (node serialport loops on such reads) would never see
+  POLLERR, while one waiting in ``poll`` sees it at once;
 * a detached master reads EIO and ``select`` reports it readable forever, so only
   attached ports are waited on; detached ones are re-checked with :meth:`PtyPort.check`;
 * the client's settings: termios ioctls on the master act on the slave, so
   :meth:`PtyPort.client_framing` reads the baud, data bits, parity and stop bits the client
-  set (one ``tcgetattr``; the runner looks every ``CHECK_NS``). The PTY driver forces CS8
-  and clears PARENB on every set (``pty_set_termios``), so 7 data bits and even parity
-  never show; odd parity does, by the PARODD it leaves behind; baud and CSTOPB show as set.
+  set (one ``tcgetattr``; the runner looks every ``CHECK_NS``), read as a UART reads them
+  (:meth:`Framing.from_cflag`). The PTY driver forces CS8 and clears PARENB on every set
+  (``pty_set_termios``), so 7 data bits and parity never show (the PARODD it leaves is no
+  parity to a UART, whichever client left it); baud and CSTOPB show as set.
 
 :class:`LinkDir` is the directory of stable symlinks (``sins``, ``xbee``, ``nanoloc``) to
 the ``/dev/pts/N`` paths: created 0700, refused when owned by another user or writable by
@@ -60,7 +73,8 @@ SPEED_BAUD = {getattr(termios, n): int(n[1:]) for n in dir(termios)
 BOTHER = 0o010000  # a rate that is no B constant (pyserial's 250000): read it with TCGETS2
 TERMIOS2 = struct.Struct("4IB19s2I")  # struct termios2: flags, c_line, c_cc, c_ispeed, c_ospeed
 TCGETS2 = 2 << 30 | TERMIOS2.size << 16 | ord("T") << 8 | 0x2A  # _IOR('T', 0x2A, termios2)
-CSIZE_BITS = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
+HANGUP_QUIET_NS = 50_000_000  # unplug: the client's queue empty this long, then the hang-up
+HANGUP_MAX_NS = 1_000_000_000  # ... or this long after the pull (a client that never reads)
 
 
 class LinkDirError(ValueError):
@@ -219,6 +233,8 @@ class PtyPort:
         self.dropped_overflow = 0
         self.received = 0
         self.unplugs = 0
+        self._pulled: tuple[int, int] | None = None  # unplugging: (when, a slave fd) until hung up
+        self._quiet_since = 0
         self._open()
 
     def _open(self) -> None:
@@ -237,20 +253,42 @@ class PtyPort:
 
     @property
     def plugged(self) -> bool:
-        return self.fd >= 0
+        return self.fd >= 0 and self._pulled is None
 
     def unplug(self) -> None:
-        """Pull the cable: the PTY goes away (its clients read a hang-up: EIO, POLLHUP), and
-        what the device writes meanwhile is dropped and counted as unplugged."""
+        """Pull the cable: what the device writes from now on is dropped and counted as
+        unplugged, and the PTY goes away once its client is back waiting (:meth:`check`;
+        module docstring)."""
         if self.plugged:
-            self.close()
+            try:  # to see the client's queue (FIONREAD) until the hang-up
+                probe = os.open(self.pts, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK | os.O_CLOEXEC)
+            except OSError:
+                probe = -1
+            self._pulled = (time.monotonic_ns(), probe)
+            self._quiet_since = 0
             self.attached = False
             self.unplugs += 1
+
+    def _hang_up_when_quiet(self) -> None:
+        pulled, probe = self._pulled
+        now = time.monotonic_ns()
+        try:
+            queued = struct.unpack("i", fcntl.ioctl(probe, termios.FIONREAD, bytes(4)))[0]
+        except OSError:
+            queued = 0
+        if queued:
+            self._quiet_since = 0
+        elif not self._quiet_since:
+            self._quiet_since = now
+        if (self._quiet_since and now - self._quiet_since >= HANGUP_QUIET_NS
+                or now - pulled >= HANGUP_MAX_NS):
+            self.close()
 
     def replug(self) -> str:
         """Plug it back: a new PTY (a new /dev/pts/N, as a USB adapter comes back under a
         new node); returns its path."""
         if not self.plugged:
+            self.close()  # an unplug still waiting to hang up does it now
             self._open()
         return self.pts
 
@@ -258,7 +296,10 @@ class PtyPort:
         return self.fd
 
     def check(self) -> bool:
-        """Refresh and return ``attached`` (one non-blocking poll of the master)."""
+        """Refresh and return ``attached`` (one non-blocking poll of the master); while
+        unplugging, hang the client up once it is quiet."""
+        if self._pulled is not None:
+            self._hang_up_when_quiet()
         if not self.plugged:
             return False
         p = select.poll()
@@ -269,8 +310,12 @@ class PtyPort:
             self.attached = True
             self.attaches += 1
         elif hup and self.attached:
-            self.attached = False
+            self._detach()
         return self.attached
+
+    def _detach(self) -> None:
+        self.attached = False
+        self._flush_stale()  # what the client left must not wait for the next opener
 
     def client_framing(self) -> tuple[Framing | None, int]:
         """The client's (Framing, c_iflag) from the slave's termios; Framing None when
@@ -287,10 +332,7 @@ class PtyPort:
             return None, 0
         if baud is None:
             return None, iflag
-        # PARODD without PARENB: the PTY cleared PARENB of a client that asked for odd parity
-        parity = "O" if cflag & termios.PARODD else "E" if cflag & termios.PARENB else "N"
-        return Framing(baud, CSIZE_BITS[cflag & termios.CSIZE], parity,
-                       2 if cflag & termios.CSTOPB else 1), iflag
+        return Framing.from_cflag(baud, cflag), iflag
 
     def _flush_stale(self) -> None:
         try:
@@ -332,7 +374,8 @@ class PtyPort:
             except OSError as e:
                 if e.errno != errno.EIO:
                     raise
-                self.attached = False
+                if self.attached:
+                    self._detach()
                 break
             if not chunk:
                 break
@@ -347,6 +390,10 @@ class PtyPort:
                 "unplugs": self.unplugs}
 
     def close(self) -> None:
+        if self._pulled is not None:
+            if self._pulled[1] >= 0:
+                os.close(self._pulled[1])  # before the master: the hang-up must reach no fd of ours
+            self._pulled = None
         if self.fd >= 0:
             os.close(self.fd)
             self.fd = -1

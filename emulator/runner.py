@@ -431,7 +431,10 @@ class Emulation:
 
     def _to_device(self, now: int) -> None:
         """Give the coordinator what the host wrote, as its to_device faults let it through."""
+        view = self.views.get(self.inbound.name)
         for t, data in self.inbound.poll(now):
+            if view is not None:  # read by the coordinator's UART at its rate
+                data = view.heard(t, data, Framing(self.coordinator.baud))
             for out in self.coordinator.host(t, data):
                 self.lines["xbee"].put(out.t_ns, out.item)
 

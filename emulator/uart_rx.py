@@ -42,6 +42,7 @@ import numpy as np
 SEC = 1_000_000_000
 EPS = 1e-9  # in bit times: a sample a rounding error before an edge reads the new bit
 PARITIES = ("N", "E", "O")
+CSIZE_BITS = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,6 +56,17 @@ class Framing:
 
     def __str__(self) -> str:
         return f"{self.baud} {self.bits}{self.parity}{self.stop}"
+
+    @classmethod
+    def from_cflag(cls, baud: int, cflag: int) -> "Framing":
+        """The framing a UART takes from a termios ``c_cflag``, as the 8250 driver programs
+        its line control register (serial8250_do_set_termios): PARODD (and CMSPAR's stick
+        parity, not modelled) mean something only under PARENB, so a PARODD a previous
+        client left behind, or ``cfmakeraw`` kept, is no parity; CSIZE and CSTOPB count
+        as set, whoever set them."""
+        parity = ("O" if cflag & termios.PARODD else "E") if cflag & termios.PARENB else "N"
+        return cls(baud, CSIZE_BITS[cflag & termios.CSIZE], parity,
+                   2 if cflag & termios.CSTOPB else 1)
 
     @property
     def frame_bits(self) -> int:
@@ -228,10 +240,11 @@ def tty_bytes(rec: Received, iflag: int) -> bytes:
 
 
 class ClientView:
-    """One port's client as its UART would read the device: while the client's settings
-    garble the device's line the port gives it :class:`Receiver`'s characters through
-    :func:`tty_bytes`, and counts them. *notify* gets one line when the client starts or
-    stops differing from the device (settings, or the device's rate, e.g. the XBee's BD)."""
+    """One port's client as its UART would read the device, and the device's UART the
+    client (:meth:`heard`): while the client's settings garble the device's line the port
+    gives it :class:`Receiver`'s characters through :func:`tty_bytes`, and counts them.
+    *notify* gets one line when the client starts or stops differing from the device
+    (settings, or the device's rate, e.g. the XBee's BD)."""
 
     def __init__(self, port: str, device: Framing, notify=None) -> None:
         self.port = port
@@ -245,6 +258,9 @@ class ClientView:
         self.chars = 0  # characters the client's UART read while garbled
         self.framing_errors = self.parity_errors = self.breaks = 0
         self.garbled_bytes = 0  # device bytes sent while the client read them garbled
+        self.listener: Receiver | None = None  # the device's UART reading the client's bytes
+        self._heard_until = 0  # ns: when the client's last byte had left its UART
+        self.garbled_host_bytes = 0  # client bytes the device read garbled
 
     @property
     def client(self) -> Framing | None:
@@ -302,8 +318,26 @@ class ClientView:
         self.garbled_bytes += len(data)
         return tty_bytes(rec, self.iflag)
 
+    def heard(self, t_ns: int, data: bytes, device: Framing) -> bytes:
+        """What the device's UART at *device* reads from bytes the client wrote that reach
+        it at *t_ns*: the same receiver and rule (:meth:`Framing.garbles`) the other way,
+        the bytes sent back to back at the client's settings (after any sent before)."""
+        client = self.seen
+        if client is None or not client.garbles(device):
+            self.listener = None
+            return data
+        if self.listener is None or (self.listener.tx, self.listener.rx) != (client, device):
+            self.listener = Receiver(client, device)
+        wire = len(data) * client.frame_bits * SEC // client.baud
+        start = max(t_ns - wire, self._heard_until)
+        self._heard_until = start + wire
+        self.garbled_host_bytes += len(data)
+        # a UART's errors and breaks reach no tty here: the device's firmware gets the values
+        return self.listener.feed(start, data).values.tobytes()
+
     def stats(self) -> dict:
         return {"client": str(self.seen) if self.seen else None, "device": str(self.device),
-                "garbled_bytes": self.garbled_bytes, "client_chars": self.chars,
+                "garbled_bytes": self.garbled_bytes,
+                "garbled_host_bytes": self.garbled_host_bytes, "client_chars": self.chars,
                 "framing_errors": self.framing_errors, "parity_errors": self.parity_errors,
                 "breaks": self.breaks}

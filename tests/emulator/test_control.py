@@ -1,7 +1,10 @@
 """Live control: a test breaks the running lab through its control socket (emulator.control),
 from Python (emulator.api.Lab) or from ``navtwin ctl``."""
+import errno
 import json
 import os
+import select
+import shutil
 import socket
 import stat
 import subprocess
@@ -72,7 +75,7 @@ def test_unplug_hangs_up_the_client_and_replug_brings_the_port_back(tmp_path):
         link = lab.ports["sins"]
         with serial.Serial(link, 115200, timeout=0.2) as ser:
             before = _read_frames(ser, sins_decoder(), 5)
-            assert len(before) == 5
+            assert len(before) >= 5  # one read may decode more: the count is not the point
             assert lab.unplug("sins") == {"ok": True, "port": "sins", "plugged": False}
             assert not os.path.lexists(link)  # the device node is gone
             with pytest.raises(serial.SerialException):
@@ -84,13 +87,91 @@ def test_unplug_hangs_up_the_client_and_replug_brings_the_port_back(tmp_path):
         assert os.readlink(link) == reply["pts"]
         with serial.Serial(link, 115200, timeout=0.2) as ser:
             frames = _read_frames(ser, sins_decoder(), 5)
-            assert len(frames) == 5  # valid SINS frames again, consecutive
+            assert len(frames) >= 5  # valid SINS frames again, consecutive
             assert all(b.fields["seq"] == (a.fields["seq"] + 1) % 65536
                        for a, b in zip(frames, frames[1:]))
         # the board ran on while its cable was out: its counter went on (no wrap in 60 s)
         assert frames[0].fields["seq"] > before[-1].fields["seq"]
         summary = lab.stop()
     assert summary["ports"]["sins"]["unplugs"] == 1
+
+
+def _hang_up(fd: int, deadline_s: float = DEADLINE_S) -> tuple:
+    """What a non-blocking reader of *fd* sees when the line hangs up: the poll events, then
+    what read and write give (reading what was in flight meanwhile)."""
+    p = select.poll()
+    p.register(fd, select.POLLIN)
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        events = dict(p.poll(100)).get(fd, 0)
+        if events & (select.POLLHUP | select.POLLERR):
+            break
+        try:
+            os.read(fd, 65536)
+        except BlockingIOError:
+            pass
+    try:
+        got = os.read(fd, 65536)
+    except OSError as e:
+        got = errno.errorcode[e.errno]
+    try:
+        wrote = os.write(fd, b"x")
+    except OSError as e:
+        wrote = errno.errorcode[e.errno]
+    return events, got, wrote
+
+
+def test_unplug_hangs_readers_up_exactly_as_a_bare_pty_whose_master_closes(tmp_path):
+    master, slave = os.openpty()
+    fd = os.open(os.ttyname(slave), os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    os.close(slave)
+    os.close(master)
+    bare = _hang_up(fd)
+    os.close(fd)
+    assert bare[0] & select.POLLHUP and bare[1:] == (b"", "EIO")  # as usb_serial_disconnect
+    with emulate("office", duration=60, link_dir=tmp_path / "links") as lab:
+        fd = os.open(lab.ports["sins"], os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            assert select.select([fd], [], [], DEADLINE_S)[0]  # the board's frames flow
+            lab.unplug("sins")
+            assert _hang_up(fd) == bare
+        finally:
+            os.close(fd)
+
+
+def _node_serialport() -> bool:
+    node = shutil.which("node")
+    return node is not None and subprocess.run(
+        [node, "-e", "require('serialport')"], capture_output=True).returncode == 0
+
+
+@pytest.mark.skipif(not _node_serialport(),
+                    reason="node serialport not installed (npm install serialport; NODE_PATH)")
+def test_node_serialport_sees_close_on_every_unplug(tmp_path):
+    """A reader caught between reads at the hang-up reads 0 bytes forever and never closes:
+    the line goes quiet first, so node is back in poll and sees POLLERR."""
+    script = Path(__file__).with_name("serialport_reader.js")
+    with emulate("office", duration=60, link_dir=tmp_path / "links") as lab:
+        for k in range(5):
+            node = subprocess.Popen(["node", str(script), lab.ports["sins"]],
+                                    stdout=subprocess.PIPE)
+            try:
+                lines = []
+
+                def until(word: str) -> bool:  # unbuffered: a line may come with the next
+                    end = time.monotonic() + DEADLINE_S
+                    while word not in lines and time.monotonic() < end:
+                        if select.select([node.stdout], [], [], 0.1)[0]:
+                            lines.extend(os.read(node.stdout.fileno(), 4096).decode().split())
+                    return word in lines
+
+                assert until("data"), f"open {k}: {lines}"
+                lab.unplug("sins")
+                assert until("close"), f"unplug {k}: {lines}"
+            finally:
+                node.kill()
+                node.wait()
+            lab.replug("sins")
 
 
 def test_a_live_anchor_outage_times_out_that_anchor_and_nothing_else(tmp_path):
@@ -150,7 +231,7 @@ def test_reset_power_cycles_the_board_under_a_reading_client(tmp_path):
     with emulate("office", duration=60, link_dir=tmp_path / "links") as lab:
         with serial.Serial(lab.ports["sins"], 115200, timeout=0.2) as ser:
             dec = sins_decoder()
-            assert len(_read_frames(ser, dec, 3)) == 3
+            assert len(_read_frames(ser, dec, 3)) >= 3  # one read may hold more
             reply = lab.reset("board", 0.3)
             assert reply["kind"] == "board_reset"
             end = time.monotonic() + DEADLINE_S
@@ -167,7 +248,7 @@ def test_a_live_line_fault_garbles_the_port_until_cleared_and_the_ledger_has_it(
     with emulate("office", duration=60, link_dir=tmp_path / "links", record=rec) as lab:
         with serial.Serial(lab.ports["sins"], 115200, timeout=0.2) as ser:
             dec = sins_decoder()
-            assert len(_read_frames(ser, dec, 5)) == 5
+            assert len(_read_frames(ser, dec, 5)) >= 5
             lab.fault("bit_errors", port="sins", ber=0.01)  # ~2 flipped bits per frame
             end = time.monotonic() + DEADLINE_S
             while time.monotonic() < end and not sum(dec.errors.values()):
@@ -177,7 +258,7 @@ def test_a_live_line_fault_garbles_the_port_until_cleared_and_the_ledger_has_it(
             ser.reset_input_buffer()
             fresh = sins_decoder()
             frames = _read_frames(ser, fresh, 20)
-            assert len(frames) == 20  # clean again
+            assert len(frames) >= 20  # clean again
         lab.stop()
     ledger = Recording(rec).faults()
     assert ledger and {e["kind"] for e in ledger} == {"bit_errors"}

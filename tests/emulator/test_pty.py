@@ -1,14 +1,18 @@
 """PTY ports and the link directory: raw line, unplugged and overflow policies, no stale
 bytes, atomic links, refusal of unsafe directories."""
+import fcntl
 import os
 import select
 import stat
+import struct
 import termios
 import time
 
 import pytest
 
+from navtwin.emulator.api import emulate
 from navtwin.emulator.pty import LinkDir, LinkDirError, PtyPort
+from navtwin.protocols.stream import sins_decoder
 
 pytestmark = pytest.mark.pty
 DEADLINE = 10.0
@@ -95,6 +99,62 @@ def test_a_new_client_never_reads_what_the_last_one_left(port):
         assert nothing_to_read(fd)
     finally:
         os.close(fd)
+
+
+@pytest.mark.parametrize("noticed_by", ["check", "read"])
+def test_what_a_client_left_is_gone_before_the_next_open(port, noticed_by):
+    """A reader that reads at once after its open, before the emulator has seen it, must
+    not get what the last client left: the queue is flushed when that one is seen gone."""
+    fd = client(port)
+    assert port.check()
+    port.write(b"left unread by the first client")
+    os.close(fd)
+    if noticed_by == "check":  # the runner's look at the ports
+        assert wait_for(lambda: not port.check())
+    else:  # the runner's read of the master: EIO
+        assert wait_for(lambda: select.select([port.fd], [], [], 0)[0])
+        assert port.read() == b"" and not port.attached
+    fd = client(port)
+    try:
+        assert nothing_to_read(fd)
+    finally:
+        os.close(fd)
+
+
+def _pending(fd: int) -> int:
+    return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, bytes(4)))[0]
+
+
+def test_a_hundred_immediate_reads_after_open_get_no_stale_frame(tmp_path):
+    """Each client reads at once after its open (no flush of its own, as cat or C do), then
+    leaves frames unread and closes; the next opener must get none of them."""
+    frame = 30  # bytes of a SINS sample frame
+    stale = []
+    with emulate("office", duration=70, link_dir=tmp_path / "links") as lab:
+        link = lab.ports["sins"]
+        left = -1  # the highest seq the last client left unread
+        for i in range(100):
+            fd = os.open(link, os.O_RDWR | os.O_NOCTTY)
+            try:
+                dec, seqs = sins_decoder(), []
+                end = time.monotonic() + DEADLINE
+                while not seqs and time.monotonic() < end:  # the immediate read, then more
+                    seqs += [f.fields["seq"] for f in dec.feed(os.read(fd, 65536))
+                             if hasattr(f, "fields")]
+                assert seqs, f"open {i}: no frame within {DEADLINE} s"
+                stale += [(i, s) for s in seqs if s <= left]
+                while select.select([fd], [], [], 0)[0]:  # take what came meanwhile ...
+                    seqs += [f.fields["seq"] for f in dec.feed(os.read(fd, 65536))
+                             if hasattr(f, "fields")]
+                assert wait_for(lambda: _pending(fd) >= 2 * frame)  # ... and leave two frames
+                left = seqs[-1] + _pending(fd) // frame
+            finally:
+                os.close(fd)
+            end = time.monotonic() + DEADLINE  # the emulator notices the close
+            while lab.status()["ports"]["sins"]["attached"]:
+                assert time.monotonic() < end, "the emulator never noticed the close"
+                time.sleep(0.002)
+    assert stale == []
 
 
 def test_a_client_that_does_not_read_never_blocks_the_emulator(port):

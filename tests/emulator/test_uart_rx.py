@@ -1,22 +1,27 @@
 """The client's UART (emulator.uart_rx): hand-computed sampling vectors, parity, data bits,
 stop bits, Linux's error delivery, a cross-check against a naive sampler of a 1-ns
-waveform; and through real PTYs: a pyserial client at the wrong rate or parity reads
+waveform; and through real PTYs: a pyserial client at the wrong rate reads
 garbage, at the right settings clean frames, and the recording stays the golden's."""
+import os
 import termios
 import threading
 import time
+import tty
 
 import numpy as np
 import pytest
 import serial
 
+from navtwin.emulator.pty import PtyPort
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.uart_rx import ClientView, Framing, Received, Receiver, tty_bytes
+from navtwin.protocols import xbee
 from navtwin.protocols.recording import Recording
-from navtwin.protocols.stream import Frame, sins_decoder
+from navtwin.protocols.stream import Frame, XBeeDecoder, XBeeSinsChain, sins_decoder
 
 LINE = Framing(115200)
+CMSPAR = 0o10000000000  # Linux's stick-parity flag; Python's termios does not name it
 LATER = 10_000_000  # ns: a chunk this much later finishes any frame of the one before
 DEADLINE = 10.0
 
@@ -120,6 +125,36 @@ def test_frames_across_back_to_back_chunks_read_as_one_chunk(rx):
     assert split == whole and len(whole) > 1
 
 
+@pytest.mark.parametrize("cflag, framing", [
+    (termios.CS8 | termios.PARODD, Framing(9600)),  # left behind: no parity to a UART
+    (termios.CS8 | CMSPAR, Framing(9600)),
+    (termios.CS8 | CMSPAR | termios.PARODD, Framing(9600)),
+    (termios.CS8 | termios.PARENB, Framing(9600, parity="E")),
+    (termios.CS8 | termios.PARENB | termios.PARODD, Framing(9600, parity="O")),
+    (termios.CS7 | termios.CSTOPB | termios.PARODD, Framing(9600, bits=7, stop=2)),
+])
+def test_termios_flags_are_read_as_a_uart_programs_its_line(cflag, framing):
+    assert Framing.from_cflag(9600, cflag | termios.CREAD | termios.CLOCAL) == framing
+
+
+@pytest.mark.pty
+def test_a_raw_8n1_client_after_an_odd_parity_client_reads_no_parity():
+    port = PtyPort("sins")
+    try:
+        with serial.Serial(port.pts, 115200, parity="O"):
+            pass  # it leaves PARODD in the slave's termios (the PTY cleared its PARENB)
+        fd = os.open(port.pts, os.O_RDWR | os.O_NOCTTY)
+        try:
+            tty.setraw(fd)  # cfmakeraw: clears PARENB, keeps PARODD
+            assert termios.tcgetattr(fd)[2] & termios.PARODD
+            assert port.check()
+            assert port.client_framing()[0] == Framing(115200)
+        finally:
+            os.close(fd)
+    finally:
+        port.close()
+
+
 def test_linux_delivery_of_errors_follows_the_8250_driver_and_n_tty():
     rec = Received(np.array([0x41, 0x42, 0x00], np.uint8), np.array([False, True, False]),
                    np.array([False, False, False]), np.array([False, False, True]))
@@ -220,6 +255,24 @@ def test_view_events_once_per_change_and_on_a_device_rate_change():
 
 # -- through PTYs -------------------------------------------------------------------------
 
+def bd(value: int, fid: int) -> bytes:
+    """The host's ATBD API frame (escaped, as AP 2 wants it)."""
+    return xbee.build(0x08, True, frame_id=fid, command=b"BD", parameter=bytes((value,)))
+
+
+def test_the_device_reads_a_client_at_another_rate_as_garbage_and_at_its_own_clean():
+    view = ClientView("xbee", Framing(115200))
+    view.settle(Framing(115200), 0)
+    frame = bd(7, 2)
+    assert view.heard(0, frame, Framing(115200)) == frame
+    heard = view.heard(LATER, frame, Framing(9600)) + view.heard(2 * LATER, b"", Framing(9600))
+    assert heard != frame and not [e for e in XBeeDecoder(True).feed(heard)
+                                   if isinstance(e, Frame)]
+    assert view.garbled_host_bytes == len(frame)
+    view.settle(Framing(9600), 0)  # the host follows the device's BD
+    assert view.heard(3 * LATER, frame, Framing(9600)) == frame
+
+
 class Run:
     """An Emulation in a thread; its event lines can be waited for."""
 
@@ -269,8 +322,7 @@ def frames_in(ser, n=900):
 
 
 @pytest.mark.pty
-@pytest.mark.parametrize("wrong", [dict(baudrate=9600), dict(baudrate=57600),
-                                   dict(baudrate=115200, parity="O")])
+@pytest.mark.parametrize("wrong", [dict(baudrate=9600), dict(baudrate=57600)])
 def test_a_client_at_wrong_settings_reads_garbage_and_clean_frames_again(live, wrong):
     link = live.emu.links["sins"]
     with serial.Serial(link, timeout=1.0, **wrong) as ser:
@@ -293,7 +345,7 @@ def test_the_recording_keeps_the_devices_bytes_whatever_the_clients_settings(roo
               record=tmp_path / "rec")
     sers = [serial.Serial(run.emu.links[p], **kw) for p, kw in
             (("sins", dict(baudrate=9600)), ("xbee", dict(baudrate=57600)),
-             ("nanoloc", dict(baudrate=115200, parity="O")))]
+             ("nanoloc", dict(baudrate=230400)))]
     try:
         run.thread.join(60)
     finally:
@@ -306,3 +358,33 @@ def test_the_recording_keeps_the_devices_bytes_whatever_the_clients_settings(roo
         rt = [(c.data, c.t_device_ns) for c in again.chunks(port)]
         assert rt == [(c.data, c.t_device_ns) for c in gold.chunks(port)
                       if c.t_device_ns < 2_000_000_000], port
+
+
+@pytest.mark.pty
+def test_a_coordinator_at_9600_does_not_understand_a_host_still_at_115200(tmp_path):
+    """ATBD3, then ATBD7 sent at 115200 (garbage to a 9600 UART: no answer, the rate stays),
+    then ATBD7 sent at 9600 (answered: the coordinator is back at 115200)."""
+    run = Run(seed=1, speed=1.0, duration_s=60, link_dir=tmp_path / "links",
+              record=tmp_path / "rec")
+    view = run.emu.views["xbee"]
+    try:
+        with serial.Serial(run.emu.links["xbee"], 115200, timeout=0.2) as ser:
+            ser.write(bd(3, 1))
+            run.wait_for("xbee: client at 115200 8N1, device 9600 8N1")
+            ser.write(bd(7, 2))
+            end = time.monotonic() + DEADLINE
+            while view.garbled_host_bytes < len(bd(7, 2)):
+                assert time.monotonic() < end, "the host's frame never reached the coordinator"
+                time.sleep(0.01)
+            ser.baudrate = 9600
+            run.wait_for("xbee: client at the device's settings (9600 8N1) again")
+            ser.write(bd(7, 3))
+            run.wait_for("xbee: client at 9600 8N1, device 115200 8N1")
+    finally:
+        run.stop.set()
+        run.thread.join(DEADLINE)
+        run.emu.close()
+    chain = XBeeSinsChain(escaped=True)
+    answered = [ev.fields["frame_id"] for c in Recording(tmp_path / "rec").chunks("xbee")
+                for ev in chain.feed(c.data) if ev.format == "xbee" and ev.type == 0x88]
+    assert answered == [1, 3]
