@@ -32,18 +32,20 @@ its own time.
 * A range with t <= T is late: it is processed at once (the estimator applies it with its
   lag, or refuses it beyond its ``max_lag_s``); the pipeline counts it and its lateness.
 * A range with t > T is held until a SINS sample with time >= t is decoded (it is
-  processed just before that sample), or until a chunk arrives at or after t + ``hold_s``
-  on any port (the IMU stream stalled), or the input ends. Without a SINS input nothing is
-  held beyond the chunk that carried it.
+  processed just before that sample), or until a chunk arrives ``hold_s`` or more after the
+  range's own chunk did, on any port (the IMU stream stalled), or the input ends. Without a
+  SINS input nothing is held beyond the chunk that carried it.
 
 So SINS samples wait for nothing, ranges at most one SINS period in normal operation and
-``hold_s`` of arrival time when the IMU stream stalls.
+``hold_s`` of arrival time when the IMU stream stalls. The hold counts from the range's
+arrival, not its time: when the host itself stalls, every port's bytes arrive late
+together, and the SINS samples that come with the range still go after it.
 """
 from __future__ import annotations
 
 import heapq
 import math
-from collections import Counter
+from collections import Counter, deque
 from functools import partial
 from typing import Any, Callable
 
@@ -82,6 +84,7 @@ class Vehicle:
         self.imu_clock = DeviceClock(16, sins.PERIOD_S, strict=True)
         self.estimator = estimator
         self.held: list[tuple] = []  # heap of (t, n, Exchange | Restart)
+        self.arrived: deque[tuple[float, float]] = deque()  # (arrival, t) of each held record
         self.t = -math.inf  # filter time: the latest measurement time given to the estimator
         self.estimates: Counter = Counter()
 
@@ -158,7 +161,10 @@ class Pipeline:
                 self._query(command)
             self._next_db = a + self._db_period
         for v in self.vehicles:
-            self._release(v, a - self._hold, out)
+            until = -math.inf
+            while v.arrived and v.arrived[0][0] <= a - self._hold:
+                until = max(until, v.arrived.popleft()[1])
+            self._release(v, until, out)
         return out
 
     def finish(self) -> list:
@@ -312,6 +318,7 @@ class Pipeline:
         or apply it now."""
         if record.t > v.t:
             heapq.heappush(v.held, (record.t, self._n, record))
+            v.arrived.append((self._arrival, record.t))
             self._n += 1
         else:
             self._apply_range(v, record, out)
