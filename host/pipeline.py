@@ -22,7 +22,8 @@ aligned to arrival times online, never stepping back). A sample counter seen on 
 that begins a new epoch (its device restarted) is passed on as a ``Restart(t, "imu" |
 "anchors")`` record (host.measurements) in time order: just before the first sample, or
 range, of the epoch (for the IMU with the board's uptime, its counter x 10 ms: it counts
-from power-up).
+from power-up). The first SINS sample of the run carries that uptime too (``uptime_s``): a
+host that started late aligns on what is left of the stationary start.
 
 Time order, with bounded latency (docs/host.md), for each vehicle. Let T be its filter
 time: the latest measurement time given to its estimator. Every measurement is given with
@@ -257,7 +258,7 @@ class Pipeline:
         if v is None:
             self.counts["imu_other_router"] += 1
             return
-        restarts = v.imu_clock.restarts
+        restarts, first = v.imu_clock.restarts, v.imu_clock.counter.last is None
         t = v.imu_clock.time(ev.fields["seq"], a)
         if t is None:
             return
@@ -271,7 +272,10 @@ class Pipeline:
         if v.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown;
             # it counts its samples from power-up, so this one says how long it has been up
             self._give(v, Restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S), out)
-        self._give(v, ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok), out)
+        # the board counts its samples from power-up: the first one says how long it has
+        # been up (a host that started late, under load, missed part of its alignment)
+        uptime = ev.fields["seq"] * sins.PERIOD_S if first else None
+        self._give(v, ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok, uptime), out)
 
     def _vehicle_of(self, source: int | None) -> Vehicle | None:
         """The vehicle of a SINS sample from radio *source* (None: the direct line)."""
