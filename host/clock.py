@@ -25,12 +25,16 @@ points (device time t, lag = arrival - t) lie on or above the line
 ``lag = offset + rate * t`` of the minimum-delay envelope. The points are grouped in
 blocks of ``block_s`` of device time; the lowest point of each block (after removing the
 current rate) is kept for the last ``window`` blocks. Once ``min_blocks`` are complete,
-the rate is the least-squares slope of those minima (bounded by ``max_rate``: crystals are
-good to 1e-4); before that it is 0. The offset puts the line under all of them, then under
-every newer point as it comes. The host time of device time t is ``t + offset + rate * t``:
-the earliest time the measurement could have arrived. A point more than ``step_s`` below
-the line, or above it for ``step_s`` of arrival time on end, means the device clock
-stepped: the estimate starts over.
+the rate is the slope of the line under all those minima that is highest at their mean
+time (the lower convex hull's edge there: the linear-programming fit of the minimum-delay
+envelope), bounded by ``max_rate`` (crystals are good to 1e-4); before that it is 0. The
+offset puts the line under all of them, then under every newer point as it comes. The host
+time of device time t is ``t + offset + rate * t``: the earliest time the measurement could
+have arrived. Late points (a host that got no CPU for seconds, a slow line) lie above the
+line and move neither rate nor offset, however late and for however long, as long as the
+points that came on time still span the middle of the window. A point more than ``step_s``
+below the line means the device clock jumped ahead: the estimate starts over. A point far
+above it is only late: a device clock that steps back is a restart for the Unwrapper.
 
 :class:`DeviceClock` combines the two with the rule that a stream's host times never step
 back: the filters see each stream in its own order.
@@ -93,24 +97,16 @@ class ClockAligner:
         self._minima.clear()
         self._block: int | None = None
         self._open: tuple[float, float] | None = None  # (t, lag) minimum of the open block
-        self._above_since: float | None = None
         self.rate = 0.0
         self.offset: float | None = None
         self.resets += count
 
     def add(self, device_s: float, arrival_s: float) -> None:
         lag = arrival_s - device_s
-        if self.offset is not None:
-            resid = lag - self.offset - self.rate * device_s
-            if resid < -self.step_s:
-                self.reset()
-            elif resid > self.step_s:
-                if self._above_since is None:
-                    self._above_since = arrival_s
-                elif arrival_s - self._above_since > self.step_s:
-                    self.reset()
-            else:
-                self._above_since = None
+        # far below the line: the device clock jumped ahead. Far above is only late (the host
+        # or the line stalled): a clock that steps back is the Unwrapper's restart
+        if self.offset is not None and lag - self.offset - self.rate * device_s < -self.step_s:
+            self.reset()
         block = math.floor(device_s / self.block_s)
         low = lag - self.rate * device_s
         if block != self._block:
@@ -125,19 +121,29 @@ class ClockAligner:
             self.offset = low
 
     def _fit(self) -> None:
-        pts = self._minima
+        pts = sorted(self._minima)
         if len(pts) >= self.min_blocks:
-            n = len(pts)
-            tm = sum(t for t, _ in pts) / n
-            lm = sum(v for _, v in pts) / n
-            sxx = sum((t - tm) ** 2 for t, _ in pts)
-            sxy = sum((t - tm) * (v - lm) for t, v in pts)
-            rate = sxy / sxx if sxx > 0 else 0.0
-            self.rate = min(max(rate, -self.max_rate), self.max_rate)
+            self.rate = min(max(_envelope_slope(pts), -self.max_rate), self.max_rate)
         self.offset = min(v - self.rate * t for t, v in pts)
 
     def to_host(self, device_s: float) -> float:
         return device_s + self.offset + self.rate * device_s
+
+
+def _envelope_slope(pts: list[tuple[float, float]]) -> float:
+    """The slope of the line under all *pts* (sorted by t) that is highest at their mean t:
+    the lower convex hull's edge there. Points above the hull (late ones) do not move it."""
+    hull: list[tuple[float, float]] = []
+    for p in pts:
+        while len(hull) >= 2 and ((hull[-1][0] - hull[-2][0]) * (p[1] - hull[-2][1])
+                                  - (hull[-1][1] - hull[-2][1]) * (p[0] - hull[-2][0])) <= 0:
+            hull.pop()
+        hull.append(p)
+    tm = sum(t for t, _ in pts) / len(pts)
+    for (t0, v0), (t1, v1) in zip(hull, hull[1:]):
+        if t1 >= tm and t1 > t0:
+            return (v1 - v0) / (t1 - t0)
+    return 0.0
 
 
 class DeviceClock:

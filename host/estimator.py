@@ -86,7 +86,7 @@ class Tuning:
     altitude_m: float = key(0.0, "m", "site altitude (gravity and earth rate)", between(-1000, 10000))
     x_azimuth_deg: float = key(90.0, "deg", "azimuth of the area's +x, clockwise from north "
                                "(90: x east)", between(0, 360))
-    alignment_s: float = key(5.0, "s", "stationary period from the first IMU sample",
+    alignment_s: float = key(5.0, "s", "stationary period from the board's power-up",
                              positive(hi=3600))
     output_period_s: float = key(0.1, "s", "estimates at k times this", between(0.001, 60))
     range_sigma_m: float = key(0.4, "m", "one exchange's distance, 1 sigma", positive(hi=100))
@@ -251,6 +251,8 @@ class Estimator:
         if not (math.isfinite(t_s) and all(map(math.isfinite, gyro)) and all(map(math.isfinite, accel))):
             self.input_rejections["imu_implausible"] += 1
             return []
+        if rec.uptime_s is not None and self._t_imu_first is None:  # even on a stale sample
+            self._t_imu_first = self._power_up(t_s, rec.uptime_s)
         if not rec.nd_ok:  # a repeated register read: the next sample covers the interval
             self.input_rejections["imu_stale"] += 1
             return []
@@ -327,10 +329,16 @@ class Estimator:
             self.alignment = Alignment()
             self.sins = None
             self.t_aligned = self._last_sample = None
-            self._t_imu_first = t_s - rec.uptime_s if 0.0 <= rec.uptime_s < self.cfg.alignment_s else None
+            self._t_imu_first = self._power_up(t_s, rec.uptime_s)
             self.origin, self._origin_since = tuple(self.cfg.start), t_s
             self._origin_fixes = (np.zeros(2), 0)
         return self._end(t_s, out)
+
+    def _power_up(self, t_s: float, uptime_s: float) -> float | None:
+        """When the board that has been up *uptime_s* at t_s powered up, if that is within
+        the alignment (the vehicle stands still from then): the alignment counts from there.
+        None: it is over (or the counter wrapped), the alignment counts from the next sample."""
+        return t_s - uptime_s if 0.0 <= uptime_s < self.cfg.alignment_s else None
 
     def _imu_gap(self, t_s: float) -> None:
         """Samples were lost before t_s (a link fade, a pulled cable): up to ``imu_gap_s``

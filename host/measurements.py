@@ -6,7 +6,9 @@ them; ``t`` is the host time base, seconds):
 
 ===========  ===========================================================================
 ImuSample    one SINS sample: gyro (rad/s) and accel (m/s^2) in body axes (x forward,
-             y left, z up); ``nd_ok`` False: the registers were not updated (a repeat)
+             y left, z up); ``nd_ok`` False: the registers were not updated (a repeat);
+             ``uptime_s`` on the first sample the host sees: how long the board has been
+             up (its sample counter; a host that starts late sees it late)
 Exchange     one ranging report of the anchors' gateway: ``distance`` (m) None when the
              exchange did not complete; rssi (dBm) and status as reported
 Restart      a device's clock began a new epoch (``device``: "imu" or "anchors");
@@ -43,6 +45,7 @@ class ImuSample:
     gyro: Any  # 3 rad/s
     accel: Any  # 3 m/s^2
     nd_ok: bool = True
+    uptime_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

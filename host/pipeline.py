@@ -22,7 +22,8 @@ aligned to arrival times online, never stepping back). A sample counter seen on 
 that begins a new epoch (its device restarted) is passed on as a ``Restart(t, "imu" |
 "anchors")`` record (host.measurements) in time order: just before the first sample, or
 range, of the epoch (for the IMU with the board's uptime, its counter x 10 ms: it counts
-from power-up).
+from power-up). The first SINS sample of the run carries that uptime too (``uptime_s``): a
+host that started late aligns on what is left of the stationary start.
 
 Time order, with bounded latency (docs/host.md), for each vehicle. Let T be its filter
 time: the latest measurement time given to its estimator. Every measurement is given with
@@ -32,18 +33,20 @@ its own time.
 * A range with t <= T is late: it is processed at once (the estimator applies it with its
   lag, or refuses it beyond its ``max_lag_s``); the pipeline counts it and its lateness.
 * A range with t > T is held until a SINS sample with time >= t is decoded (it is
-  processed just before that sample), or until a chunk arrives at or after t + ``hold_s``
-  on any port (the IMU stream stalled), or the input ends. Without a SINS input nothing is
-  held beyond the chunk that carried it.
+  processed just before that sample), or until a chunk arrives ``hold_s`` or more after the
+  range's own chunk did, on any port (the IMU stream stalled), or the input ends. Without a
+  SINS input nothing is held beyond the chunk that carried it.
 
 So SINS samples wait for nothing, ranges at most one SINS period in normal operation and
-``hold_s`` of arrival time when the IMU stream stalls.
+``hold_s`` of arrival time when the IMU stream stalls. The hold counts from the range's
+arrival, not its time: when the host itself stalls, every port's bytes arrive late
+together, and the SINS samples that come with the range still go after it.
 """
 from __future__ import annotations
 
 import heapq
 import math
-from collections import Counter
+from collections import Counter, deque
 from functools import partial
 from typing import Any, Callable
 
@@ -82,6 +85,7 @@ class Vehicle:
         self.imu_clock = DeviceClock(16, sins.PERIOD_S, strict=True)
         self.estimator = estimator
         self.held: list[tuple] = []  # heap of (t, n, Exchange | Restart)
+        self.arrived: deque[tuple[float, float]] = deque()  # (arrival, t) of each held record
         self.t = -math.inf  # filter time: the latest measurement time given to the estimator
         self.estimates: Counter = Counter()
 
@@ -158,7 +162,10 @@ class Pipeline:
                 self._query(command)
             self._next_db = a + self._db_period
         for v in self.vehicles:
-            self._release(v, a - self._hold, out)
+            until = -math.inf
+            while v.arrived and v.arrived[0][0] <= a - self._hold:
+                until = max(until, v.arrived.popleft()[1])
+            self._release(v, until, out)
         return out
 
     def finish(self) -> list:
@@ -251,7 +258,7 @@ class Pipeline:
         if v is None:
             self.counts["imu_other_router"] += 1
             return
-        restarts = v.imu_clock.restarts
+        restarts, first = v.imu_clock.restarts, v.imu_clock.counter.last is None
         t = v.imu_clock.time(ev.fields["seq"], a)
         if t is None:
             return
@@ -265,7 +272,10 @@ class Pipeline:
         if v.imu_clock.restarts != restarts:  # the board restarted: so did its strapdown;
             # it counts its samples from power-up, so this one says how long it has been up
             self._give(v, Restart(t, "imu", ev.fields["seq"] * sins.PERIOD_S), out)
-        self._give(v, ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok), out)
+        # the board counts its samples from power-up: the first one says how long it has
+        # been up (a host that started late, under load, missed part of its alignment)
+        uptime = ev.fields["seq"] * sins.PERIOD_S if first else None
+        self._give(v, ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok, uptime), out)
 
     def _vehicle_of(self, source: int | None) -> Vehicle | None:
         """The vehicle of a SINS sample from radio *source* (None: the direct line)."""
@@ -312,6 +322,7 @@ class Pipeline:
         or apply it now."""
         if record.t > v.t:
             heapq.heappush(v.held, (record.t, self._n, record))
+            v.arrived.append((self._arrival, record.t))
             self._n += 1
         else:
             self._apply_range(v, record, out)

@@ -138,3 +138,19 @@ def test_device_clock_gives_older_exchange_its_own_time():
     t_old = c.time(1_020_000, 0.041)  # reported late, happened before the previous one
     assert t_old < t2 and t_old == pytest.approx(t1 + 0.020, abs=1e-9)
     assert math.isfinite(t_old)
+
+
+def test_a_host_stall_and_its_slow_catch_up_leave_the_alignment():
+    # 3 s without a read from 8 s, then the backlog read at twice the line's pace: over 1 s
+    # late for 4 s of reads, and whole blocks' minima seconds high
+    dev, arr = _arrivals(2500, 0.01, 20e-6, 1.0, seed=3)
+    late = np.maximum(arr, np.where(arr >= 9.0, 9.0 + 3.0 + (arr - 9.0) * 0.5, arr))
+    clean, stalled = ClockAligner(), ClockAligner()
+    worst = 0.0
+    for d, a, b in zip(dev, arr, late):
+        clean.add(d, a)
+        stalled.add(d, b)
+        worst = max(worst, abs(stalled.to_host(d) - clean.to_host(d)))
+    assert stalled.resets == 0
+    assert stalled.rate == pytest.approx(20e-6, abs=5e-6)
+    assert worst < 1e-4  # s: the same host times, to the envelope's own noise
