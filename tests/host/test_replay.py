@@ -132,7 +132,14 @@ def _broken_copy(host_recording, tmp_path, unknown_filter=False, untimed=slice(0
         meta["host"]["filters"].append("nope")
         (d / "recording.json").write_text(json.dumps(meta))
     head, *lines = (d / "xbee.csv").read_text().splitlines()
-    lines[untimed] = [line.rpartition(",")[0] + "," for line in lines[untimed]]
+    col = head.split(",").index("t_wall_ns")
+
+    def untime(line: str) -> str:
+        cells = line.split(",")
+        cells[col] = ""
+        return ",".join(cells)
+
+    lines[untimed] = [untime(line) for line in lines[untimed]]
     (d / "xbee.csv").write_text("\n".join([head, *lines]) + "\n")
     return d
 
