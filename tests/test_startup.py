@@ -89,3 +89,27 @@ cli._emit = emit
 from navtwin.cli.main import main
 main(["emulate", "--scenario", "office", "--quiet", "--link-dir", sys.argv[1]])
 """
+
+
+def test_entry_points_are_read_once_per_process():
+    """Each registry asks for its group (commands, fault kinds, tracks); importlib.metadata
+    reads every installed package whichever group is asked, so one read serves them all."""
+    done = subprocess.run([sys.executable, "-c", COUNT_READS], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout) == 1
+
+
+#: the process reads for the commands, the fault kinds and the tracks (twice)
+COUNT_READS = """
+import importlib.metadata, json
+reads = []
+real = importlib.metadata.entry_points
+importlib.metadata.entry_points = lambda **select: reads.append(select) or real(**select)
+from navtwin.cli.main import build_parser
+build_parser()
+import navtwin.emulator.faults
+from navtwin.host import tracks
+tracks.names(), tracks.names()
+print(len(reads))
+"""
