@@ -8,14 +8,15 @@ from __future__ import annotations
 
 import json
 import sys
-from importlib.metadata import entry_points
+
+from navtwin.common.plugins import entry_points
 
 from .main import UsageError
 
 
 def available() -> dict:
     found = {}
-    for ep in sorted(entry_points(group="navtwin.benchmarks"), key=lambda e: e.name):
+    for ep in entry_points("navtwin.benchmarks"):
         found.update(ep.load()())
     return found
 

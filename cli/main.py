@@ -17,9 +17,9 @@ import signal
 import sys
 import threading
 from contextlib import contextmanager
-from importlib.metadata import entry_points
 
 from navtwin.common.limits import number_problem, span
+from navtwin.common.plugins import entry_points
 from navtwin.protocols import __version__
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.serial import BAUDS
@@ -116,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "positioning lab, and the lab computer's fusion service.")
     parser.add_argument("--version", action="version", version=f"navtwin {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    for ep in sorted(entry_points(group="navtwin.commands"), key=lambda e: e.name):
+    for ep in entry_points("navtwin.commands"):
         ep.load()(sub)
     return parser
 

@@ -1,2 +1,3 @@
 """What both sides share and neither owns: the declarative schema of TOML tables, the
-ranges of the lab's numbers and the earth's constants. Imports nothing of ours but :mod:`navtwin.protocols`."""
+ranges of the lab's numbers, the earth's constants and the installed packages' entry points.
+Imports nothing of ours but :mod:`navtwin.protocols`."""

@@ -27,6 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from navtwin.common.schema import Invalid
+from navtwin.emulator.fresnel import fresnel
 
 TWO_PI = 2.0 * math.pi
 
@@ -48,8 +49,6 @@ def _chord(psi0, k0, c, u):
         out[arc] = (np.exp(1j * (p + k * uu)) - np.exp(1j * p)) / (1j * k)
     spiral = c != 0
     if spiral.any():
-        from scipy.special import fresnel  # 0.3 CPU-s to import: only for clothoids
-
         p, k, cc, uu = psi0[spiral], k0[spiral], c[spiral], u[spiral]
         b = k / cc  # psi = psi0 - c b^2 / 2 + c (v + b)^2 / 2
         scale = np.sqrt(math.pi / np.abs(cc))

@@ -33,9 +33,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from importlib.metadata import entry_points
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_DURATION_S
+from navtwin.common.plugins import entry_points
 from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative, one_of
 from navtwin.protocols.ports import NAMES as PORT_NAMES
 
@@ -232,7 +232,7 @@ def unregister(kind: str) -> None:
 
 def load_entry_points() -> None:
     """Register the kinds that installed packages declare in the ``navtwin.faults`` group."""
-    for ep in entry_points(group=ENTRY_POINTS):
+    for ep in entry_points(ENTRY_POINTS):
         cls = ep.load()
         if getattr(cls, "KIND", None) != ep.name:
             raise FaultError(f"entry point {ep.name} = {ep.value} ({ENTRY_POINTS}) names a class "

@@ -14,7 +14,8 @@ Registered tracks follow the built-in ones in output order, in the order they we
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import entry_points
+
+from navtwin.common.plugins import entry_points
 
 from .base import Estimate, NoSettings, Track
 
@@ -58,7 +59,7 @@ def unregister(name: str) -> None:
 
 
 def _entry_points() -> dict:
-    return {ep.name: ep for ep in sorted(entry_points(group=GROUP), key=lambda ep: ep.name)
+    return {ep.name: ep for ep in entry_points(GROUP)
             if ep.name not in BUILT_IN and ep.name not in _registered}
 
 
