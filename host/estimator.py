@@ -422,7 +422,9 @@ class Estimator:
         """A closed TDMA cycle: the WSN fix (re-initialisations of the tracks waiting for
         one, the SINS origin after a restart, then the tracks that take fixes), and the
         TDOA product."""
-        fix = self.solver.fix(cycle.t, cycle.valid_anchors, cycle.distances)
+        # the previous fix tells TDOA mirror positions apart (three anchors: both fit exactly)
+        near = self.fixes[-1].p if self.fixes else None
+        fix = self.solver.fix(cycle.t, cycle.valid_anchors, cycle.distances, near)
         if isinstance(fix, str):
             refused = FixRefused(cycle.t, fix)
             for take in self._refused:

@@ -22,7 +22,10 @@ TDOA fix (000 eqs. 12-13, reference anchor 1)
     solved for p = u + w r_ref in least squares, and r_ref from the quadratic
     ``r_ref^2 = |u + w r_ref - a_ref|^2 + dz_ref^2``. (Chan-Ho's method needs more anchors:
     with four anchors in a rectangle its first stage is singular on the symmetry axes.)
-    Then Gauss-Newton weighted by R^-1, Jacobian rows (u_i - u_ref)^T.
+    Then Gauss-Newton weighted by R^-1, Jacobian rows (u_i - u_ref)^T. The quadratic's two
+    roots are mirror positions; with three anchors both fit exactly, so a misfit difference
+    below MIRROR_CHI2 does not choose: the plausible region does, then the previous fix
+    (``near``), else there is no fix (docs/filters.md, "Mirror positions").
 
 Outliers and plausibility
     The weighted residual sum of squares is chi-square with (equations - 2) degrees of
@@ -56,6 +59,13 @@ _I2 = np.eye(2)
 MIN_RANGES = 3  # TOA: 3 ranges for 2 unknowns; TDOA: 3 ranges give 2 differences
 GN_ITERATIONS = 20
 GN_TOLERANCE_M = 1e-6  # last step; Gauss-Newton converges quadratically from there
+# still stepping this far after GN_ITERATIONS: hopping about a singular minimum (TDOA ranges no
+# position fits), where the last iterate depends on the last bit of every product: no fix.
+# (Slow, linear convergence, large residuals against raised anchors, is down to ~1e-5 m by then.)
+GN_SETTLED_M = 1e-3
+# SX roots whose weighted misfits (chi-square, in sigma units) differ by less than this fit the
+# ranges alike (likelihoods within e^0.5): the ranges cannot choose, the geometry must (Solver)
+MIRROR_CHI2 = 1.0
 
 
 class AnchorLayout:
@@ -171,8 +181,12 @@ def _sx_geometry(layout: AnchorLayout, rows: tuple[int, ...], ref: int) -> tuple
     return np.linalg.pinv(2.0 * (a - a_ref)), k - k_ref
 
 
-def tdoa_closed_form(layout: AnchorLayout, idx: np.ndarray, d: np.ndarray, ref: int) -> np.ndarray:
-    """Spherical-intersection (SX) TDOA position; ``d`` = r_i - r_ref for rows idx != ref."""
+def tdoa_closed_form(layout: AnchorLayout, idx: np.ndarray, d: np.ndarray, ref: int,
+                     weight_sqrt: np.ndarray) -> list[np.ndarray]:
+    """Spherical-intersection (SX) TDOA positions; ``d`` = r_i - r_ref for rows idx != ref,
+    ``weight_sqrt`` their whitening. The quadratic's root that fits the differences best; both
+    (in root order, not misfit order) when their weighted misfits differ by less than
+    ``MIRROR_CHI2``: mirror solutions the ranges cannot tell apart, for the caller to resolve."""
     a_ref = layout.xy[ref]
     pinv, dk = _sx_geometry(layout, tuple(idx.tolist()), int(ref))
     u = pinv.dot(dk - d**2)
@@ -189,12 +203,17 @@ def tdoa_closed_form(layout: AnchorLayout, idx: np.ndarray, d: np.ndarray, ref: 
     roots = roots[roots >= 0.0] if np.any(roots >= 0.0) else np.array([0.0])
     candidates = [u + w * r0 for r0 in roots]
     if len(candidates) == 1:
-        return candidates[0]
+        return candidates
 
     def misfit(p):
-        return np.sum((layout.ranges(p[None], idx) - layout.ranges(p[None], np.array([ref])) - d) ** 2)
+        e = layout.ranges(p[None], idx) - layout.ranges(p[None], np.array([ref])) - d
+        e = weight_sqrt.dot(e)
+        return e.dot(e)
 
-    return min(candidates, key=misfit)
+    chi2 = [misfit(p) for p in candidates]
+    if abs(chi2[0] - chi2[1]) < MIRROR_CHI2:
+        return candidates
+    return [candidates[int(chi2[1] < chi2[0])]]
 
 
 def _gauss_newton(residual_jacobian, p0: np.ndarray, weight_sqrt: np.ndarray):
@@ -209,6 +228,9 @@ def _gauss_newton(residual_jacobian, p0: np.ndarray, weight_sqrt: np.ndarray):
             raise np.linalg.LinAlgError("Gauss-Newton diverged")
         if step.dot(step) < GN_TOLERANCE_M**2:
             break
+    else:
+        if step.dot(step) > GN_SETTLED_M**2:
+            raise np.linalg.LinAlgError("Gauss-Newton did not converge")
     e, J = residual_jacobian(p)
     ew, Jw = weight_sqrt.dot(e), weight_sqrt.dot(J)
     return p, solve(Jw.T.dot(Jw), _I2), float(ew.dot(ew))
@@ -223,8 +245,10 @@ def toa_fix(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray, sigma: float):
     return _gauss_newton(rj, toa_linear(layout, idx, r), np.eye(len(idx)) / sigma)
 
 
-def tdoa_fix(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray, sigma: float, ref_row: int):
-    """Gauss-Newton TDOA fix (differences to row ``ref_row`` of idx): (p, cov, chi2)."""
+def tdoa_fix(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray, sigma: float, ref_row: int,
+             resolve):
+    """Gauss-Newton TDOA fix (differences to row ``ref_row`` of idx): (p, cov, chi2).
+    ``resolve`` picks the start from mirror SX positions that fit alike."""
     others = np.array([k for k in range(len(idx)) if k != ref_row], dtype=np.intp)
     ref = idx[ref_row]
     d = r[others] - r[ref_row]
@@ -234,7 +258,8 @@ def tdoa_fix(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray, sigma: float,
         rho, J = layout.geometry(p, idx)
         return (rho.take(others) - rho[ref_row]) - d, J.take(others, 0) - J[ref_row]
 
-    return _gauss_newton(rj, tdoa_closed_form(layout, idx[others], d, ref), w_sqrt)
+    starts = tdoa_closed_form(layout, idx[others], d, ref, w_sqrt)
+    return _gauss_newton(rj, starts[0] if len(starts) == 1 else resolve(starts), w_sqrt)
 
 
 @dataclass(slots=True)
@@ -267,44 +292,61 @@ class Solver:
     def _dof(self, m: int) -> int:
         return m - 2 if self.method == "toa" else m - 3
 
-    def _solve(self, anchors: tuple[int, ...], r: np.ndarray):
+    def _solve(self, anchors: tuple[int, ...], r: np.ndarray, near: np.ndarray | None):
         idx = self.layout.index(anchors)
         if self.method == "toa":
             return toa_fix(self.layout, idx, r, self.sigma)
         ref_row = anchors.index(self.reference) if self.reference in anchors else 0
-        return tdoa_fix(self.layout, idx, r, self.sigma, ref_row)
+        return tdoa_fix(self.layout, idx, r, self.sigma, ref_row,
+                        lambda candidates: self._resolve(candidates, near))
+
+    def _resolve(self, candidates: list[np.ndarray], near: np.ndarray | None) -> np.ndarray:
+        """Of mirror positions that fit the ranges alike: the one in the plausible region,
+        else the one nearer ``near``; with neither to tell them apart, no fix."""
+        inside = [p for p in candidates if self._inside(p)]
+        if len(inside) < 2:
+            return (inside or candidates)[0]  # none inside: refused as "outside" anyway
+        if near is None:
+            raise np.linalg.LinAlgError("mirror positions fit alike")  # "geometry"
+        return min(inside, key=lambda p: float(np.hypot(*(p - near))))
 
     def _passes(self, m: int, rss: float) -> bool:
         dof = self._dof(m)
         return dof < 1 or rss <= chi2_gate(dof, self.gate_probability)
 
-    def fix(self, t: float, anchors: Sequence[int], ranges: Sequence[float]) -> Fix | str:
+    def fix(self, t: float, anchors: Sequence[int], ranges: Sequence[float],
+            near: Sequence[float] | None = None) -> Fix | str:
         """A :class:`Fix`, or why there is none: ``"too_few"`` ranges, ``"geometry"``
-        (singular or diverging, e.g. collinear anchors), ``"outside"`` the plausible region,
-        ``"residual"`` (inconsistent ranges and no consistent subset)."""
+        (singular, diverging or not settling, e.g. collinear anchors or ranges no position
+        fits, or TDOA mirror positions that fit alike, both plausible and no ``near``),
+        ``"outside"`` the plausible region, ``"residual"`` (inconsistent ranges and no
+        consistent subset). ``near``: where the tag was lately (the previous fix), to choose
+        between mirror positions."""
         order = sorted(range(len(anchors)), key=anchors.__getitem__)  # stable
         anchors = tuple(int(anchors[k]) for k in order)
         r = np.array([float(ranges[k]) for k in order])
+        near = None if near is None else np.asarray(near, float)
         m = len(anchors)
         if m < MIN_RANGES:
             return "too_few"
-        result = self._checked(t, anchors, r)
+        result = self._checked(t, anchors, r, near)
         if not isinstance(result, Fix) or self._passes(m, result.chi2):
             return result
         if self._dof(m - 1) < 2:
             return "residual"
         best = None
         for keep in combinations(range(m), m - 1):
-            sub = self._checked(t, tuple(anchors[k] for k in keep), r[list(keep)])
+            sub = self._checked(t, tuple(anchors[k] for k in keep), r[list(keep)], near)
             if isinstance(sub, Fix) and self._passes(m - 1, sub.chi2) and (best is None or sub.chi2 < best.chi2):
                 best = sub
         if best is None:
             return "residual"
         return Fix(t, best.p, best.cov, best.anchors, best.chi2, tuple(a for a in anchors if a not in best.anchors))
 
-    def _checked(self, t: float, anchors: tuple[int, ...], r: np.ndarray) -> Fix | str:
+    def _checked(self, t: float, anchors: tuple[int, ...], r: np.ndarray,
+                 near: np.ndarray | None) -> Fix | str:
         try:
-            p, cov, rss = self._solve(anchors, r)
+            p, cov, rss = self._solve(anchors, r, near)
         except np.linalg.LinAlgError:
             return "geometry"
         return Fix(t, p, cov, anchors, rss) if self._inside(p) else "outside"

@@ -169,7 +169,7 @@ OUTAGES = ((18.0, 23.0), (40.0, 45.0))
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2])
-def test_on_corridor_outage_lc_drifts_while_anchor_2_is_silent_and_tc_holds(seed):
+def test_on_corridor_outage_every_001_track_holds_while_anchor_2_is_silent(seed):
     from navtwin.emulator.scenario import load_scenario
     from navtwin.emulator.world import World
     from navtwin.lab.run import run_in_memory
@@ -183,8 +183,8 @@ def test_on_corridor_outage_lc_drifts_while_anchor_2_is_silent_and_tc_holds(seed
         if any(a <= e.t <= b for a, b in OUTAGES):
             err = math.hypot(e.x - np.interp(e.t, tt, truth["x"]), e.y - np.interp(e.t, tt, truth["y"]))
             worst[e.filter] = max(worst.get(e.filter, 0.0), err)
-    # lc has no fix for most of each window (three anchors left in a corridor: the WSN
-    # refuses them) and coasts on the strapdown; tc and fatci take the three ranges
-    assert worst["lc"] > 1.5, worst
+    # tc and fatci take the three ranges; lc the three anchors' TDOA fixes, their mirror
+    # positions told apart by the plausible region and the previous fix (001's LC had no fix
+    # and drifted to 1.49 m; ours drifted to 3 m when rounding chose the mirror)
     assert worst["tc"] < 1.0 and worst["fatci"] < 1.0, worst
-    assert worst["lc"] > 2 * max(worst["tc"], worst["fatci"]), worst
+    assert worst["lc"] < 1.5, worst

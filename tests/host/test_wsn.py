@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from navtwin.host.wsn import (AnchorLayout, CycleGrouper, Fix, Solver, tdoa_closed_form, tdoa_covariance, toa_linear)
+from navtwin.host.wsn import (AnchorLayout, CycleGrouper, Fix, Solver, tdoa_closed_form,
+                              tdoa_covariance, tdoa_whitening, toa_linear)
 
 from .navsynth import OFFICE_ANCHORS
 
@@ -38,7 +39,8 @@ def test_closed_forms_are_exact_on_exact_ranges(layout, p):
     r = exact_ranges(layout, p)
     idx = np.arange(4)
     np.testing.assert_allclose(toa_linear(layout, idx, r), p, atol=1e-9)
-    np.testing.assert_allclose(tdoa_closed_form(layout, idx[1:], r[1:] - r[0], 0), p, atol=1e-7)
+    (start,) = tdoa_closed_form(layout, idx[1:], r[1:] - r[0], 0, tdoa_whitening(0.3, 3))
+    np.testing.assert_allclose(start, p, atol=1e-7)
 
 
 @pytest.mark.parametrize("method", ["toa", "tdoa"])
@@ -118,3 +120,47 @@ def test_cycles_close_on_all_anchors_a_repeat_or_the_window():
     assert repeat.anchors == [1]
     (late,) = g.add(0.400, 2, 5.2)  # more than the window after the open cycle's start
     assert late.anchors == [1] and late.times == [0.2]
+
+
+# the corridor's anchors while anchor 2 is silent (corridor-outage): three, nearly in a line
+CORRIDOR = AnchorLayout({1: (1.5, 1.0), 3: (-12.0, 1.0), 4: (-19.5, -2.3)})
+
+
+def ulp_variants(r):
+    """The ranges with one of them moved by 1-3 ulps: the rounding noise another CPU's BLAS
+    kernels give."""
+    for j in range(len(r)):
+        for k in (-3, -2, -1, 1, 2, 3):
+            v = r.copy()
+            v[j] += k * np.spacing(v[j])
+            yield v
+
+
+def test_tdoa_mirror_positions_are_told_apart_by_geometry_not_by_rounding():
+    """Three anchors, two range differences, two unknowns: the tag's position and its mirror
+    both fit exactly, so their misfits differ by rounding noise only (the old choice by the
+    smaller misfit flipped with the BLAS kernel: corridor-outage's fixes differed by metres
+    on AVX-512). The plausible region decides; where both are in it, the previous fix."""
+    solver = Solver(CORRIDOR, 0.4, "tdoa")
+    p = np.array([-9.15, 0.21])  # mirror near (-9.8, 4.5), beyond the region
+    for r in ulp_variants(CORRIDOR.ranges(p[None], np.arange(3))):
+        fix = solver.fix(18.15, [1, 3, 4], r)
+        assert isinstance(fix, Fix)
+        np.testing.assert_allclose(fix.p, p, atol=1e-6)
+    p, mirror = np.array([-11.22, 0.0]), np.array([-11.83, 2.98])  # both in the region
+    for r in ulp_variants(CORRIDOR.ranges(p[None], np.arange(3))):
+        assert solver.fix(21.05, [1, 3, 4], r) == "geometry"  # nothing to tell them apart
+        near_tag = solver.fix(21.05, [1, 3, 4], r, near=(-11.1, 0.1))
+        np.testing.assert_allclose(near_tag.p, p, atol=1e-6)
+        near_mirror = solver.fix(21.05, [1, 3, 4], r, near=(-11.7, 2.8))
+        np.testing.assert_allclose(near_mirror.p, mirror, atol=0.01)
+
+
+def test_tdoa_ranges_no_position_fits_give_no_fix_whatever_the_rounding():
+    """corridor-outage seed 3 at 19.25 s: the three ranges' hyperbolae do not meet, so
+    Gauss-Newton hops about the singular closest approach for all its iterations and its
+    last iterate (the old fix) depended on the last bit of every product."""
+    solver = Solver(CORRIDOR, 0.4, "tdoa")
+    r = np.array([11.434323780532718, 2.1468722851764577, 10.361092130207716])
+    fixes = [solver.fix(19.25, [1, 3, 4], v) for v in [r, *ulp_variants(r)]]
+    assert {f if isinstance(f, str) else tuple(f.p.round(6)) for f in fixes} == {"geometry"}
