@@ -15,8 +15,10 @@ says how many). Other keys are the kind's details (a flipped ``mask``, a ``held_
 Line faults add entries through their line (emulator.uart); a device fault marks the items
 it changed (emulator.uart.Marked: an anchor's timed-out or biased report, the board's first
 frame after a reset, the coordinator's power-up frame), and the line adds an entry over the
-bytes each became. The Emulation writes each entry into its recording's
-``faults.jsonl`` (protocols.recording) and keeps per-kind totals for its summary.
+bytes each became. A line adds an entry once the bytes it names are delivered, so a
+stopped run's ledger names only bytes it recorded. The Emulation writes each entry into
+its recording's ``faults.jsonl`` (protocols.recording) and keeps per-kind totals for its
+summary.
 """
 from __future__ import annotations
 

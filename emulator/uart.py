@@ -25,8 +25,10 @@ the bytes at t, as read.
 Ledger. A wrapper marks what it did with :meth:`LineWrapper.mark` (byte offsets within what
 it returned for the call); the line turns them into offsets in the port's stream (the
 bytes as delivered, i.e. as recorded in ``<port>.bin``) and adds them to its ledger
-(emulator.ledger). With several wrappers on one line, the last one's offsets are exact;
-an earlier one's are exact when the wrappers after it keep the length of what it returned.
+(emulator.ledger) once those bytes are delivered: a run that stops while they are on the
+line records neither them nor their entries. With several wrappers on one line, the last
+one's offsets are exact; an earlier one's are exact when the wrappers after it keep the
+length of what it returned.
 """
 from __future__ import annotations
 
@@ -181,11 +183,15 @@ class _Wrapped:
         for w in self.wrappers:
             if w.marks and size is not None and self.ledger is not None:
                 for m in w.marks:
-                    self.ledger.add(kind=w.kind, fault=w.fault_index, port=self.name,
-                                    direction=w.direction, **{
-                                        **m, "start": self.bytes + min(m["start"], size),
-                                        "end": self.bytes + min(m["end"], size)})
+                    self._enter({"kind": w.kind, "fault": w.fault_index, "port": self.name,
+                                 "direction": w.direction, **m,
+                                 "start": self.bytes + min(m["start"], size),
+                                 "end": self.bytes + min(m["end"], size)})
             w.marks.clear()
+
+    def _enter(self, entry: dict) -> None:
+        """Add a ledger entry of this stream."""
+        self.ledger.add(**entry)
 
 
 class Line(_Wrapped):
@@ -211,6 +217,8 @@ class Line(_Wrapped):
         self.free_ns = 0
         self.current: Chunk | None = None
         self.chunks = 0
+        self.delivered = 0  # bytes of the chunks delivered: the stream as recorded so far
+        self._held: list[dict] = []  # ledger entries naming bytes not delivered yet
         # device -> wrappers[0] -> ... -> wrappers[-1] -> line; .bytes: bytes sent so far
         super().__init__(name, wrappers, ledger)
 
@@ -279,6 +287,9 @@ class Line(_Wrapped):
                 out.append(cur)
                 self.current = None
                 self.queued -= len(cur.data)
+                self.delivered += len(cur.data)
+                if self._held:
+                    self._release()
             elif what == -2:
                 _, data, baud = self._pieces.popleft()
                 end = t + wire_ns(len(data), baud)
@@ -303,9 +314,9 @@ class Line(_Wrapped):
                 sent = self._launch(pieces, baud, end_ns)
                 if marks and sent and self.ledger is not None:
                     for m in marks:
-                        self.ledger.add(**{**m, "fault": self.ledger.index(m["fault"])},
-                                        port=self.name, direction="to_host", start=offset,
-                                        end=offset + sent)
+                        self._enter({**m, "fault": self.ledger.index(m["fault"]),
+                                     "port": self.name, "direction": "to_host",
+                                     "start": offset, "end": offset + sent})
 
     def _launch(self, pieces: list, baud: int, end_ns: int) -> int:
         """Queue the pieces of a chunk that will start before *end_ns* (each starts when
@@ -323,6 +334,20 @@ class Line(_Wrapped):
         if self.wrappers:
             self._settle(sent if sent or not pieces else None)
         return sent
+
+    def _enter(self, entry: dict) -> None:
+        """Add *entry* once the bytes it names are delivered: a run that stops while they
+        are on the line has neither them nor the entry in its recording."""
+        if entry["end"] <= self.delivered:
+            self.ledger.add(**entry)
+        else:
+            self._held.append(entry)
+
+    def _release(self) -> None:
+        """Add the held entries whose bytes are now delivered, in the order they came."""
+        held, self._held = self._held, []
+        for entry in held:
+            self._enter(entry)
 
     def busy(self) -> bool:
         return self.current is not None or bool(self._pieces)

@@ -39,9 +39,10 @@ happened (emulator.ledger describes an entry): ``kind`` (a string), ``fault`` (a
 "to_device" or null), ``t_ns`` (an integer), ``start`` and ``end`` (integers, 0 <= start <=
 end, or both null), any other keys the kind's details. An emulator recording always has the
 file, empty when no fault acted; a recording without it (older ones, the host's) has an
-empty ledger. It is flushed with the other files, after the ports' data: an entry is added
-when its chunk starts, so in a killed run's recording the last entries may name bytes past
-a port's recorded end; they are skipped, as is a partial last line.
+empty ledger. It is flushed with the other files, after the ports' data; the emulator adds
+an entry as its bytes are delivered, just before it buffers them, so in a killed run's
+recording the last entries may name bytes past a port's recorded end; they are skipped, as
+is a partial last line.
 
 Reading validates: the meta's shape, and each index against its data file (contiguous
 offsets from 0, sizes in (0, MAX_CHUNK], integer non-decreasing times). Data files are
@@ -648,8 +649,8 @@ class Recording:
                 if entry["port"] is not None and entry["end"] is not None \
                         and entry["direction"] != "to_device" \
                         and entry["end"] > self.sizes[entry["port"]]:
-                    # an entry names its chunk's bytes when the chunk starts: a killed run
-                    # has the entry and not yet the bytes
+                    # an entry is buffered just before its bytes: a killed run may have the
+                    # entry and not yet the bytes
                     self._tail(path, n, f"entries past the end of {entry['port']}.bin",
                                _lines(path) - n + 1)
                     break
