@@ -182,7 +182,7 @@ def _watch(lab, host, log: Path, d: Path, watch: Watch, stop: threading.Event) -
     """Until the scenario ends, the host exits or *stop* is set: the live state to *watch*."""
     status_log = Tail(log)
     live = LiveErrors(d / "emulator" / "truth.csv", d / "estimates.jsonl")
-    t0, host_t0, last = time.monotonic(), None, None
+    t0, host_t0, emu_t0, last = time.monotonic(), None, None, None
     while lab.running() and host.poll() is None and not stop.is_set():
         stop.wait(watch.tick_s)
         for line in status_log.lines():
@@ -197,9 +197,12 @@ def _watch(lab, host, log: Path, d: Path, watch: Watch, stop: threading.Event) -
             emu = lab.status()
         except (ControlError, OSError):  # it is ending
             emu = None
+        # kept from an earlier status: the tick after the run ended still scores the host,
+        # which on a starved machine may have sent its first status line only then
+        emu_t0 = (emu or {}).get("t0_monotonic_ns") or emu_t0
         offset = None
-        if host_t0 and emu and emu.get("t0_monotonic_ns"):
-            offset = (host_t0 - emu["t0_monotonic_ns"]) / 1e9  # scenario = host time + offset
+        if host_t0 and emu_t0:
+            offset = (host_t0 - emu_t0) / 1e9  # scenario = host time + offset
         watch.tick({"elapsed_s": time.monotonic() - t0, "emulator": emu, "host": last,
                     "tracks": live.update(offset)})
 

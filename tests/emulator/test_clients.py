@@ -80,12 +80,11 @@ def test_digi_xbee_open_role_data_and_transmit(lab):
     from digi.xbee.models.status import TransmitStatus
 
     dev = XBeeDevice(lab.ports["xbee"], 115200)
-    t = time.perf_counter()
+    # a client setting: digi-xbee's 4 s per AT round trip, which a starved box can exceed;
+    # how fast open() is (goal 1.5 s) is emulator_bench digi-open's to measure
+    dev.set_sync_ops_timeout(DEADLINE)
     dev.open()
-    opened_s = time.perf_counter() - t
     try:
-        print(f"digi-xbee open() took {opened_s * 1000:.0f} ms")
-        assert opened_s < 10  # goal 1.5 s; measured ~0.1 s (see emulator.bench)
         assert dev.get_role() == Role.COORDINATOR
         assert dev.get_protocol() == XBeeProtocol.ZIGBEE
         assert dev.operating_mode == OperatingMode.ESCAPED_API_MODE
@@ -127,6 +126,7 @@ def test_digi_xbee_reads_the_remote_router_as_an_s2b_router(lab):
     from digi.xbee.models.protocol import Role
 
     dev = XBeeDevice(lab.ports["xbee"], 115200)
+    dev.set_sync_ops_timeout(DEADLINE)  # digi-xbee's 4 s, which a starved box can exceed
     dev.open()
     answers = []  # (command, status) of every 0x97
 

@@ -4,6 +4,7 @@ import json
 import re
 import subprocess
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ from navtwin.host import tracks
 from navtwin.host.output import estimate_line
 from navtwin.lab import evaluate
 from navtwin.lab.live import LiveErrors, Tail
-from navtwin.lab.orchestrator import PHASES
+from navtwin.lab.orchestrator import PHASES, Watch, _watch
 from navtwin.lab.run import run_in_memory
 from navtwin.emulator.scenario import load_scenario
 
@@ -59,6 +60,49 @@ def test_live_errors_on_growing_files_equal_the_errors_after_the_run(tmp_path):
         g = got[name]
         assert g.n == err.size and g.max == err.max() and g.last == err[-1]
         assert g.mean == pytest.approx(err.mean(), rel=1e-12)
+
+
+def test_a_host_heard_only_after_the_run_ended_is_still_scored_live(tmp_path):
+    # a starved host may send its first status line once the emulator has gone: the tick
+    # then still shows each track's error (the clocks' offset known from an earlier status)
+    sc = load_scenario("office")
+    estimates, _ = run_in_memory(sc, 1, duration=4)
+    (tmp_path / "emulator").mkdir()
+    (tmp_path / "emulator" / "truth.csv").write_bytes(
+        HEADER + csv_rows(World(sc, 1).truth(0, 4 * 10**9)))
+    (tmp_path / "estimates.jsonl").write_text("".join(map(estimate_line, estimates)))
+    log, t0 = tmp_path / "host.log", 123 * 10**9
+
+    class Lab:  # a status while it runs, then gone (its control socket closed)
+        ticks = 0
+
+        def running(self):
+            return self.ticks < 2
+
+        def status(self):
+            self.ticks += 1
+            if self.ticks > 1:
+                raise OSError("the emulator has stopped")
+            return {"t0_monotonic_ns": t0, "virtual_s": 1.0}
+
+    class Host:
+        def poll(self):
+            return None
+
+    seen = []
+
+    class Seen(Watch):
+        tick_s = 0.01
+
+        def tick(self, state):
+            seen.append({**state, "tracks": dict(state["tracks"])})  # its dict grows
+            log.write_text(json.dumps({"status": {"t0_monotonic_ns": t0, "t_s": 4.0}}) + "\n")
+
+    log.write_text("")
+    _watch(Lab(), Host(), log, tmp_path, Seen(), threading.Event())
+    assert [s["emulator"] is None for s in seen] == [False, True]
+    assert not seen[0]["tracks"] and seen[1]["host"]
+    assert set(seen[1]["tracks"]) == {"sins", "wsn", "kf", "ekf", "ukf"}
 
 
 @pytest.mark.pty
