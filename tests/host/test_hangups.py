@@ -68,7 +68,9 @@ def test_twenty_emulator_restarts_under_a_running_host_all_recover(tmp_path):
                 assert svc.started.wait(NAVTWIN_S)
             counts = svc.pipeline.counts
             imu0, reports0 = counts["imu"], counts["reports"]
-            while counts["imu"] < imu0 + 50 or counts["reports"] < reports0 + 20:
+            # each run outlasts the clock's restart threshold (1 s of counts): a board reset
+            # sooner is within a stall's reach and cannot be told from one by its count alone
+            while counts["imu"] < imu0 + 150 or counts["reports"] < reports0 + 20:
                 assert time.monotonic() - ready < NAVTWIN_S and host.is_alive(), \
                     f"restart {n}: the host got no data from the new emulator"
                 time.sleep(0.02)
@@ -86,6 +88,6 @@ def test_twenty_emulator_restarts_under_a_running_host_all_recover(tmp_path):
     assert len(recovery) == RESTARTS
     clocks = result["vehicles"][0]["imu_clock"]
     assert clocks["restarts"] >= RESTARTS - 1  # a new epoch for every run after the first
-    print(f"\n{RESTARTS} restarts: emulator ready -> 50 IMU samples and 20 reports at the host "
+    print(f"\n{RESTARTS} restarts: emulator ready -> 150 IMU samples and 20 reports at the host "
           f"(s): median {np.median(recovery):.2f}, max {max(recovery):.2f}; "
           f"reconnects {result['reconnects']}")
