@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import sys
 
-from navtwin.common.plugins import entry_points
+from navtwin.protocols.plugins import entry_points
 
 from .main import UsageError
 

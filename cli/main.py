@@ -19,7 +19,7 @@ import threading
 from contextlib import contextmanager
 
 from navtwin.common.limits import number_problem, span
-from navtwin.common.plugins import entry_points
+from navtwin.protocols.plugins import entry_points
 from navtwin.protocols import __version__
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.serial import BAUDS

@@ -1,10 +1,10 @@
-"""common.plugins.Registry: the one way tracks, fault kinds, commands, benchmarks and ports are
+"""protocols.plugins.Registry: the one way tracks, fault kinds, commands, benchmarks and ports are
 found (built in, registered in process, entry points of installed packages)."""
 import sys
 
 import pytest
 
-from navtwin.common.plugins import Registry, entry_points
+from navtwin.protocols.plugins import Registry, entry_points
 
 
 def _check(name, obj):

@@ -35,7 +35,7 @@ import math
 from dataclasses import dataclass
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_DURATION_S
-from navtwin.common.plugins import entry_points
+from navtwin.protocols.plugins import entry_points
 from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative, one_of
 from navtwin.protocols.ports import NAMES as PORT_NAMES
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import importlib
 
-from navtwin.common.plugins import entry_points
+from navtwin.protocols.plugins import entry_points
 
 from .base import Estimate, NoSettings, Track
 

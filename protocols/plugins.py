@@ -1,5 +1,9 @@
 """Registries of named plug-ins, and the entry points of installed packages, read once.
 
+Here, in the bottom layer (it imports nothing of ours), so that every layer can declare and
+find plug-ins: the wire formats and ports here, the devices and fault kinds of the emulator,
+the host's tracks, the command line's commands and benchmarks.
+
 A :class:`Registry` holds one kind of plug-in (fusion tracks, fault kinds, commands,
 benchmarks, ports): the built-in ones, named by ``"module:attribute"`` and imported when first
 asked for (start-up imports only what it uses); those added in process with
