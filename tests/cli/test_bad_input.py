@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GOLDEN = str(ROOT / "fixtures" / "golden" / "office")  # a recording replay reads
 OFFICE_CONFIG = (ROOT / "host" / "configs" / "office.toml").read_text()
 

@@ -12,7 +12,7 @@ import pytest
 
 from navtwin.protocols import recording, sins, xbee
 
-from .vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP
+from ..protocols.vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP
 
 NAVTWIN = [sys.executable, "-m", "navtwin"]
 

@@ -17,7 +17,7 @@ import pytest
 from navtwin.cli.main import main
 from navtwin.protocols.recording import Recording
 from ..fs_helpers import fsize_limit
-from . import lab_bytes
+from ..lab import lab_bytes
 
 NAVTWIN = [sys.executable, "-m", "navtwin"]
 DEADLINE_S = 60.0

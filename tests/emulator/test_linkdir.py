@@ -12,7 +12,7 @@ from navtwin.emulator.pty import LinkDir, LinkDirError
 from navtwin.protocols.ports import NAMES as PORTS
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
-from .test_cli import one_line_error
+from ..cli.test_emulate import one_line_error
 
 NAVTWIN = [sys.executable, "-m", "navtwin"]
 DEADLINE_S = 60.0

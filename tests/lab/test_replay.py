@@ -18,7 +18,7 @@ from navtwin.protocols.recording import Recording, RecordingWriter
 from navtwin.protocols.serial import wire_ns
 
 from . import lab_bytes
-from .fake_estimator import RecordingEstimator
+from ..host.fake_estimator import RecordingEstimator
 
 OFFICE = host_config.load("office")
 NAVTWIN = str(Path(sys.executable).with_name("navtwin"))

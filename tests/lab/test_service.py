@@ -24,7 +24,7 @@ from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import XBeeDecoder
 
 from . import lab_bytes
-from .fake_estimator import RecordingEstimator
+from ..host.fake_estimator import RecordingEstimator
 
 pytestmark = pytest.mark.pty
 

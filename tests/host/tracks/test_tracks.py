@@ -17,7 +17,7 @@ from navtwin.host.output import estimate_line
 from navtwin.host.replay import replay
 from navtwin.protocols.recording import Recording
 
-from . import lab_bytes
+from ...lab import lab_bytes
 
 OFFICE = host_config.load("office")
 
