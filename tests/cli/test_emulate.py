@@ -4,17 +4,12 @@ import os
 import select
 import signal
 import subprocess
-import sys
 
 import pytest
 
-NAVTWIN = [sys.executable, "-c", "import sys; from navtwin.cli.main import main; sys.exit(main())"]
+from ..helpers import NAVTWIN, navtwin
+
 DEADLINE = 60.0
-
-
-def navtwin(*args, timeout=DEADLINE):
-    return subprocess.run([*NAVTWIN, *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
 
 
 def one_line_error(result, *words):

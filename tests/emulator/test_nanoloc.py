@@ -9,6 +9,7 @@ import pytest
 from navtwin.emulator.scenario import load_scenario
 from navtwin.protocols.nanoloc import SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT
 
+from ..helpers import OFFICE_ANCHORS
 from ..protocols.vectors import NANOLOC_5M
 from .world_helpers import reports, run, true_distances, variant
 
@@ -85,7 +86,7 @@ ppm = {tag_ppm}
 [ranging]
 sigma0_m = {sigma}
 sigma_per_m = 0.0
-""" + anchors_toml([(1.3, 1.6), (10.8, 1.6), (10.8, 5.4), (1.3, 5.4)], ppm=anchor_ppm), name)
+""" + anchors_toml([(x, y) for x, y, _ in OFFICE_ANCHORS.values()], ppm=anchor_ppm), name)
 
 
 @pytest.mark.parametrize("anchor_ppm, tag_ppm", [(20.0, -20.0), (0.0, 0.0), (-15.0, 25.0)])

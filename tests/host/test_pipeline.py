@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from navtwin.host import config as host_config
-from .synthetic import ROUTER64, synthetic_chunks
 from navtwin.host.pipeline import DB_PERIOD_S, Pipeline
 from navtwin.protocols import adis16350, nanoloc, sins, xbee
 from navtwin.protocols.stream import XBeeDecoder
 
+from ..helpers import OFFICE
 from .fake_estimator import RecordingEstimator
+from .synthetic import ROUTER64, synthetic_chunks
 
-OFFICE = host_config.load("office")
 
 
 def run(chunks, **kw):

@@ -18,14 +18,12 @@ import math
 import numpy as np
 import pytest
 
+from navtwin.emulator import scenario, world
 from navtwin.host.estimator import Estimator, EstimatorConfig
 from navtwin.protocols import adis16350, nanoloc
 from navtwin.protocols.stream import nanoloc_decoder, sins_decoder
 
 from ..host.navsynth import record
-
-world = pytest.importorskip("navtwin.emulator.world")
-scenario = pytest.importorskip("navtwin.emulator.scenario")
 
 pytestmark = pytest.mark.slow
 

@@ -17,9 +17,9 @@ from navtwin.host.output import estimate_line
 from navtwin.host.replay import replay
 from navtwin.protocols.recording import Recording
 
+from ...helpers import OFFICE
 from ...lab import lab_bytes
 
-OFFICE = host_config.load("office")
 
 #: A toy track: the latest WSN fix, moved by its one setting along x.
 TOY = '''

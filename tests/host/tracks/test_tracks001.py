@@ -16,7 +16,8 @@ from navtwin.host.tracks.fatci import FatciSettings, FatciTrack
 from navtwin.host.tracks.lc import LcTrack
 from navtwin.host.tracks.tc import TcSettings
 
-from ..navsynth import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS, ellipse, exchanges, noisy_imu, perfect_imu
+from ...helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS
+from ..navsynth import ellipse, exchanges, noisy_imu, perfect_imu
 
 skfuzzy = pytest.importorskip("skfuzzy")
 
