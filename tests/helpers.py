@@ -40,6 +40,28 @@ def run_cli(capsys, *argv) -> tuple[int, str, str]:
     return code, out, err
 
 
+def _error_line(code: int, out: str, err: str, words) -> str:
+    """A user error as navtwin reports one: exit 2, nothing on stdout, one line on stderr
+    (holding *words*); that line."""
+    assert code == 2, err
+    assert out == "", out
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    for w in words:
+        assert w in lines[0], lines[0]
+    return lines[0]
+
+
+def one_line_error(result: subprocess.CompletedProcess, *words: str) -> str:
+    """The error line of a navtwin process that met a user error (:func:`_error_line`)."""
+    return _error_line(result.returncode, result.stdout, result.stderr, words)
+
+
+def cli_error(capsys, *argv) -> str:
+    """The error line of ``navtwin *argv`` run in this process (:func:`_error_line`)."""
+    return _error_line(*run_cli(capsys, *argv), ())
+
+
 #: The office lab of paper 000 as the host knows it.
 OFFICE = host_config.load("office")
 #: ``{anchor id: (x, y, z)}`` of the office survey, m.

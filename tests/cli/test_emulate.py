@@ -7,19 +7,9 @@ import subprocess
 
 import pytest
 
-from ..helpers import NAVTWIN, navtwin
+from ..helpers import NAVTWIN, navtwin, one_line_error
 
 DEADLINE = 60.0
-
-
-def one_line_error(result, *words):
-    assert result.returncode == 2, result
-    assert result.stdout == ""
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1, result.stderr
-    for w in words:
-        assert w in lines[0], lines[0]
-    return lines[0]
 
 
 def test_help_lists_the_options():

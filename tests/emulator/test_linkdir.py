@@ -10,8 +10,7 @@ from navtwin.emulator.pty import LinkDir, LinkDirError
 from navtwin.protocols.ports import NAMES as PORTS
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
-from ..cli.test_emulate import one_line_error
-from ..helpers import navtwin
+from ..helpers import navtwin, one_line_error
 
 
 def emulate(link_dir):

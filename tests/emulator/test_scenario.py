@@ -2,17 +2,14 @@
 round trip through to_toml, and the documentation table."""
 import math
 import tomllib
-from pathlib import Path
 
 import pytest
 
 from navtwin.emulator.scenario import (SCENARIO_NAMES, ScenarioError, load_scenario, parse_scenario,
                                schema_markdown)
 
-from ..helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS, OFFICE_START
+from ..helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS, OFFICE_START, ROOT
 from .world_helpers import variant
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_shipped_names():
