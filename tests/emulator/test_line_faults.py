@@ -24,7 +24,7 @@ from navtwin.protocols.recording import FAULTS, Recording, RecordingError
 from navtwin.protocols.serial import wire_ns
 
 from ..helpers import navtwin
-from .world_helpers import variant
+from .world_helpers import shipped_kinds, variant
 
 SEC = 1_000_000_000
 MS = 1_000_000
@@ -524,7 +524,7 @@ def test_every_kind_in_one_run_is_deterministic_and_its_recorded_ledger_matches(
     assert rec.faults() == b.ledger.entries  # the file holds what the run added
     kinds = {e["kind"] for e in b.ledger.entries}
     # every line kind, and the anchor outage on the reports it timed out
-    assert kinds == {k for k in Fault.KINDS if Fault.KINDS[k].ACTS_ON == "line"} | {"anchor_outage"}
+    assert kinds == {k for k in shipped_kinds() if Fault.KINDS[k].ACTS_ON == "line"} | {"anchor_outage"}
     assert {e["fault"] for e in b.ledger.entries} == set(range(0, 11))  # 0: the outage
     totals = {}
     for e in b.ledger.entries:
