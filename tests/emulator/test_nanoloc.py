@@ -31,8 +31,9 @@ def anchors_toml(anchors, **extra):
 
 def test_noise_free_exchange_gives_the_wire_format_vector_taus(tmp_path):
     """wire-formats.md section 3: 5.000 m, 100 us replies, ideal clocks -> the vector's taus."""
-    sc = variant(tmp_path, "office", "duration_s = 1.0\n" + QUIET
-                 + anchors_toml([(1.0, 1.8), (10.8, 1.6), (10.8, 5.4), (1.3, 5.4)]))
+    # anchor 1 moved to 5.000 m from the tag's start (6.0, 1.8), the others where they are
+    others = [(x, y) for a, (x, y, _) in OFFICE_ANCHORS.items() if a != 1]
+    sc = variant(tmp_path, "office", "duration_s = 1.0\n" + QUIET + anchors_toml([(1.0, 1.8), *others]))
     _, events = run(sc)
     r = reports(events)
     first = np.flatnonzero(r["anchor"] == 1)[0]
