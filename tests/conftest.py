@@ -1,10 +1,10 @@
-"""Shared test helpers. Fixture files live in fixtures/ at the project root."""
+"""The tests' shared fixtures (their shared functions and constants: tests/helpers.py).
+Fixture files live in fixtures/ at the project root."""
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared"
+from .helpers import ROOT
 
 
 @pytest.fixture(scope="session")

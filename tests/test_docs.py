@@ -7,13 +7,13 @@ import re
 import shlex
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 from navtwin.cli.main import build_parser
 
-ROOT = Path(__file__).resolve().parents[1]
+from .helpers import ROOT
+
 DOCS = ("README.md", "docs/tutorial.md")
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.M | re.S)
 NOT_SHELL = {"python", "toml", "json", "text"}  # text: output only

@@ -11,15 +11,13 @@ import re
 import shlex
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-NAVTWIN = [sys.executable, "-m", "navtwin"]
-DEADLINE_S = 120.0
+from .helpers import DEADLINE_S, NAVTWIN, ROOT, navtwin
+
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.M | re.S)
 
 
@@ -68,11 +66,6 @@ def assert_shape(doc_line: str, line: str) -> dict:
     if "…" not in doc_line:
         assert set(value) == set(json.loads(doc_line)), (doc_line, line)
     return value
-
-
-def navtwin(*args: str, timeout: float = DEADLINE_S, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([*NAVTWIN, *args], capture_output=True, text=True, timeout=timeout,
-                          **kw)
 
 
 def read_until(stream, enough, what: str) -> list[str]:

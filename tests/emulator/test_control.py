@@ -8,7 +8,6 @@ import shutil
 import socket
 import stat
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -22,6 +21,8 @@ from navtwin.emulator.scenario import load_scenario
 from navtwin.protocols import nanoloc
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import nanoloc_decoder, sins_decoder
+
+from ..helpers import navtwin
 
 DEADLINE_S = 20.0
 
@@ -207,9 +208,7 @@ def test_a_live_anchor_outage_times_out_that_anchor_and_nothing_else(tmp_path):
 
 def test_navtwin_ctl_prints_replies_and_refuses_in_one_line(tmp_path):
     def ctl(*args):
-        return subprocess.run([sys.executable, "-m", "navtwin", "ctl", "--link-dir",
-                               str(tmp_path / "links"), *args], capture_output=True, text=True,
-                              timeout=60)
+        return navtwin("ctl", "--link-dir", tmp_path / "links", *args)
 
     r = ctl("status")
     assert r.returncode == 2 and "cannot connect" in r.stderr and len(r.stderr.splitlines()) == 1

@@ -2,8 +2,6 @@
 a client sends stops the lab, idle connections time out and a full house answers "busy"."""
 import json
 import socket
-import subprocess
-import sys
 import time
 
 import pytest
@@ -14,6 +12,8 @@ from navtwin.emulator.api import emulate
 from navtwin.emulator.control import MAX_CLIENTS, MAX_LINE, OPS, ControlServer
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import load_scenario
+
+from ..helpers import navtwin
 
 DEADLINE_S = 20.0
 
@@ -76,9 +76,7 @@ def test_every_malformed_request_is_answered_and_the_lab_runs_on(tmp_path):
 
 def test_a_full_house_answers_busy_and_navtwin_ctl_says_so(tmp_path):
     def ctl(*args):
-        return subprocess.run([sys.executable, "-m", "navtwin", "ctl", "--link-dir",
-                               str(tmp_path / "links"), *args], capture_output=True, text=True,
-                              timeout=120)
+        return navtwin("ctl", "--link-dir", tmp_path / "links", *args)
 
     with emulate("office", duration=70, link_dir=tmp_path / "links") as lab:
         clients = []

@@ -11,7 +11,7 @@ from navtwin.emulator.faults import Fault
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import ScenarioError, load_scenario, parse_scenario, with_faults
 
-from .world_helpers import variant
+from .world_helpers import shipped_kinds, variant
 
 SC = load_scenario("office")
 #: the schedule and the fault's target: set per kind below, not varied
@@ -47,7 +47,7 @@ def _runs(fault) -> None:
         emu.run()
 
 
-@pytest.mark.parametrize("kind", list(Fault.KINDS))
+@pytest.mark.parametrize("kind", shipped_kinds())
 def test_every_setting_that_passes_validation_runs(kind):
     cls = Fault.KINDS[kind]
     base = {"start_s": 0.5, "end_s": 2.5, **_target(cls)}

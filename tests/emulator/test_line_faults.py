@@ -7,8 +7,6 @@ from __future__ import annotations
 import difflib
 import json
 import math
-import subprocess
-import sys
 import threading
 
 import numpy as np
@@ -25,7 +23,8 @@ from navtwin.protocols.ports import NAMES as PORTS
 from navtwin.protocols.recording import FAULTS, Recording, RecordingError
 from navtwin.protocols.serial import wire_ns
 
-from .world_helpers import variant
+from ..helpers import navtwin
+from .world_helpers import shipped_kinds, variant
 
 SEC = 1_000_000_000
 MS = 1_000_000
@@ -525,7 +524,7 @@ def test_every_kind_in_one_run_is_deterministic_and_its_recorded_ledger_matches(
     assert rec.faults() == b.ledger.entries  # the file holds what the run added
     kinds = {e["kind"] for e in b.ledger.entries}
     # every line kind, and the anchor outage on the reports it timed out
-    assert kinds == {k for k in Fault.KINDS if Fault.KINDS[k].ACTS_ON == "line"} | {"anchor_outage"}
+    assert kinds == {k for k in shipped_kinds() if Fault.KINDS[k].ACTS_ON == "line"} | {"anchor_outage"}
     assert {e["fault"] for e in b.ledger.entries} == set(range(0, 11))  # 0: the outage
     totals = {}
     for e in b.ledger.entries:
@@ -638,16 +637,11 @@ def test_the_ledger_reader_refuses_damage_and_skips_a_crash_tail(tmp_path):
 
 
 # -- the command line ------------------------------------------------------------------------------
-NAVTWIN = [sys.executable, "-c", "import sys; from navtwin.cli.main import main; sys.exit(main())"]
-
-
 def test_fault_options_add_to_the_scenario_and_bad_ones_get_one_line(tmp_path):
-    out = subprocess.run(
-        [*NAVTWIN, "emulate", "--scenario", "office", "--speed", "max", "--duration", "1",
-         "--quiet", "--link-dir", tmp_path / "l", "--record", tmp_path / "r",
-         "--fault", "byte_drop:port=sins,probability=0.01,start_s=0,end_s=5",
-         "--fault", "stuck:port=xbee,direction=to_device,start_s=0.5,end_s=0.6,repeat_s=0.2"],
-        capture_output=True, text=True, timeout=120)
+    out = navtwin("emulate", "--scenario", "office", "--speed", "max", "--duration", "1",
+                  "--quiet", "--link-dir", tmp_path / "l", "--record", tmp_path / "r",
+                  "--fault", "byte_drop:port=sins,probability=0.01,start_s=0,end_s=5",
+                  "--fault", "stuck:port=xbee,direction=to_device,start_s=0.5,end_s=0.6,repeat_s=0.2")
     assert out.returncode == 0, out.stderr
     done = json.loads(out.stdout.splitlines()[-1])
     rec = Recording(tmp_path / "r")
@@ -660,9 +654,8 @@ def test_fault_options_add_to_the_scenario_and_bad_ones_get_one_line(tmp_path):
                         ("latency:port=sins,start_s=0,end_s=1,delay=3", "did you mean 'delay_s'"),
                         ("slicing:port", "not key=value"),
                         ("bit_errors:port=sins,start_s=0,end_s=1,ber=2", "ber must be in (0, 1]")]:
-        bad = subprocess.run([*NAVTWIN, "emulate", "--scenario", "office", "--link-dir",
-                              tmp_path / "l2", "--fault", spec],
-                             capture_output=True, text=True, timeout=60)
+        bad = navtwin("emulate", "--scenario", "office", "--link-dir", tmp_path / "l2",
+                      "--fault", spec)
         assert bad.returncode == 2 and bad.stdout == ""
         (line,) = bad.stderr.strip().splitlines()
         assert "--fault" in line and words in line, line

@@ -2,8 +2,6 @@
 made; what it did not make is refused with one line and left alone; a dead run's links are
 gone while the lock is held; the host's test of "is the emulator alive"."""
 import os
-import subprocess
-import sys
 import threading
 
 import pytest
@@ -12,16 +10,12 @@ from navtwin.emulator.pty import LinkDir, LinkDirError
 from navtwin.protocols.ports import NAMES as PORTS
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
-from .test_cli import one_line_error
-
-NAVTWIN = [sys.executable, "-m", "navtwin"]
-DEADLINE_S = 60.0
+from ..helpers import navtwin, one_line_error
 
 
 def emulate(link_dir):
-    return subprocess.run([*NAVTWIN, "emulate", "--scenario", "office", "--speed", "max",
-                           "--duration", "0.2", "--quiet", "--link-dir", str(link_dir)],
-                          capture_output=True, text=True, timeout=DEADLINE_S)
+    return navtwin("emulate", "--scenario", "office", "--speed", "max", "--duration", "0.2",
+                   "--quiet", "--link-dir", link_dir)
 
 
 def private_dir(tmp_path):

@@ -9,6 +9,7 @@ import pytest
 from navtwin.emulator.scenario import load_scenario
 from navtwin.protocols.nanoloc import SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT
 
+from ..helpers import OFFICE_ANCHORS
 from ..protocols.vectors import NANOLOC_5M
 from .world_helpers import reports, run, true_distances, variant
 
@@ -30,8 +31,9 @@ def anchors_toml(anchors, **extra):
 
 def test_noise_free_exchange_gives_the_wire_format_vector_taus(tmp_path):
     """wire-formats.md section 3: 5.000 m, 100 us replies, ideal clocks -> the vector's taus."""
-    sc = variant(tmp_path, "office", "duration_s = 1.0\n" + QUIET
-                 + anchors_toml([(1.0, 1.8), (10.8, 1.6), (10.8, 5.4), (1.3, 5.4)]))
+    # anchor 1 moved to 5.000 m from the tag's start (6.0, 1.8), the others where they are
+    others = [(x, y) for a, (x, y, _) in OFFICE_ANCHORS.items() if a != 1]
+    sc = variant(tmp_path, "office", "duration_s = 1.0\n" + QUIET + anchors_toml([(1.0, 1.8), *others]))
     _, events = run(sc)
     r = reports(events)
     first = np.flatnonzero(r["anchor"] == 1)[0]
@@ -85,7 +87,7 @@ ppm = {tag_ppm}
 [ranging]
 sigma0_m = {sigma}
 sigma_per_m = 0.0
-""" + anchors_toml([(1.3, 1.6), (10.8, 1.6), (10.8, 5.4), (1.3, 5.4)], ppm=anchor_ppm), name)
+""" + anchors_toml([(x, y) for x, y, _ in OFFICE_ANCHORS.values()], ppm=anchor_ppm), name)
 
 
 @pytest.mark.parametrize("anchor_ppm, tag_ppm", [(20.0, -20.0), (0.0, 0.0), (-15.0, 25.0)])

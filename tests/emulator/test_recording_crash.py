@@ -3,7 +3,6 @@
 prefix; a write that fails ends the run with one line, exit 2 and a closed recording."""
 import json
 import subprocess
-import sys
 import time
 
 import pytest
@@ -15,8 +14,7 @@ from navtwin.cli.main import main
 from navtwin.protocols.ports import NAMES as PORTS
 from navtwin.protocols.recording import Recording
 from ..fs_helpers import fsize_limit
-
-NAVTWIN = [sys.executable, "-m", "navtwin"]
+from ..helpers import NAVTWIN
 DEADLINE_S = 120.0
 
 

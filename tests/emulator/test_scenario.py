@@ -2,16 +2,14 @@
 round trip through to_toml, and the documentation table."""
 import math
 import tomllib
-from pathlib import Path
 
 import pytest
 
 from navtwin.emulator.scenario import (SCENARIO_NAMES, ScenarioError, load_scenario, parse_scenario,
                                schema_markdown)
 
+from ..helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS, OFFICE_START, ROOT
 from .world_helpers import variant
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_shipped_names():
@@ -19,13 +17,14 @@ def test_shipped_names():
 
 
 def test_office_is_papers_lab():
-    """000 sect. 3.3: anchors, start, latitude, gravity (shared/specs/scenarios.md)."""
+    """000 sect. 3.3: anchors, start, latitude, gravity as the host's office config has them
+    (which tests/cli/test_host.py checks against shared/specs/scenarios.md)."""
     sc = load_scenario("office")
-    assert [(a.x, a.y) for a in sc.anchors] == [(1.3, 1.6), (10.8, 1.6), (10.8, 5.4), (1.3, 5.4)]
-    assert sc.trajectory.waypoints[0] == (6.0, 1.8)
+    assert [(a.x, a.y) for a in sc.anchors] == [(x, y) for x, y, _ in OFFICE_ANCHORS.values()]
+    assert sc.trajectory.waypoints[0] == OFFICE_START
     (x0, y0), (x1, y1) = sc.trajectory.waypoints[:2]
     assert math.atan2(y1 - y0, x1 - x0) == 0.0  # heading 0
-    assert sc.site.latitude_deg == 34.316 and sc.site.local_gravity == 9.7952
+    assert sc.site.latitude_deg == LATITUDE_DEG and sc.site.local_gravity == GRAVITY
     assert sc.area.size == (12.0, 7.0)
     assert sc.trajectory.alignment_s > 0 and 0.3 <= sc.trajectory.speed_m_s <= 0.5
 

@@ -9,11 +9,18 @@ from pathlib import Path
 
 import numpy as np
 
+from navtwin.emulator.faults import Fault
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.world import World
 from navtwin.protocols import adis16350 as adis
 from navtwin.protocols.nanoloc import SPEED_OF_LIGHT
 from navtwin.protocols.stream import Frame, nanoloc_decoder, sins_decoder
+
+
+def shipped_kinds() -> list[str]:
+    """The fault kinds navtwin ships, in registry order: a user's installed kinds are theirs
+    to test, and must not change what navtwin's own tests run."""
+    return [k for k, cls in Fault.KINDS.items() if cls.__module__.startswith("navtwin.")]
 
 
 def variant(tmp_path: Path, base: str, toml: str, name: str = "variant") -> object:

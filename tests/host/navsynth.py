@@ -13,10 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-OFFICE_ANCHORS = {1: (1.3, 1.6, 0.0), 2: (10.8, 1.6, 0.0), 3: (10.8, 5.4, 0.0), 4: (1.3, 5.4, 0.0)}
-OFFICE_START = (6.0, 1.8)
-LATITUDE_DEG = 34.316
-GRAVITY = 9.7952
+from ..helpers import GRAVITY, LATITUDE_DEG
+
 OMEGA_E = 7.2916e-5
 
 

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from navtwin.cli.main import main
 from navtwin.host import calibration as cal
 from navtwin.host import config as host_config
 from navtwin.host.config import ConfigError
@@ -15,7 +14,8 @@ from navtwin.host.estimator import Estimator
 from navtwin.host.measurements import Exchange
 from navtwin.protocols.nanoloc import SPEED_OF_LIGHT, STATUS_COMPLETE, build_report
 
-ANCHORS = {1: (1.5, 1.0, 0.0), 2: (-5.5, -2.3, 0.0), 3: (-12.0, 1.0, 0.0), 4: (-19.5, -2.3, 0.0)}
+from ..helpers import CORRIDOR_ANCHORS, run_cli
+
 REPLY = 100_000_000  # ps
 F, C = 1.05, {1: 0.25, 2: 0.18, 3: 0.30, 4: 0.22}
 
@@ -32,7 +32,7 @@ def gateway_stream(table, sigma, rng, scale=F, bias=C) -> bytes:
     out, seq = [], 0
     for step in table.steps:
         for k in range(table.exchanges):
-            for a, (x, y, z) in ANCHORS.items():
+            for a, (x, y, z) in CORRIDOR_ANCHORS.items():
                 d = math.dist((step.x, step.y), (x, y))
                 reported = scale * d + bias[a] + sigma(d) * rng.standard_normal()
                 x = round(2 * reported / SPEED_OF_LIGHT * 1e12)  # c (tau1 - tau2 + tau3 - tau4) / 4
@@ -50,10 +50,10 @@ def test_fit_recovers_f_c_and_sigma_of_a_known_law():
     table = walk()
     law = lambda d: 0.1 + 0.01 * d
     r = cal.ranges(gateway_stream(table, law, np.random.default_rng(3)))
-    result = cal.fit(r, table, ANCHORS)
+    result = cal.fit(r, table, CORRIDOR_ANCHORS)
     c = result.calibration
     assert abs(c.scale - F) < c.scale_ci95 and c.scale_ci95 < 0.01
-    for a in ANCHORS:
+    for a in CORRIDOR_ANCHORS:
         assert abs(c.bias[a] - C[a]) < c.bias_ci95[a], a
     d = np.linspace(1.0, 18.0, 20)
     assert np.allclose(c.sigma(d), law(d), rtol=0.1)
@@ -69,10 +69,11 @@ def test_fit_uses_only_the_windows_and_the_first_exchanges():
     data = gateway_stream(table, lambda d: 0.0, np.random.default_rng(1))
     moving = gateway_stream(dataclasses.replace(table, steps=tuple(
         dataclasses.replace(s, start_s=s.start_s + 5.0, end_s=s.end_s + 5.0) for s in table.steps)),
-        lambda d: 0.0, np.random.default_rng(1), scale=1.3, bias={a: 2.0 for a in ANCHORS})
-    c = cal.fit(cal.ranges(data + moving), dataclasses.replace(table, exchanges=5), ANCHORS).calibration
+        lambda d: 0.0, np.random.default_rng(1), scale=1.3, bias={a: 2.0 for a in CORRIDOR_ANCHORS})
+    c = cal.fit(cal.ranges(data + moving), dataclasses.replace(table, exchanges=5),
+                CORRIDOR_ANCHORS).calibration
     assert c.scale == pytest.approx(F, abs=1e-4)  # taus are whole picoseconds: 0.15 mm
-    assert all(c.bias[a] == pytest.approx(C[a], abs=1e-3) for a in ANCHORS)
+    assert all(c.bias[a] == pytest.approx(C[a], abs=1e-3) for a in CORRIDOR_ANCHORS)
 
 
 def test_file_round_trip_and_sigma_clamps_to_its_span(tmp_path):
@@ -108,29 +109,21 @@ def test_bad_calibration_file_is_one_line(tmp_path, text, problem):
     assert problem in str(e.value) and "\n" not in str(e.value) and str(path) in str(e.value)
 
 
-def run_cli(capsys, *argv):
-    try:
-        code = main(list(argv))
-    except SystemExit as e:
-        code = e.code
-    return code, capsys.readouterr()
-
-
 def test_host_with_a_bad_calibration_exits_2_with_one_line(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text("scale = 2\n")
-    code, (_, err) = run_cli(capsys, "host", "--nanoloc", "/dev/null", "--calibration", str(bad))
+    code, _, err = run_cli(capsys, "host", "--nanoloc", "/dev/null", "--calibration", str(bad))
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--calibration" in err
     assert "format is not" in err
-    code, (_, err) = run_cli(capsys, "host", "--nanoloc", "/dev/null", "--calibration",
-                             str(tmp_path / "none.toml"))
+    code, _, err = run_cli(capsys, "host", "--nanoloc", "/dev/null", "--calibration",
+                           str(tmp_path / "none.toml"))
     assert code == 2 and len(err.strip().splitlines()) == 1 and "cannot read" in err
 
 
 def test_calibrate_with_a_bad_step_table_exits_2_with_one_line(tmp_path, capsys):
     steps = tmp_path / "steps.toml"
     steps.write_text("[[steps]]\nx = 1.0\ny = 0.0\nstart_s = 5.0\nend_s = 4.0\n")
-    code, (_, err) = run_cli(capsys, "calibrate", str(tmp_path), "--steps", str(steps))
+    code, _, err = run_cli(capsys, "calibrate", str(tmp_path), "--steps", str(steps))
     assert code == 2 and len(err.strip().splitlines()) == 1 and "end_s" in err
 
 
@@ -167,13 +160,13 @@ def test_estimator_holds_the_calibration_and_corrects_as_range_scale_and_bias_do
     rng = np.random.default_rng(2)
     out_a, out_b = [], []
     for k in range(50):
-        for a, (x, y, _) in ANCHORS.items():
+        for a, (x, y, _) in CORRIDOR_ANCHORS.items():
             d = c.scale * math.dist((0.0, 0.0), (x, y)) + c.bias[a] + 0.05 * rng.standard_normal()
             rec = Exchange(0.1 * k + 0.025 * a, a, d)
             out_a += calibrated.feed(rec)
             out_b += by_hand.feed(rec)
     assert out_a and [(e.x, e.y) for e in out_a] == [(e.x, e.y) for e in out_b]
     uncorrected = Estimator(plain_cfg.estimator_config(("wsn",)))
-    out_c = [e for k in range(50) for a in ANCHORS for e in uncorrected.feed(Exchange(
-        0.1 * k + 0.025 * a, a, c.scale * math.dist((0.0, 0.0), ANCHORS[a][:2]) + c.bias[a]))]
+    out_c = [e for k in range(50) for a in CORRIDOR_ANCHORS for e in uncorrected.feed(Exchange(
+        0.1 * k + 0.025 * a, a, c.scale * math.dist((0.0, 0.0), CORRIDOR_ANCHORS[a][:2]) + c.bias[a]))]
     assert math.hypot(out_a[-1].x, out_a[-1].y) < 0.5 * math.hypot(out_c[-1].x, out_c[-1].y)

@@ -19,7 +19,8 @@ from navtwin.host.filters import (ACCELERATION, ConstantAcceleration, ExtendedKa
                           Ranges, UnscentedKalmanFilter, position_fix)
 from navtwin.host.wsn import AnchorLayout, tdoa_covariance
 
-from .navsynth import OFFICE_ANCHORS, ellipse
+from ..helpers import OFFICE_ANCHORS
+from .navsynth import ellipse
 
 ATOL = 1e-9
 MODEL = ConstantAcceleration(0.5)

@@ -12,7 +12,8 @@ from navtwin.host.estimator import Estimate, Estimator, EstimatorConfig
 from navtwin.host.measurements import Exchange, ImuSample, Restart
 from navtwin.host.tracks import DEFAULT
 
-from .navsynth import GRAVITY, OFFICE_ANCHORS, ellipse, exchanges, noisy_imu, perfect_imu, record
+from ..helpers import GRAVITY, OFFICE_ANCHORS
+from .navsynth import ellipse, exchanges, noisy_imu, perfect_imu, record
 
 FILTER_NAMES = DEFAULT
 

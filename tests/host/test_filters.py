@@ -11,7 +11,7 @@ from navtwin.host.filters import (ACCELERATION, ConstantAcceleration, ExtendedKa
 from navtwin.host.filters.linalg import inverse, solve
 from navtwin.host.wsn import AnchorLayout, tdoa_covariance
 
-from .navsynth import OFFICE_ANCHORS
+from ..helpers import OFFICE_ANCHORS
 
 LAYOUT = AnchorLayout({k: (x, y, 2.4) for k, (x, y, _) in OFFICE_ANCHORS.items()}, tag_height=0.3)
 MODEL = ConstantAcceleration(0.8)
@@ -57,7 +57,7 @@ def test_ranges_use_the_lagged_position_and_work_on_sigma_stacks():
     x = np.array([4.0, 2.5, 0.4, -0.2, 0.3, 0.1])
     lag = 0.06
     p = x[:2] - lag * x[2:4] + lag**2 / 2 * x[4:6]
-    ax, ay, az = 10.8, 5.4, 2.4
+    (ax, ay, _), az = OFFICE_ANCHORS[3], 2.4  # anchor 3 of LAYOUT
     expected = np.sqrt((p[0] - ax) ** 2 + (p[1] - ay) ** 2 + (0.3 - az) ** 2)
     assert Ranges(LAYOUT, (3,), (lag,)).h(x)[0] == pytest.approx(expected, rel=1e-14)
     meas = Ranges(LAYOUT, (2, 4, 1), (0.01, 0.02, 0.03), reference=4)

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from navtwin.host import config as host_config
-from .synthetic import ROUTER64, synthetic_chunks
-from navtwin.host.pipeline import DB_PERIOD_S, Pipeline
+from navtwin.host.pipeline import Pipeline
 from navtwin.protocols import adis16350, nanoloc, sins, xbee
 from navtwin.protocols.stream import XBeeDecoder
 
+from ..helpers import OFFICE
 from .fake_estimator import RecordingEstimator
+from .synthetic import ROUTER64, synthetic_chunks
 
-OFFICE = host_config.load("office")
 
 
 def run(chunks, **kw):
@@ -326,40 +326,3 @@ def test_another_clients_ap_set_answer_makes_the_host_ask_at_once():
     pipe.feed("xbee", _ap_answer(None), 1_000_000_000)  # "AP set OK", no value
     asked = XBeeDecoder(escaped=True).decode(pipe.take_tx())
     assert [f.fields["command"] for f in asked] == [b"DB", b"AP"]
-
-
-def test_a_second_clients_atap1_is_seen_by_an_api2_host():
-    """Issue 7 point 9, with the emulator's coordinator in memory: a second client sends ATAP1
-    at 3 s (and reads the OK itself); the host learns it from its own periodic AP query and
-    says so; the second client's ATAP2 at 12 s puts things right, and the host says that."""
-    from navtwin.emulator.runner import SEC, Emulation
-    from navtwin.emulator.scenario import load_scenario
-
-    emu = Emulation(load_scenario("office"), speed=None, ports=False, duration_s=20)
-    coord, line = emu.coordinator, emu.lines["xbee"]
-    second = {3 * SEC: xbee.build(0x08, True, frame_id=0x42, command=b"AP", parameter=b"\x01"),
-              12 * SEC: xbee.build(0x08, False, frame_id=0x43, command=b"AP", parameter=b"\x02")}
-    pipe = Pipeline(OFFICE, make_estimator=lambda _: RecordingEstimator(), inputs=("xbee",))
-    events, t, step = [], 0, 1_000_000
-    while t < emu.end_ns:
-        t += step
-        for ev in emu.world.advance(t):
-            emu._enqueue(ev)
-        for out in coord.host(t, second.pop(t, b"")):
-            line.put(out.t_ns, out.item)
-        for chunk in line.poll(t, t, emu.end_ns):
-            if chunk.data[4:5] in (b"\x42", b"\x43") and chunk.data[3] == 0x88:
-                continue  # the second client's answers: it reads them, not the host
-            pipe.feed("xbee", chunk.data, chunk.end_ns)
-            events += [(chunk.end_ns / SEC, e) for e in pipe.take_events()]
-            for out in coord.host(t, pipe.take_tx()):
-                line.put(out.t_ns, out.item)
-        for other in ("sins", "nanoloc"):
-            emu.lines[other].poll(t, t, emu.end_ns)
-    assert [(e["event"], e["coordinator_api"], e["host_api"]) for _, e in events] == \
-        [("api_mode_mismatch", 1, 2), ("api_mode_ok", 2, 2)]
-    (t_bad, bad), (t_ok, _) = events
-    assert 3 < t_bad < 3 + DB_PERIOD_S + 0.1 and 12 < t_ok < 12 + DB_PERIOD_S + 0.1
-    assert bad["message"] == ("coordinator switched to API 1; the host decodes API 2: restart "
-                              "the host with --api1 or send ATAP2")
-    assert pipe.counts["api_mode_mismatch"] >= 1 and pipe.counts["imu"] > 1500

@@ -15,7 +15,8 @@ from scipy.spatial.transform import Rotation
 from navtwin.host.sins import (Alignment, Strapdown, euler_from_quat, quat_from_euler, quat_from_rotvec,
                        quat_multiply, quat_to_dcm)
 
-from .navsynth import GRAVITY, LATITUDE_DEG, ellipse, noisy_imu, perfect_imu
+from ..helpers import GRAVITY, LATITUDE_DEG
+from .navsynth import ellipse, noisy_imu, perfect_imu
 
 DT = 0.01
 

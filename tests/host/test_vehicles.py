@@ -11,9 +11,9 @@ from navtwin.host.config import ConfigError, Vehicle
 from navtwin.host.output import estimate_line
 from navtwin.host.pipeline import Pipeline
 
+from ..helpers import OFFICE
 from .synthetic import ROUTER64, synthetic_chunks
 
-OFFICE = host_config.load("office")
 ROUTER2 = 0x0013A20040A1C0DE
 ONE = Vehicle(start=(6.0, 1.8), tag=0x10, router=f"{ROUTER64:016X}")
 TWO = Vehicle(start=(3.0, 4.0), tag=0x11, router=f"{ROUTER2:016X}")

@@ -9,12 +9,12 @@ import pytest
 from navtwin.host.wsn import (AnchorLayout, CycleGrouper, Fix, Solver, tdoa_closed_form,
                               tdoa_covariance, tdoa_whitening, toa_linear)
 
-from .navsynth import OFFICE_ANCHORS
+from ..helpers import CORRIDOR_ANCHORS, OFFICE_ANCHORS
 
 PLANAR = AnchorLayout(OFFICE_ANCHORS, tag_height=0.0)
 # anchors on the walls at 2.4 m, tag on the car at 0.3 m: 3-D ranges, 2-D position
-RAISED = AnchorLayout({1: (1.3, 1.6, 2.4), 2: (10.8, 1.6, 2.2), 3: (10.8, 5.4, 2.4), 4: (1.3, 5.4, 2.3)},
-                      tag_height=0.3)
+HEIGHTS = {1: 2.4, 2: 2.2, 3: 2.4, 4: 2.3}
+RAISED = AnchorLayout({k: (x, y, HEIGHTS[k]) for k, (x, y, _) in OFFICE_ANCHORS.items()}, tag_height=0.3)
 # inside, on the room's symmetry axes (where Chan-Ho is singular), near an anchor, outside the hull
 POINTS = [(6.05, 3.5), (6.05, 2.2), (3.0, 3.5), (2.0, 2.0), (9.5, 5.0), (11.5, 0.9)]
 
@@ -123,7 +123,7 @@ def test_cycles_close_on_all_anchors_a_repeat_or_the_window():
 
 
 # the corridor's anchors while anchor 2 is silent (corridor-outage): three, nearly in a line
-CORRIDOR = AnchorLayout({1: (1.5, 1.0), 3: (-12.0, 1.0), 4: (-19.5, -2.3)})
+CORRIDOR = AnchorLayout({k: CORRIDOR_ANCHORS[k] for k in (1, 3, 4)})
 
 
 def ulp_variants(r):

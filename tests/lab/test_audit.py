@@ -4,14 +4,14 @@ it."""
 import json
 import os
 import shutil
-import subprocess
-import sys
 
 import pytest
 
 from navtwin.lab import audit as audit_mod
 from navtwin.lab.orchestrator import Watch, run_lab
 from navtwin.protocols.stream import nanoloc_decoder
+
+from ..helpers import navtwin
 
 FAULTS = """base = "office"
 name = "faulty"
@@ -55,11 +55,6 @@ def run(tmp_path_factory):
     return d / "run"
 
 
-def _navtwin(*args):
-    return subprocess.run([sys.executable, "-m", "navtwin", *args], capture_output=True,
-                          text=True, timeout=120)
-
-
 def _copy(run, tmp_path):
     shutil.copytree(run / "emulator", tmp_path / "emulator")
     shutil.copytree(run / "host", tmp_path / "host")
@@ -75,7 +70,7 @@ def test_a_live_run_with_line_faults_passes(run):
     assert xb["injections"] > 0 and nl["injections"] > 0 and nl["timing_injections"] > 0
     assert xb["rejected_bytes"] > 0 and nl["rejected_bytes"] > 0
     assert xb["accepted"] == xb["intact"] > 100 and nl["accepted"] == nl["intact"] > 100
-    out = _navtwin("audit", str(run / "emulator"), str(run / "host"))
+    out = navtwin("audit", str(run / "emulator"), str(run / "host"))
     assert out.returncode == 0 and "PASS" in out.stdout and len(out.stdout.splitlines()) < 25
 
 
@@ -85,7 +80,7 @@ def test_a_ledger_that_misses_injections_fails(run, tmp_path):
     kept = [e for e in entries if e["kind"] != "byte_drop"]
     assert len(kept) < len(entries)
     (emu / "faults.jsonl").write_text("".join(json.dumps(e) + "\n" for e in kept))
-    out = _navtwin("audit", str(emu), str(host))
+    out = navtwin("audit", str(emu), str(host))
     assert out.returncode == 1, out.stdout
     assert "FAIL nanoloc: the host rejected" in out.stdout and "no injection touched" in out.stdout
 
@@ -129,7 +124,7 @@ def test_bad_input_is_one_line_and_exit_2(run, tmp_path):
     for args, want in [((str(run / "host"), str(run / "host")), "not an emulator recording"),
                        ((str(run / "emulator"), str(run / "emulator")), "an emulator recording"),
                        ((str(tmp_path / "none"), str(run / "host")), "")]:
-        out = _navtwin("audit", *args)
+        out = navtwin("audit", *args)
         assert out.returncode == 2 and len(out.stderr.splitlines()) == 1, out.stderr
         assert want in out.stderr and "Traceback" not in out.stderr
 
@@ -173,7 +168,7 @@ def test_a_read_deleted_from_the_host_recording_fails(run, tmp_path):
     _, rows = _index(host, "nanoloc")
     gone = len(rows) // 2
     _rewrite(host, "nanoloc", [i for i in range(len(rows)) if i != gone])
-    out = _navtwin("audit", str(emu), str(host))
+    out = navtwin("audit", str(emu), str(host))
     assert out.returncode == 1, out.stdout
     assert (f"FAIL nanoloc: {rows[gone][1]} bytes the host read are missing from its recording"
             f" (1 gaps; the first at byte {rows[gone][4]} of the port, before nanoloc.csv line "
@@ -202,7 +197,7 @@ def test_an_old_host_recording_passes_with_a_note(run, tmp_path):
     for index in host.glob("*.csv"):  # the index as navtwin before the read columns wrote it
         lines = index.read_text().splitlines()
         index.write_text("".join(",".join(x.split(",")[:4]) + "\n" for x in lines))
-    out = _navtwin("audit", str(emu), str(host))
+    out = navtwin("audit", str(emu), str(host))
     assert out.returncode == 0 and "PASS" in out.stdout, out.stdout
     notes = [x for x in out.stdout.splitlines() if x.startswith("NOTE ")]
     assert len(notes) == 1 and "wholeness is not proven" in notes[0], out.stdout
@@ -227,6 +222,6 @@ def test_a_host_read_without_its_read_columns_is_one_line_and_exit_2(run, tmp_pa
     header, *lines = (host / "xbee.csv").read_text().splitlines()
     lines[5] = ",".join(lines[5].split(",")[:4]) + ",,,"
     (host / "xbee.csv").write_text("\n".join([header, *lines]) + "\n")
-    out = _navtwin("audit", str(emu), str(host))
+    out = navtwin("audit", str(emu), str(host))
     assert out.returncode == 2 and len(out.stderr.splitlines()) == 1, out.stderr
     assert "xbee.csv: a read without its read columns" in out.stderr

@@ -2,8 +2,6 @@
 both sides write, equal to the after-the-run figures."""
 import json
 import re
-import subprocess
-import sys
 import threading
 
 import numpy as np
@@ -18,6 +16,8 @@ from navtwin.lab.live import LiveErrors, Tail
 from navtwin.lab.orchestrator import PHASES, Watch, _watch
 from navtwin.lab.run import run_in_memory
 from navtwin.emulator.scenario import load_scenario
+
+from ..helpers import navtwin
 
 
 def test_a_tail_yields_whole_lines_only_and_each_once(tmp_path):
@@ -109,10 +109,9 @@ def test_a_host_heard_only_after_the_run_ended_is_still_scored_live(tmp_path):
 @pytest.mark.slow
 def test_demo_runs_every_track_and_ends_with_the_table_and_the_run_directory(tmp_path):
     d = tmp_path / "run"
-    p = subprocess.run([sys.executable, "-m", "navtwin", "demo", "--duration", "8", "--dir",
-                        str(d)], capture_output=True, timeout=180)
-    assert p.returncode == 0, p.stderr.decode()[-2000:]
-    out, err = p.stdout.decode(), p.stderr.decode()
+    p = navtwin("demo", "--duration", "8", "--dir", d, timeout=180)
+    assert p.returncode == 0, p.stderr[-2000:]
+    out, err = p.stdout, p.stderr
     report = json.loads((d / "report.json").read_text())
     assert set(report["errors"]) == set(tracks.names())  # every track
     rows = {line.split()[0]: line.split()[1:] for line in out.splitlines() if line.strip()}

@@ -1,11 +1,11 @@
 """`navtwin lab`: the emulator and the host, two processes on PTYs, judged against truth.csv."""
 import json
-import subprocess
-import sys
 
 import pytest
 
 from navtwin.lab.report import fmt
+
+from ..helpers import navtwin
 
 pytestmark = [pytest.mark.pty, pytest.mark.slow]
 
@@ -13,10 +13,8 @@ pytestmark = [pytest.mark.pty, pytest.mark.slow]
 def test_lab_runs_and_reports_against_truth(tmp_path):
     d = tmp_path / "run"
     # a relative --dir, as users type it: the host (a process of its own) must find the links
-    p = subprocess.run([sys.executable, "-m", "navtwin", "lab", "--duration", "16",
-                        "--dir", "run", "--no-plot"], capture_output=True, timeout=180,
-                       cwd=tmp_path)
-    assert p.returncode == 0, p.stderr.decode()[-2000:]
+    p = navtwin("lab", "--duration", "16", "--dir", "run", "--no-plot", timeout=180, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr[-2000:]
     report = json.loads((d / "report.json").read_text())
     errors = report["errors"]
     assert set(errors) == {"sins", "wsn", "kf", "ekf", "ukf"}
@@ -27,12 +25,11 @@ def test_lab_runs_and_reports_against_truth(tmp_path):
     assert errors["wsn"]["mean"] < 1.5  # bounded: the emulated office is calibrated near 000's 0.64 m
     assert abs(report["time_offset_s"]) < 5  # both clocks are this machine's CLOCK_MONOTONIC
     # the host's own recording replays to its live lines
-    replayed = subprocess.run([sys.executable, "-m", "navtwin", "replay", str(d / "host")],
-                              capture_output=True, timeout=120)
-    assert replayed.stdout.decode() == (d / "estimates.jsonl").read_text()
-    assert "filter" in p.stdout.decode() and str(d) in p.stdout.decode()
+    replayed = navtwin("replay", d / "host")
+    assert replayed.stdout == (d / "estimates.jsonl").read_text()
+    assert "filter" in p.stdout and str(d) in p.stdout
     # while it ran: JSON lines with the host's status and every track's latest error
-    live = [json.loads(x) for x in p.stderr.decode().splitlines() if x.startswith("{")]
+    live = [json.loads(x) for x in p.stderr.splitlines() if x.startswith("{")]
     assert any(set(x.get("error_m", {})) == set(errors) for x in live)
     assert any("host" in x for x in live)
     assert [x["lab"] for x in live if "lab" in x] == ["starting", "running", "ended", "reporting"]
@@ -41,9 +38,8 @@ def test_lab_runs_and_reports_against_truth(tmp_path):
     inn = [json.loads(x) for x in (d / "innovations.jsonl").read_text().splitlines()]
     assert {r["filter"] for r in inn} == {"kf", "ekf", "ukf"}
     assert not (d / "report.html").exists()
-    made = subprocess.run([sys.executable, "-m", "navtwin", "report", str(d)],
-                          capture_output=True, timeout=120)
-    assert made.returncode == 0, made.stderr.decode()[-2000:]
+    made = navtwin("report", d)
+    assert made.returncode == 0, made.stderr[-2000:]
     md = (d / "report.md").read_text()
     for name, e in errors.items():
         assert fmt(e["mean"]) in md and fmt(e["max"]) in md, name
@@ -51,9 +47,6 @@ def test_lab_runs_and_reports_against_truth(tmp_path):
 
 
 def test_lab_reports_a_bad_scenario_in_one_line(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "navtwin", "lab", "--scenario", "nowhere",
-                        "--config", "office",
-                        "--dir", str(tmp_path / "r")], capture_output=True,
-                       timeout=120)
-    err = p.stderr.decode().strip()
+    p = navtwin("lab", "--scenario", "nowhere", "--config", "office", "--dir", tmp_path / "r")
+    err = p.stderr.strip()
     assert p.returncode == 2 and len(err.splitlines()) == 1 and "nowhere" in err

@@ -7,7 +7,6 @@ import os
 import re
 import shutil
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -18,6 +17,8 @@ from navtwin.host.output import estimate_line, innovation_line
 from navtwin.lab import evaluate
 from navtwin.lab.report import ROWS, cell, fmt, write_report
 from navtwin.lab.run import run_in_memory
+
+from ..helpers import navtwin
 
 pytest.importorskip("matplotlib")
 
@@ -153,8 +154,7 @@ def test_headless_chromium_screenshot_is_not_blank(report, tmp_path):
 
 
 def test_cli_bad_run_dir_is_one_line_and_exit_2(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "navtwin", "report", str(tmp_path)],
-                       capture_output=True, text=True, timeout=60)
+    p = navtwin("report", tmp_path)
     assert p.returncode == 2
     assert p.stdout == "" and len(p.stderr.strip().splitlines()) == 1
     assert "emulator/truth.csv" in p.stderr

@@ -14,6 +14,8 @@ from navtwin.cli.main import main
 from navtwin.emulator.scenario import load_scenario
 from navtwin.lab import evaluate, sweep
 
+from ..helpers import cli_error
+
 #: Short runs: 5 s of office is two seeds a task (MIN_TASK_VIRTUAL_S), so chunks are exercised.
 SHORT = 5.0
 
@@ -193,21 +195,13 @@ def test_corridor_markdown_has_001_table_1_in_its_layout_with_the_papers_figures
     assert "Table 1" not in sweep.markdown(sweep.summarise(rows, ("lc",)), "office")
 
 
-def _one_line_exit_2(capsys, argv: list[str]) -> str:
-    rc = main(argv)
-    captured = capsys.readouterr()
-    lines = captured.err.splitlines()
-    assert rc == 2 and captured.out == "" and len(lines) == 1, captured.err
-    return lines[0]
-
-
 def test_an_out_that_holds_anything_but_parts_is_refused(tmp_path, capsys):
     rec = tmp_path / "recording"  # e.g. an emulator's recording directory
     rec.mkdir()
     (rec / "recording.json").write_text("{}")
     (rec / "sins.bin").write_bytes(b"\xaa" * 10)
-    line = _one_line_exit_2(capsys, ["sweep", "--seeds", "1", "--filters", "kf", "--duration",
-                                     "2", "--serial", "--quiet", "--out", str(rec)])
+    line = cli_error(capsys, "sweep", "--seeds", "1", "--filters", "kf", "--duration", "2",
+                     "--serial", "--quiet", "--out", rec)
     assert f"--out {rec}: holds recording.json and 1 more" in line
     assert sorted(p.name for p in rec.iterdir()) == ["recording.json", "sins.bin"]
     assert (rec / "sins.bin").read_bytes() == b"\xaa" * 10
@@ -218,9 +212,8 @@ def test_a_results_file_that_cannot_be_written_is_refused_before_the_work(tmp_pa
     calls = _counting(monkeypatch)
     out = tmp_path / "o"
     for results in (tmp_path, tmp_path / "nowhere" / "results.md"):
-        line = _one_line_exit_2(capsys, ["sweep", "--seeds", "1", "--filters", "kf", "--duration",
-                                         "2", "--serial", "--quiet", "--out", str(out),
-                                         "--results", str(results)])
+        line = cli_error(capsys, "sweep", "--seeds", "1", "--filters", "kf", "--duration", "2",
+                         "--serial", "--quiet", "--out", out, "--results", results)
         assert f"--results {results}: " in line and "omit --results" in line
     assert calls == [] and not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == []

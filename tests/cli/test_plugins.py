@@ -5,8 +5,9 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
+
+from ..helpers import navtwin
 
 PLUGIN = '''
 from navtwin.cli.main import UsageError
@@ -42,28 +43,28 @@ labext = labext:benchmarks
 """
 
 
-def navtwin(tmp_path: Path, *argv: str) -> subprocess.CompletedProcess:
+def with_labext(tmp_path: Path, *argv: str) -> subprocess.CompletedProcess:
+    """``navtwin *argv`` with the user package labext installed (in *tmp_path*)."""
     (tmp_path / "labext.py").write_text(PLUGIN)
     info = tmp_path / "labext-1.0.dist-info"
     info.mkdir(exist_ok=True)
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: labext\nVersion: 1.0\n")
     (info / "entry_points.txt").write_text(ENTRY_POINTS)
     path = os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), str(tmp_path)) if p)
-    return subprocess.run([sys.executable, "-m", "navtwin", *argv], capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": path}, timeout=60)
+    return navtwin(*argv, env={**os.environ, "PYTHONPATH": path})
 
 
 def test_a_user_package_adds_a_subcommand(tmp_path):
-    assert "greet" in navtwin(tmp_path, "--help").stdout
-    p = navtwin(tmp_path, "greet", "3")
+    assert "greet" in with_labext(tmp_path, "--help").stdout
+    p = with_labext(tmp_path, "greet", "3")
     assert (p.returncode, p.stdout) == (0, "hello anchor 3\n")
-    p = navtwin(tmp_path, "greet", "0")
+    p = with_labext(tmp_path, "greet", "0")
     assert (p.returncode, p.stderr) == (2, "navtwin greet: error: anchor 0: anchors are "
                                             "numbered from 1\n")
 
 
 def test_a_user_package_adds_a_benchmark(tmp_path):
-    p = navtwin(tmp_path, "bench", "--list")
+    p = with_labext(tmp_path, "bench", "--list")
     assert "user-toy\tuser: a benchmark from outside navtwin" in p.stdout.splitlines()
-    p = navtwin(tmp_path, "bench", "user-toy", "--quick")
+    p = with_labext(tmp_path, "bench", "user-toy", "--quick")
     assert json.loads(p.stdout) == {"bench": "user-toy", "quick": True}

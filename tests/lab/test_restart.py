@@ -20,7 +20,6 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -28,16 +27,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from navtwin.emulator import runner, scenario
 from navtwin.host import replay as host_replay
 from navtwin.host.tracks import DEFAULT as FILTER_NAMES
 from navtwin.host.pipeline import Pipeline
+from navtwin.lab import evaluate
 from navtwin.protocols.recording import Recording
 
+from ..helpers import NAVTWIN
 from ..lines import Lines
-
-runner = pytest.importorskip("navtwin.emulator.runner")
-scenario = pytest.importorskip("navtwin.emulator.scenario")
-evaluate = pytest.importorskip("navtwin.lab.evaluate")
 
 RUN_S = 40.0
 RECOVER_S = 10.0  # after the restart: every track must be back by then
@@ -204,8 +202,8 @@ NAVTWIN_S = 120.0  # deadline of each wait
 
 
 def emulate(link_dir: Path, record_dir: Path | None, duration: float | None) -> tuple[subprocess.Popen, Lines]:
-    args = [sys.executable, "-m", "navtwin", "emulate", "--scenario", "office", "--speed",
-            "realtime", "--link-dir", str(link_dir)]
+    args = [*NAVTWIN, "emulate", "--scenario", "office", "--speed", "realtime", "--link-dir",
+            str(link_dir)]
     if record_dir is not None:
         args += ["--record", str(record_dir)]
     if duration is not None:

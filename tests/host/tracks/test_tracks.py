@@ -17,9 +17,9 @@ from navtwin.host.output import estimate_line
 from navtwin.host.replay import replay
 from navtwin.protocols.recording import Recording
 
-from . import lab_bytes
+from ...helpers import OFFICE
+from ..synthetic import synthetic_chunks
 
-OFFICE = host_config.load("office")
 
 #: A toy track: the latest WSN fix, moved by its one setting along x.
 TOY = '''
@@ -84,14 +84,14 @@ def registered(tmp_path, monkeypatch):
 
 
 def test_a_registered_track_runs_in_replay_with_its_own_config_section(registered, tmp_path):
-    assert tracks.names()[-1] == "toy" and tracks.get("toy") is registered
+    assert "toy" in tracks.names() and tracks.get("toy") is registered
     d = OFFICE.to_dict()
     config = host_config.from_dict({**d, "filters": {**d["filters"], "toy": {"offset_m": 1.5}}})
     assert config.settings["toy"].offset_m == 1.5
     filters = host_config.parse_filters("wsn,toy,kf")
     assert filters == ("wsn", "kf", "toy")  # registered tracks follow the built-in ones
     rec = write_host_recording(tmp_path / "rec", config, filters,
-                               lab_bytes.office(6.0, seed=3))
+                               synthetic_chunks(OFFICE, 6.0, seed=3))
     got = lines(rec)  # the recorded config, with its [filters.toy], read back
     assert got["toy"], "the toy track emitted nothing"
     wsn = {e["t"]: e for e in got["wsn"]}
@@ -120,7 +120,7 @@ def test_an_entry_point_track_runs_in_replay(tmp_path, monkeypatch):
     (dist / "entry_points.txt").write_text(f"[{tracks.GROUP}]\ntoy_ep = navtwin_toy_ep:Toy\n")
     assert "toy_ep" in tracks.names()
     rec = write_host_recording(tmp_path / "rec", OFFICE, ("kf",),
-                               lab_bytes.office(4.0, seed=5))
+                               synthetic_chunks(OFFICE, 4.0, seed=5))
     got = lines(rec, filters=host_config.parse_filters("kf,toy_ep"))
     assert set(got) == {"kf", "toy_ep"} and got["toy_ep"]
 

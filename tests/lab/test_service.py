@@ -14,7 +14,6 @@ import time
 
 import pytest
 
-from navtwin.host import config as host_config
 from navtwin.host.output import estimate_line
 from navtwin.host.replay import replay
 from navtwin.host.service import TX_PORT, Service
@@ -23,12 +22,12 @@ from navtwin.protocols import adis16350, sins
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import XBeeDecoder
 
+from ..helpers import OFFICE
+from ..host.fake_estimator import RecordingEstimator
 from . import lab_bytes
-from .fake_estimator import RecordingEstimator
 
 pytestmark = pytest.mark.pty
 
-OFFICE = host_config.load("office")
 DEADLINE_S = 60.0
 
 

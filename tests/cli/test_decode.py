@@ -4,7 +4,6 @@ import os
 import select
 import signal
 import subprocess
-import sys
 import threading
 import time
 
@@ -12,13 +11,13 @@ import pytest
 
 from navtwin.protocols import recording, sins, xbee
 
-from .vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP
+from ..helpers import NAVTWIN, navtwin
+from ..protocols.vectors import NANOLOC_5M, SINS_LEVEL, SINS_SEQ_WRAP
 
-NAVTWIN = [sys.executable, "-m", "navtwin"]
 
-
-def navtwin(*args, stdin=None):
-    p = subprocess.run([*NAVTWIN, *args], input=stdin, capture_output=True, timeout=60)
+def decoded(*args, stdin=None):
+    """``navtwin *args`` fed *stdin*: its exit code, its JSON lines, its stderr."""
+    p = navtwin(*args, input=stdin, text=False)
     lines = [json.loads(x) for x in p.stdout.decode().splitlines()]
     return p.returncode, lines, p.stderr.decode()
 
@@ -26,7 +25,7 @@ def navtwin(*args, stdin=None):
 def test_file_with_garbage(tmp_path):
     f = tmp_path / "s.bin"
     f.write_bytes(b"\x00\x01" + SINS_LEVEL + SINS_LEVEL[:-1] + b"\x00" + SINS_SEQ_WRAP)
-    rc, lines, _ = navtwin("decode", "--format", "sins", "--hex", str(f))
+    rc, lines, _ = decoded("decode", "--format", "sins", "--hex", str(f))
     assert rc == 0
     frames = [x for x in lines if "seq" in x]
     assert [x["seq"] for x in frames] == [1, 65535]
@@ -41,7 +40,7 @@ def test_file_with_garbage(tmp_path):
 
 
 def test_stdin_nanoloc():
-    rc, lines, _ = navtwin("decode", "--format", "nanoloc", "-", stdin=NANOLOC_5M * 2)
+    rc, lines, _ = decoded("decode", "--format", "nanoloc", "-", stdin=NANOLOC_5M * 2)
     assert rc == 0
     assert [x["distance_m"] for x in lines[:2]] == [pytest.approx(4.99994, abs=1e-5)] * 2
     assert lines[0]["complete"] is True and lines[-1]["summary"]["frames"] == 2
@@ -55,11 +54,11 @@ def test_recording_directory_xbee_sins(tmp_path):
             end = {0: 17, 17: 45, 45: 60}[cut]
             port.write(xbee.build(0x90, src64=0x0013A20040A1B2D4, src16=1, options=1,
                                   data=stream[cut:end]), t_device_ns=i * 10_000_000)
-    rc, lines, _ = navtwin("decode", "--format", "xbee-sins", str(tmp_path / "rec"))
+    rc, lines, _ = decoded("decode", "--format", "xbee-sins", str(tmp_path / "rec"))
     assert rc == 0
     assert [(x["seq"], x["source"]) for x in lines if "seq" in x] == \
            [(1, "0013A20040A1B2D4"), (65535, "0013A20040A1B2D4")]
-    rc, lines, _ = navtwin("decode", "--format", "xbee", "--api1", str(tmp_path / "rec"))
+    rc, lines, _ = decoded("decode", "--format", "xbee", "--api1", str(tmp_path / "rec"))
     assert rc == 0 and lines[-1]["summary"]["frames"] == 0  # API 2 bytes read as API 1: no frame
 
 
@@ -110,13 +109,13 @@ def test_live_serial_port_follow():
     (["bench", "nosuch"], "unknown benchmark"),
 ])
 def test_user_errors_are_one_line(args, needle, tmp_path):
-    rc, lines, err = navtwin(*args, stdin=b"")
+    rc, lines, err = decoded(*args, stdin=b"")
     assert rc == 2 and not lines
     assert len(err.strip().splitlines()) == 1 and needle in err
 
 
 def test_not_a_recording(tmp_path):
-    rc, _, err = navtwin("decode", "--format", "sins", str(tmp_path))
+    rc, _, err = decoded("decode", "--format", "sins", str(tmp_path))
     assert rc == 2 and "recording.json" in err and len(err.strip().splitlines()) == 1
 
 
@@ -131,7 +130,7 @@ def test_a_flood_of_7e_is_a_handful_of_lines_and_the_frames_after_it_decode(tmp_
     f = tmp_path / "flood.bin"
     frames = [build(k) for k in range(5)]
     f.write_bytes(b"\x7e" * 100_000 + b"".join(frames))
-    rc, lines, _ = navtwin("decode", "--format", fmt, api, str(f))
+    rc, lines, _ = decoded("decode", "--format", fmt, api, str(f))
     assert rc == 0 and len(lines) < 20
     got = [x for x in lines if "error" not in x and "summary" not in x]
     assert [x.get("status", x.get("seq")) for x in got] == list(range(5))
@@ -153,7 +152,7 @@ def test_decode_prints_each_value_to_the_sensors_resolution_and_the_api_keeps_it
                                       accel_g=(0.0, 3 * 2.522e-3, 1.0), temp_c=(25.1453, 25, 25))
     f = tmp_path / "s.bin"
     f.write_bytes(sins.build_sample(5, words))
-    rc, lines, _ = navtwin("decode", "--format", "sins", str(f))
+    rc, lines, _ = decoded("decode", "--format", "sins", str(f))
     assert rc == 0
     printed = json.dumps(lines[0], separators=(",", ":"))
     assert '"gyro_dps":[0.87912,-0.51282,0.0]' in printed
@@ -163,6 +162,6 @@ def test_decode_prints_each_value_to_the_sensors_resolution_and_the_api_keeps_it
     for key in ("gyro_rad_s", "accel_m_s2", "supply_v"):
         assert lines[0][key] == pytest.approx(exact[key], abs=1e-5)
     (tmp_path / "n.bin").write_bytes(NANOLOC_5M)
-    rc, lines, _ = navtwin("decode", "--format", "nanoloc", str(tmp_path / "n.bin"))
+    rc, lines, _ = decoded("decode", "--format", "nanoloc", str(tmp_path / "n.bin"))
     exact = next(decode(str(tmp_path / "n.bin"), "nanoloc"))["distance_m"]
     assert lines[0]["distance_m"] == round(exact, 5) != exact  # 1 ps is 0.07 mm

@@ -1,9 +1,6 @@
 """Replay: a host recording gives the pipeline's estimates exactly; emulator recordings
 get synthesised arrival times."""
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
@@ -17,11 +14,10 @@ from navtwin.protocols import sins
 from navtwin.protocols.recording import Recording, RecordingWriter
 from navtwin.protocols.serial import wire_ns
 
+from ..helpers import OFFICE, navtwin
+from ..host.fake_estimator import RecordingEstimator
 from . import lab_bytes
-from .fake_estimator import RecordingEstimator
 
-OFFICE = host_config.load("office")
-NAVTWIN = str(Path(sys.executable).with_name("navtwin"))
 
 
 def direct_lines(chunks_, filters=BUILT_IN, config=OFFICE) -> str:
@@ -54,15 +50,13 @@ def test_replay_of_a_host_recording_equals_the_pipeline_run(host_recording):
 def test_navtwin_replay_prints_the_same_bytes(host_recording, tmp_path):
     path, data = host_recording
     expected = direct_lines(data)
-    res = subprocess.run([NAVTWIN, "replay", str(path)],
-                         capture_output=True, timeout=120)
+    res = navtwin("replay", path)
     assert res.returncode == 0, res.stderr
-    assert res.stdout.decode() == expected
-    summary = json.loads(res.stderr.decode().strip().splitlines()[-1])["summary"]
+    assert res.stdout == expected
+    summary = json.loads(res.stderr.strip().splitlines()[-1])["summary"]
     assert summary["counts"]["imu"] == 800
     out = tmp_path / "est.jsonl"
-    res = subprocess.run([NAVTWIN, "replay", str(path), "--out",
-                          str(out), "--filters", "wsn,ukf"], capture_output=True, timeout=120)
+    res = navtwin("replay", path, "--out", out, "--filters", "wsn,ukf")
     assert res.returncode == 0, res.stderr
     assert {json.loads(x)["filter"] for x in out.read_text().splitlines()} == {"wsn", "ukf"}
 

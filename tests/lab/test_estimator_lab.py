@@ -8,7 +8,7 @@ scenario has no clock offsets). Truth comes from World.truth.
 
 The tables (mean / max horizontal error, m, over the whole run, beside 000's figures; and
 001's corridor, uncalibrated and with its range calibration):
-    .venv/bin/python -m pytest tests/host/test_estimator_lab.py -m slow -s
+    .venv/bin/python -m pytest tests/lab/test_estimator_lab.py -m slow -s
 """
 from __future__ import annotations
 
@@ -18,14 +18,12 @@ import math
 import numpy as np
 import pytest
 
+from navtwin.emulator import scenario, world
 from navtwin.host.estimator import Estimator, EstimatorConfig
 from navtwin.protocols import adis16350, nanoloc
 from navtwin.protocols.stream import nanoloc_decoder, sins_decoder
 
-from .navsynth import record
-
-world = pytest.importorskip("navtwin.emulator.world")
-scenario = pytest.importorskip("navtwin.emulator.scenario")
+from ..host.navsynth import record
 
 pytestmark = pytest.mark.slow
 

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from ..helpers import ROOT, navtwin
+
 GOLDEN = str(ROOT / "fixtures" / "golden" / "office")  # a recording replay reads
 OFFICE_CONFIG = (ROOT / "host" / "configs" / "office.toml").read_text()
 
@@ -281,10 +282,9 @@ def _env(cwd: Path) -> dict[str, str]:
     return {"TMPDIR": str(cwd / "tmp"), "XDG_RUNTIME_DIR": str(cwd / "run-user")}
 
 
-def navtwin(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "navtwin", *argv], cwd=cwd,
-                          env={**os.environ, **_env(cwd)}, stdin=subprocess.DEVNULL,
-                          capture_output=True, text=True, timeout=120)
+def navtwin_in(cwd: Path, argv: list[str]) -> subprocess.CompletedProcess:
+    """navtwin run in *cwd* with its temporary and runtime directories there."""
+    return navtwin(*argv, cwd=cwd, env={**os.environ, **_env(cwd)}, stdin=subprocess.DEVNULL)
 
 
 #: Runs each job {"argv", "cwd", "env", "out", "err"} of the JSON on stdin in a forked child
@@ -379,7 +379,7 @@ def test_a_one_tap_imu_filter_runs(tmp_path):
     """imu.filter_taps = 1 (SENS/AVG M = 0, no averaging) is a valid device setting: the
     emulator used to crash on it after validation passed."""
     prepare(tmp_path, {"s.toml": 'base = "office"\n[imu]\nfilter_taps = 1\n'})
-    result = navtwin(emulate("--duration", "2", scenario="s.toml"), tmp_path)
+    result = navtwin_in(tmp_path, emulate("--duration", "2", scenario="s.toml"))
     assert result.returncode == 0, result.stderr[-2000:]
     assert '"done":true' in result.stdout and '"virtual_s":2.0' in result.stdout
 
@@ -389,7 +389,7 @@ def test_the_slowest_valid_sample_rate_and_a_late_board_start_run(tmp_path):
     end are accepted and run."""
     prepare(tmp_path, {"s.toml": 'base = "office"\n[imu]\nsmpl_prd = 179\n'
                                  '[board]\nstart_ms = 5000.0\n'})
-    result = navtwin(emulate("--duration", "3", scenario="s.toml"), tmp_path)
+    result = navtwin_in(tmp_path, emulate("--duration", "3", scenario="s.toml"))
     assert result.returncode == 0, result.stderr[-2000:]
     assert '"virtual_s":3.0' in result.stdout
 

@@ -4,27 +4,12 @@ import os
 import select
 import signal
 import subprocess
-import sys
 
 import pytest
 
-NAVTWIN = [sys.executable, "-c", "import sys; from navtwin.cli.main import main; sys.exit(main())"]
+from ..helpers import NAVTWIN, navtwin, one_line_error
+
 DEADLINE = 60.0
-
-
-def navtwin(*args, timeout=DEADLINE):
-    return subprocess.run([*NAVTWIN, *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
-
-
-def one_line_error(result, *words):
-    assert result.returncode == 2, result
-    assert result.stdout == ""
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1, result.stderr
-    for w in words:
-        assert w in lines[0], lines[0]
-    return lines[0]
 
 
 def test_help_lists_the_options():

@@ -9,7 +9,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -18,12 +17,12 @@ import pytest
 
 from navtwin.host.tracks import DEFAULT
 
+from ..helpers import NAVTWIN, navtwin
 from ..lines import Lines
 from . import lab_bytes
 
 pytestmark = [pytest.mark.pty, pytest.mark.slow]
 
-NAVTWIN = str(Path(sys.executable).with_name("navtwin"))
 DEADLINE_S = 120.0
 
 
@@ -31,7 +30,7 @@ class Proc:
     """A subprocess whose stdout and stderr lines are collected as they come."""
 
     def __init__(self, *argv: str) -> None:
-        self.p = subprocess.Popen([NAVTWIN, *argv], stdout=subprocess.PIPE,
+        self.p = subprocess.Popen([*NAVTWIN, *argv], stdout=subprocess.PIPE,
                                   stderr=subprocess.PIPE, text=True)
         self.out, self.err = Lines(self.p.stdout), Lines(self.p.stderr)
 
@@ -67,8 +66,7 @@ def _host(ports: dict[str, str], tmp_path: Path) -> Proc:
 
 def _replay_equals_live(tmp_path: Path) -> str:
     live = (tmp_path / "live.jsonl").read_text()
-    res = subprocess.run([NAVTWIN, "replay", str(tmp_path / "rec")], capture_output=True,
-                         text=True, timeout=DEADLINE_S)
+    res = navtwin("replay", tmp_path / "rec")
     assert res.returncode == 0, res.stderr
     assert res.stdout == live
     return live
@@ -102,14 +100,7 @@ def test_host_process_on_fed_ptys_stops_on_signal_and_replays_byte_for_byte(tmp_
         os.close(m)
 
 
-def _emulator_available() -> bool:
-    res = subprocess.run([NAVTWIN, "emulate", "--help"], capture_output=True, timeout=60)
-    return res.returncode == 0
-
-
 def test_office_emulator_and_host_live_then_replay(tmp_path):
-    if not _emulator_available():
-        pytest.skip("navtwin emulate is not available")
     emu = Proc("emulate", "--scenario", "office", "--speed", "realtime", "--duration", "20",
                "--link-dir", str(tmp_path / "links"), "--record", str(tmp_path / "emu"), "--quiet")
     ready = emu.wait_line(emu.out, lambda o: o.get("ready") is True, "emulator ready line")

@@ -7,26 +7,11 @@ import os
 import pytest
 
 from navtwin.host import config as host_config
+from navtwin.host import tracks
 from navtwin.host.config import ConfigError
-from navtwin.cli.main import main
 from navtwin.host.tracks import DEFAULT
 
-
-def run_cli(capsys, *argv) -> tuple[int, str, str]:
-    try:
-        code = main(list(argv))
-    except SystemExit as e:  # argparse
-        code = e.code
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def one_line_error(capsys, *argv) -> str:
-    code, _, err = run_cli(capsys, *argv)
-    assert code == 2, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    return lines[0]
+from ..helpers import cli_error, run_cli
 
 
 @pytest.fixture
@@ -38,41 +23,45 @@ def pty_path():
 
 
 def test_host_without_ports(capsys):
-    assert "give --xbee PORT" in one_line_error(capsys, "host")
+    assert "give --xbee PORT" in cli_error(capsys, "host")
 
 
 def test_host_port_that_does_not_exist(capsys, tmp_path):
-    line = one_line_error(capsys, "host", "--sins", str(tmp_path / "ttyNOPE"))
+    line = cli_error(capsys, "host", "--sins", str(tmp_path / "ttyNOPE"))
     assert "cannot open --sins" in line and "check the device path" in line
 
 
 def test_host_bad_url_scheme(capsys):
-    assert "cannot open --xbee" in one_line_error(capsys, "host", "--xbee", "nosuch://x")
+    assert "cannot open --xbee" in cli_error(capsys, "host", "--xbee", "nosuch://x")
 
 
 def test_host_unknown_filter(capsys, pty_path):
-    line = one_line_error(capsys, "host", "--sins", pty_path, "--filters", "kf,pf")
-    assert "unknown filter 'pf'" in line and "sins, wsn, kf, ekf, ukf, lc, tc, fatci or all" in line
+    line = cli_error(capsys, "host", "--sins", pty_path, "--filters", "kf,pf")
+    assert "unknown filter 'pf'" in line
+    # every track the registry knows, a user's installed ones too, the built-in ones first
+    listed = line.split("a comma list of ")[1].split(" or all")[0].split(", ")
+    assert listed == list(tracks.names())
+    assert listed[:8] == ["sins", "wsn", "kf", "ekf", "ukf", "lc", "tc", "fatci"]
 
 
 def test_host_unknown_config_name(capsys, pty_path):
-    line = one_line_error(capsys, "host", "--sins", pty_path, "--config", "garage")
+    line = cli_error(capsys, "host", "--sins", pty_path, "--config", "garage")
     assert "no host config named 'garage'" in line and "office" in line
 
 
 def test_host_record_into_a_used_directory(capsys, pty_path, tmp_path):
     (tmp_path / "x").write_text("keep me")
-    line = one_line_error(capsys, "host", "--sins", pty_path, "--record", str(tmp_path))
+    line = cli_error(capsys, "host", "--sins", pty_path, "--record", str(tmp_path))
     assert "not an empty directory" in line
     assert (tmp_path / "x").read_text() == "keep me"
 
 
 def test_host_negative_duration(capsys, pty_path):
-    assert "--duration" in one_line_error(capsys, "host", "--sins", pty_path, "--duration", "-1")
+    assert "--duration" in cli_error(capsys, "host", "--sins", pty_path, "--duration", "-1")
 
 
 def test_replay_of_a_directory_that_is_no_recording(capsys, tmp_path):
-    assert "recording.json" in one_line_error(capsys, "replay", str(tmp_path))
+    assert "recording.json" in cli_error(capsys, "replay", str(tmp_path))
 
 
 def test_help_texts_name_the_commands(capsys):
@@ -147,7 +136,7 @@ def test_bad_config_files_get_one_line_naming_key_and_fix(tmp_path, capsys, pty_
     with pytest.raises(ConfigError) as e:
         host_config.load(path)
     assert words in str(e.value) and path in str(e.value) and "\n" not in str(e.value)
-    assert words in one_line_error(capsys, "host", "--sins", pty_path, "--config", path)
+    assert words in cli_error(capsys, "host", "--sins", pty_path, "--config", path)
 
 
 def test_a_good_config_file_is_read(tmp_path):

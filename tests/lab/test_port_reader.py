@@ -20,7 +20,6 @@ import queue
 import select
 import shutil
 import subprocess
-import sys
 import tempfile
 import termios
 import threading
@@ -32,15 +31,14 @@ import pytest
 import serial
 
 from navtwin.emulator.api import Lab, command, emulate
-from navtwin.host import config as host_config
 from navtwin.host import service
 from navtwin.host.service import PortReader, Service, StartError
 
+from ..helpers import NAVTWIN, OFFICE
 from .test_service import Running, pty_pair, wait_for
 
 pytestmark = pytest.mark.pty
 
-OFFICE = host_config.load("office")
 DEADLINE_S = 60.0
 QUIET_S = 3.0  # six host retry periods: time a host would need to open what it must not
 
@@ -224,7 +222,7 @@ class Host:
     """``navtwin host --xbee LINK`` with its status lines collected as they come."""
 
     def __init__(self, link: str) -> None:
-        self.p = subprocess.Popen([sys.executable, "-m", "navtwin", "host", "--xbee", link,
+        self.p = subprocess.Popen([*NAVTWIN, "host", "--xbee", link,
                                    "--filters", "kf", "--status-period", "1", "--out",
                                    os.devnull], stderr=subprocess.PIPE, text=True)
         self.lines = Lines()

@@ -14,19 +14,13 @@ import time
 
 import pytest
 
-from navtwin.cli.main import main
 from navtwin.protocols.recording import Recording
+
 from ..fs_helpers import fsize_limit
-from . import lab_bytes
+from ..helpers import NAVTWIN, run_cli
+from ..lab import lab_bytes
 
-NAVTWIN = [sys.executable, "-m", "navtwin"]
 DEADLINE_S = 60.0
-
-
-def run_cli(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def error_line(err: str) -> str:
