@@ -135,10 +135,10 @@ def close_out(out, option: str = "--out") -> str | None:
 
 
 def run(args) -> int:
-    from navtwin.host.pipeline import INPUTS
+    from navtwin.protocols.ports import host_inputs
     from navtwin.host.service import OutputError, Service, StartError
 
-    ports = {p: getattr(args, p) for p in INPUTS if getattr(args, p)}
+    ports = {p: getattr(args, p) for p in host_inputs() if getattr(args, p, None)}
     if not ports:
         raise UsageError("no input port; give --xbee PORT and/or --sins PORT, and --nanoloc PORT")
     cfg, filters = config_and_filters(args, default_config=True)

@@ -14,7 +14,9 @@ from navtwin.emulator.faults import Fault, FaultError, LineFault, register, unre
 from navtwin.emulator.runner import Emulation, RunError
 from navtwin.emulator.scenario import ScenarioError
 from navtwin.emulator.uart import Line, LineWrapper, Wire
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
+
+PORTS = names()
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
 

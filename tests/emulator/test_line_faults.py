@@ -21,7 +21,9 @@ from navtwin.emulator.rng import stream
 from navtwin.emulator.runner import Emulation, RunError
 from navtwin.emulator.scenario import ScenarioError
 from navtwin.emulator.uart import Inbound, Line, LineWrapper, Wire
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
+
+PORTS = names()
 from navtwin.protocols.recording import FAULTS, Recording, RecordingError
 from navtwin.protocols.serial import wire_ns
 

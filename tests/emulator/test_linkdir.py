@@ -9,7 +9,9 @@ import threading
 import pytest
 
 from navtwin.emulator.pty import LinkDir, LinkDirError
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
+
+PORTS = names()
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
 from .test_cli import one_line_error

@@ -12,7 +12,9 @@ from navtwin.emulator import runner
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import load_scenario
 from navtwin.cli.main import main
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
+
+PORTS = names()
 from navtwin.protocols.recording import Recording
 from ..fs_helpers import fsize_limit
 
