@@ -15,12 +15,12 @@ from navtwin.emulator.runner import Emulation, RunError
 from navtwin.emulator.scenario import ScenarioError
 from navtwin.emulator.uart import Line, LineWrapper, Wire
 from navtwin.protocols.ports import names
-
-PORTS = names()
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
 
 from .world_helpers import variant
+
+PORTS = names()  # the lab's ports, in its order
 
 SEC = 1_000_000_000
 SHIPPED = ["anchor_outage", "nlos", "link_loss", "link_fade", "range_value_error", "board_reset",

@@ -10,11 +10,11 @@ import pytest
 
 from navtwin.emulator.pty import LinkDir, LinkDirError
 from navtwin.protocols.ports import names
-
-PORTS = names()
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
 from .test_cli import one_line_error
+
+PORTS = names()  # the lab's ports, in its order
 
 NAVTWIN = [sys.executable, "-m", "navtwin"]
 DEADLINE_S = 60.0

@@ -13,10 +13,10 @@ from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import load_scenario
 from navtwin.cli.main import main
 from navtwin.protocols.ports import names
-
-PORTS = names()
 from navtwin.protocols.recording import Recording
 from ..fs_helpers import fsize_limit
+
+PORTS = names()  # the lab's ports, in its order
 
 NAVTWIN = [sys.executable, "-m", "navtwin"]
 DEADLINE_S = 120.0
