@@ -72,7 +72,7 @@ class Frame:
     """A decoded frame. ``fields`` holds the type's layout as plain Python values;
     a type the format does not declare has ``fields == {"payload": bytes}``."""
 
-    format: str  # "sins", "nanoloc" or "xbee"
+    format: str  # the protocols.formats name of its layout: "sins", "nanoloc", "xbee", ...
     offset: int  # of the first byte, in the decoder's input stream
     raw: bytes  # the frame as it was on the wire (escaped in API mode 2)
     type: int
