@@ -197,3 +197,5 @@ def test_a_package_adds_a_port_with_its_decoder_a_track_and_a_fault_kind(tmp_pat
     assert summary["counts"]["mag_frames"] == 25
     estimates = [json.loads(line) for line in out.read_text().splitlines()]
     assert {e["filter"] for e in estimates} == {"sins", "heading"}
+    # and the live host takes the port as an input of its own
+    assert "--mag PORT" in navtwin(env, "host", "--help").stdout
