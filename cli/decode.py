@@ -6,6 +6,7 @@ import json
 import sys
 import threading
 
+from navtwin.protocols.formats import FORMATS
 from navtwin.protocols.ports import DEFAULT_BAUD
 
 from .main import BAUD_HELP, UsageError, baud, stop_on_signals
@@ -20,7 +21,7 @@ def register(sub) -> None:
     p.add_argument("source", nargs="?", default="-", metavar="SOURCE",
                    help="a file, - for stdin (default), a recording directory, or a serial port "
                         "or pyserial URL (socket://, rfc2217://, spy://, loop://)")
-    p.add_argument("--format", required=True, choices=("sins", "nanoloc", "xbee", "xbee-sins"),
+    p.add_argument("--format", required=True, choices=FORMATS.names(),
                    help="what the bytes are; xbee-sins rebuilds the SINS stream from 0x90 packets")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--escaped", dest="escaped", action="store_true", default=True,

@@ -24,6 +24,7 @@ def register(sub) -> None:
 
 def _options(p) -> None:
     from navtwin.host.output import KEYS
+    from navtwin.protocols import ports
 
     p.description = (
         "Read the coordinator (API mode; or the SINS board's direct line) and the "
@@ -33,10 +34,11 @@ def _options(p) -> None:
         "state (an emulator's link only while that emulator runs). Ports are opened "
         "exclusively (flock, as picocom does). SIGINT or SIGTERM ends the run with a summary "
         "line on stderr (exit 0).")
-    p.add_argument("--xbee", metavar="PORT", help=f"the coordinator in API mode: {PORT_HELP}")
-    p.add_argument("--sins", metavar="PORT",
-                   help="the SINS board's direct RS-232 line (same forms)")
-    p.add_argument("--nanoloc", metavar="PORT", help="the anchors' gateway (same forms)")
+    # an option per port the host reads (protocols.ports: a package's port gets one too)
+    for i, name in enumerate(ports.host_inputs()):
+        doc = ports.get(name).doc
+        p.add_argument(f"--{name}", metavar="PORT",
+                       help=f"{doc}: {PORT_HELP}" if i == 0 else f"{doc} (same forms)")
     p.add_argument("--api1", dest="escaped", action="store_false", default=True,
                    help="the coordinator runs API mode 1 (AP=1); default API mode 2, escaped")
     p.add_argument("--baud", type=baud, default=DEFAULT_BAUD, help=BAUD_HELP)
@@ -135,10 +137,10 @@ def close_out(out, option: str = "--out") -> str | None:
 
 
 def run(args) -> int:
-    from navtwin.host.pipeline import INPUTS
+    from navtwin.protocols.ports import host_inputs
     from navtwin.host.service import OutputError, Service, StartError
 
-    ports = {p: getattr(args, p) for p in INPUTS if getattr(args, p)}
+    ports = {p: getattr(args, p) for p in host_inputs() if getattr(args, p, None)}
     if not ports:
         raise UsageError("no input port; give --xbee PORT and/or --sins PORT, and --nanoloc PORT")
     cfg, filters = config_and_filters(args, default_config=True)

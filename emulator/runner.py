@@ -1,5 +1,9 @@
 """The emulated lab in time: the world's events on the ports' UARTs, in real or virtual time.
 
+Ports. Every declared port (protocols.ports) is emulated by its device model
+(emulator.devices): the device gives the port's line its events, and takes what the host
+writes to it.
+
 Timeline. Every device writes to its port through an ``emulator.uart.Line``, a model of
 its UART (8N1 timing, chunks in ready order, delivered to the PTY whole when the last byte
 would have arrived; wrappers between device and line: :meth:`Emulation.wrap`). The world's
@@ -55,18 +59,19 @@ import time
 from typing import Callable
 
 from navtwin.common.limits import SPEEDS, span
-from navtwin.protocols.ports import NAMES as PORT_NAMES
 from navtwin.common.schema import Invalid, build
+from navtwin.protocols import ports as lab_ports
 from navtwin.protocols.recording import FAULTS, FLUSH_S, RecordingWriteError, RecordingWriter
 
 from .control import SOCKET as CONTROL_SOCKET, ControlError, ControlServer, Inject
 from .coordinator import Coordinator, Remote, identity_registers
+from .devices import DEVICES
 from .faults import Fault, LineFault, acting_on
 from .ledger import Ledger
 from .pty import LinkDir, PtyPort
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
-from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked, Wire
+from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked
 from .uart_rx import ClientView, Framing
 
 SEC = 1_000_000_000
@@ -109,8 +114,9 @@ def speed_name(factor: float | None) -> str:
 class Feed:
     """The world's events, generated in blocks of virtual time on demand."""
 
-    def __init__(self, world, end_ns: int, block_ns: int) -> None:
+    def __init__(self, world, end_ns: int, block_ns: int, devices=()) -> None:
         self.world = world
+        self.devices = devices  # their own output, beside the world's (emulator.devices)
         self.end_ns = end_ns
         self.block_ns = block_ns
         self.known_ns = 0  # every event with t < known_ns has been taken
@@ -125,6 +131,8 @@ class Feed:
         t = time.monotonic_ns()
         until = min(self.known_ns + self.block_ns, self.end_ns)
         events = self.world.advance(until)
+        for device in self.devices:
+            events += device.advance(until)
         self.known_ns = until
         self.cost_ns = max(time.monotonic_ns() - t, self.cost_ns * 99 // 100)
         return events
@@ -167,14 +175,19 @@ class Emulation:
         self.progress = progress
         self.sink = sink
         self.coordinator = self._coordinator(response_delay_ns)
-        bauds = {name: scenario.ports[name]["baud"] for name in PORT_NAMES}
+        self.devices = {p.name: DEVICES.get(p.device)(self, p) for p in lab_ports.listed()}
+        bauds = {name: dev.settings["baud"] for name, dev in self.devices.items()}
         # a recorded run has its entries in faults.jsonl; others keep them in memory
         self.ledger = Ledger(self._record_fault if record is not None else None,
                              keep=record is None, faults=scenario.faults)
-        self.lines = {name: Line(name, self.coordinator if name == "xbee" else Wire(bauds[name]),
-                                 ledger=self.ledger)
-                      for name in PORT_NAMES}
-        self.inbound = Inbound("xbee", self.coordinator, ledger=self.ledger)
+        self.lines = {name: Line(name, dev.line_device, ledger=self.ledger)
+                      for name, dev in self.devices.items()}
+        #: the coordinator's port: its power-ups and answers go on this line
+        self.coordinator_port = next(name for name, dev in self.devices.items()
+                                     if dev.line_device is self.coordinator)
+        # what the host writes to the port whose device reads it (the coordinator's)
+        written = next(p.name for p in lab_ports.listed() if p.host_writes)
+        self.inbound = Inbound(written, self.devices[written].line_device, ledger=self.ledger)
         line_faults = [(i, f) for i, f in enumerate(scenario.faults) if f.ACTS_ON == "line"]
         for n, (index, fault) in enumerate(line_faults):
             wrapper = fault.wrapper(stream(self.seed, f"faults.line.{n}"))
@@ -183,7 +196,7 @@ class Emulation:
         self.coordinator.faults = tuple(acting_on(scenario.faults, "coordinator"))
         for out in self.coordinator.power_up() + [o for f in self.coordinator.faults
                                                   for o in self._power_ups(f)]:
-            self.lines["xbee"].put(out.t_ns, out.item)
+            self.lines[self.coordinator_port].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
         self.views: dict[str, ClientView] = {}  # per port: what the client's UART reads
@@ -233,8 +246,8 @@ class Emulation:
     # -- assembly -------------------------------------------------------------------------
     def _publish(self, link_dir, bauds: dict[str, int]) -> None:
         """The PTYs and their links; a failure is a one-line LinkDirError or RunError."""
-        self.link_dir = LinkDir(link_dir, PORT_NAMES)
-        for name in PORT_NAMES:
+        self.link_dir = LinkDir(link_dir, tuple(self.devices))
+        for name in self.devices:
             try:
                 self.ports[name] = PtyPort(name, bauds[name])
             except OSError as e:
@@ -258,7 +271,7 @@ class Emulation:
         rec = RecordingWriter(directory, replace=True, meta={
             "source": "navtwin emulate", "scenario": self.scenario.name, "seed": self.seed,
             "speed": speed_name(self.speed), "duration_s": self.end_ns / SEC,
-            "ports": {name: dict(self.scenario.ports[name]) for name in PORT_NAMES},
+            "ports": {name: dict(dev.settings) for name, dev in self.devices.items()},
             "clocks": {"t_device_ns": "ns since the run started when the chunk's first byte "
                                       "leaves the device's UART",
                        "t_wall_ns": "monotonic ns since the run started when the chunk was "
@@ -305,7 +318,8 @@ class Emulation:
         """Play the timeline until the end or until *stop* is set; returns :meth:`summary`."""
         stop = stop or threading.Event()
         paced = self.speed is not None
-        feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS)
+        feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS,
+                    tuple(self.devices.values()))
         for ev in feed.take(PREFILL_NS if paced else 0):  # before the clock starts
             self._enqueue(ev)
         if paced:  # what exists now lives for the run: keep full collections from walking it
@@ -430,20 +444,18 @@ class Emulation:
         # the SINS board and the nanoLOC gateway ignore what the host sends them
 
     def _to_device(self, now: int) -> None:
-        """Give the coordinator what the host wrote, as its to_device faults let it through."""
-        view = self.views.get(self.inbound.name)
+        """Give the device what the host wrote, as its to_device faults let it through."""
+        name = self.inbound.name
+        view, device, line = self.views.get(name), self.devices[name], self.lines[name]
         for t, data in self.inbound.poll(now):
-            if view is not None:  # read by the coordinator's UART at its rate
-                data = view.heard(t, data, Framing(self.coordinator.baud))
-            for out in self.coordinator.host(t, data):
-                self.lines["xbee"].put(out.t_ns, out.item)
+            if view is not None:  # read by the device's UART at its rate
+                data = view.heard(t, data, Framing(device.line_device.baud))
+            for t_ns, item in device.host(t, data):
+                line.put(t_ns, item)
 
     def _enqueue(self, ev) -> None:
-        if ev.port == "xbee":
-            out = self.coordinator.received(ev.t_ns, ev.data)
-            self.lines["xbee"].put(out.t_ns, Marked(out.item, ev.marks) if ev.marks else out.item)
-        else:
-            self.lines[ev.port].put(ev.t_ns, Marked(ev.data, ev.marks) if ev.marks else ev.data)
+        t_ns, item = self.devices[ev.port].to_line(ev)
+        self.lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
 
     def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
         port = self.ports.get(chunk.port)
@@ -513,7 +525,7 @@ class Emulation:
         elif fault.ACTS_ON == "coordinator":
             self.coordinator.faults += (fault,)
             for out in self._power_ups(fault):
-                self.lines["xbee"].put(out.t_ns, out.item)
+                self.lines[self.coordinator_port].put(out.t_ns, out.item)
         else:
             self.world.inject(fault)
         self.live[self._live_ids] = (fault, wrapper)
@@ -584,8 +596,7 @@ class Emulation:
         ports = {}
         for name, line in self.lines.items():
             entry = {"frames": line.chunks, "bytes": line.bytes}
-            if name == "xbee":  # RF packets its serial transmit buffer had no room for
-                entry["dropped_tx_buffer"] = self.coordinator.dropped_tx_buffer
+            entry.update(self.devices[name].stats())
             if name in self.ports:
                 entry.update(self.ports[name].stats())
                 entry.update(self.views[name].stats())

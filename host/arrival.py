@@ -14,14 +14,14 @@ from collections.abc import Iterable, Iterator, Mapping
 
 from navtwin.protocols.serial import wire_ns
 
-from .pipeline import INPUTS
+from navtwin.protocols.ports import host_inputs
 
 
 def arrivals(streams: Mapping[str, Iterable[tuple[bytes, int]]],
              bauds: Mapping[str, int]) -> Iterator[tuple[str, bytes, int]]:
     """``(port, bytes, arrival ns)`` in processing order, from each port's ``(bytes,
-    t_device_ns)`` in device order (ports among ``INPUTS``) and its rate in *bauds*."""
-    order = {p: i for i, p in enumerate(INPUTS)}
+    t_device_ns)`` in device order (ports the host reads) and its rate in *bauds*."""
+    order = {p: i for i, p in enumerate(host_inputs())}
 
     def timed(port: str):
         baud = bauds[port]

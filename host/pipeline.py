@@ -5,14 +5,18 @@ The input is the sequence of chunks ``(port, bytes, arrival ns since start)`` in
 order the host processed them (live) or recorded them (replay). Nothing here reads a
 clock: the same chunks give the same estimates, bit for bit.
 
-Ports (also the names of a host recording's files):
+Ports (also the names of a host recording's files): those whose declaration
+(protocols.ports) the host reads, each decoded as its declared format (protocols.formats),
+whose frames it handles by what they carry:
 
 =========  ==========================================================================
-xbee       the coordinator in API mode: 0x90 packets carry the SINS byte stream
-           (:class:`navtwin.protocols.stream.XBeeSinsChain`); 0x88 DB answers give link quality,
-           0x88 AP answers the coordinator's API mode (a mismatch is an event)
-sins       the SINS board's direct RS-232 line
-nanoloc    the anchors' gateway: one ranging report per exchange
+imu        SINS samples: on the lab's ``sins`` line, and inside the coordinator's 0x90
+           packets on ``xbee`` (:class:`navtwin.protocols.stream.XBeeSinsChain`)
+ranges     the anchors' gateway (``nanoloc``): one ranging report per exchange
+radio      the coordinator's own frames: 0x88 DB answers give link quality, 0x88 AP
+           answers the coordinator's API mode (a mismatch is an event); the host writes
+           its AT queries to the port whose declaration says ``host_writes``
+other      a format the host has no use for (a user's port): its frames are counted
 =========  ==========================================================================
 
 Time. Each SINS sample's host time comes from the board's counter and each range's from
@@ -50,16 +54,14 @@ from collections import Counter, deque
 from functools import partial
 from typing import Any, Callable
 
-from navtwin.protocols import adis16350, nanoloc, sins, xbee
-from navtwin.protocols.stream import DecodeError, Frame, XBeeSinsChain, nanoloc_decoder, sins_decoder
+from navtwin.protocols import adis16350, formats, nanoloc, ports, sins, xbee
+from navtwin.protocols.stream import DecodeError, Frame
 
 from .clock import DeviceClock, Unwrapper
 from .config import HostConfig
 from .estimator import Estimator
 from .measurements import Exchange, ImuSample, Restart
 
-INPUTS = ("xbee", "sins", "nanoloc")
-IMU_INPUTS = ("xbee", "sins")
 DB_PERIOD_S = 5.0  # AT query period, in arrival time
 #: asked every DB_PERIOD_S: link quality, and the coordinator's API mode (another client's
 #: ATAP1 would switch it under the host)
@@ -109,12 +111,14 @@ class Pipeline:
     """
 
     def __init__(self, config: HostConfig, filters: tuple[str, ...] | None = None, *,
-                 inputs: tuple[str, ...] = INPUTS, escaped: bool = True,
+                 inputs: tuple[str, ...] | None = None, escaped: bool = True,
                  make_estimator: Callable | None = None, db_period_s: float = DB_PERIOD_S,
                  on_innovation: Callable | None = None) -> None:
-        unknown = set(inputs) - set(INPUTS)
+        readable = ports.host_inputs()
+        inputs = readable if inputs is None else inputs
+        unknown = set(inputs) - set(readable)
         if unknown:
-            raise ValueError(f"unknown input {sorted(unknown)[0]!r}; use {', '.join(INPUTS)}")
+            raise ValueError(f"unknown input {sorted(unknown)[0]!r}; use {', '.join(readable)}")
         self.config = config
         self.filters = tuple(filters or config.filters)
         make_estimator = make_estimator or Estimator  # EstimatorConfig -> estimator
@@ -125,13 +129,16 @@ class Pipeline:
                 v.estimator.on_innovation = partial(_with_vehicle, on_innovation, v.number)
         self._by_router = {v.router: v for v in self.vehicles if v.router is not None}
         self._by_tag = {v.tag: v for v in self.vehicles if v.tag is not None}
-        self.inputs = tuple(p for p in INPUTS if p in inputs)
+        self.inputs = tuple(p for p in readable if p in inputs)
         self.escaped = escaped
-        self._decoders: dict[str, Any] = {}
-        for port in self.inputs:
-            self._decoders[port] = (XBeeSinsChain(escaped) if port == "xbee" else
-                                    sins_decoder() if port == "sins" else nanoloc_decoder())
-        self._hold = config.hold_s if set(IMU_INPUTS) & set(self.inputs) else 0.0
+        declared = [ports.get(p) for p in self.inputs]
+        self._decoders: dict[str, Any] = {p.name: formats.get(p.format).make(escaped=escaped)
+                                          for p in declared}
+        #: the ports the host writes its AT queries to (the coordinator's)
+        self._queried = {p.name for p in declared if p.host_writes}
+        self._hold = config.hold_s if any(p.carries_imu for p in declared) else 0.0
+        self._handlers = {"imu": self._imu, "ranges": self._range, "radio": self._xbee}
+        self._handler_of: dict[str, Callable] = {}  # frame format -> its handler
         self.range_clock = DeviceClock(32, T_US_TICK_S, strict=False)
         # the gateway's report counter: equal = a duplicate, any step back = a restart
         self._report_seq = Unwrapper(16, restart=0)
@@ -157,7 +164,7 @@ class Pipeline:
         self._arrival = a
         out: list = []
         self._events(port, self._decoders[port].feed(data), a, out)
-        if port == "xbee" and a >= self._next_db:
+        if port in self._queried and a >= self._next_db:
             for command in AT_QUERIES:
                 self._query(command)
             self._next_db = a + self._db_period
@@ -196,14 +203,18 @@ class Pipeline:
                 continue
             if not ev.known:
                 self.counts[f"{ev.format}_unknown_type"] += 1
-            elif ev.format == "sins":
-                self._imu(ev, a, out)
-            elif ev.format == "nanoloc":
-                self._range(ev.fields, a, out)
-            else:
-                self._xbee(ev)
+                continue
+            handler = self._handler_of.get(ev.format)
+            if handler is None:
+                handler = self._handler_of[ev.format] = self._handlers.get(
+                    formats.get(ev.format).carries, self._other)
+            handler(ev, a, out)
 
-    def _xbee(self, ev: Frame) -> None:
+    def _other(self, ev: Frame, a: float, out: list) -> None:
+        """A frame of a format the host has no use for (a user's port): counted."""
+        self.counts[f"{ev.format}_frames"] += 1
+
+    def _xbee(self, ev: Frame, a: float, out: list) -> None:
         f = ev.fields
         command = f.get("command", b"").upper()  # any client's answer: "ap" is AP too
         if ev.type == xbee.FrameType.AT_RESPONSE and command == b"DB":
@@ -288,7 +299,8 @@ class Pipeline:
             self._by_router[source] = v
         return v
 
-    def _range(self, f: dict, a: float, out: list) -> None:
+    def _range(self, ev: Frame, a: float, out: list) -> None:
+        f = ev.fields
         self.counts["reports"] += 1
         v = self._by_tag.get(f["tag"], None if self._by_tag else self.vehicles[0])
         if v is None:
@@ -347,17 +359,13 @@ class Pipeline:
         out += estimates
 
     # -- status -------------------------------------------------------------------------------
-    def _top_decoders(self):
-        """(port, the decoder of the port's own frames): the XBee layer of the xbee port."""
-        for port, dec in self._decoders.items():
-            yield port, dec.xbee if port == "xbee" else dec
-
     def stats(self) -> dict:
         """Counters of everything the pipeline saw (part of the status and summary lines);
         each vehicle's under ``vehicles``, in order."""
         return {
-            "ports": {p: {"bytes": top.bytes, "frames": top.frames, "errors": dict(self.errors[p])}
-                      for p, top in self._top_decoders()},
+            # frames: the port's own (the coordinator's: its API frames)
+            "ports": {p: {"bytes": dec.bytes, "frames": dec.frames, "errors": dict(self.errors[p])}
+                      for p, dec in self._decoders.items()},
             "counts": dict(sorted(self.counts.items())),
             "held": sum(len(v.held) for v in self.vehicles),
             "max_late_ms": self.max_late_s * 1e3,

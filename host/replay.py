@@ -17,13 +17,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping
 
+from navtwin.protocols import ports as ports_
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import Recording, RecordingError
 
 from . import config as host_config
 from .arrival import arrivals
 from .config import HostConfig
-from .pipeline import INPUTS, Pipeline
+from .pipeline import Pipeline
 from .service import HOST_SOURCE
 
 
@@ -37,7 +38,7 @@ def _host_meta(rec: Recording) -> dict:
     ok = (isinstance(h, dict) and isinstance(h.get("config"), dict)
           and isinstance(h.get("filters"), list) and all(isinstance(f, str) for f in h["filters"])
           and isinstance(h.get("escaped"), bool) and isinstance(h.get("inputs"), list)
-          and h["inputs"] and all(p in INPUTS and p in rec.ports for p in h["inputs"]))
+          and h["inputs"] and all(p in ports_.host_inputs() and p in rec.ports for p in h["inputs"]))
     if not ok:
         raise RecordingError(f"{rec.directory / 'recording.json'}: \"host\" is not "
                              f"{{config: object, filters: [names], escaped: bool, inputs: "
@@ -62,8 +63,9 @@ def settings(rec: Recording, *, config: HostConfig | None = None,
                 "inputs": tuple(h["inputs"]),
                 "escaped": h["escaped"] if escaped is None else escaped}
     ports = rec.meta.get("ports", {})
-    if not any(p in rec.ports for p in INPUTS):
-        raise RecordingError(f"{rec.directory}: none of the ports {', '.join(INPUTS)} is recorded")
+    readable = ports_.host_inputs()
+    if not any(p in rec.ports for p in readable):
+        raise RecordingError(f"{rec.directory}: none of the ports {', '.join(readable)} is recorded")
     return emulator_settings(str(rec.meta.get("scenario", "")),
                              {p: ports.get(p, {}) for p in rec.ports},
                              config=config, filters=filters, escaped=escaped)
@@ -83,12 +85,13 @@ def emulator_settings(scenario: str, ports: Mapping[str, dict], *, config: HostC
     its settings, e.g. ``api_mode``) are at hand: the lab computer's inputs among them (the
     radio's SINS path rather than the direct line), the scenario's shipped config (or the
     default one) and the coordinator's API mode, unless overridden."""
-    inputs = [p for p in INPUTS if p in ports]
-    if "xbee" in inputs and "sins" in inputs:
-        inputs.remove("sins")
+    inputs = [p for p in ports_.host_inputs() if p in ports]
+    imu = [p for p in inputs if ports_.get(p).carries_imu]
+    for p in imu[1:]:  # one IMU stream: the first in the host's order (the radio's)
+        inputs.remove(p)
     if config is None:
         config = host_config.load(config_for(scenario))
-    api = ports.get("xbee", {}).get("api_mode", 2)
+    api = next((ports[p]["api_mode"] for p in inputs if "api_mode" in ports[p]), 2)
     return {"config": config, "filters": filters or config.filters, "inputs": tuple(inputs),
             "escaped": (api == 2) if escaped is None else escaped}
 

@@ -46,13 +46,14 @@ import serial
 
 from navtwin.protocols import __version__
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
+from navtwin.protocols import ports as lab_ports
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import (FLUSH_S, Read, RecordingWriteError, RecordingWriter,
                                          write_failure)
 
 from .config import HostConfig
 from .output import Latency, estimate_line, info_line, innovation_line
-from .pipeline import INPUTS, Pipeline
+from .pipeline import Pipeline
 
 READ_TIMEOUT_S = 0.1  # how often a reader looks at the stop flag
 RETRY_S = 0.5
@@ -234,10 +235,15 @@ def recording_meta(config: HostConfig, filters: tuple[str, ...], escaped: bool,
     """A host recording's meta: everything ``navtwin replay`` needs to redo the run."""
     return {"source": HOST_SOURCE, "navtwin": __version__,
             "host": {"config": config.to_dict(), "filters": list(filters), "escaped": escaped,
-                     "inputs": [p for p in INPUTS if p in ports]},
+                     "inputs": [p for p in lab_ports.host_inputs() if p in ports]},
             "clock": "t_wall_ns = arrival, monotonic ns since the host started",
             "ports": {**{p: {"url": u, "baud": baud} for p, u in ports.items()},
-                      **({TX_PORT: {"of": "xbee"}} if "xbee" in ports else {})}}
+                      **{TX_PORT: {"of": p} for p in written_ports(ports)[:1]}}}
+
+
+def written_ports(ports) -> list[str]:
+    """Those of *ports* whose device reads what the host writes (the coordinator's)."""
+    return [p for p in ports if lab_ports.get(p).host_writes]
 
 
 class Service:
@@ -249,16 +255,19 @@ class Service:
                  status_period_s: float = 2.0, make_estimator=None,
                  on_lines: Callable[[str, int, int], None] | None = None,
                  innovations: TextIO | None = None) -> None:
-        unknown = set(ports) - set(INPUTS)
+        readable = lab_ports.host_inputs()
+        unknown = set(ports) - set(readable)
         if unknown or not ports:
-            raise ValueError(f"ports must be some of {', '.join(INPUTS)}")
-        self.ports = {p: ports[p] for p in INPUTS if p in ports}
+            raise ValueError(f"ports must be some of {', '.join(readable)}")
+        self.ports = {p: ports[p] for p in readable if p in ports}
         self.config, self.filters = config, tuple(filters)
         self.out, self.status, self.status_period_s = out, status, status_period_s
         # on_lines(port, bytes of that port processed, monotonic ns) after each batch of lines
         self.on_lines = on_lines
         self.escaped, self.baud = escaped, baud
         self.innovations = innovations  # the fusion tracks' innovation lines, if given
+        # the port the host's AT queries go to (the pipeline makes them only when it reads one)
+        self._written = next(iter(written_ports(self.ports)), None)
         self.pipeline = Pipeline(config, self.filters, inputs=tuple(self.ports), escaped=escaped,
                                  make_estimator=make_estimator,
                                  on_innovation=None if innovations is None else self._innovation)
@@ -390,7 +399,7 @@ class Service:
             if v.estimator.reinit_count != self._reinit_seen[v.number]:
                 self._reinit_event(v)
         tx = self.pipeline.take_tx()
-        if tx and self._readers["xbee"].write(tx) and self.recorder is not None:
+        if tx and self._readers[self._written].write(tx) and self.recorder is not None:
             self.recorder.port(TX_PORT).write(tx, t_wall_ns=stamp)
 
     def _emit(self, estimates: list, port: str | None, t_read: int | None) -> None:

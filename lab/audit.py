@@ -37,7 +37,8 @@ reopened the port before its next read: unplugged, emulator restarted), ``second
 and ``no_cause_seen`` (a PTY overflow, a reader that took bytes unseen; in a recording
 without read columns, every gap between reads).
 
-The xbee port is audited at the API-frame level in the API mode the emulator recorded at its
+Each port is audited at the level of its own frames (its declaration's ``frames``, protocols.ports):
+the xbee port at the API-frame level, in the API mode the emulator recorded at its
 start (a run whose coordinator switched mode under the host is not auditable so).
 """
 from __future__ import annotations
@@ -49,9 +50,8 @@ from pathlib import Path
 
 from navtwin.emulator.faults import Fault
 from navtwin.protocols.recording import Read, Recording
-from navtwin.protocols.stream import DecodeError, Frame, XBeeDecoder, nanoloc_decoder, sins_decoder
-
-PORTS = ("sins", "xbee", "nanoloc")
+from navtwin.protocols import formats, ports as lab_ports
+from navtwin.protocols.stream import DecodeError, Frame
 
 
 class AuditError(ValueError):
@@ -59,8 +59,8 @@ class AuditError(ValueError):
 
 
 def _decoder(port: str, escaped: bool):
-    return XBeeDecoder(escaped) if port == "xbee" else sins_decoder() if port == "sins" \
-        else nanoloc_decoder()
+    """A decoder of the port's own frames (the audit judges frames, not what they carry)."""
+    return formats.get(lab_ports.get(port).frame_format).make(escaped=escaped)
 
 
 def align(reads: list[bytes], emu: bytes) -> tuple[list[tuple[int, int, int]], int]:
@@ -296,8 +296,8 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
     if (host.meta.get("source") or "").startswith("navtwin emulate"):
         raise AuditError(f"{host_dir}: an emulator recording; give the host's --record directory second")
     entries = emu.faults()
-    escaped = emu.meta.get("ports", {}).get("xbee", {}).get("api_mode", 2) == 2
-    ports = [p for p in PORTS if emu.sizes.get(p) and host.sizes.get(p)]
+    settings = emu.meta.get("ports", {})
+    ports = [p for p in lab_ports.names() if emu.sizes.get(p) and host.sizes.get(p)]
     if not ports:
         raise AuditError("the recordings share no port with data; record the host on the "
                          "emulator's ports")
@@ -310,6 +310,7 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
         if host.reads[p] and None in marks:
             raise AuditError(f"{host_dir}/{p}.csv: a read without its read columns; a host "
                              f"recording has them on every read: re-record it")
+        escaped = settings.get(p, {}).get("api_mode", 2) == 2  # its API mode at the start
         results.append(audit_port(p, b"".join(c.data for c in emu.chunks(p)), reads, entries,
                                   escaped, marks if host.reads[p] else None))
     old = [p for p in ports if not host.reads[p]]

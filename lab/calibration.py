@@ -19,6 +19,7 @@ from navtwin.emulator.trajectory import SteppedProfile, Trajectory
 from navtwin.emulator.world import World
 from navtwin.host import calibration as cal
 from navtwin.host.config import HostConfig
+from navtwin.protocols.ports import NANOLOC
 from navtwin.protocols.recording import Recording
 
 from .evaluate import error
@@ -59,7 +60,7 @@ def gateway_bytes(scenario, seed: int | None = None) -> bytes:
     out: list[bytes] = []
 
     def sink(chunk: Chunk) -> None:
-        if chunk.port == "nanoloc":
+        if chunk.port == NANOLOC.name:
             out.append(chunk.data)
 
     with Emulation(_scenario(scenario), seed, speed=None, ports=False, sink=sink) as emu:
@@ -69,7 +70,7 @@ def gateway_bytes(scenario, seed: int | None = None) -> bytes:
 
 def recorded_bytes(directory: str | Path) -> bytes:
     """The gateway's bytes of a recording (emulator's or host's)."""
-    return Recording(directory).read_bytes("nanoloc")
+    return Recording(directory).read_bytes(NANOLOC.name)
 
 
 def calibrate(data: bytes, steps: cal.StepTable, config: HostConfig, sigma_degree: int = 2) -> cal.Result:

@@ -10,23 +10,13 @@ import time
 from pathlib import Path
 from typing import Iterator
 
-from . import adis16350, nanoloc, xbee
-from .recording import Recording
-from .stream import DecodeError, Frame, decoder_for
+from . import adis16350, formats, nanoloc, ports, xbee
 from .ports import DEFAULT_BAUD
+from .recording import Recording, RecordingError
+from .formats import hexval
+from .stream import DecodeError, Frame
 
-FORMATS = ("sins", "nanoloc", "xbee", "xbee-sins")
-#: The port of a recording each format reads by default.
-PORT_OF_FORMAT = {"sins": "sins", "nanoloc": "nanoloc", "xbee": "xbee", "xbee-sins": "xbee"}
 CHUNK = 65536
-
-
-def _hexval(v):
-    if isinstance(v, bytes):
-        return v.hex().upper()
-    if isinstance(v, tuple):
-        return [_hexval(x) for x in v]
-    return v
 
 
 def frame_record(ev: Frame, *, gyro_range: int = 300, with_hex: bool = False) -> dict:
@@ -34,34 +24,45 @@ def frame_record(ev: Frame, *, gyro_range: int = 300, with_hex: bool = False) ->
     rec: dict = {"format": ev.format, "offset": ev.offset, "type": ev.type}
     if ev.source is not None:
         rec["source"] = f"{ev.source:016X}"
-    f = ev.fields
     if not ev.known:
         rec["unknown_type"] = True
-        rec["payload"] = f["payload"].hex().upper()
-    elif ev.format == "sins":
-        s = adis16350.words_to_sample(f["words"], gyro_range)
-        rec.update(seq=f["seq"], words=list(f["words"]), nd=all(s.nd), ea=s.ea,
-                   gyro_dps=list(s.gyro_dps), gyro_rad_s=list(s.gyro_rad_s),
-                   accel_g=list(s.accel_g), accel_m_s2=list(s.accel_m_s2),
-                   temp_c=list(s.temp_c), supply_v=s.supply_v, aux_v=s.aux_v)
-    elif ev.format == "nanoloc":
-        complete = nanoloc.is_complete(f["status"])
-        rec.update({k: f[k] for k in ("seq", "t_us", "anchor", "tag", "status", "rssi")},
-                   complete=complete, tau_ps=list(f["tau"]),
-                   distance_m=nanoloc.distance(*f["tau"]) if complete else None)
+        rec["payload"] = ev.fields["payload"].hex().upper()
     else:
-        rec["name"] = xbee.FRAME_NAMES.get(ev.type, "unknown")
-        for k, v in f.items():
-            if k in ("src64", "dest64", "remote64"):
-                rec[k] = f"{v:016X}"
-            elif k in ("src16", "dest16", "remote16", "parent16"):
-                rec[k] = f"{v:04X}"
-            elif k == "command":
-                rec[k] = v.decode("ascii", "replace")
-            else:
-                rec[k] = _hexval(v)
+        rec.update(formats.get(ev.format).render(ev, gyro_range))
     if with_hex:
         rec["hex"] = ev.raw.hex().upper()
+    return rec
+
+
+def sins_record(frame: Frame, gyro_range: int) -> dict:
+    f = frame.fields
+    s = adis16350.words_to_sample(f["words"], gyro_range)
+    return dict(seq=f["seq"], words=list(f["words"]), nd=all(s.nd), ea=s.ea,
+                gyro_dps=list(s.gyro_dps), gyro_rad_s=list(s.gyro_rad_s),
+                accel_g=list(s.accel_g), accel_m_s2=list(s.accel_m_s2),
+                temp_c=list(s.temp_c), supply_v=s.supply_v, aux_v=s.aux_v)
+
+
+def nanoloc_record(frame: Frame, gyro_range: int) -> dict:
+    f = frame.fields
+    complete = nanoloc.is_complete(f["status"])
+    rec = {k: f[k] for k in ("seq", "t_us", "anchor", "tag", "status", "rssi")}
+    rec.update(complete=complete, tau_ps=list(f["tau"]),
+               distance_m=nanoloc.distance(*f["tau"]) if complete else None)
+    return rec
+
+
+def xbee_record(frame: Frame, gyro_range: int) -> dict:
+    rec = {"name": xbee.FRAME_NAMES.get(frame.type, "unknown")}
+    for k, v in frame.fields.items():
+        if k in ("src64", "dest64", "remote64"):
+            rec[k] = f"{v:016X}"
+        elif k in ("src16", "dest16", "remote16", "parent16"):
+            rec[k] = f"{v:04X}"
+        elif k == "command":
+            rec[k] = v.decode("ascii", "replace")
+        else:
+            rec[k] = hexval(v)
     return rec
 
 
@@ -150,6 +151,15 @@ def _is_serial(source: str) -> bool:
         return False
 
 
+def port_of_format(fmt: str) -> str:
+    """The port of a recording that format *fmt* reads by default: the first (in the lab's
+    order) that the host decodes as *fmt*, or whose own frames are *fmt*."""
+    for p in ports.listed():
+        if fmt in (p.format, p.frame_format):
+            return p.name
+    raise RecordingError(f"no port carries format {fmt!r}; name the recording's port to read")
+
+
 def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud: int = DEFAULT_BAUD,
                 follow: bool = False, idle: float = 1.0,
                 stop: threading.Event | None = None) -> Iterator[bytes]:
@@ -179,7 +189,7 @@ def read_chunks(source: str, *, fmt: str = "sins", port: str | None = None, baud
     path = Path(source)
     if path.is_dir():
         rec = Recording(path)
-        name = port or PORT_OF_FORMAT[fmt]
+        name = port or port_of_format(fmt)
         for c in rec.chunks(name):
             yield c.data
         return
@@ -199,7 +209,7 @@ def decode(source: str, fmt: str, *, escaped: bool = True, with_hex: bool = Fals
     """Decode *source* as *fmt*: one dict per frame and per run of errors (:class:`ErrorRuns`;
     runs also end with each read, so a live port's errors are not held back), then
     ``{"summary": {...}}`` (which counts every error)."""
-    dec = decoder_for(fmt, escaped=escaped)
+    dec = formats.get(fmt).make(escaped=escaped)
     runs = ErrorRuns()
 
     def records(events):

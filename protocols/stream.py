@@ -72,7 +72,7 @@ class Frame:
     """A decoded frame. ``fields`` holds the type's layout as plain Python values;
     a type the format does not declare has ``fields == {"payload": bytes}``."""
 
-    format: str  # "sins", "nanoloc" or "xbee"
+    format: str  # the protocols.formats name of its layout: "sins", "nanoloc", "xbee", ...
     offset: int  # of the first byte, in the decoder's input stream
     raw: bytes  # the frame as it was on the wire (escaped in API mode 2)
     type: int
@@ -435,24 +435,21 @@ class XBeeSinsChain:
     def decode(self, data: bytes) -> list:
         return self.feed(data) + self.flush()
 
+    @property
+    def bytes(self) -> int:
+        """Bytes fed (the port's bytes)."""
+        return self.xbee.bytes
+
+    @property
+    def frames(self) -> int:
+        """XBee API frames decoded: the port's own frames, as the other decoders count theirs."""
+        return self.xbee.frames
+
     def summary(self) -> dict:
         return {"format": self.format, "xbee": self.xbee.summary(),
                 "sins": {f"{src:016X}": d.summary() for src, d in self.sins.items()},
                 "sources_evicted": self.evicted}
 
 
-def decoder_for(fmt: str, *, escaped: bool = True):
-    """The decoder for a ``navtwin decode --format`` name."""
-    if fmt == "sins":
-        return sins_decoder()
-    if fmt == "nanoloc":
-        return nanoloc_decoder()
-    if fmt == "xbee":
-        return XBeeDecoder(escaped)
-    if fmt == "xbee-sins":
-        return XBeeSinsChain(escaped)
-    raise ValueError(f"unknown format {fmt!r}: use sins, nanoloc, xbee or xbee-sins")
-
-
 __all__ = ["Frame", "DecodeError", "Decoder", "CrcFramedDecoder", "XBeeDecoder", "XBeeSinsChain",
-           "sins_decoder", "nanoloc_decoder", "decoder_for", "ERROR_KINDS", "plain"]
+           "sins_decoder", "nanoloc_decoder", "ERROR_KINDS", "plain"]

@@ -1,6 +1,7 @@
 """The layers' import rules, read from every module's imports with ``ast`` (lazy imports inside
 functions included): a package imports only the layers below it, nothing but the command line
 imports the command line, and the command line (argument parsing) lives in ``cli`` alone.
+Ports declare themselves: no port's name decides anything outside the declarations.
 
 An import is counted by the package it lands in, however it is written: ``protocols.x``,
 ``navtwin.protocols.x`` (the installed namespace) and a relative import that resolves there
@@ -169,3 +170,63 @@ def test_a_user_package_named_host_imports_beside_navtwin(tmp_path):
                          text=True, timeout=60)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "navtwin.host.config"
+
+
+#: the lab's ports, and the modules that declare them, their formats and their devices: the
+#: only places a port's name may decide something (protocols.ports)
+PORT_NAMES = {"sins", "xbee", "nanoloc"}
+DECLARATIONS = {ROOT / "protocols" / "ports.py", ROOT / "protocols" / "formats.py",
+                ROOT / "emulator" / "devices.py"}
+
+
+def _port_literals(node):
+    if isinstance(node, ast.Constant) and node.value in PORT_NAMES:
+        yield node.value
+    elif isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        for element in node.elts:
+            yield from _port_literals(element)
+
+
+def port_name_decisions(source: str) -> list[tuple[int, str]]:
+    """``(line, port)`` for each comparison (``==``, ``in``, ...) or ``case`` against a port's
+    name in a decision: the test of an if/elif, while, ternary or comprehension, or a match."""
+    tests = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.If, ast.While, ast.IfExp)):
+            tests.append(node.test)
+        elif isinstance(node, ast.comprehension):
+            tests += node.ifs
+        elif isinstance(node, ast.Match):
+            tests += [case.pattern for case in node.cases]
+    found = []
+    for test in tests:
+        for node in ast.walk(test):
+            if isinstance(node, ast.Compare):
+                found += [(node.lineno, name) for operand in (node.left, *node.comparators)
+                          for name in _port_literals(operand)]
+            elif isinstance(node, ast.MatchValue):
+                found += [(node.lineno, name) for name in _port_literals(node.value)]
+    return sorted(found)
+
+
+@pytest.mark.parametrize("source, expected", [
+    ('if port == "xbee":\n    pass', [(1, "xbee")]),
+    ('x = a if "sins" in inputs else b', [(1, "sins")]),
+    ('if p in ("xbee", "sins"):\n    pass', [(1, "sins"), (1, "xbee")]),
+    ('while name != "nanoloc":\n    pass', [(1, "nanoloc")]),
+    ('y = [p for p in ps if p == "xbee"]', [(1, "xbee")]),
+    ('match port:\n    case "sins":\n        pass', [(2, "sins")]),
+    ('lines["xbee"].put(t, x)\nif kind == "sins_track":\n    pass', []),
+])
+def test_port_name_decisions_are_found_however_written(source, expected):
+    assert port_name_decisions(source) == expected
+
+
+def test_no_port_name_decides_outside_the_port_declarations():
+    """A port's behaviour is read from its declaration (protocols.ports: its format, decoder,
+    device, whether the host reads or writes it), so adding a port is a declaration and a
+    device model, never another branch (docs/architecture.md, "A port")."""
+    found = [f"{path.relative_to(ROOT)}:{line} decides on {name!r}"
+             for package in packages() for path, _ in modules(package) if path not in DECLARATIONS
+             for line, name in port_name_decisions(path.read_text())]
+    assert found == [], "read it from the port's declaration (protocols.ports) instead"

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_DURATION_S
 from navtwin.protocols.plugins import entry_points
-from navtwin.common.schema import REQUIRED, Invalid, between, key, non_negative, one_of
-from navtwin.protocols.ports import NAMES as PORT_NAMES
+from navtwin.common.schema import REQUIRED, Check, Invalid, between, key, non_negative, one_of
+from navtwin.protocols import ports
 
 ENTRY_POINTS = "navtwin.faults"
 #: what a fault can act on: an anchor's exchanges, the XBee RF link, a vehicle's SINS board
@@ -45,8 +45,11 @@ ENTRY_POINTS = "navtwin.faults"
 MODELS = ("anchor", "link", "board", "router", "coordinator", "line")
 #: which bytes a line fault acts on: what the device sends the host, or what the host writes
 DIRECTIONS = ("to_host", "to_device")
-#: the ports whose device reads what the host writes (the others ignore it)
-READING_PORTS = ("xbee",)
+_LAB_PORTS = ", ".join(map(repr, ports.PORTS.built_in))
+#: a line's port: the lab's or one an installed package declares (protocols.ports)
+DECLARED_PORT = Check(lambda v: v in ports.PORTS, f"must be one of {_LAB_PORTS} or a port a "
+                      "package declares", f"use one of {_LAB_PORTS}, or install the package "
+                      "that declares the port")
 #: The shortest episode and period: the emulator keeps time in integer ns, and a schedule
 #: finer than these only multiplies episodes (each a power-up, a Poisson draw) with nothing
 #: to act on, until a run of seconds takes hours or a float of ns overflows.
@@ -193,15 +196,16 @@ class LineFault(Fault):
     #: False for a kind that only moves bytes in time (latency, bandwidth, slicing): the
     #: audit (lab.audit) then expects the far side to accept every frame it touched
     CHANGES_BYTES = True
-    port: str = key(REQUIRED, "", "the port whose line it acts on", one_of(*PORT_NAMES))
+    port: str = key(REQUIRED, "", "the port whose line it acts on", DECLARED_PORT)
     direction: str = key("to_host", "", "the bytes it acts on: to_host (the device's) or "
                          "to_device (the host's; xbee only)", one_of(*DIRECTIONS))
 
     def __post_init__(self):
         super().__post_init__()
-        if self.direction == "to_device" and self.port not in READING_PORTS:
+        if self.direction == "to_device" and not ports.get(self.port).host_writes:
+            reading = [p.name for p in ports.listed() if p.host_writes]
             raise Invalid("direction", f"to_device on {self.port}: its device ignores what the host "
-                                       f"writes; use port = {' or '.join(map(repr, READING_PORTS))} "
+                                       f"writes; use port = {' or '.join(map(repr, reading))} "
                                        'or direction = "to_host"')
 
     def wrapper(self, rng):

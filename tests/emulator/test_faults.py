@@ -15,11 +15,13 @@ from navtwin.emulator.faults import Fault, FaultError, LineFault, register, unre
 from navtwin.emulator.runner import Emulation, RunError
 from navtwin.emulator.scenario import ScenarioError
 from navtwin.emulator.uart import Line, LineWrapper, Wire
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
 
 from .world_helpers import variant
+
+PORTS = names()  # the lab's ports, in its order
 
 SEC = 1_000_000_000
 SHIPPED = ["anchor_outage", "nlos", "link_loss", "link_fade", "range_value_error", "board_reset",

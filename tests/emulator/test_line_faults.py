@@ -19,12 +19,14 @@ from navtwin.emulator.rng import stream
 from navtwin.emulator.runner import Emulation, RunError
 from navtwin.emulator.scenario import ScenarioError
 from navtwin.emulator.uart import Inbound, Line, LineWrapper, Wire
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
 from navtwin.protocols.recording import FAULTS, Recording, RecordingError
 from navtwin.protocols.serial import wire_ns
 
 from ..helpers import navtwin
 from .world_helpers import shipped_kinds, variant
+
+PORTS = names()  # the lab's ports, in its order
 
 SEC = 1_000_000_000
 MS = 1_000_000

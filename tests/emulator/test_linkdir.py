@@ -7,10 +7,12 @@ import threading
 import pytest
 
 from navtwin.emulator.pty import LinkDir, LinkDirError
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
 from navtwin.protocols.linkdir import LOCK, emulator_alive, navtwin_link_dir
 
 from ..helpers import navtwin, one_line_error
+
+PORTS = names()  # the lab's ports, in its order
 
 
 def emulate(link_dir):

@@ -11,10 +11,12 @@ from navtwin.emulator import runner
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import load_scenario
 from navtwin.cli.main import main
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
 from navtwin.protocols.recording import Recording
 from ..fs_helpers import fsize_limit
 from ..helpers import NAVTWIN
+
+PORTS = names()  # the lab's ports, in its order
 DEADLINE_S = 120.0
 
 

@@ -13,11 +13,12 @@ from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.truth import read_truth_csv
 from navtwin.emulator.world import World
 from navtwin.protocols import xbee
-from navtwin.protocols.ports import NAMES as PORTS
+from navtwin.protocols.ports import names
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import (DecodeError, Frame, XBeeDecoder, XBeeSinsChain, nanoloc_decoder,
                               sins_decoder)
 
+PORTS = names()  # the lab's ports, in its order
 
 
 @pytest.fixture(scope="module")
