@@ -1,23 +1,34 @@
 """``navtwin bench``: the benchmark registry, with peers measured in the same run.
 
-Benchmarks are registered in the ``navtwin.benchmarks`` entry-point group: each entry point is
-a callable returning ``{name: fn}``, where ``fn(quick: bool) -> dict`` runs one benchmark and
-returns its figures; the first line of ``fn``'s docstring is its ``--list`` line.
+Benchmarks come in sets, found in :data:`SETS`: navtwin's own, declared below by
+``"module:function"``, then those of installed packages, from the ``navtwin.benchmarks``
+entry-point group. A set is a callable returning ``{name: fn}``, where ``fn(quick: bool) ->
+dict`` runs one benchmark and returns its figures; the first line of ``fn``'s docstring is its
+``--list`` line.
 """
 from __future__ import annotations
 
 import json
 import sys
 
-from navtwin.protocols.plugins import entry_points
+from navtwin.protocols.plugins import Registry
 
 from .main import UsageError
 
 
+#: The benchmark sets: name -> a callable returning {benchmark name: fn}.
+SETS = Registry("navtwin.benchmarks", "benchmark set", {
+    "decode": "navtwin.protocols.bench:decode_benchmarks",
+    "emulator": "navtwin.emulator.bench:benchmarks",
+    "host": "navtwin.host.bench:benchmarks",
+    "lab": "navtwin.lab.bench:benchmarks",
+})
+
+
 def available() -> dict:
     found = {}
-    for ep in entry_points("navtwin.benchmarks"):
-        found.update(ep.load()())
+    for _, benchmarks in SETS.items():
+        found.update(benchmarks())
     return found
 
 

@@ -1,8 +1,8 @@
-"""The ``navtwin`` console script: one parser, subcommands registered by entry points.
+"""The ``navtwin`` console script: one parser, subcommands found in a registry.
 
-Each subcommand is registered in the ``navtwin.commands`` entry-point group
-(``pyproject.toml``), so this dispatcher imports none of them by name and a user's package can
-add one. A subcommand module provides ``register(subparsers)``, which adds its parser and sets
+The subcommands are :data:`COMMANDS`: navtwin's own, declared below by ``"module:register"``,
+then those of installed packages, from the ``navtwin.commands`` entry-point group, so a user's
+package can add one. A subcommand module provides ``register(subparsers)``, which adds its parser and sets
 ``func(args) -> int``; it reports bad input by raising :class:`UsageError`. A command that needs
 an extra (``pyproject.toml``'s optional dependencies) sets ``extra`` too: a module of it that is
 not installed is then one line naming the extra (:func:`missing_extra`), exit status 2. Every
@@ -19,7 +19,7 @@ import threading
 from contextlib import contextmanager
 
 from navtwin.common.limits import number_problem, span
-from navtwin.protocols.plugins import entry_points
+from navtwin.protocols.plugins import Registry
 from navtwin.protocols import __version__
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.serial import BAUDS
@@ -111,13 +111,22 @@ def missing_extra(e: ModuleNotFoundError, extra: str | None) -> str | None:
     return f"needs {name}, which is not installed; pip install 'navtwin[{extra}]'"
 
 
+#: The subcommands: name -> register(subparsers), which may add more than one ('navtwin --help'
+#: lists them in this order, then those of entry points by name).
+COMMANDS = Registry("navtwin.commands", "command", {
+    name: f"navtwin.cli.{module}:register" for name, module in (
+        ("audit", "audit"), ("bench", "bench"), ("calibrate", "calibrate"), ("ctl", "ctl"),
+        ("decode", "decode"), ("demo", "demo"), ("emulate", "emulate"), ("host", "host"),
+        ("host-replay", "replay"), ("lab", "lab"), ("report", "report"), ("sweep", "sweep"))})
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="navtwin", description="Firmware-in-the-loop emulator of a SINS/WSN "
                     "positioning lab, and the lab computer's fusion service.")
     parser.add_argument("--version", action="version", version=f"navtwin {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    for ep in entry_points("navtwin.commands"):
-        ep.load()(sub)
+    for _, register in COMMANDS.items():
+        register(sub)
     return parser
 
 

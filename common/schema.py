@@ -7,8 +7,8 @@ ONE line naming the key, the problem and the fix; :func:`dump` writes it back as
 lists every key for the documentation. Field types understood: bool, int, float, str,
 dict (a table passed on as it is), ``float | None`` (optional), fixed and variable tuples
 of numbers, tuples of points, a nested table (dataclass) and an array of tables
-(``tuple[Table, ...]``; a class attribute ``KINDS`` maps a ``kind`` key to one dataclass
-per kind).
+(``tuple[Table, ...]``; a class attribute ``KINDS``, a protocols.plugins.Registry, maps a
+``kind`` key to one dataclass per kind).
 """
 from __future__ import annotations
 
@@ -213,10 +213,10 @@ def build(cls, data: Any, path: KeyPath = ()):
     if kinds is not None:
         kind = data.get("kind")
         if not isinstance(kind, str) or kind not in kinds:
-            names = ", ".join(repr(k) for k in kinds)
+            names = ", ".join(repr(k) for k in kinds.names())
             raise Invalid(where(path, "kind"), f"must be one of {names} (got {_describe(kind)}); "
                                                f"set kind to one of {names}")
-        cls = kinds[kind]
+        cls = kinds.get(kind)
         data = {k: v for k, v in data.items() if k != "kind"}
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
@@ -257,7 +257,7 @@ def build(cls, data: Any, path: KeyPath = ()):
 
 
 def kind_of(obj) -> str | None:
-    """The ``kind`` value of an array-of-tables entry whose class is one of a KINDS map."""
+    """The ``kind`` value of an array-of-tables entry whose class is one of a KINDS registry."""
     return getattr(type(obj), "KIND", None)
 
 
@@ -309,9 +309,9 @@ def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
     keys are dotted paths, ``[]`` marking an array of tables (``anchors[].x``)."""
     out = []
     kinds = getattr(cls, "KINDS", None)
-    classes = list(kinds.values()) if kinds else [cls]
+    classes = [c for _, c in kinds.items()] if kinds else [cls]
     if kinds:
-        out.append((prefix + "kind", "", "required", ", ".join(f"`{k}`" for k in kinds),
+        out.append((prefix + "kind", "", "required", ", ".join(f"`{k}`" for k in kinds.names()),
                     "the kind of entry"))
     shared: dict[tuple, list] = {}  # a key as documented -> the kinds declaring it so
     for c in classes:

@@ -214,7 +214,7 @@ def uart_rx(chunks: int = 3000, seed: int = 1) -> dict:
 
 
 def benchmarks() -> dict:
-    """The emulator's benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks)."""
+    """The emulator's benchmarks for ``navtwin bench`` (a set of navtwin.cli.bench.SETS)."""
     def emulator_speed(quick: bool = False) -> dict:
         """emulator: virtual-time generation speed of office (goal >= 300x real time)"""
         return speed("office", repeat=1 if quick else 3)

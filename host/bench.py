@@ -133,7 +133,7 @@ def replay_speeds(directory: str | os.PathLike, sets: dict, runs: int = 1) -> di
 
 
 def benchmarks() -> dict:
-    """The host's own benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks);
+    """The host's own benchmarks for ``navtwin bench`` (a set of navtwin.cli.bench.SETS);
     those on the emulated lab's bytes are the lab's (:mod:`navtwin.lab.bench`)."""
     def host_filters(quick: bool = False) -> dict:
         """host: microseconds per step of each filter, the strapdown and the estimator"""

@@ -187,6 +187,11 @@ def _cause(before: Read, now: Read) -> str:
     return "second_reader" if now.contended > before.contended else "no_cause_seen"
 
 
+def _changes_bytes(kind: str) -> bool:
+    """Whether fault *kind* may change bytes (a kind no longer installed is taken to)."""
+    return kind not in Fault.KINDS or getattr(Fault.KINDS.get(kind), "CHANGES_BYTES", True)
+
+
 def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
                escaped: bool, marks: list[Read] | None = None) -> PortAudit:
     """The audit of one port (module docstring); *marks*: the reads' read columns, when the
@@ -210,7 +215,7 @@ def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
         return i >= 0 and seen[i][0] <= lo and hi <= seen[i][1]
 
     changing = [e for e in entries if e["port"] == port and e.get("direction", "to_host") != "to_device"
-                and e["start"] is not None and getattr(Fault.KINDS.get(e["kind"]), "CHANGES_BYTES", True)]
+                and e["start"] is not None and _changes_bytes(e["kind"])]
     timing = [e for e in entries if e["port"] == port and e.get("direction", "to_host") != "to_device"
               and e["start"] is not None and e not in changing]
     damage = sorted((e["start"], e["end"]) for e in changing)

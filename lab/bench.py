@@ -99,7 +99,7 @@ def sweep_rate(scenario: str = "office", seeds: int = 8, workers: int = 2,
 
 
 def benchmarks() -> dict:
-    """The lab's benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks)."""
+    """The lab's benchmarks for ``navtwin bench`` (a set of navtwin.cli.bench.SETS)."""
     def host_latency(quick: bool = False) -> dict:
         """host: last byte on the PTY -> estimate line, office lab, all filters (goal p99 <= 2 ms)"""
         return latency(5.0 if quick else 20.0)
