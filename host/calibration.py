@@ -41,14 +41,14 @@ use it (host.estimator); ``est.calibration`` is the loaded :class:`Calibration` 
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_BIAS_M, RANGE_SCALE, limit_problem, number_problem
+from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_BIAS_M, RANGE_SCALE, number_problem
+from navtwin.common import tomlfile
 from navtwin.common.schema import REQUIRED, Invalid, between, build, dump, key
 from navtwin.protocols.nanoloc import distance, is_complete
 from navtwin.protocols.stream import Frame, nanoloc_decoder
@@ -168,16 +168,7 @@ def build_file(path: str | Path, suffix: str, make):
     path = Path(path)
     if not path.suffix and not path.is_file():
         path = CALIBRATION_DIR / f"{path}{suffix}.toml"
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise CalibrationError(f"{path}: cannot read ({e.strerror}); check the path") from None
-    except UnicodeDecodeError as e:
-        raise CalibrationError(f"{path}: not UTF-8 text ({e.reason}); save it as UTF-8") from None
-    except tomllib.TOMLDecodeError as e:
-        raise CalibrationError(f"{path}: not valid TOML ({e}); fix the syntax") from None
-    except (ValueError, RecursionError) as e:
-        raise CalibrationError(f"{path}: {limit_problem(e)}; shorten it") from None
+    doc = tomlfile.read(path, CalibrationError)
     try:
         return make(doc, str(path))
     except (Invalid, CalibrationError) as e:

@@ -50,13 +50,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
-                           RANGE_BIAS_M, limit_problem, number_problem)
+                           RANGE_BIAS_M, number_problem)
 from navtwin.protocols.adis16350 import GYRO_LSB_DPS
+from navtwin.common import tomlfile
 from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, each, key, one_of, rows
 
 from . import calibration as range_calibration
@@ -258,20 +258,7 @@ def load(name_or_path: str | None = None) -> HostConfig:
         if not path.is_file():
             raise ConfigError(f"no host config named {spec!r}; use one of {', '.join(shipped())} "
                               f"or a path to a .toml file")
-    try:
-        text = path.read_text(encoding="utf-8")  # TOML is UTF-8, whatever the locale says
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read ({e.strerror}); check the path") from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start}); save it "
-                          f"as UTF-8") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML ({e}); fix the syntax") from None
-    except (ValueError, RecursionError) as e:  # tomllib's limits: an integer's digits, nesting
-        raise ConfigError(f"{path}: {limit_problem(e)}; shorten it") from None
-    return _parse(doc, str(path), path.stem, path.parent)
+    return _parse(tomlfile.read(path, ConfigError), str(path), path.stem, path.parent)
 
 
 # -- checking -------------------------------------------------------------------------------
