@@ -20,7 +20,6 @@ import html
 import io
 import json
 import re
-import subprocess
 from collections import Counter
 from pathlib import Path
 
@@ -32,10 +31,10 @@ from navtwin.emulator.scenario import ScenarioError, load_scenario
 from navtwin.host import config as host_config
 from navtwin.host.config import ConfigError
 from navtwin.host.replay import config_for
-from navtwin.protocols import __version__
 from navtwin.protocols.recording import FAULTS
 
 from . import evaluate, pcrb
+from .provenance import code_version
 
 #: Table 1's rows (paper 001): key of lab.evaluate.position_errors -> label; ranges are two keys.
 ROWS = (("x_range", "x error range (m)"), ("x_var", "x error variance (m²)"),
@@ -114,16 +113,6 @@ def _host_config(d: Path, scenario: str):
         return None
 
 
-def _code_version() -> str:
-    """The package version, and the git commit of its checkout when it is one."""
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).parent,
-                                capture_output=True, text=True, timeout=10).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        commit = ""
-    return __version__ + (f" ({commit})" if commit else "")
-
-
 def collect(run_dir: str | Path) -> dict:
     """Everything the report shows, from the run directory's files."""
     d = Path(run_dir)
@@ -167,7 +156,7 @@ def collect(run_dir: str | Path) -> dict:
            "paper": evaluate.PAPER_FIGURES.get(sc.name),
            "hashes": {n: hashlib.sha256((d / n).read_bytes()).hexdigest()
                       for n in HASHED if (d / n).is_file()},
-           "code": _code_version()}
+           "code": code_version()}
     if cfg is not None:
         ec = cfg.estimator_config()
         run["bound"] = pcrb.position_bound(sc, truth, ec.jerk_psd, ec.p0_sigma)

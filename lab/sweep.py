@@ -32,7 +32,6 @@ import json
 import math
 import os
 import re
-import subprocess
 import tomllib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -44,12 +43,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from scipy.stats import t as student_t
 
-from navtwin.protocols import __version__
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
 from navtwin.host.output import estimate_line
 from navtwin.host.replay import emulator_settings
 
 from . import evaluate
+from .provenance import code_version
 from .run import run_in_memory, truth
 
 #: Scenario seconds a task holds at least (seeds chunked): 0.2-0.7 s of work here.
@@ -77,22 +76,6 @@ TABLE_1 = {"x error range (m)": ("x_min", "x_max"), "x error variance (m²)": ("
 
 class SweepError(Exception):
     """A sweep that cannot start: one line naming the problem and the fix."""
-
-
-def code_version() -> str:
-    """navtwin's version, plus ``git describe`` of its checkout when there is one, with
-    ``-dirty`` when a .py or .toml file differs from it (edited docs do not change a cell)."""
-    root = str(Path(__file__).resolve().parent.parent)
-    try:
-        head = subprocess.run(["git", "-C", root, "describe", "--always"], capture_output=True,
-                              text=True, timeout=10)
-        diff = subprocess.run(["git", "-C", root, "diff", "--quiet", "HEAD", "--", "*.py",
-                               "*.toml"], capture_output=True, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return __version__
-    if head.returncode != 0:
-        return __version__
-    return f"{__version__}+{head.stdout.strip()}" + ("-dirty" if diff.returncode else "")
 
 
 def scenario_hash(sc: Scenario) -> str:
