@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import signal
 import sys
 import threading
@@ -27,6 +28,22 @@ from navtwin.protocols.serial import BAUDS
 
 class UsageError(Exception):
     """A problem with what the user asked for: printed as one line, exit status 2."""
+
+
+def flag(setting: str) -> str:
+    """The command-line option of library setting *setting*: ``link_dir`` -> ``--link-dir``."""
+    return "--" + setting.replace("_", "-")
+
+
+#: A library error about one setting starts with its name: ``speed: 'x' is not ...``.
+_SETTING = re.compile(r"([a-z][a-z0-9_]*): ")
+
+
+def flagged(message: str) -> str:
+    """*message* as the command line says it: a library error that starts with a setting's name
+    (``record: /x: not empty``) starts with its option instead (``--record /x: not empty``)."""
+    m = _SETTING.match(message)
+    return f"{flag(m[1])} {message[m.end():]}" if m else message
 
 
 class Parser(argparse.ArgumentParser):
@@ -140,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args) or 0
     except UsageError as e:
-        print(f"navtwin {args.command}: error: {e}", file=sys.stderr)
+        print(f"navtwin {args.command}: error: {flagged(str(e))}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:
         if (line := missing_extra(e, getattr(args, "extra", None))) is None:

@@ -583,7 +583,7 @@ def parse_scenario(data: dict, source: str = "scenario") -> Scenario:
         raise ScenarioError(f"{source}: {e}".replace("\n", " ")) from None
 
 
-def parse_fault(spec: str, where: str = "--fault") -> dict:
+def parse_fault(spec: str, where: str = "fault:") -> dict:
     """``KIND:key=value,...`` (the ``--fault`` option, ``navtwin ctl fault``) as the table a
     ``[[faults]]`` entry is; values are TOML scalars (``0.5``, ``true``, ``"text"``), a bare
     word a string."""
@@ -616,5 +616,5 @@ def with_faults(sc: Scenario, specs) -> Scenario:
             faults.append(build(Fault, parse_fault(spec), (("faults", len(faults) + 1),)))
             sc = dataclasses.replace(sc, faults=tuple(faults))
         except Invalid as e:
-            raise ScenarioError(f"--fault {spec}: {e}".replace("\n", " ")) from None
+            raise ScenarioError(f"fault: {spec}: {e}".replace("\n", " ")) from None
     return sc

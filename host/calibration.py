@@ -308,7 +308,7 @@ def fit(r: Ranges, table: StepTable, anchors: Mapping[int, tuple[float, ...]], t
             f"the fitted scale factor f = {theta[0]:.4g} {problem} (what the host accepts): "
             "the ranges do not grow with the step table's distances, so the recording is no "
             "calibration walk of that table (the tag resting at each of its points in turn); "
-            "record one, or give the --steps and --config it was made with")
+            "record one, or give the steps and config it was made with")
     resid = mean - A @ theta
     dof = max(len(mean) - A.shape[1], 1)
     inflation = max((_ar1_inflation(resid[who == a]) for a in ids), default=1.0)

@@ -263,7 +263,7 @@ def load(name_or_path: str | None = None) -> HostConfig:
 
 # -- checking -------------------------------------------------------------------------------
 
-def parse_filters(spec, where: str = "--filters") -> tuple[str, ...]:
+def parse_filters(spec, where: str = "filters") -> tuple[str, ...]:
     """``"all"`` or track names (comma string or list of strings) -> names in output order
     (host.tracks.names())."""
     known = tracks.names()

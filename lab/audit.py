@@ -297,9 +297,9 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
     emu, host = Recording(emulator_dir), Recording(host_dir)
     if emu.meta.get("source") != "navtwin emulate":
         raise AuditError(f"{emulator_dir}: not an emulator recording (source "
-                         f"{emu.meta.get('source')!r}); give the emulator's --record directory first")
+                         f"{emu.meta.get('source')!r}); give the emulator's recording directory first")
     if (host.meta.get("source") or "").startswith("navtwin emulate"):
-        raise AuditError(f"{host_dir}: an emulator recording; give the host's --record directory second")
+        raise AuditError(f"{host_dir}: an emulator recording; give the host's recording directory second")
     entries = emu.faults()
     escaped = emu.meta.get("ports", {}).get("xbee", {}).get("api_mode", 2) == 2
     ports = [p for p in PORTS if emu.sizes.get(p) and host.sizes.get(p)]

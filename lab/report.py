@@ -117,7 +117,7 @@ def collect(run_dir: str | Path) -> dict:
     """Everything the report shows, from the run directory's files."""
     d = Path(run_dir)
     if not d.is_dir():
-        raise ReportError(f"{d}: not a directory; give the run directory of 'navtwin lab --dir DIR'")
+        raise ReportError(f"{d}: not a directory; give the run directory of 'navtwin lab'")
     for need in ("emulator/truth.csv", "emulator/scenario.toml", "estimates.jsonl"):
         if not (d / need).is_file():
             raise ReportError(f"{d}: no {need}; give a run directory written by 'navtwin lab'")
@@ -583,11 +583,11 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> dict[str
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise ReportError(f"--out {out}: {e.strerror}; choose a writable directory") from None
+        raise ReportError(f"out: {out}: {e.strerror}; choose a writable directory") from None
     paths = {"html": out / "report.html", "md": out / "report.md"}
     try:
         paths["html"].write_text(html_page(run, figures(run)), encoding="utf-8")
         paths["md"].write_text(markdown(run), encoding="utf-8")
     except OSError as e:
-        raise ReportError(f"--out {out}: {e.strerror}; choose a writable directory") from None
+        raise ReportError(f"out: {out}: {e.strerror}; choose a writable directory") from None
     return paths

@@ -173,9 +173,9 @@ class Client:
             try:
                 self.client = DaskClient(address, timeout=f"{CONNECT_TIMEOUT_S}s")
             except (OSError, TimeoutError, ValueError) as e:
-                raise SweepError(f"--scheduler {address}: no scheduler answered "
+                raise SweepError(f"scheduler: {address}: no scheduler answered "
                                  f"({_error_line(e)}); start one (dask scheduler) or omit "
-                                 "--scheduler for a LocalCluster") from None
+                                 "the scheduler for a LocalCluster") from None
         else:
             self.cluster = private_cluster(workers or os.cpu_count() or 1)
             self.client = DaskClient(self.cluster)
@@ -225,16 +225,16 @@ def _check_out(out: Path) -> None:
     """*out* made if missing; refused if it holds anything but a sweep's parts (a recording's
     or the user's files would be mixed with ours, and read as parts)."""
     if out.exists() and not out.is_dir():
-        raise SweepError(f"--out {out}: not a directory; pass a directory path")
+        raise SweepError(f"out: {out}: not a directory; pass a directory path")
     try:
         out.mkdir(parents=True, exist_ok=True)
         others = sorted(p.name for p in out.iterdir() if not (PART.fullmatch(p.name)
                                                               and p.is_file()))
     except OSError as e:
-        raise SweepError(f"--out {out}: {e.strerror}; choose a writable directory") from None
+        raise SweepError(f"out: {out}: {e.strerror}; choose a writable directory") from None
     if others:
         more = f" and {len(others) - 1} more" if len(others) > 1 else ""
-        raise SweepError(f"--out {out}: holds {others[0]}{more}, not only a sweep's "
+        raise SweepError(f"out: {out}: holds {others[0]}{more}, not only a sweep's "
                          "part-NNNN.parquet files; choose a new or empty directory, or that "
                          "of an earlier sweep")
 
@@ -244,8 +244,8 @@ def _check_same(out: Path, metas: list[dict], meta: dict) -> None:
         for key, what in (("scenario_hash", "scenario hash"), ("code_version", "code version"),
                           ("duration_s", "duration"), ("filters", "filter set")):
             if m.get(key) != meta[key]:
-                raise SweepError(f"--out {out}: holds a sweep of another {what} ({m.get(key)} "
-                                 f"there, {meta[key]} now); choose another --out or remove it")
+                raise SweepError(f"out: {out}: holds a sweep of another {what} ({m.get(key)} "
+                                 f"there, {meta[key]} now); choose another directory or remove it")
 
 
 def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable[str] | None = None,
@@ -280,7 +280,7 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         try:
             writer = pq.ParquetWriter(part, SCHEMA.with_metadata({META_KEY: json.dumps(meta)}))
         except OSError as e:
-            raise SweepError(f"--out {out}: cannot write {part.name} ({e}); choose a writable "
+            raise SweepError(f"out: {out}: cannot write {part.name} ({e}); choose a writable "
                              "directory") from None
     finished = len(seeds) - len(todo)
 
@@ -483,9 +483,9 @@ def check_block(path: str | Path) -> None:
 
 def _unwritable(path: Path, e: OSError | UnicodeDecodeError) -> SweepError:
     if isinstance(e, UnicodeDecodeError):
-        return SweepError(f"--results {path}: not UTF-8 text; give a Markdown file such as "
+        return SweepError(f"results: {path}: not UTF-8 text; give a Markdown file such as "
                           "docs/results.md")
-    return SweepError(f"--results {path}: {e.strerror or e}; give a file you can write, or "
+    return SweepError(f"results: {path}: {e.strerror or e}; give a file you can write, or "
                       "omit --results")
 
 
