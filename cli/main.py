@@ -49,11 +49,14 @@ def flagged(message: str) -> str:
 class Parser(argparse.ArgumentParser):
     """*options* (a subcommand's ``add_parser(..., options=fn)``): fn(parser) adds the options
     whose help needs a library module, when this parser is first used: ``navtwin --version``
-    and every other subcommand do not import it (docs/performance.md)."""
+    and every other subcommand do not import it (docs/performance.md). *options_for*:
+    fn(parser, args) adds the options that depend on the arguments given, before they are
+    parsed (``navtwin bench NAME``'s settings, ``--help`` included)."""
 
-    def __init__(self, *args, options=None, **kwargs):
+    def __init__(self, *args, options=None, options_for=None, **kwargs):
         super().__init__(*args, **kwargs)
         self._options = options
+        self._options_for = options_for
 
     def _add_options(self) -> None:
         if self._options is not None:
@@ -62,6 +65,10 @@ class Parser(argparse.ArgumentParser):
 
     def parse_known_args(self, args=None, namespace=None):
         self._add_options()
+        if self._options_for is not None:
+            args = list(sys.argv[1:] if args is None else args)
+            add, self._options_for = self._options_for, None
+            add(self, args)
         return super().parse_known_args(args, namespace)
 
     def format_usage(self):

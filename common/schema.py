@@ -82,6 +82,16 @@ def key(default: Any, unit: str, doc: str, *checks: Check, hex: int = 0) -> Any:
     return dataclasses.field(default=default, metadata=meta)
 
 
+def takes(settings: type) -> Callable:
+    """Declare the settings of a function as a table class of :func:`key` fields, its
+    ``Settings`` attribute: ``navtwin bench NAME --setting value`` builds them (checked as a
+    table is) and calls ``fn(quick, settings)``."""
+    def mark(fn: Callable) -> Callable:
+        fn.Settings = settings
+        return fn
+    return mark
+
+
 # -- building ----------------------------------------------------------------------------
 #: how much of a wrong value a message shows: list elements, nesting, string characters
 SHOW_ITEMS, SHOW_DEPTH, SHOW_CHARS = 8, 3, 40
