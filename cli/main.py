@@ -19,7 +19,7 @@ import sys
 import threading
 from contextlib import contextmanager
 
-from navtwin.common.limits import number_problem, span
+from navtwin.common.limits import span
 from navtwin.protocols.plugins import Registry
 from navtwin.protocols import __version__
 from navtwin.protocols.ports import DEFAULT_BAUD
@@ -87,15 +87,21 @@ def number(lo: float = -math.inf, hi: float = math.inf, *, integer: bool = False
            above: bool = False):
     """An argparse ``type``: a finite number (an integer if *integer*) in [lo, hi], or
     (lo, hi] if *above*; anything else is one line naming the value and the range."""
+    within = span(lo, hi, above)
+
     def parse(text: str):
+        from navtwin.common.schema import Check, Invalid, value  # when a number is parsed
+
+        check = Check(lambda v: (lo < v if above else lo <= v) and v <= hi, f"must be {within}",
+                      f"use a value {within}")
         try:
-            value = int(text) if integer else float(text)
+            raw = int(text) if integer else float(text)
         except ValueError:
-            value = text
-        problem = number_problem(value, lo, hi, integer=integer, above=above)
-        if problem:
-            raise argparse.ArgumentTypeError(f"{text}: {problem}")
-        return value
+            raw = text  # the schema names what it should be
+        try:
+            return value(raw, int if integer else float, text, check)
+        except Invalid as e:
+            raise argparse.ArgumentTypeError(f"{text}: {e.problem}") from None
 
     parse.__name__ = "integer" if integer else "number"  # argparse names it in messages
     return parse

@@ -54,7 +54,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
-                           RANGE_BIAS_M, number_problem)
+                           RANGE_BIAS_M)
 from navtwin.protocols.adis16350 import GYRO_LSB_DPS
 from navtwin.common import tomlfile
 from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, each, key, one_of, rows
@@ -383,22 +383,19 @@ def _vehicles(doc: dict) -> tuple[Vehicle, ...]:
     return tuple(build(Vehicle, item, (("vehicles", n),)) for n, item in enumerate(items, 1))
 
 
+@dataclass(frozen=True)
+class _RangeBias:
+    range_bias_m: dict[int, float] = key(REQUIRED, "m", "c_i of 001 per anchor id",
+                                         between(*RANGE_BIAS_M), ids=("anchor", ANCHOR_IDS))
+
+
 def _range_bias(value, anchors: set[int]) -> dict[int, float]:
-    """``range_bias_m = {1 = 0.3, 2 = 0.25}``: c_i of 001 per anchor id, in RANGE_BIAS_M."""
-    where = "[filters] range_bias_m"
-    if not isinstance(value, dict):
-        raise ConfigError(f"{where} must be a table of anchor id = number like "
-                          f"{{1 = 0.3, 2 = 0.25}}, not {value!r}")
-    out = {}
-    for k, v in value.items():
-        aid = int(k) if str(k).isdigit() else None
+    """``range_bias_m = {1 = 0.3, 2 = 0.25}``: c_i of 001 per anchor id of [[anchors]]."""
+    out = build(_RangeBias, {"range_bias_m": value}, (("filters", 0),)).range_bias_m
+    for aid in out:
         if aid not in anchors:
-            raise ConfigError(f"{where} names anchor {k!r}, which is not in [[anchors]]; "
-                              f"use the ids {sorted(anchors)}")
-        problem = number_problem(v, *RANGE_BIAS_M)
-        if problem:
-            raise ConfigError(f"{where} {aid} {problem}, not {v!r}")
-        out[aid] = float(v)
+            raise ConfigError(f"[filters] range_bias_m names anchor {str(aid)!r}, which is not in "
+                              f"[[anchors]]; use the ids {sorted(anchors)}")
     return out
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from navtwin.common.limits import number_problem
+from navtwin.common.schema import Invalid, value
 from navtwin.emulator.scenario import ScenarioError, load_scenario
 from navtwin.host import config as host_config
 from navtwin.host.config import ConfigError
@@ -135,9 +135,10 @@ def collect(run_dir: str | Path) -> dict:
         raise ReportError(f"{d}/estimates.jsonl: no estimate; the host wrote none (see host.log)")
     report = _json(d / "report.json")
     offset = report.get("time_offset_s", 0.0)
-    if problem := number_problem(offset):
-        raise ReportError(f"{d}/report.json: time_offset_s {offset!r} {problem}; re-run "
-                          "navtwin lab")
+    try:
+        value(offset, float, "time_offset_s")
+    except Invalid as e:
+        raise ReportError(f"{d}/report.json: {e}; re-run navtwin lab") from None
     for key in ("emulator", "audit"):
         if not isinstance(report.get(key, {}), dict):
             raise ReportError(f"{d}/report.json: {key} is not the JSON object navtwin lab "
