@@ -1,7 +1,6 @@
 """Tracks, fault kinds, commands and benchmark sets: four registries found one way (issue 18
 item 5): navtwin's own declared in code, then the entry points of installed packages, each
 checked when loaded; an unknown name is one line listing the known ones."""
-import sys
 import textwrap
 
 import pytest
@@ -10,6 +9,8 @@ from navtwin.cli.bench import SETS
 from navtwin.cli.main import COMMANDS
 from navtwin.emulator.faults import KINDS
 from navtwin.host.tracks import TRACKS
+
+from .packages import install
 
 REGISTRIES = {"track": TRACKS, "fault kind": KINDS, "command": COMMANDS, "benchmark set": SETS}
 
@@ -38,17 +39,10 @@ PLUGIN = textwrap.dedent('''
 @pytest.fixture
 def package(tmp_path, monkeypatch):
     """An installed package declaring 'reg_mine' in each group."""
-    (tmp_path / "regmine.py").write_text(PLUGIN)
-    info = tmp_path / "regmine-1.0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: regmine\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text(
-        "[navtwin.tracks]\nreg_mine = regmine:Mine\n[navtwin.faults]\nreg_mine = regmine:Hangup\n"
-        "[navtwin.commands]\nreg_mine = regmine:register\n"
-        "[navtwin.benchmarks]\nreg_mine = regmine:benchmarks\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    yield
-    sys.modules.pop("regmine", None)
+    install(tmp_path, monkeypatch, "regmine",
+            "[navtwin.tracks]\nreg_mine = regmine:Mine\n[navtwin.faults]\nreg_mine = regmine:Hangup\n"
+            "[navtwin.commands]\nreg_mine = regmine:register\n"
+            "[navtwin.benchmarks]\nreg_mine = regmine:benchmarks\n", PLUGIN)
 
 
 @pytest.mark.parametrize("noun", REGISTRIES)
@@ -75,17 +69,9 @@ def test_an_unknown_name_is_one_line_listing_the_known(noun):
 
 
 def test_an_entry_point_that_is_not_what_its_group_takes_is_refused(tmp_path, monkeypatch):
-    (tmp_path / "regbad.py").write_text("class NotATrack:\n    name = 'reg_bad'\n")
-    info = tmp_path / "regbad-1.0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: regbad\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[navtwin.tracks]\nreg_bad = regbad:NotATrack\n"
-                                           "[navtwin.faults]\nreg_bad = regbad:NotATrack\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    try:
-        with pytest.raises(ValueError, match="^track 'reg_bad' is .*not a Track class named"):
-            TRACKS.get("reg_bad")
-        with pytest.raises(ValueError, match="not a DeviceFault or LineFault subclass"):
-            KINDS.get("reg_bad")
-    finally:
-        sys.modules.pop("regbad", None)
+    install(tmp_path, monkeypatch, "regbad", "[navtwin.tracks]\nreg_bad = regbad:NotATrack\n"
+            "[navtwin.faults]\nreg_bad = regbad:NotATrack\n", "class NotATrack:\n    name = 'reg_bad'\n")
+    with pytest.raises(ValueError, match="^track 'reg_bad' is .*not a Track class named"):
+        TRACKS.get("reg_bad")
+    with pytest.raises(ValueError, match="not a DeviceFault or LineFault subclass"):
+        KINDS.get("reg_bad")

@@ -55,13 +55,13 @@ def test_flagged_turns_a_leading_setting_into_its_flag():
         assert flagged(plain) == plain
 
 
-def test_the_command_line_says_the_flag(capsys, tmp_path):
-    code = main(["emulate", "--scenario", "office", "--duration", "99999", "--quiet",
+@pytest.mark.parametrize("option, start", [
+    (["--duration", "99999"], "--duration 99999 is outside"),
+    (["--fault", "byte_drop:port=gps"], "--fault byte_drop:port=gps: "),
+])
+def test_the_command_line_says_the_flag(capsys, tmp_path, option, start):
+    code = main(["emulate", "--scenario", "office", *option, "--quiet",
                  "--link-dir", str(tmp_path / "links")])
     err = capsys.readouterr().err.strip()
-    assert code == 2 and err.startswith("navtwin emulate: error: --duration 99999 is outside")
+    assert code == 2 and err.startswith(f"navtwin emulate: error: {start}")
     assert len(err.splitlines()) == 1
-    code = main(["emulate", "--scenario", "office", "--fault", "byte_drop:port=gps", "--quiet",
-                 "--link-dir", str(tmp_path / "links")])
-    err = capsys.readouterr().err.strip()
-    assert code == 2 and err.startswith("navtwin emulate: error: --fault byte_drop:port=gps: ")

@@ -3,7 +3,6 @@ known law, the file and its one-line errors, the host config's [calibration] and
 estimator's use of it."""
 import dataclasses
 import math
-import re
 
 import numpy as np
 import pytest
@@ -100,6 +99,12 @@ GOOD = cal.Calibration(scale=1.05, bias={1: 0.25}, sigma_coefficients=(0.1,), si
     (GOOD.replace("span_m = [0.6, 20.0]", "span_m = [20.0, 0.6]"), "span_m must be"),
     (GOOD.replace("[sigma]", "[sigmas]"), "unknown key 'sigmas'"),
     (GOOD + "[[", "not valid TOML"),
+    (GOOD.replace("1 = 0.25", "0 = 0.25", 1), "bias_m names anchor '0', which is not an anchor id (1..254)"),
+    (GOOD.replace("1 = 0.25", '1 = "x"', 1), "bias_m 1 must be a number (got 'x')"),
+    (GOOD.replace("[bias_m]\n1 = 0.25\n", "[bias_m]\n"), "bias_m is empty"),
+    (GOOD.replace("[bias_ci95_m]", "[bias_ci95_m]\n3 = 11.0"), "bias_ci95_m 3 must be in [0, 10]"),
+    (GOOD.replace("coefficients = [0.1]", "coefficients = []"), "coefficients must hold 1 to 8"),
+    (GOOD.replace("coefficients = [0.1]", "coefficients = [1000.0]"), "coefficients elements must be in [-100, 100]"),
 ])
 def test_bad_calibration_file_is_one_line(tmp_path, text, problem):
     path = tmp_path / "bad.toml"
@@ -179,17 +184,3 @@ def test_estimator_holds_the_calibration_and_corrects_as_range_scale_and_bias_do
         0.1 * k + 0.025 * a, a, c.scale * math.dist((0.0, 0.0), ANCHORS[a][:2]) + c.bias[a]))]
     assert math.hypot(out_a[-1].x, out_a[-1].y) < 0.5 * math.hypot(out_c[-1].x, out_c[-1].y)
 
-
-@pytest.mark.parametrize("text, problem", [
-    (GOOD.replace("1 = 0.25", "0 = 0.25", 1), "bias_m names anchor '0', which is not an anchor id (1..254)"),
-    (GOOD.replace("1 = 0.25", '1 = "x"', 1), "bias_m 1 must be a number (got 'x')"),
-    (GOOD.replace("[bias_m]\n1 = 0.25\n", "[bias_m]\n"), "bias_m is empty"),
-    (GOOD.replace("[bias_ci95_m]", "[bias_ci95_m]\n3 = 11.0"), "bias_ci95_m 3 must be in [0, 10]"),
-    (GOOD.replace("coefficients = [0.1]", "coefficients = []"), "coefficients must hold 1 to 8"),
-    (GOOD.replace("coefficients = [0.1]", "coefficients = [1000.0]"), "coefficients elements must be in [-100, 100]"),
-])
-def test_a_calibration_files_maps_and_tables_are_checked_by_the_schema(tmp_path, text, problem):
-    path = tmp_path / "bad.toml"
-    path.write_text(text)
-    with pytest.raises(cal.CalibrationError, match=re.escape(problem)):
-        cal.load(path)
