@@ -69,9 +69,12 @@ def _settings_options(parser, args: list[str]) -> None:
     cls = getattr(fn, "Settings", None)
     if cls is None:
         return
+    fields = [f for f in dataclasses.fields(cls) if flag(f.name) not in parser._option_string_actions]
+    if not fields:
+        return
     group = parser.add_argument_group(f"settings of {names[0]}")
     hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
+    for f in fields:
         meta = f.metadata
         what, _, default = meta.get("doc", "").partition(";")  # "meaning; none = default"
         valid = [c.must.replace("must be ", "") for c in meta.get("checks", ())]
@@ -85,14 +88,17 @@ def _settings_options(parser, args: list[str]) -> None:
                                metavar=f.name.upper(), help=text)
 
 
-def settings(cls, given: dict):
-    """A benchmark's settings *cls* from the command line's *given* texts (setting ->
+def settings(name: str, cls, given: dict):
+    """Benchmark *name*'s settings *cls* from the command line's *given* texts (setting ->
     text, or True for a switch); UsageError (one line naming the flag) if one is not valid."""
     from navtwin.common.schema import Invalid, build
 
     hints = typing.get_type_hints(cls)
     values = {}
     for key, text in given.items():
+        if key not in hints:
+            raise UsageError(f"{name} takes no {flag(key)}; its settings: "
+                             f"{', '.join(map(flag, hints))}")
         tp = next((a for a in typing.get_args(hints[key]) if a is not type(None)), hints[key])
         try:
             values[key] = tp(text) if tp in (int, float) else text
@@ -117,7 +123,7 @@ def run(args) -> int:
     given = {k[len(_DEST):]: v for k, v in vars(args).items() if k.startswith(_DEST)}
     runs = [(name, benches[name], getattr(benches[name], "Settings", None))
             for name in args.names or benches]
-    runs = [(name, fn, cls and settings(cls, given)) for name, fn, cls in runs]  # all checked first
+    runs = [(name, fn, cls and settings(name, cls, given)) for name, fn, cls in runs]  # all checked first
     for name, fn, s in runs:
         print(f"running {name} ...", file=sys.stderr, flush=True)
         result = fn(args.quick) if s is None else fn(args.quick, s)

@@ -51,7 +51,7 @@ class Parser(argparse.ArgumentParser):
     whose help needs a library module, when this parser is first used: ``navtwin --version``
     and every other subcommand do not import it (docs/performance.md). *options_for*:
     fn(parser, args) adds the options that depend on the arguments given, before they are
-    parsed (``navtwin bench NAME``'s settings, ``--help`` included)."""
+    parsed (``navtwin bench NAME``'s settings, ``--help`` included), those it has not yet."""
 
     def __init__(self, *args, options=None, options_for=None, **kwargs):
         super().__init__(*args, **kwargs)
@@ -65,10 +65,9 @@ class Parser(argparse.ArgumentParser):
 
     def parse_known_args(self, args=None, namespace=None):
         self._add_options()
-        if self._options_for is not None:
+        if self._options_for is not None:  # each parse: a parser may parse several lines
             args = list(sys.argv[1:] if args is None else args)
-            add, self._options_for = self._options_for, None
-            add(self, args)
+            self._options_for(self, args)
         return super().parse_known_args(args, namespace)
 
     def format_usage(self):

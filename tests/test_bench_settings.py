@@ -20,10 +20,10 @@ def run(capsys, *argv):
 
 
 def test_settings_are_parsed_into_the_benchmarks_table():
-    s = settings(Soak, {"seconds": "3600", "faults": True, "dir": "/tmp/soak"})
+    s = settings("lab-soak", Soak, {"seconds": "3600", "faults": True, "dir": "/tmp/soak"})
     assert s == Soak(seconds=3600.0, faults=True, dir="/tmp/soak")
-    assert settings(Soak, {}) == Soak()  # none given: the defaults (smaller with --quick)
-    assert settings(Replay, {"recording": "rec", "filters": "wsn", "runs": "2"}) == \
+    assert settings("lab-soak", Soak, {}) == Soak()  # none given: the defaults (smaller with --quick)
+    assert settings("host-replay", Replay, {"recording": "rec", "filters": "wsn", "runs": "2"}) == \
         Replay(recording="rec", filters="wsn", runs=2)
 
 
@@ -66,6 +66,7 @@ def test_every_benchmark_with_settings_declares_them_as_a_table():
         build(cls, {})  # every setting has a default
 
 
-def test_usage_error_is_what_settings_raise():
-    with pytest.raises(UsageError):
-        settings(Soak, {"dir": 3})
+def test_a_setting_the_benchmark_does_not_take_is_one_line():
+    with pytest.raises(UsageError, match=r"^lab-soak takes no --steps; its settings: --seconds, "
+                                         r"--faults, --dir$"):
+        settings("lab-soak", Soak, {"steps": "5"})
