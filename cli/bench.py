@@ -103,8 +103,7 @@ def settings(name: str, cls, given: dict):
         try:
             values[key] = tp(text) if tp in (int, float) else text
         except ValueError:
-            what = "an integer" if tp is int else "a number"
-            raise UsageError(f"{flag(key)} {text!r}: must be {what}") from None
+            values[key] = text  # the schema names what it should be
     try:
         return build(cls, values)
     except Invalid as e:

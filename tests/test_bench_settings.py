@@ -30,10 +30,10 @@ def test_settings_are_parsed_into_the_benchmarks_table():
 @pytest.mark.parametrize("argv, line", [
     (["lab-soak", "--seconds", "5"], "--seconds must be in [30, 36000] (got 5 s); use a value "
                                      "from 30 to 36000"),
-    (["lab-soak", "--seconds", "an hour"], "--seconds 'an hour': must be a number"),
-    (["host-filters", "--steps", "1.5"], "--steps '1.5': must be an integer"),
+    (["lab-soak", "--seconds", "an hour"], "--seconds must be a number (got 'an hour')"),
+    (["host-filters", "--steps", "1.5"], "--steps must be an integer (got '1.5')"),
     (["host-replay", "--filters", "kf,pf"], "--filters unknown filter 'pf'; use a comma list of"),
-    (["lab-sweep", "--seeds", "nan"], "--seeds 'nan': must be an integer"),
+    (["lab-sweep", "--seeds", "nan"], "--seeds must be an integer (got 'nan')"),
     (["lab-sweep", "--duration", "inf"], "--duration must be a finite number (got inf)"),
 ])
 def test_a_bad_setting_is_one_line_naming_its_flag(capsys, argv, line):
