@@ -63,7 +63,7 @@ def _speed(text: str) -> float | None:
     try:
         return parse_speed(text)
     except RunError as e:
-        raise argparse.ArgumentTypeError(str(e).removeprefix("--speed ")) from None
+        raise argparse.ArgumentTypeError(str(e).removeprefix("speed: ")) from None
 
 
 def _check_record_dir(path: str, overwrite: bool) -> None:

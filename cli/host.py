@@ -9,7 +9,7 @@ import threading
 from navtwin.common.limits import MAX_DURATION_S, span
 from navtwin.protocols.ports import DEFAULT_BAUD
 
-from .main import BAUD_HELP, UsageError, baud, number, stop_on_signals
+from .main import BAUD_HELP, UsageError, baud, flag, number, stop_on_signals
 
 STATUS_PERIODS = (0, 3600)
 PORT_HELP = ("a device path (/dev/ttyUSB0, an emulator PTY link) or a pyserial URL "
@@ -83,7 +83,7 @@ def _filters(text: str) -> tuple[str, ...]:
     try:
         return host_config.parse_filters(text)
     except ConfigError as e:
-        raise argparse.ArgumentTypeError(str(e).removeprefix("--filters: ")) from None
+        raise argparse.ArgumentTypeError(str(e).removeprefix("filters: ")) from None
 
 
 def config_and_filters(args, default_config: bool):
@@ -166,8 +166,8 @@ def run(args) -> int:
         if innovations is not None:
             error = error or close_out(innovations, "--innovations")
     if service.error is not None:
-        where = service.error.option if isinstance(service.error, OutputError) else "--record"
-        raise UsageError(f"{where} {service.error}")
+        where = service.error.setting if isinstance(service.error, OutputError) else "record"
+        raise UsageError(f"{flag(where)} {service.error}")
     if error:
         raise UsageError(error)
     return 0

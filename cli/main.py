@@ -1,8 +1,8 @@
-"""The ``navtwin`` console script: one parser, subcommands registered by entry points.
+"""The ``navtwin`` console script: one parser, subcommands found in a registry.
 
-Each subcommand is registered in the ``navtwin.commands`` entry-point group
-(``pyproject.toml``), so this dispatcher imports none of them by name and a user's package can
-add one. A subcommand module provides ``register(subparsers)``, which adds its parser and sets
+The subcommands are :data:`COMMANDS`: navtwin's own, declared below by ``"module:register"``,
+then those of installed packages, from the ``navtwin.commands`` entry-point group, so a user's
+package can add one. A subcommand module provides ``register(subparsers)``, which adds its parser and sets
 ``func(args) -> int``; it reports bad input by raising :class:`UsageError`. A command that needs
 an extra (``pyproject.toml``'s optional dependencies) sets ``extra`` too: a module of it that is
 not installed is then one line naming the extra (:func:`missing_extra`), exit status 2. Every
@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import signal
 import sys
 import threading
 from contextlib import contextmanager
 
-from navtwin.common.limits import number_problem, span
-from navtwin.protocols.plugins import entry_points
+from navtwin.common.limits import span
+from navtwin.protocols.plugins import Registry
 from navtwin.protocols import __version__
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.serial import BAUDS
@@ -29,14 +30,33 @@ class UsageError(Exception):
     """A problem with what the user asked for: printed as one line, exit status 2."""
 
 
+def flag(setting: str) -> str:
+    """The command-line option of library setting *setting*: ``link_dir`` -> ``--link-dir``."""
+    return "--" + setting.replace("_", "-")
+
+
+#: A library error about one setting starts with its name: ``speed: 'x' is not ...``.
+_SETTING = re.compile(r"([a-z][a-z0-9_]*): ")
+
+
+def flagged(message: str) -> str:
+    """*message* as the command line says it: a library error that starts with a setting's name
+    (``record: /x: not empty``) starts with its option instead (``--record /x: not empty``)."""
+    m = _SETTING.match(message)
+    return f"{flag(m[1])} {message[m.end():]}" if m else message
+
+
 class Parser(argparse.ArgumentParser):
     """*options* (a subcommand's ``add_parser(..., options=fn)``): fn(parser) adds the options
     whose help needs a library module, when this parser is first used: ``navtwin --version``
-    and every other subcommand do not import it (docs/performance.md)."""
+    and every other subcommand do not import it (docs/performance.md). *options_for*:
+    fn(parser, args) adds the options that depend on the arguments given, before they are
+    parsed (``navtwin bench NAME``'s settings, ``--help`` included), those it has not yet."""
 
-    def __init__(self, *args, options=None, **kwargs):
+    def __init__(self, *args, options=None, options_for=None, **kwargs):
         super().__init__(*args, **kwargs)
         self._options = options
+        self._options_for = options_for
 
     def _add_options(self) -> None:
         if self._options is not None:
@@ -45,6 +65,9 @@ class Parser(argparse.ArgumentParser):
 
     def parse_known_args(self, args=None, namespace=None):
         self._add_options()
+        if self._options_for is not None:  # each parse: a parser may parse several lines
+            args = list(sys.argv[1:] if args is None else args)
+            self._options_for(self, args)
         return super().parse_known_args(args, namespace)
 
     def format_usage(self):
@@ -63,15 +86,21 @@ def number(lo: float = -math.inf, hi: float = math.inf, *, integer: bool = False
            above: bool = False):
     """An argparse ``type``: a finite number (an integer if *integer*) in [lo, hi], or
     (lo, hi] if *above*; anything else is one line naming the value and the range."""
+    within = span(lo, hi, above)
+
     def parse(text: str):
+        from navtwin.common.schema import Check, Invalid, value  # when a number is parsed
+
+        check = Check(lambda v: (lo < v if above else lo <= v) and v <= hi, f"must be {within}",
+                      f"use a value {within}")
         try:
-            value = int(text) if integer else float(text)
+            raw = int(text) if integer else float(text)
         except ValueError:
-            value = text
-        problem = number_problem(value, lo, hi, integer=integer, above=above)
-        if problem:
-            raise argparse.ArgumentTypeError(f"{text}: {problem}")
-        return value
+            raw = text  # the schema names what it should be
+        try:
+            return value(raw, int if integer else float, text, check)
+        except Invalid as e:
+            raise argparse.ArgumentTypeError(f"{text}: {e.problem}") from None
 
     parse.__name__ = "integer" if integer else "number"  # argparse names it in messages
     return parse
@@ -111,13 +140,22 @@ def missing_extra(e: ModuleNotFoundError, extra: str | None) -> str | None:
     return f"needs {name}, which is not installed; pip install 'navtwin[{extra}]'"
 
 
+#: The subcommands: name -> register(subparsers), which may add more than one ('navtwin --help'
+#: lists them in this order, then those of entry points by name).
+COMMANDS = Registry("navtwin.commands", "command", {
+    name: f"navtwin.cli.{module}:register" for name, module in (
+        ("audit", "audit"), ("bench", "bench"), ("calibrate", "calibrate"), ("ctl", "ctl"),
+        ("decode", "decode"), ("demo", "demo"), ("emulate", "emulate"), ("host", "host"),
+        ("host-replay", "replay"), ("lab", "lab"), ("report", "report"), ("sweep", "sweep"))})
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="navtwin", description="Firmware-in-the-loop emulator of a SINS/WSN "
                     "positioning lab, and the lab computer's fusion service.")
     parser.add_argument("--version", action="version", version=f"navtwin {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    for ep in entry_points("navtwin.commands"):
-        ep.load()(sub)
+    for _, register in COMMANDS.items():
+        register(sub)
     return parser
 
 
@@ -131,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args) or 0
     except UsageError as e:
-        print(f"navtwin {args.command}: error: {e}", file=sys.stderr)
+        print(f"navtwin {args.command}: error: {flagged(str(e))}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:
         if (line := missing_extra(e, getattr(args, "extra", None))) is None:

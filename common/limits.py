@@ -51,20 +51,6 @@ def finite(value: int | float) -> bool:
         return False
 
 
-def number_problem(value, lo=-math.inf, hi=math.inf, *, integer: bool = False,
-                   above: bool = False) -> str | None:
-    """Why *value* is not a finite number (an integer if *integer*) in [lo, hi] ((lo, hi] if
-    *above*), as ``must be ...``; None when it is."""
-    what = "an integer" if integer else "a number"
-    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
-        return f"must be {what}"
-    if not (integer or finite(value)):
-        return "must be a finite number"
-    if not ((lo < value) if above else (lo <= value)) or not value <= hi:
-        return f"must be {what} {span(lo, hi, above)}"
-    return None
-
-
 def limit_problem(e: Exception) -> str:
     """The limit a TOML parser hit beyond its syntax, in one line: nesting deeper than the
     recursion limit, or (ValueError) an integer of more digits than Python converts."""

@@ -5,10 +5,12 @@ A table is a dataclass whose fields carry their unit, meaning and checks (:func:
 ONE line naming the key, the problem and the fix; :func:`dump` writes it back as TOML
 (every key, defaults included, so the text is the scenario exactly as run); :func:`rows`
 lists every key for the documentation. Field types understood: bool, int, float, str,
-dict (a table passed on as it is), ``float | None`` (optional), fixed and variable tuples
-of numbers, tuples of points, a nested table (dataclass) and an array of tables
-(``tuple[Table, ...]``; a class attribute ``KINDS`` maps a ``kind`` key to one dataclass
-per kind).
+dict (a table passed on as it is), a map keyed by id (``dict[int, float]`` with
+``key(..., ids=("anchor", (1, 254)))``: ``{1 = 0.3, 2 = 0.25}``, the field's checks applied
+to each value), ``float | None`` (optional), fixed and variable tuples of numbers, tuples of
+points, a nested table (dataclass) and an array of tables (``tuple[Table, ...]``; a class
+attribute ``KINDS``, a protocols.plugins.Registry, maps a ``kind`` key to one dataclass per
+kind). :func:`value` checks one value alike (a command-line number, a figure in a file).
 """
 from __future__ import annotations
 
@@ -73,13 +75,25 @@ def each(check: Check) -> Check:
 REQUIRED = MISSING
 
 
-def key(default: Any, unit: str, doc: str, *checks: Check, hex: int = 0) -> Any:
+def key(default: Any, unit: str, doc: str, *checks: Check, hex: int = 0,
+        ids: tuple[str, tuple[int, int]] | None = None) -> Any:
     """A dataclass field with its unit, meaning and checks (*default* REQUIRED = required);
-    an integer with *hex* digits is written in hex."""
-    meta = {"unit": unit, "doc": doc, "checks": checks, "hex": hex}
+    an integer with *hex* digits is written in hex; a map's keys are *ids* (noun, (lo, hi)),
+    its checks apply to each value."""
+    meta = {"unit": unit, "doc": doc, "checks": checks, "hex": hex, "ids": ids}
     if isinstance(default, (list, dict)):
         raise TypeError("use tuples for defaults")
     return dataclasses.field(default=default, metadata=meta)
+
+
+def takes(settings: type) -> Callable:
+    """Declare the settings of a function as a table class of :func:`key` fields, its
+    ``Settings`` attribute: ``navtwin bench NAME --setting value`` builds them (checked as a
+    table is) and calls ``fn(quick, settings)``."""
+    def mark(fn: Callable) -> Callable:
+        fn.Settings = settings
+        return fn
+    return mark
 
 
 # -- building ----------------------------------------------------------------------------
@@ -124,6 +138,8 @@ def _example(tp) -> tuple[str, str]:
     if tp is dict:  # a table kept as it is, for its reader to build (a live fault's settings)
         return "a table", '{"kind": "bit_errors"}'
     origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is dict:
+        return "a table of id = value", "{1 = 0.3, 2 = 0.25}"
     if origin in (typing.Union, types.UnionType):
         return _example(next(a for a in args if a is not type(None)))
     if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
@@ -173,6 +189,40 @@ def _convert(value: Any, tp, at: str) -> Any:
     return tuple(_convert(v, a, f"{at}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
 
 
+def _checked(v: Any, at: str, meta) -> Any:
+    """*v* if it passes the checks of *meta* (a key's), else Invalid naming *at*."""
+    for check in meta.get("checks", ()):
+        if v is not None and not check.ok(v):
+            unit = meta.get("unit", "")
+            got = _describe(v) + (f" {unit}" if unit and not isinstance(v, tuple) else "")
+            raise Invalid(at, f"{check.must} (got {got}); {check.fix}")
+    return v
+
+
+def _map(value: Any, tp, at: str, meta) -> dict:
+    """A table keyed by id (``{1 = 0.3}``, TOML keys are strings): each key an id of
+    ``meta["ids"]``, each value of the map's value type, passing the key's checks."""
+    noun, (lo, hi) = meta["ids"]
+    if not isinstance(value, dict):
+        raise Invalid(at, f"must be a table of {noun} id = value like {{1 = 0.3, 2 = 0.25}} "
+                          f"(got {_describe(value)}); write it so")
+    _, vtype = typing.get_args(tp)
+    out = {}
+    for k, v in value.items():
+        i = int(k) if k.isdigit() and len(k) < 5 else None
+        if i is None or not lo <= i <= hi:
+            raise Invalid(at, f"names {noun} {k[:SHOW_CHARS]!r}, which is not an {noun} id "
+                              f"({lo}..{hi}); name each {noun} by its id")
+        out[i] = _checked(_convert(v, vtype, f"{at} {i}"), f"{at} {i}", meta)
+    return out
+
+
+def value(raw: Any, tp, where: str, *checks: Check, unit: str = "") -> Any:
+    """One value outside a table (a command-line number, a figure read from a file) as type
+    *tp*, checked as a key is; Invalid naming *where*."""
+    return _checked(_convert(raw, tp, where), where, {"checks": checks, "unit": unit})
+
+
 KeyPath = tuple  # of (table name, 1-based entry number or 0)
 
 
@@ -213,10 +263,10 @@ def build(cls, data: Any, path: KeyPath = ()):
     if kinds is not None:
         kind = data.get("kind")
         if not isinstance(kind, str) or kind not in kinds:
-            names = ", ".join(repr(k) for k in kinds)
+            names = ", ".join(repr(k) for k in kinds.names())
             raise Invalid(where(path, "kind"), f"must be one of {names} (got {_describe(kind)}); "
                                                f"set kind to one of {names}")
-        cls = kinds[kind]
+        cls = kinds.get(kind)
         data = {k: v for k, v in data.items() if k != "kind"}
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
@@ -236,6 +286,12 @@ def build(cls, data: Any, path: KeyPath = ()):
             values[name] = build(tp, raw, path + ((name, 0),))
             continue
         origin, args = typing.get_origin(tp), typing.get_args(tp)
+        if origin in (typing.Union, types.UnionType):  # optional: what it is when given
+            tp = next(a for a in args if a is not type(None))
+            origin, args = typing.get_origin(tp), typing.get_args(tp)
+        if origin is dict:
+            values[name] = _map(raw, tp, at, f.metadata)
+            continue
         if origin is tuple and args and _is_table(args[0]):
             if not isinstance(raw, list):
                 raise Invalid(at, f"must be an array of tables (got {_describe(raw)}); "
@@ -243,13 +299,7 @@ def build(cls, data: Any, path: KeyPath = ()):
             values[name] = tuple(build(args[0], item, path + ((name, i + 1),))
                                  for i, item in enumerate(raw))
             continue
-        v = _convert(raw, tp, at)
-        for check in f.metadata.get("checks", ()):
-            if v is not None and not check.ok(v):
-                unit = f.metadata.get("unit", "")
-                got = _describe(v) + (f" {unit}" if unit and not isinstance(v, tuple) else "")
-                raise Invalid(at, f"{check.must} (got {got}); {check.fix}")
-        values[name] = v
+        values[name] = _checked(_convert(raw, tp, at), at, f.metadata)
     try:
         return cls(**values)
     except Invalid as e:  # a cross-field check in __post_init__ names a key of this table
@@ -257,7 +307,7 @@ def build(cls, data: Any, path: KeyPath = ()):
 
 
 def kind_of(obj) -> str | None:
-    """The ``kind`` value of an array-of-tables entry whose class is one of a KINDS map."""
+    """The ``kind`` value of an array-of-tables entry whose class is one of a KINDS registry."""
     return getattr(type(obj), "KIND", None)
 
 
@@ -309,9 +359,9 @@ def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
     keys are dotted paths, ``[]`` marking an array of tables (``anchors[].x``)."""
     out = []
     kinds = getattr(cls, "KINDS", None)
-    classes = list(kinds.values()) if kinds else [cls]
+    classes = [c for _, c in kinds.items()] if kinds else [cls]
     if kinds:
-        out.append((prefix + "kind", "", "required", ", ".join(f"`{k}`" for k in kinds),
+        out.append((prefix + "kind", "", "required", ", ".join(f"`{k}`" for k in kinds.names()),
                     "the kind of entry"))
     shared: dict[tuple, list] = {}  # a key as documented -> the kinds declaring it so
     for c in classes:

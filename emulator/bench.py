@@ -1,6 +1,6 @@
 """Benchmarks of the emulator runtime (not tests: they measure, they do not assert).
 
-``python -m navtwin.cli.emulator_bench jitter --seconds 60``
+``navtwin bench emulator-jitter [--seconds 60] [--scenario office]``
     starts ``navtwin emulate --speed realtime`` (as a subprocess, like a user would), reads
     the ``sins`` port with pyserial and reports how regular the SINS frames arrive: p50, p99
     and max of |period - nominal| (nominal = 10 ms of the board's clock, from the scenario's
@@ -10,12 +10,12 @@
     which separates the emulator's jitter from the reader's wake-up latency; and, as the peer
     in the same run, the same reader measure on a bare PTY pair written on an exact schedule
     (``bare_pty``): the floor of the kernel's PTY path on this machine.
-``python -m navtwin.cli.emulator_bench speed [--scenario office]``
+``navtwin bench emulator-speed [--scenario office] [--repeat 3]``
     generates the whole scenario in virtual time (``--speed max``, no PTYs, no recording)
     and reports how many times faster than real time it ran.
-``python -m navtwin.cli.emulator_bench digi-open [--repeat 10]``
+``navtwin bench digi-open [--repeat 10]``
     times digi-xbee's ``XBeeDevice(port, 115200).open()`` on the coordinator's port.
-``python -m navtwin.cli.emulator_bench digi-router [--repeat 10]``
+``navtwin bench digi-router [--repeat 10]``
     times digi-xbee's ``RemoteZigBeeDevice.read_device_info()`` on the router, through the
     coordinator (remote AT, then the ZDO node descriptor that gives its role).
 
@@ -24,7 +24,7 @@
     other settings reads, on 30-byte chunks every 10 ms (the SINS board's frames) for
     several client settings, against the 11 520 B/s a 115200 8N1 line carries.
 
-Each prints one JSON object.
+Each prints one JSON object; a setting left out takes its default (smaller with ``--quick``).
 """
 from __future__ import annotations
 
@@ -32,9 +32,12 @@ import os
 import select
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from navtwin.common.schema import between, key, takes
 
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import Frame, sins_decoder
@@ -213,23 +216,50 @@ def uart_rx(chunks: int = 3000, seed: int = 1) -> dict:
             "min_x_line": min(out.values()) / line_bps}
 
 
+@dataclass(frozen=True)
+class ScenarioRuns:
+    """emulator-speed's settings."""
+    scenario: str = key("office", "", "the scenario generated (a name or a .toml path)")
+    repeat: int | None = key(None, "", "runs, the fastest counts; none = 3 (1 quick)",
+                             between(1, 1000))
+
+
+@dataclass(frozen=True)
+class RealTime:
+    """emulator-jitter's settings."""
+    seconds: float | None = key(None, "s", "how long the port is read; none = 60 (10 quick)",
+                                between(1, 3600))
+    scenario: str = key("office", "", "the scenario run (a name or a .toml path)")
+
+
+@dataclass(frozen=True)
+class Repeat:
+    """digi-open's and digi-router's settings."""
+    repeat: int | None = key(None, "", "timed calls, the median counts; none = 10 (3 quick)",
+                             between(1, 1000))
+
+
 def benchmarks() -> dict:
-    """The emulator's benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks)."""
-    def emulator_speed(quick: bool = False) -> dict:
+    """The emulator's benchmarks for ``navtwin bench`` (a set of navtwin.cli.bench.SETS)."""
+    @takes(ScenarioRuns)
+    def emulator_speed(quick: bool, s: ScenarioRuns) -> dict:
         """emulator: virtual-time generation speed of office (goal >= 300x real time)"""
-        return speed("office", repeat=1 if quick else 3)
+        return speed(s.scenario, repeat=s.repeat or (1 if quick else 3))
 
-    def emulator_jitter(quick: bool = False) -> dict:
+    @takes(RealTime)
+    def emulator_jitter(quick: bool, s: RealTime) -> dict:
         """emulator: SINS frame-period jitter seen by a pyserial reader, real time (goal p99 <= 0.3 ms)"""
-        return jitter(10.0 if quick else 60.0)
+        return jitter(s.seconds or (10.0 if quick else 60.0), s.scenario)
 
-    def digi_xbee_open(quick: bool = False) -> dict:
+    @takes(Repeat)
+    def digi_xbee_open(quick: bool, s: Repeat) -> dict:
         """emulator: digi-xbee XBeeDevice.open() on the coordinator (goal < 1.5 s)"""
-        return digi_open(3 if quick else 10)
+        return digi_open(s.repeat or (3 if quick else 10))
 
-    def digi_xbee_router(quick: bool = False) -> dict:
+    @takes(Repeat)
+    def digi_xbee_router(quick: bool, s: Repeat) -> dict:
         """emulator: digi-xbee read_device_info() on the router, Role.ROUTER (goal < 2 s)"""
-        return digi_router(3 if quick else 10)
+        return digi_router(s.repeat or (3 if quick else 10))
 
     def uart_rx_model(quick: bool = False) -> dict:
         """emulator: client-UART model throughput vs the 11.5 kB/s line (goal >= 5x)"""

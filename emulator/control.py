@@ -248,8 +248,8 @@ class Control:
         except OSError as e:
             s.close()
             why = "no such socket" if e.errno in (errno.ENOENT, errno.ECONNREFUSED) else e.strerror
-            raise ControlError(f"{self.path}: cannot connect ({why}); is an emulator running "
-                               "with this --link-dir?") from None
+            raise ControlError(f"link_dir: {self.path}: cannot connect ({why}); is an emulator "
+                               "running on this link directory?") from None
         return s
 
     def call(self, op: str, **args) -> dict:

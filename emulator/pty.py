@@ -98,19 +98,18 @@ class LinkDir:
         except FileExistsError:
             pass
         except OSError as e:
-            raise LinkDirError(f"cannot create link directory {self.path} ({e.strerror}); "
-                               f"pass --link-dir with a writable path") from None
+            raise LinkDirError(f"link_dir: cannot create link directory {self.path} "
+                               f"({e.strerror}); choose a writable path") from None
         st = os.lstat(self.path)
         if not stat.S_ISDIR(st.st_mode):
-            raise LinkDirError(f"link directory {self.path} is not a directory; "
-                               f"pass --link-dir with another path")
+            raise LinkDirError(f"link_dir: {self.path} is not a directory; choose another path")
         if st.st_uid != os.getuid():
-            raise LinkDirError(f"link directory {self.path} is owned by uid {st.st_uid}, not you; "
-                               f"pass --link-dir with a directory of your own")
+            raise LinkDirError(f"link_dir: {self.path} is owned by uid {st.st_uid}, not you; "
+                               f"choose a directory of your own")
         if st.st_mode & 0o022:
-            raise LinkDirError(f"link directory {self.path} is writable by others "
-                               f"(mode {stat.S_IMODE(st.st_mode):04o}); chmod 700 it or pass "
-                               f"another --link-dir")
+            raise LinkDirError(f"link_dir: {self.path} is writable by others "
+                               f"(mode {stat.S_IMODE(st.st_mode):04o}); chmod 700 it or choose "
+                               f"another link directory")
         try:
             self._take_lock()
             for name in names:
@@ -121,7 +120,8 @@ class LinkDir:
             raise
 
     def _refuse(self, name: str, what: str) -> LinkDirError:
-        return LinkDirError(f"{self.path / name} {what}; remove it or pass another --link-dir")
+        return LinkDirError(f"link_dir: {self.path / name} {what}; remove it or choose another link "
+                            "directory")
 
     def _take_lock(self) -> None:
         try:  # O_NOFOLLOW: a symlinked lock must not make us truncate the file it points at
@@ -142,8 +142,8 @@ class LinkDir:
                     time.sleep(LOCK_RETRY_S)
             else:
                 other = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
-                raise LinkDirError(f"link directory {self.path} is in use by another emulator "
-                                   f"(pid {other}); stop it or pass another --link-dir")
+                raise LinkDirError(f"link_dir: {self.path} is in use by another emulator "
+                                   f"(pid {other}); stop it or choose another link directory")
         except BaseException:
             os.close(fd)  # not ours: close() must leave the file where it is
             raise

@@ -99,11 +99,11 @@ def parse_speed(text: str | float) -> float | None:
     try:
         factor = float(text)
     except ValueError:
-        raise RunError(f"--speed {text!r} is not realtime, max or a number; "
-                         f"use e.g. --speed realtime, --speed max or --speed 10") from None
+        raise RunError(f"speed: {text!r} is not realtime, max or a number; "
+                       f"use e.g. realtime, max or 10") from None
     if not SPEEDS[0] <= factor <= SPEEDS[1]:  # also refuses nan
-        raise RunError(f"--speed {text!r} must be a positive factor {span(*SPEEDS)}; use e.g. "
-                       "--speed 10, or --speed max")
+        raise RunError(f"speed: {text!r} must be a positive factor {span(*SPEEDS)}; use e.g. "
+                       "10, or max")
     return factor
 
 
@@ -170,7 +170,7 @@ class Emulation:
         full = self.world.duration_ns
         self.end_ns = full if duration_s is None else int(round(duration_s * SEC))
         if not 0 < self.end_ns <= full:
-            raise RunError(f"--duration {duration_s:g} is outside (0, {full / SEC:g}] s, the "
+            raise RunError(f"duration: {duration_s:g} is outside (0, {full / SEC:g}] s, the "
                            f"length of scenario {scenario.name}; pass a duration in that range")
         self.progress = progress
         self.sink = sink
@@ -213,9 +213,9 @@ class Emulation:
                 try:
                     self.recorder = self._recorder(record)
                 except RecordingWriteError as e:
-                    raise RunError(f"--record {e}") from None
+                    raise RunError(f"record: {e}") from None
                 except OSError as e:
-                    raise RunError(f"--record {record}: {e.strerror or e}; choose a directory "
+                    raise RunError(f"record: {record}: {e.strerror or e}; choose a directory "
                                    f"you can write") from None
         except BaseException:
             self.close()

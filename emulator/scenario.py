@@ -32,6 +32,7 @@ from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_C
 from . import trajectory as geometry
 from .faults import Fault
 from .rng import stream
+from navtwin.common import tomlfile
 from navtwin.common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
                      non_negative, one_of, positive)
 
@@ -524,15 +525,7 @@ def _resolve(ref: str, relative_to: Path | None) -> Path:
 def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
     if path.resolve() in chain:
         raise ScenarioError(f"{path.name}: base chain loops back to {path.name}; remove the loop")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"{path.name}: not valid TOML: {e}; fix the syntax") from None
-    except (ValueError, RecursionError) as e:  # tomllib's limits: an integer's digits, nesting
-        raise ScenarioError(f"{path.name}: {limit_problem(e)}; shorten it") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ScenarioError(f"{path.name}: cannot read it ({e}); check the path") from None
-    data = _vehicles(data, path.name)
+    data = _vehicles(tomlfile.read(path, ScenarioError, path.name), path.name)
     base = data.pop("base", None)
     if base is None:
         return data
@@ -590,7 +583,7 @@ def parse_scenario(data: dict, source: str = "scenario") -> Scenario:
         raise ScenarioError(f"{source}: {e}".replace("\n", " ")) from None
 
 
-def parse_fault(spec: str, where: str = "--fault") -> dict:
+def parse_fault(spec: str, where: str = "fault:") -> dict:
     """``KIND:key=value,...`` (the ``--fault`` option, ``navtwin ctl fault``) as the table a
     ``[[faults]]`` entry is; values are TOML scalars (``0.5``, ``true``, ``"text"``), a bare
     word a string."""
@@ -623,5 +616,5 @@ def with_faults(sc: Scenario, specs) -> Scenario:
             faults.append(build(Fault, parse_fault(spec), (("faults", len(faults) + 1),)))
             sc = dataclasses.replace(sc, faults=tuple(faults))
         except Invalid as e:
-            raise ScenarioError(f"--fault {spec}: {e}".replace("\n", " ")) from None
+            raise ScenarioError(f"fault: {spec}: {e}".replace("\n", " ")) from None
     return sc

@@ -5,9 +5,9 @@ give it the emulated lab's).
 gateway); this process writes the chunks to the masters at their arrival times and
 measures, for every batch of estimate lines, the time from the write of the chunk holding
 the last byte the host had processed to the moment the lines were written (p50/p99/max).
-``bench_replay``: the pipeline over a recording (a host or emulator recording), in multiples
-of real time = recorded span / median wall time (``replay_speeds``: several filter sets
-over one recording, their runs interleaved). ``write_host_recording``: chunks as ``navtwin host
+``replay_speeds``: the pipeline over a recording (a host or emulator recording) with each of
+several filter sets, their runs interleaved, in multiples of real time = recorded span /
+median wall time. ``write_host_recording``: chunks as ``navtwin host
 --record`` records them.
 """
 from __future__ import annotations
@@ -15,10 +15,12 @@ from __future__ import annotations
 import os
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from navtwin.common.schema import between, key, takes
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import Read, Recording, RecordingWriter
 
@@ -98,15 +100,9 @@ def bench_latency(config: HostConfig, filters, chunks, seconds: float) -> dict:
             "host_side": service.latency.overall()}
 
 
-def bench_replay(directory: str | os.PathLike, filters=None, runs: int = 1) -> dict:
-    """Replay speed of the recording in *directory* (the recorded run's filters unless
-    *filters*), in multiples of real time: the median wall time of *runs* replays."""
-    return replay_speeds(directory, {"replay": filters}, runs)["replay"]
-
-
 def replay_speeds(directory: str | os.PathLike, sets: dict, runs: int = 1) -> dict:
-    """``bench_replay`` of each of *sets* (name -> filters, None: the recorded run's), the
-    runs interleaved (set a, set b, set a, ...) so that a drift in the machine's speed
+    """Replay speed of the recording in *directory* with each of *sets* (name -> filters,
+    None: the recorded run's), the median wall time of *runs* replays each, the runs interleaved (set a, set b, set a, ...) so that a drift in the machine's speed
     weighs on every set alike; name -> its result."""
     rec = Recording(directory)
     stamps = [t_ns for _, _, t_ns in replay_chunks(rec, settings(rec)["inputs"])]
@@ -132,14 +128,22 @@ def replay_speeds(directory: str | os.PathLike, sets: dict, runs: int = 1) -> di
     return out
 
 
+@dataclass(frozen=True)
+class Steps:
+    """host-filters' settings."""
+    steps: int | None = key(None, "", "steps per timing run; none = 2000 (200 quick)",
+                            between(1, 1_000_000))
+
+
 def benchmarks() -> dict:
-    """The host's own benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks);
+    """The host's own benchmarks for ``navtwin bench`` (a set of navtwin.cli.bench.SETS);
     those on the emulated lab's bytes are the lab's (:mod:`navtwin.lab.bench`)."""
-    def host_filters(quick: bool = False) -> dict:
+    @takes(Steps)
+    def host_filters(quick: bool, s: Steps) -> dict:
         """host: microseconds per step of each filter, the strapdown and the estimator"""
         from .bench_filters import measure
 
-        us = measure(200 if quick else 2000)
+        us = measure(s.steps or (200 if quick else 2000))
         return {"benchmark": "host-filters", "us_per_step": {k: round(v, 2) for k, v in us.items()},
                 # 100 IMU samples per second of the lab
                 "estimator_x_real_time": round(1e6 / (100 * us["estimator/imu"]), 1)}

@@ -1,6 +1,6 @@
 """Microseconds per step of each filter, the strapdown and the whole estimator.
 
-    python -m navtwin.cli.filters_bench [--steps N] [--json]
+    navtwin bench host-filters [--steps 2000]
 
 A step is what the estimator does per measurement: predict over the interval, then one
 update. ``sins`` is one strapdown step. 001's error-state tracks: ``lc/imu``, ``tc/imu``,

@@ -41,15 +41,15 @@ use it (host.estimator); ``est.calibration`` is the loaded :class:`Calibration` 
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_BIAS_M, RANGE_SCALE, limit_problem, number_problem
-from navtwin.common.schema import REQUIRED, Invalid, between, build, dump, key
+from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_BIAS_M, RANGE_SCALE
+from navtwin.common import tomlfile
+from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, dump, each, key
 from navtwin.protocols.nanoloc import distance, is_complete
 from navtwin.protocols.stream import Frame, nanoloc_decoder
 
@@ -157,6 +157,42 @@ def _num(v: float) -> str:
     return repr(float(f"{v:.6g}"))
 
 
+@dataclass(frozen=True)
+class SigmaFit:
+    """A calibration file's [sigma]: the range standard deviation as a polynomial in d."""
+    coefficients: tuple[float, ...] = key(REQUIRED, "", "sigma(d) (m) as a polynomial in d, "
+                                          "from d^0", Check(lambda v: 1 <= len(v) <= 8,
+                                                            "must hold 1 to 8 numbers",
+                                                            "re-run navtwin calibrate"),
+                                          each(between(-100, 100)))
+    span_m: tuple[float, float] = key(REQUIRED, "m", "the distances it was fitted over, "
+                                      "[lo, hi]; d is clipped to them",
+                                      each(between(0, MAX_COORD_M)))
+
+    def __post_init__(self):
+        if self.span_m[0] >= self.span_m[1]:
+            raise Invalid("span_m", f"must be [lo, hi] with lo < hi (got {list(self.span_m)}); "
+                                    "re-run navtwin calibrate")
+
+
+@dataclass(frozen=True, kw_only=True)
+class CalibrationFile:
+    """What a calibration file holds (``navtwin calibrate`` writes it: Calibration.to_toml)."""
+    format: str = key(REQUIRED, "", f'"{CALIBRATION_FORMAT}"')
+    version: int = key(REQUIRED, "", f"{VERSION}")
+    scale: float = key(REQUIRED, "", "f of 001 eq. 13", between(*RANGE_SCALE))
+    scale_ci95: float = key(0.0, "", "95 % half-width of f", between(0, 1))
+    bias_m: dict[int, float] = key(REQUIRED, "m", "c_i of 001 eq. 13 per anchor id",
+                                   between(*RANGE_BIAS_M), ids=("anchor", ANCHOR_IDS))
+    bias_ci95_m: dict[int, float] | None = key(None, "m", "95 % half-width of c_i per anchor id",
+                                               between(0, 10), ids=("anchor", ANCHOR_IDS))
+    sigma: SigmaFit = key(REQUIRED, "", "the range standard deviation sigma(d)")
+
+    def __post_init__(self):
+        if not self.bias_m:
+            raise Invalid("bias_m", "is empty; give c_i per anchor id like 1 = 0.25")
+
+
 def load(path: str | Path) -> Calibration:
     """The calibration file at *path*, or a shipped one by name (host/calibrations/<name>.toml)."""
     return build_file(path, "", parse)
@@ -168,16 +204,7 @@ def build_file(path: str | Path, suffix: str, make):
     path = Path(path)
     if not path.suffix and not path.is_file():
         path = CALIBRATION_DIR / f"{path}{suffix}.toml"
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise CalibrationError(f"{path}: cannot read ({e.strerror}); check the path") from None
-    except UnicodeDecodeError as e:
-        raise CalibrationError(f"{path}: not UTF-8 text ({e.reason}); save it as UTF-8") from None
-    except tomllib.TOMLDecodeError as e:
-        raise CalibrationError(f"{path}: not valid TOML ({e}); fix the syntax") from None
-    except (ValueError, RecursionError) as e:
-        raise CalibrationError(f"{path}: {limit_problem(e)}; shorten it") from None
+    doc = tomlfile.read(path, CalibrationError)
     try:
         return make(doc, str(path))
     except (Invalid, CalibrationError) as e:
@@ -192,56 +219,10 @@ def parse(doc, source: str = "calibration") -> Calibration:
     if doc.get("version") != VERSION:
         raise CalibrationError(f"version {doc.get('version')!r} is not {VERSION}; re-run navtwin "
                                "calibrate")
-    known = {"format", "version", "scale", "scale_ci95", "bias_m", "bias_ci95_m", "sigma"}
-    for k in doc:
-        if k not in known:
-            raise CalibrationError(f"unknown key {k!r}; use {', '.join(sorted(known))}")
-    scale = _number(doc, "scale", *RANGE_SCALE)
-    sigma = doc.get("sigma")
-    if not isinstance(sigma, dict) or set(sigma) != {"coefficients", "span_m"}:
-        raise CalibrationError("[sigma] must hold coefficients = [...] and span_m = [lo, hi]")
-    coeffs = sigma["coefficients"]
-    if not isinstance(coeffs, list) or not 1 <= len(coeffs) <= 8 or \
-            any(number_problem(c, -100, 100) for c in coeffs):
-        raise CalibrationError("[sigma] coefficients must be 1 to 8 numbers in [-100, 100]; "
-                               "re-run navtwin calibrate")
-    span = sigma["span_m"]
-    if not isinstance(span, list) or len(span) != 2 or any(number_problem(v, 0, MAX_COORD_M) for v in span) \
-            or span[0] >= span[1]:
-        raise CalibrationError("[sigma] span_m must be [lo, hi] with 0 <= lo < hi (m); "
-                               "re-run navtwin calibrate")
-    return Calibration(scale=scale, bias=_per_anchor(doc, "bias_m", *RANGE_BIAS_M),
-                       sigma_coefficients=tuple(float(c) for c in coeffs),
-                       sigma_span_m=(float(span[0]), float(span[1])),
-                       scale_ci95=_number(doc, "scale_ci95", 0, 1, default=0.0),
-                       bias_ci95=_per_anchor(doc, "bias_ci95_m", 0, 10, required=False),
-                       source=source)
-
-
-def _number(doc: dict, name: str, lo: float, hi: float, default=None) -> float:
-    if name not in doc and default is not None:
-        return default
-    problem = number_problem(doc.get(name), lo, hi)
-    if problem:
-        raise CalibrationError(f"{name} {problem}, not {doc.get(name)!r}")
-    return float(doc[name])
-
-
-def _per_anchor(doc: dict, name: str, lo: float, hi: float, required: bool = True) -> dict[int, float]:
-    table = doc.get(name, None if required else {})
-    if not isinstance(table, dict) or (required and not table):
-        raise CalibrationError(f"[{name}] must be a table of anchor id = metres like 1 = 0.25")
-    out = {}
-    for k, v in table.items():
-        aid = int(k) if k.isdigit() and len(k) < 5 else None
-        if aid is None or not ANCHOR_IDS[0] <= aid <= ANCHOR_IDS[1]:
-            raise CalibrationError(f"[{name}] key {k!r} is not an anchor id "
-                                   f"({ANCHOR_IDS[0]}..{ANCHOR_IDS[1]}); name anchors by id")
-        problem = number_problem(v, lo, hi)
-        if problem:
-            raise CalibrationError(f"[{name}] {aid} {problem}, not {v!r}")
-        out[aid] = float(v)
-    return out
+    f = build(CalibrationFile, doc)
+    return Calibration(scale=f.scale, bias=f.bias_m, sigma_coefficients=f.sigma.coefficients,
+                       sigma_span_m=f.sigma.span_m, scale_ci95=f.scale_ci95,
+                       bias_ci95=f.bias_ci95_m or {}, source=source)
 
 
 # -- the ranges ------------------------------------------------------------------------------
@@ -312,12 +293,13 @@ def fit(r: Ranges, table: StepTable, anchors: Mapping[int, tuple[float, ...]], t
     # 001 eqs. 15-16: the normal equations of S(f, c) = sum (d~ - f d - c_i)^2, in lstsq form
     A = np.column_stack([d] + [(who == a).astype(float) for a in ids])
     theta, *_ = np.linalg.lstsq(A, mean, rcond=None)
-    if problem := number_problem(float(theta[0]), *RANGE_SCALE):  # the limit parse() applies
+    scale_ok = between(*RANGE_SCALE)  # the limit a calibration file's scale has
+    if not scale_ok.ok(float(theta[0])):
         raise CalibrationError(
-            f"the fitted scale factor f = {theta[0]:.4g} {problem} (what the host accepts): "
+            f"the fitted scale factor f = {theta[0]:.4g} {scale_ok.must} (what the host accepts): "
             "the ranges do not grow with the step table's distances, so the recording is no "
             "calibration walk of that table (the tag resting at each of its points in turn); "
-            "record one, or give the --steps and --config it was made with")
+            "record one, or give the steps and config it was made with")
     resid = mean - A @ theta
     dof = max(len(mean) - A.shape[1], 1)
     inflation = max((_ar1_inflation(resid[who == a]) for a in ids), default=1.0)

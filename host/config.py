@@ -50,13 +50,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
-                           RANGE_BIAS_M, limit_problem, number_problem)
+                           RANGE_BIAS_M)
 from navtwin.protocols.adis16350 import GYRO_LSB_DPS
+from navtwin.common import tomlfile
 from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, each, key, one_of, rows
 
 from . import calibration as range_calibration
@@ -258,25 +258,12 @@ def load(name_or_path: str | None = None) -> HostConfig:
         if not path.is_file():
             raise ConfigError(f"no host config named {spec!r}; use one of {', '.join(shipped())} "
                               f"or a path to a .toml file")
-    try:
-        text = path.read_text(encoding="utf-8")  # TOML is UTF-8, whatever the locale says
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read ({e.strerror}); check the path") from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start}); save it "
-                          f"as UTF-8") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML ({e}); fix the syntax") from None
-    except (ValueError, RecursionError) as e:  # tomllib's limits: an integer's digits, nesting
-        raise ConfigError(f"{path}: {limit_problem(e)}; shorten it") from None
-    return _parse(doc, str(path), path.stem, path.parent)
+    return _parse(tomlfile.read(path, ConfigError), str(path), path.stem, path.parent)
 
 
 # -- checking -------------------------------------------------------------------------------
 
-def parse_filters(spec, where: str = "--filters") -> tuple[str, ...]:
+def parse_filters(spec, where: str = "filters") -> tuple[str, ...]:
     """``"all"`` or track names (comma string or list of strings) -> names in output order
     (host.tracks.names())."""
     known = tracks.names()
@@ -396,22 +383,19 @@ def _vehicles(doc: dict) -> tuple[Vehicle, ...]:
     return tuple(build(Vehicle, item, (("vehicles", n),)) for n, item in enumerate(items, 1))
 
 
+@dataclass(frozen=True)
+class _RangeBias:
+    range_bias_m: dict[int, float] = key(REQUIRED, "m", "c_i of 001 per anchor id",
+                                         between(*RANGE_BIAS_M), ids=("anchor", ANCHOR_IDS))
+
+
 def _range_bias(value, anchors: set[int]) -> dict[int, float]:
-    """``range_bias_m = {1 = 0.3, 2 = 0.25}``: c_i of 001 per anchor id, in RANGE_BIAS_M."""
-    where = "[filters] range_bias_m"
-    if not isinstance(value, dict):
-        raise ConfigError(f"{where} must be a table of anchor id = number like "
-                          f"{{1 = 0.3, 2 = 0.25}}, not {value!r}")
-    out = {}
-    for k, v in value.items():
-        aid = int(k) if str(k).isdigit() else None
+    """``range_bias_m = {1 = 0.3, 2 = 0.25}``: c_i of 001 per anchor id of [[anchors]]."""
+    out = build(_RangeBias, {"range_bias_m": value}, (("filters", 0),)).range_bias_m
+    for aid in out:
         if aid not in anchors:
-            raise ConfigError(f"{where} names anchor {k!r}, which is not in [[anchors]]; "
-                              f"use the ids {sorted(anchors)}")
-        problem = number_problem(v, *RANGE_BIAS_M)
-        if problem:
-            raise ConfigError(f"{where} {aid} {problem}, not {v!r}")
-        out[aid] = float(v)
+            raise ConfigError(f"[filters] range_bias_m names anchor {str(aid)!r}, which is not in "
+                              f"[[anchors]]; use the ids {sorted(anchors)}")
     return out
 
 

@@ -42,7 +42,7 @@ def _host_meta(rec: Recording) -> dict:
     if not ok:
         raise RecordingError(f"{rec.directory / 'recording.json'}: \"host\" is not "
                              f"{{config: object, filters: [names], escaped: bool, inputs: "
-                             f"[recorded ports]}}; re-record, or pass --config and --filters")
+                             f"[recorded ports]}}; re-record, or give the config and filters")
     return h
 
 

@@ -64,11 +64,11 @@ HOST_SOURCE = "navtwin host"  # a host recording's meta "source"
 
 class OutputError(Exception):
     """The estimate (or innovation) output cannot be written: one line naming it and the fix;
-    ``option`` is the command line's name of that output."""
+    ``setting`` names that output (``out``, ``innovations``)."""
 
-    def __init__(self, message: str, option: str = "--out") -> None:
+    def __init__(self, message: str, setting: str = "out") -> None:
         super().__init__(message)
-        self.option = option
+        self.setting = setting
 
 
 class StartError(Exception):
@@ -300,9 +300,9 @@ class Service:
                 try:
                     opened[name] = open_port(url, self.baud)
                 except StartError as e:
-                    raise StartError(f"cannot open --{name} {e}") from None
+                    raise StartError(f"{name}: cannot open {e}") from None
                 except (serial.SerialException, OSError, ValueError) as e:
-                    raise StartError(f"cannot open --{name} {url}: {e}; check the device path "
+                    raise StartError(f"{name}: cannot open {url}: {e}; check the device path "
                                     f"or URL (socket://, rfc2217://, spy://)") from None
         except StartError:
             for s in opened.values():
@@ -315,7 +315,7 @@ class Service:
         try:
             self.recorder = RecordingWriter(self.record_dir, self.meta(), reads=True)
         except RecordingWriteError as e:
-            raise StartError(f"--record {e}") from None
+            raise StartError(f"record: {e}") from None
 
     # -- run -----------------------------------------------------------------------------
     def run(self, stop: threading.Event | None = None, duration_s: float | None = None) -> dict:
@@ -424,7 +424,7 @@ class Service:
             self.innovations.write(innovation_line(*fields))
         except OSError as e:
             raise OutputError(write_failure(getattr(self.innovations, "name", "the innovations"), e),
-                              "--innovations") from None
+                              "innovations") from None
 
     # -- reporting ---------------------------------------------------------------------------
     def _info(self, kind: str, body: dict) -> None:

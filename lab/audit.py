@@ -187,6 +187,11 @@ def _cause(before: Read, now: Read) -> str:
     return "second_reader" if now.contended > before.contended else "no_cause_seen"
 
 
+def _changes_bytes(kind: str) -> bool:
+    """Whether fault *kind* may change bytes (a kind no longer installed is taken to)."""
+    return kind not in Fault.KINDS or getattr(Fault.KINDS.get(kind), "CHANGES_BYTES", True)
+
+
 def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
                escaped: bool, marks: list[Read] | None = None) -> PortAudit:
     """The audit of one port (module docstring); *marks*: the reads' read columns, when the
@@ -210,7 +215,7 @@ def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
         return i >= 0 and seen[i][0] <= lo and hi <= seen[i][1]
 
     changing = [e for e in entries if e["port"] == port and e.get("direction", "to_host") != "to_device"
-                and e["start"] is not None and getattr(Fault.KINDS.get(e["kind"]), "CHANGES_BYTES", True)]
+                and e["start"] is not None and _changes_bytes(e["kind"])]
     timing = [e for e in entries if e["port"] == port and e.get("direction", "to_host") != "to_device"
               and e["start"] is not None and e not in changing]
     damage = sorted((e["start"], e["end"]) for e in changing)
@@ -292,9 +297,9 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
     emu, host = Recording(emulator_dir), Recording(host_dir)
     if emu.meta.get("source") != "navtwin emulate":
         raise AuditError(f"{emulator_dir}: not an emulator recording (source "
-                         f"{emu.meta.get('source')!r}); give the emulator's --record directory first")
+                         f"{emu.meta.get('source')!r}); give the emulator's recording directory first")
     if (host.meta.get("source") or "").startswith("navtwin emulate"):
-        raise AuditError(f"{host_dir}: an emulator recording; give the host's --record directory second")
+        raise AuditError(f"{host_dir}: an emulator recording; give the host's recording directory second")
     entries = emu.faults()
     settings = emu.meta.get("ports", {})
     ports = [p for p in lab_ports.names() if emu.sizes.get(p) and host.sizes.get(p)]

@@ -1,29 +1,36 @@
 """Benchmarks that need both sides: the host on the emulated lab's bytes, the in-memory run,
 and the live soak (not tests: they measure, they do not assert).
 
-    python -m navtwin.cli.lab_bench latency [--seconds 20] [--filters all]
-    python -m navtwin.cli.lab_bench replay [DIR] [--seconds 60] [--filters all] [--runs 5]
-    python -m navtwin.cli.lab_bench in-memory [--scenario office] [--seeds 3]
-    python -m navtwin.cli.lab_bench soak [--seconds 600] [--dir DIR]
-    python -m navtwin.cli.lab_bench sweep [--scenario office] [--seeds 8] [--workers 2]
+    navtwin bench host-latency [--seconds 20] [--filters all]
+    navtwin bench host-replay [--recording DIR] [--seconds 60] [--filters all] [--runs 7]
+    navtwin bench lab-in-memory [--scenario office] [--seeds 3]
+    navtwin bench lab-soak [--seconds 600] [--faults] [--dir DIR]
+    navtwin bench lab-sweep [--scenario office] [--seeds 8] [--workers 2] [--duration S]
 
-``latency``: :func:`navtwin.host.bench.bench_latency` fed the office lab's first --seconds, made in
-memory (:func:`navtwin.lab.run.lab_chunks`). ``replay``: :func:`navtwin.host.bench.bench_replay` over DIR (a
-host or emulator recording), by default over a host recording of the office lab's first
---seconds. ``in-memory``: seeds per second of the whole scenario through the host, in memory
-(:func:`navtwin.lab.run.run_in_memory`) against ``navtwin emulate --speed max --record`` then
-``navtwin replay`` (the disk in between). ``soak``: :func:`navtwin.lab.soak.soak`. ``sweep``: seeds
-per second of :func:`navtwin.lab.sweep.run`, serial and on a LocalCluster. Each prints one
-JSON object.
+``host-latency``: :func:`navtwin.host.bench.bench_latency` fed the office lab's first seconds,
+made in memory (:func:`navtwin.lab.run.lab_chunks`). ``host-replay``:
+:func:`navtwin.host.bench.replay_speeds` over a recording (a host or emulator recording), by
+default over a host recording of the office lab's first seconds, of one filter set or of 000's
+five tracks and all eight compared. ``lab-in-memory``: seeds per second of the whole scenario
+through the host, in memory (:func:`navtwin.lab.run.run_in_memory`) against ``navtwin emulate
+--speed max --record`` then ``navtwin replay`` (the disk in between). ``lab-soak``:
+:func:`navtwin.lab.soak.soak`. ``lab-sweep``: seeds per second of :func:`navtwin.lab.sweep.run`,
+serial and on a LocalCluster. Each prints one JSON object; a setting left out takes its default
+(smaller with ``--quick``).
 """
 from __future__ import annotations
 
+import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import load_scenario
+from navtwin.common.limits import MAX_DURATION_S
+from navtwin.common.schema import Invalid, between, key, positive, takes
+from navtwin.host import config as host_config
 from navtwin.host import tracks
 from navtwin.host.bench import bench_latency, replay_speeds, write_host_recording
 from navtwin.host.replay import replay
@@ -36,11 +43,6 @@ def latency(seconds: float = 20.0, filters=tracks.DEFAULT, seed: int = 1) -> dic
     """The host service on PTYs, fed the office lab at its arrival times."""
     kw, chunks = lab_chunks("office", seed, duration=seconds, filters=tuple(filters))
     return bench_latency(kw["config"], kw["filters"], list(chunks), seconds)
-
-
-def office_replay(seconds: float = 60.0, filters=tracks.DEFAULT, seed: int = 1, runs: int = 5) -> dict:
-    """Replay speed of a host recording of the office lab's first *seconds* (median of *runs*)."""
-    return office_replays(seconds, {"replay": filters}, seed, runs)["replay"]
 
 
 def office_replays(seconds: float, sets: dict, seed: int = 1, runs: int = 5) -> dict:
@@ -98,34 +100,111 @@ def sweep_rate(scenario: str = "office", seeds: int = 8, workers: int = 2,
             "same_cells": spread.rows == serial.rows}
 
 
-def benchmarks() -> dict:
-    """The lab's benchmarks for ``navtwin bench`` (entry point group navtwin.benchmarks)."""
-    def host_latency(quick: bool = False) -> dict:
-        """host: last byte on the PTY -> estimate line, office lab, all filters (goal p99 <= 2 ms)"""
-        return latency(5.0 if quick else 20.0)
+def _tracks(spec: str | None, default=tracks.DEFAULT) -> tuple[str, ...]:
+    """The tracks a ``filters`` setting names (a comma list or all); *default* when none."""
+    try:
+        return default if spec is None else host_config.parse_filters(spec)
+    except host_config.ConfigError as e:
+        raise Invalid("filters", str(e).removeprefix("filters: ")) from None
 
-    def host_replay(quick: bool = False) -> dict:
+
+FILTERS_DOC = "the tracks, a comma list or all; none = 000's sins,wsn,kf,ekf,ukf"
+
+
+@dataclass(frozen=True)
+class Latency:
+    """host-latency's settings."""
+    seconds: float | None = key(None, "s", "of the office lab fed; none = 20 (5 quick)",
+                                between(1, 3600))
+    filters: str | None = key(None, "", FILTERS_DOC)
+
+    def __post_init__(self):
+        _tracks(self.filters)
+
+
+@dataclass(frozen=True)
+class Replay:
+    """host-replay's settings."""
+    recording: str | None = key(None, "", "a host or emulator recording's directory; none = a "
+                                "host recording of the office lab's first seconds")
+    seconds: float | None = key(None, "s", "of the office lab recorded; none = 60 (10 quick)",
+                                between(1, 3600))
+    filters: str | None = key(None, "", "the tracks replayed, a comma list or all; none = "
+                              "000's five and all eight, compared")
+    runs: int | None = key(None, "", "replays, their median wall time counts; none = 7 (3 quick)",
+                           between(1, 100))
+
+    def __post_init__(self):
+        _tracks(self.filters)
+
+
+@dataclass(frozen=True)
+class Seeds:
+    """lab-in-memory's settings."""
+    scenario: str = key("office", "", "the scenario run (a name or a .toml path)")
+    seeds: int | None = key(None, "", "seeds run each way; none = 3 (1 quick)", between(1, 1000))
+
+
+@dataclass(frozen=True)
+class Soak:
+    """lab-soak's settings."""
+    seconds: float | None = key(None, "s", "of the soak; none = 600 (120 quick)",
+                                between(30, 36000))
+    faults: bool = key(False, "", "inject lab.soak.SOAK_FAULTS periodically, record the host and "
+                       "audit it (no emulator restart then)")
+    dir: str | None = key(None, "", "keep the run here; none = a new temporary directory")
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """lab-sweep's settings."""
+    scenario: str = key("office", "", "the scenario swept (a name or a .toml path)")
+    seeds: int | None = key(None, "", "seeds; none = 8 (4 quick)", between(1, 1000))
+    workers: int = key(2, "", "LocalCluster workers", between(1, 64))
+    duration: float | None = key(None, "s", "of each run; none = the whole scenario (20 quick)",
+                                 positive(hi=MAX_DURATION_S))
+
+
+def benchmarks() -> dict:
+    """The lab's benchmarks for ``navtwin bench`` (a set of navtwin.cli.bench.SETS)."""
+    @takes(Latency)
+    def host_latency(quick: bool, s: Latency) -> dict:
+        """host: last byte on the PTY -> estimate line, office lab, all filters (goal p99 <= 2 ms)"""
+        return latency(s.seconds or (5.0 if quick else 20.0), _tracks(s.filters))
+
+    @takes(Replay)
+    def host_replay(quick: bool, s: Replay) -> dict:
         """host: replay speed of a host recording of the office lab, 000's five tracks and all
         eight, medians of interleaved runs and their ratio (goal >= 100x with all)"""
         seconds, runs = (10.0, 3) if quick else (60.0, 7)
-        r = office_replays(seconds, {"default": tracks.DEFAULT, "all_tracks": tracks.names()},
-                           runs=runs)
+        runs = s.runs or runs
+        sets = ({"replay": _tracks(s.filters)} if s.filters is not None
+                else {"default": tracks.DEFAULT, "all_tracks": tracks.names()})
+        r = (replay_speeds(s.recording, sets, runs) if s.recording is not None
+             else office_replays(s.seconds or seconds, sets, runs=runs))
+        if s.filters is not None:
+            return {**r["replay"], "benchmark": "host-replay"}
         return {"benchmark": "host-replay", **r,
                 "all_to_default": round(r["default"]["wall_s"] / r["all_tracks"]["wall_s"], 3)}
 
-    def lab_in_memory(quick: bool = False) -> dict:
+    @takes(Seeds)
+    def lab_in_memory(quick: bool, s: Seeds) -> dict:
         """emulator+host: office seeds/s in memory vs emulate --record then replay (goal: faster)"""
-        return in_memory("office", 1 if quick else 3)
+        return in_memory(s.scenario, s.seeds or (1 if quick else 3))
 
-    def lab_soak(quick: bool = False) -> dict:
+    @takes(Soak)
+    def lab_soak(quick: bool, s: Soak) -> dict:
         """emulator+host: live soak, second reader and an emulator restart (RSS growth, recovery)"""
         from .soak import soak
 
-        return soak(120.0 if quick else 600.0)
+        return soak(s.seconds or (120.0 if quick else 600.0), directory=s.dir, faults=s.faults,
+                    progress=lambda m: print(m, file=sys.stderr, flush=True))
 
-    def lab_sweep(quick: bool = False) -> dict:
+    @takes(Sweep)
+    def lab_sweep(quick: bool, s: Sweep) -> dict:
         """emulator+host: office seeds/s of navtwin sweep, serial and on 2 LocalCluster workers"""
-        return sweep_rate("office", 4 if quick else 8, 2, 20.0 if quick else None)
+        return sweep_rate(s.scenario, s.seeds or (4 if quick else 8), s.workers,
+                          s.duration or (20.0 if quick else None))
 
     def startup(quick: bool = False) -> dict:
         """navtwin: CPU-s to --version, ctl status and emulate's ready line vs importing numpy

@@ -53,7 +53,7 @@ def run_dir(path: str | os.PathLike | None) -> Path:
         return Path(tempfile.mkdtemp(prefix="navtwin-lab-"))  # mode 0700
     d = Path(path).absolute()  # the host is a process of its own: no path may hang on cwd
     if d.exists() and (not d.is_dir() or any(d.iterdir())):
-        raise LabError(f"--dir {d}: exists and is not an empty directory; choose a new one")
+        raise LabError(f"dir: {d}: exists and is not an empty directory; choose a new one")
     d.mkdir(mode=0o700, parents=True, exist_ok=True)
     os.chmod(d, 0o700)
     return d
@@ -137,7 +137,8 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
         raise LabError(str(e)) from None
     config = config or config_for(Path(scenario).stem)  # the scenario's lab, as replay finds it
     if config is None:
-        raise LabError(f"no host config for scenario {scenario!r}; give --config NAME|FILE")
+        raise LabError(f"config: no host config for scenario {scenario!r}; name one (a shipped "
+                       "name or a file)")
     d = run_dir(directory)
     log = d / "host.log"
     watch.phase("starting")

@@ -20,22 +20,21 @@ import html
 import io
 import json
 import re
-import subprocess
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
 
-from navtwin.common.limits import number_problem
+from navtwin.common.schema import Invalid, value
 from navtwin.emulator.scenario import ScenarioError, load_scenario
 from navtwin.host import config as host_config
 from navtwin.host.config import ConfigError
 from navtwin.host.replay import config_for
-from navtwin.protocols import __version__
 from navtwin.protocols.recording import FAULTS
 
 from . import evaluate, pcrb
+from .provenance import code_version
 
 #: Table 1's rows (paper 001): key of lab.evaluate.position_errors -> label; ranges are two keys.
 ROWS = (("x_range", "x error range (m)"), ("x_var", "x error variance (m²)"),
@@ -114,21 +113,11 @@ def _host_config(d: Path, scenario: str):
         return None
 
 
-def _code_version() -> str:
-    """The package version, and the git commit of its checkout when it is one."""
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).parent,
-                                capture_output=True, text=True, timeout=10).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        commit = ""
-    return __version__ + (f" ({commit})" if commit else "")
-
-
 def collect(run_dir: str | Path) -> dict:
     """Everything the report shows, from the run directory's files."""
     d = Path(run_dir)
     if not d.is_dir():
-        raise ReportError(f"{d}: not a directory; give the run directory of 'navtwin lab --dir DIR'")
+        raise ReportError(f"{d}: not a directory; give the run directory of 'navtwin lab'")
     for need in ("emulator/truth.csv", "emulator/scenario.toml", "estimates.jsonl"):
         if not (d / need).is_file():
             raise ReportError(f"{d}: no {need}; give a run directory written by 'navtwin lab'")
@@ -146,9 +135,10 @@ def collect(run_dir: str | Path) -> dict:
         raise ReportError(f"{d}/estimates.jsonl: no estimate; the host wrote none (see host.log)")
     report = _json(d / "report.json")
     offset = report.get("time_offset_s", 0.0)
-    if problem := number_problem(offset):
-        raise ReportError(f"{d}/report.json: time_offset_s {offset!r} {problem}; re-run "
-                          "navtwin lab")
+    try:
+        value(offset, float, "time_offset_s")
+    except Invalid as e:
+        raise ReportError(f"{d}/report.json: {e}; re-run navtwin lab") from None
     for key in ("emulator", "audit"):
         if not isinstance(report.get(key, {}), dict):
             raise ReportError(f"{d}/report.json: {key} is not the JSON object navtwin lab "
@@ -167,7 +157,7 @@ def collect(run_dir: str | Path) -> dict:
            "paper": evaluate.PAPER_FIGURES.get(sc.name),
            "hashes": {n: hashlib.sha256((d / n).read_bytes()).hexdigest()
                       for n in HASHED if (d / n).is_file()},
-           "code": _code_version()}
+           "code": code_version()}
     if cfg is not None:
         ec = cfg.estimator_config()
         run["bound"] = pcrb.position_bound(sc, truth, ec.jerk_psd, ec.p0_sigma)
@@ -594,11 +584,11 @@ def write_report(run_dir: str | Path, out: str | Path | None = None) -> dict[str
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise ReportError(f"--out {out}: {e.strerror}; choose a writable directory") from None
+        raise ReportError(f"out: {out}: {e.strerror}; choose a writable directory") from None
     paths = {"html": out / "report.html", "md": out / "report.md"}
     try:
         paths["html"].write_text(html_page(run, figures(run)), encoding="utf-8")
         paths["md"].write_text(markdown(run), encoding="utf-8")
     except OSError as e:
-        raise ReportError(f"--out {out}: {e.strerror}; choose a writable directory") from None
+        raise ReportError(f"out: {out}: {e.strerror}; choose a writable directory") from None
     return paths

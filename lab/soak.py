@@ -1,6 +1,6 @@
 """The live soak: the lab for many minutes with the misuse of ordinary days, measured.
 
-``python -m navtwin.cli.lab_bench soak --seconds 600`` (or ``navtwin bench lab-soak``) runs
+``navtwin bench lab-soak [--seconds 600] [--faults] [--dir DIR]`` runs
 ``navtwin emulate`` in real time on a long office scenario (the loop driven again and again)
 and ``navtwin host`` on its PTYs, each its own process as users run them, and meanwhile:
 

@@ -32,7 +32,6 @@ import json
 import math
 import os
 import re
-import subprocess
 import tomllib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -44,12 +43,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from scipy.stats import t as student_t
 
-from navtwin.protocols import __version__
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
 from navtwin.host.output import estimate_line
 from navtwin.host.replay import emulator_settings
 
 from . import evaluate
+from .provenance import code_version
 from .run import run_in_memory, truth
 
 #: Scenario seconds a task holds at least (seeds chunked): 0.2-0.7 s of work here.
@@ -77,22 +76,6 @@ TABLE_1 = {"x error range (m)": ("x_min", "x_max"), "x error variance (m²)": ("
 
 class SweepError(Exception):
     """A sweep that cannot start: one line naming the problem and the fix."""
-
-
-def code_version() -> str:
-    """navtwin's version, plus ``git describe`` of its checkout when there is one, with
-    ``-dirty`` when a .py or .toml file differs from it (edited docs do not change a cell)."""
-    root = str(Path(__file__).resolve().parent.parent)
-    try:
-        head = subprocess.run(["git", "-C", root, "describe", "--always"], capture_output=True,
-                              text=True, timeout=10)
-        diff = subprocess.run(["git", "-C", root, "diff", "--quiet", "HEAD", "--", "*.py",
-                               "*.toml"], capture_output=True, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return __version__
-    if head.returncode != 0:
-        return __version__
-    return f"{__version__}+{head.stdout.strip()}" + ("-dirty" if diff.returncode else "")
 
 
 def scenario_hash(sc: Scenario) -> str:
@@ -190,9 +173,9 @@ class Client:
             try:
                 self.client = DaskClient(address, timeout=f"{CONNECT_TIMEOUT_S}s")
             except (OSError, TimeoutError, ValueError) as e:
-                raise SweepError(f"--scheduler {address}: no scheduler answered "
+                raise SweepError(f"scheduler: {address}: no scheduler answered "
                                  f"({_error_line(e)}); start one (dask scheduler) or omit "
-                                 "--scheduler for a LocalCluster") from None
+                                 "the scheduler for a LocalCluster") from None
         else:
             self.cluster = private_cluster(workers or os.cpu_count() or 1)
             self.client = DaskClient(self.cluster)
@@ -242,16 +225,16 @@ def _check_out(out: Path) -> None:
     """*out* made if missing; refused if it holds anything but a sweep's parts (a recording's
     or the user's files would be mixed with ours, and read as parts)."""
     if out.exists() and not out.is_dir():
-        raise SweepError(f"--out {out}: not a directory; pass a directory path")
+        raise SweepError(f"out: {out}: not a directory; pass a directory path")
     try:
         out.mkdir(parents=True, exist_ok=True)
         others = sorted(p.name for p in out.iterdir() if not (PART.fullmatch(p.name)
                                                               and p.is_file()))
     except OSError as e:
-        raise SweepError(f"--out {out}: {e.strerror}; choose a writable directory") from None
+        raise SweepError(f"out: {out}: {e.strerror}; choose a writable directory") from None
     if others:
         more = f" and {len(others) - 1} more" if len(others) > 1 else ""
-        raise SweepError(f"--out {out}: holds {others[0]}{more}, not only a sweep's "
+        raise SweepError(f"out: {out}: holds {others[0]}{more}, not only a sweep's "
                          "part-NNNN.parquet files; choose a new or empty directory, or that "
                          "of an earlier sweep")
 
@@ -261,8 +244,8 @@ def _check_same(out: Path, metas: list[dict], meta: dict) -> None:
         for key, what in (("scenario_hash", "scenario hash"), ("code_version", "code version"),
                           ("duration_s", "duration"), ("filters", "filter set")):
             if m.get(key) != meta[key]:
-                raise SweepError(f"--out {out}: holds a sweep of another {what} ({m.get(key)} "
-                                 f"there, {meta[key]} now); choose another --out or remove it")
+                raise SweepError(f"out: {out}: holds a sweep of another {what} ({m.get(key)} "
+                                 f"there, {meta[key]} now); choose another directory or remove it")
 
 
 def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable[str] | None = None,
@@ -297,7 +280,7 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         try:
             writer = pq.ParquetWriter(part, SCHEMA.with_metadata({META_KEY: json.dumps(meta)}))
         except OSError as e:
-            raise SweepError(f"--out {out}: cannot write {part.name} ({e}); choose a writable "
+            raise SweepError(f"out: {out}: cannot write {part.name} ({e}); choose a writable "
                              "directory") from None
     finished = len(seeds) - len(todo)
 
@@ -500,9 +483,9 @@ def check_block(path: str | Path) -> None:
 
 def _unwritable(path: Path, e: OSError | UnicodeDecodeError) -> SweepError:
     if isinstance(e, UnicodeDecodeError):
-        return SweepError(f"--results {path}: not UTF-8 text; give a Markdown file such as "
+        return SweepError(f"results: {path}: not UTF-8 text; give a Markdown file such as "
                           "docs/results.md")
-    return SweepError(f"--results {path}: {e.strerror or e}; give a file you can write, or "
+    return SweepError(f"results: {path}: {e.strerror or e}; give a file you can write, or "
                       "omit --results")
 
 

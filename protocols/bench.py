@@ -1,7 +1,7 @@
 """The decoders' benchmarks, with peers measured in the same run (``navtwin bench decode``).
 
-:func:`decode_benchmarks` is this package's entry in the ``navtwin.benchmarks`` group (the
-registry is :mod:`navtwin.cli.bench`): library functions that return figures, over protocols alone.
+:func:`decode_benchmarks` is this package's set of ``navtwin bench`` (the registry is
+:mod:`navtwin.cli.bench`): library functions that return figures, over protocols alone.
 This module also holds the adapters that run the two peer XBee libraries' own read paths over
 bytes in memory (digi-xbee 1.5.0 and python-xbee 2.3.2 are test-extra dependencies, imported
 only here).

@@ -1,10 +1,10 @@
 """Fault kinds of the emulated lab (the registry and its rules: emulator.faults.base).
 
-Importing the package registers the shipped kinds, in this order (the order of the docs
-table), then the kinds of installed packages (entry-point group ``navtwin.faults``).
+The registry (:data:`KINDS`) holds the shipped kinds, declared in emulator.faults.base, and
+finds the kinds of installed packages (entry-point group ``navtwin.faults``) when asked.
 """
-from .base import (ENTRY_POINTS, MODELS, AnchorFault, BoardFault, DeviceFault, Fault, FaultError,
-                   LineFault, RouterFault, acting_on, load_entry_points, register, unregister)
+from .base import (ENTRY_POINTS, KINDS, MODELS, AnchorFault, BoardFault, DeviceFault, Fault, FaultError,
+                   LineFault, RouterFault, acting_on, register, unregister)
 from .anchor_outage import AnchorOutage
 from .nlos import Nlos
 from .link_loss import LinkLoss
@@ -24,10 +24,8 @@ from .bandwidth import Bandwidth
 from .slicing import Slicing
 from .stuck import Stuck
 
-load_entry_points()
-
-__all__ = ["ENTRY_POINTS", "MODELS", "AnchorFault", "BoardFault", "RouterFault", "DeviceFault", "Fault", "FaultError", "LineFault",
-           "acting_on", "load_entry_points", "register", "unregister", "AnchorOutage", "Nlos",
+__all__ = ["ENTRY_POINTS", "KINDS", "MODELS", "AnchorFault", "BoardFault", "RouterFault", "DeviceFault", "Fault", "FaultError", "LineFault",
+           "acting_on", "register", "unregister", "AnchorOutage", "Nlos",
            "LinkLoss", "LinkFade", "RangeValueError", "BoardReset", "CoordinatorReset", "RouterRejoin",
            "BitErrors", "ByteDrop", "ByteDuplicate", "ByteInsert", "Garbage", "BurstLoss",
            "Latency", "Bandwidth", "Slicing", "Stuck"]

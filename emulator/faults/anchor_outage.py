@@ -4,10 +4,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
-from .base import AnchorFault, register
+from .base import AnchorFault
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class AnchorOutage(AnchorFault):
     """The anchor is silent: its exchanges time out (status 0x40 reports)."""

@@ -14,11 +14,10 @@ from dataclasses import dataclass
 from navtwin.common.schema import between, key
 from navtwin.protocols.serial import wire_ns
 
-from .base import LineFault, register
+from .base import LineFault
 from .line import FaultWrapper
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class Bandwidth(LineFault):
     """A bandwidth cap below the line's rate."""

@@ -26,8 +26,10 @@ A kind acts in one of two places:
   coordinator reads them). Its wrapper marks what it did (``LineWrapper.mark``) and the
   line writes each mark into the run's fault ledger (emulator.ledger).
 
-Kinds of a user's package register through the entry-point group ``navtwin.faults`` (name =
-the kind, value = the class); they are loaded when emulator.faults is imported.
+The registry is :data:`KINDS` (also ``Fault.KINDS``, which common.schema reads): the shipped
+kinds declared by ``"module:class"`` below (the order of the docs table), those added in process
+with :func:`register`, then the kinds of installed packages, from the entry-point group
+``navtwin.faults`` (name = the kind, value = the class), each imported when first used.
 """
 from __future__ import annotations
 
@@ -35,7 +37,7 @@ import math
 from dataclasses import dataclass
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_DURATION_S
-from navtwin.protocols.plugins import entry_points
+from navtwin.protocols.plugins import Registry
 from navtwin.common.schema import REQUIRED, Check, Invalid, between, key, non_negative, one_of
 from navtwin.protocols import ports
 
@@ -65,7 +67,7 @@ class FaultError(ValueError):
 class Fault:
     """One episode of a fault; subclasses add their settings."""
 
-    KINDS = {}  # kind name -> class, in registration order (common.schema reads it)
+    KINDS = None  # the registry of kinds (a protocols.plugins.Registry), set below; common.schema reads it
     KIND = ""
     ACTS_ON = ""
     start_s: float = key(0.0, "s", "start of the episode", non_negative(hi=MAX_DURATION_S))
@@ -213,36 +215,37 @@ class LineFault(Fault):
         raise NotImplementedError
 
 
-def register(cls: type[Fault]) -> type[Fault]:
-    """Add kind *cls* to the registry (a class decorator); FaultError if it cannot be."""
+def _check(kind: str, cls) -> None:
     if not (isinstance(cls, type) and issubclass(cls, (DeviceFault, LineFault))):
         raise FaultError(f"{cls!r} is not a DeviceFault or LineFault subclass; derive the kind "
                          "from navtwin.emulator.faults.DeviceFault or LineFault")
-    if not cls.KIND or cls.ACTS_ON not in MODELS:
-        raise FaultError(f"{cls.__name__} needs KIND (its name) and ACTS_ON (one of "
+    if not cls.KIND or cls.KIND != kind or cls.ACTS_ON not in MODELS:
+        raise FaultError(f"{cls.__name__} needs KIND = {kind!r} (its name) and ACTS_ON (one of "
                          f"{', '.join(MODELS)}); set both class attributes")
-    known = Fault.KINDS.get(cls.KIND)
-    if known is not None and known is not cls:
-        raise FaultError(f"fault kind {cls.KIND!r} is taken by {known.__module__}."
-                         f"{known.__name__}; give {cls.__name__} another KIND")
-    Fault.KINDS[cls.KIND] = cls
-    return cls
 
 
-def unregister(kind: str) -> None:
-    """Remove a kind (tests that register a toy kind put the registry back with it)."""
-    del Fault.KINDS[kind]
+#: The fault kinds: the shipped ones in the order of the docs table, then registered, then
+#: entry points.
+KINDS: Registry[type[Fault]] = Registry(ENTRY_POINTS, "fault kind", {
+    kind: f"navtwin.emulator.faults.{kind}:{cls}" for kind, cls in (
+        ("anchor_outage", "AnchorOutage"), ("nlos", "Nlos"), ("link_loss", "LinkLoss"),
+        ("link_fade", "LinkFade"), ("range_value_error", "RangeValueError"),
+        ("board_reset", "BoardReset"), ("coordinator_reset", "CoordinatorReset"),
+        ("router_rejoin", "RouterRejoin"), ("bit_errors", "BitErrors"), ("byte_drop", "ByteDrop"),
+        ("byte_duplicate", "ByteDuplicate"), ("byte_insert", "ByteInsert"),
+        ("garbage", "Garbage"), ("burst_loss", "BurstLoss"), ("latency", "Latency"),
+        ("bandwidth", "Bandwidth"), ("slicing", "Slicing"), ("stuck", "Stuck"))},
+    check=_check, error=FaultError)
+Fault.KINDS = KINDS
 
 
-def load_entry_points() -> None:
-    """Register the kinds that installed packages declare in the ``navtwin.faults`` group."""
-    for ep in entry_points(ENTRY_POINTS):
-        cls = ep.load()
-        if getattr(cls, "KIND", None) != ep.name:
-            raise FaultError(f"entry point {ep.name} = {ep.value} ({ENTRY_POINTS}) names a class "
-                             f"of kind {getattr(cls, 'KIND', None)!r}; name the entry point "
-                             "after the class's KIND")
-        register(cls)
+def register(cls: type[Fault]) -> type[Fault]:
+    """Add kind *cls* under its KIND (a class decorator); FaultError if it cannot be."""
+    _check(getattr(cls, "KIND", None), cls)  # before the registry reads KIND as the name
+    return KINDS.register(cls.KIND, cls)
+
+
+unregister = KINDS.unregister
 
 
 def acting_on(faults, model: str, **which) -> list[Fault]:

@@ -10,11 +10,10 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import key, positive
 
-from .base import LineFault, register
+from .base import LineFault
 from .line import FaultWrapper, Gaps
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class BitErrors(LineFault):
     """Bit errors at a bit error rate: each data bit flips with probability ber."""

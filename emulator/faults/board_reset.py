@@ -3,10 +3,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .base import BoardFault, register
+from .base import BoardFault
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class BoardReset(BoardFault):
     """The SINS board is off from start_s to end_s (a brown-out and its boot): it writes

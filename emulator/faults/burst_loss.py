@@ -15,13 +15,12 @@ import numpy as np
 
 from navtwin.common.schema import between, key, one_of
 
-from .base import LineFault, register
+from .base import LineFault
 from .line import FaultWrapper, remove
 
 NEVER = 1 << 62
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class BurstLoss(LineFault):
     """Burst loss (Gilbert-Elliott): a good and a bad state with their own loss."""

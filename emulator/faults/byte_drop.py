@@ -9,13 +9,12 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import key, positive
 
-from .base import LineFault, register
+from .base import LineFault
 from .line import FaultWrapper, Gaps, remove
 
 PER_BYTE = "the probability that a byte is hit"
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class ByteDrop(LineFault):
     """Dropped bytes: each byte is lost with the given probability."""

@@ -8,12 +8,11 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import key, positive
 
-from .base import LineFault, register
+from .base import LineFault
 from .byte_drop import PER_BYTE
 from .line import FaultWrapper, Gaps, insert
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class ByteDuplicate(LineFault):
     """Duplicated bytes: each byte arrives twice with the given probability."""

@@ -10,12 +10,11 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import key, positive
 
-from .base import LineFault, register
+from .base import LineFault
 from .byte_drop import PER_BYTE
 from .line import FaultWrapper, Gaps, insert
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class ByteInsert(LineFault):
     """Inserted bytes: a random byte comes before each byte with the given probability."""

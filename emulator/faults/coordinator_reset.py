@@ -3,10 +3,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .base import DeviceFault, register
+from .base import DeviceFault
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class CoordinatorReset(DeviceFault):
     """The coordinator is off from start_s to end_s: RF packets are not reported, host frames

@@ -13,13 +13,12 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import Invalid, between, key
 
-from .base import LineFault, register
+from .base import LineFault
 from .line import FaultWrapper
 
 MAX_BURST = 4096
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class Garbage(LineFault):
     """Bursts of garbage: random bytes at a rate, between the chunks."""

@@ -15,13 +15,12 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import key, non_negative
 
-from .base import LineFault, register
+from .base import LineFault
 from .line import FaultWrapper
 
 MAX_DELAY_S = 3600.0
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class Latency(LineFault):
     """Added latency with jitter; chunks stay in order."""

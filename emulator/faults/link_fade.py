@@ -5,10 +5,9 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import between, key
 
-from .base import DeviceFault, register
+from .base import DeviceFault
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class LinkFade(DeviceFault):
     """The RF link fades (a body in the path, a door closing): each attempt in the window is

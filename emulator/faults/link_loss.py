@@ -3,10 +3,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .base import DeviceFault, register
+from .base import DeviceFault
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class LinkLoss(DeviceFault):
     """The XBee link is down: every RF packet in the window is lost."""

@@ -5,10 +5,9 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import key, non_negative
 
-from .base import AnchorFault, register
+from .base import AnchorFault
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class Nlos(AnchorFault):
     """Non-line-of-sight: a positive range bias (exponential) and a weaker signal."""

@@ -5,10 +5,9 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import between, key
 
-from .base import AnchorFault, register
+from .base import AnchorFault
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class RangeValueError(AnchorFault):
     """The gateway flags an anchor's exchanges as value errors (status 0x80: a timestamp out

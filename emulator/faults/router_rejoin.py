@@ -3,10 +3,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .base import RouterFault, register
+from .base import RouterFault
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class RouterRejoin(RouterFault):
     """The router is out of the network from start_s to end_s (a reset, a network leave):

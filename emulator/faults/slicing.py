@@ -14,13 +14,12 @@ from dataclasses import dataclass
 from navtwin.common.schema import between, key, non_negative, positive
 from navtwin.protocols.serial import wire_ns
 
-from .base import LineFault, register
+from .base import LineFault
 from .line import FaultWrapper
 
 MAX_PIECE = 1 << 16
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class Slicing(LineFault):
     """Chunks delivered in pieces, with a gap between them."""

@@ -15,13 +15,12 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import between, key
 
-from .base import LineFault, register
+from .base import LineFault
 from .line import FaultWrapper
 
 MAX_BUFFER = 1 << 24
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
 class Stuck(LineFault):
     """A stuck line: nothing arrives during the episode; the receive buffer overruns."""

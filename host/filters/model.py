@@ -73,7 +73,7 @@ class ConstantAcceleration:
         self._transition = lru_cache(maxsize=32)(self._build)
 
     # ndarray.dot rather than @ here and in the filters: the same BLAS call, a third of
-    # the overhead on these 6x6 operands (python -m navtwin.cli.filters_bench)
+    # the overhead on these 6x6 operands (navtwin bench host-filters)
     def F(self, dt: float) -> np.ndarray:
         return np.array((1.0, dt, dt * dt / 2)).dot(_F_BASIS).reshape(DIM_X, DIM_X)
 

@@ -13,14 +13,26 @@ Registered tracks follow the built-in ones in output order, in the order they we
 """
 from __future__ import annotations
 
-import importlib
-
-from navtwin.protocols.plugins import entry_points
+from navtwin.protocols.plugins import Registry
 
 from .base import Estimate, NoSettings, Track
 
-#: The built-in tracks in output order: name -> "module:class" (imported when used).
-_BUILT_IN = {
+#: What runs when no filters are named: 000's tracks. 001's error-state tracks (lc, ...) run
+#: when named (``--filters``, ``[filters] enabled``): together they add about 0.6 of the
+#: five's replay time (docs/lab.md, "Replay with all eight tracks").
+DEFAULT = ("sins", "wsn", "kf", "ekf", "ukf")
+GROUP = "navtwin.tracks"
+
+
+def _check(name: str, cls) -> None:
+    if not (isinstance(cls, type) and issubclass(cls, Track) and cls.name == name):
+        raise ValueError(f"track {name!r} is {cls!r}, not a Track class named {name!r}; give the "
+                         f"class the attribute name = {name!r} (and derive it from Track)")
+
+
+#: The tracks: the built-in ones in output order (name -> "module:class", imported when used),
+#: then those registered in process, then entry points by name.
+TRACKS: Registry[type[Track]] = Registry(GROUP, "track", {
     "sins": "navtwin.host.tracks.sins:SinsTrack",
     "wsn": "navtwin.host.tracks.wsn:WsnTrack",
     "kf": "navtwin.host.tracks.kf:KfTrack",
@@ -29,17 +41,12 @@ _BUILT_IN = {
     "lc": "navtwin.host.tracks.lc:LcTrack",
     "tc": "navtwin.host.tracks.tc:TcTrack",
     "fatci": "navtwin.host.tracks.fatci:FatciTrack",
-}
-BUILT_IN = tuple(_BUILT_IN)
-#: What runs when no filters are named: 000's tracks. 001's error-state tracks (lc, ...) run
-#: when named (``--filters``, ``[filters] enabled``): together they add about 0.6 of the
-#: five's replay time (docs/lab.md, "Replay with all eight tracks").
-DEFAULT = ("sins", "wsn", "kf", "ekf", "ukf")
-GROUP = "navtwin.tracks"
-_registered: dict[str, type[Track]] = {}
+}, check=_check)
+BUILT_IN = TRACKS.built_in
+names, get, unregister = TRACKS.names, TRACKS.get, TRACKS.unregister
 
-__all__ = ["BUILT_IN", "DEFAULT", "Estimate", "GROUP", "NoSettings", "Track", "get", "names", "register",
-           "unregister"]
+__all__ = ["BUILT_IN", "DEFAULT", "Estimate", "GROUP", "NoSettings", "TRACKS", "Track", "get", "names",
+           "register", "unregister"]
 
 
 def register(cls: type[Track]) -> type[Track]:
@@ -47,39 +54,4 @@ def register(cls: type[Track]) -> type[Track]:
     name = getattr(cls, "name", None)
     if not (isinstance(name, str) and name.isidentifier()):
         raise ValueError(f"track {cls!r} needs a name: a class attribute like name = \"mine\"")
-    if name in BUILT_IN or name in _registered:
-        raise ValueError(f"track {name!r} is already registered; choose another name")
-    _registered[name] = cls
-    return cls
-
-
-def unregister(name: str) -> None:
-    """Remove a track added with :func:`register`."""
-    del _registered[name]
-
-
-def _entry_points() -> dict:
-    return {ep.name: ep for ep in entry_points(GROUP)
-            if ep.name not in BUILT_IN and ep.name not in _registered}
-
-
-def names() -> tuple[str, ...]:
-    """Every track name in output order: built in, registered, then entry points."""
-    return (*BUILT_IN, *_registered, *_entry_points())
-
-
-def get(name: str) -> type[Track]:
-    """The track class registered as *name*; KeyError if there is none."""
-    if name in _BUILT_IN:
-        module, cls = _BUILT_IN[name].split(":")
-        return getattr(importlib.import_module(module), cls)
-    if name in _registered:
-        return _registered[name]
-    ep = _entry_points().get(name)
-    if ep is None:
-        raise KeyError(name)
-    cls = ep.load()
-    if not (isinstance(cls, type) and issubclass(cls, Track) and cls.name == name):
-        raise ValueError(f"entry point {name} = {ep.value!r} in {GROUP} is not a Track class "
-                         f"named {name!r}; fix the package that declares it")
-    return cls
+    return TRACKS.register(name, cls)

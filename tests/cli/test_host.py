@@ -28,11 +28,13 @@ def test_host_without_ports(capsys):
 
 def test_host_port_that_does_not_exist(capsys, tmp_path):
     line = cli_error(capsys, "host", "--sins", str(tmp_path / "ttyNOPE"))
-    assert "cannot open --sins" in line and "check the device path" in line
+    assert line.startswith("navtwin host: error: --sins ") and "cannot open" in line \
+        and "check the device path" in line
 
 
 def test_host_bad_url_scheme(capsys):
-    assert "cannot open --xbee" in cli_error(capsys, "host", "--xbee", "nosuch://x")
+    line = cli_error(capsys, "host", "--xbee", "nosuch://x")
+    assert line.startswith("navtwin host: error: --xbee ") and "cannot open" in line
 
 
 def test_host_unknown_filter(capsys, pty_path):

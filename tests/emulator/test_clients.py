@@ -81,7 +81,7 @@ def test_digi_xbee_open_role_data_and_transmit(lab):
 
     dev = XBeeDevice(lab.ports["xbee"], 115200)
     # a client setting: digi-xbee's 4 s per AT round trip, which a starved box can exceed;
-    # how fast open() is (goal 1.5 s) is emulator_bench digi-open's to measure
+    # how fast open() is (goal 1.5 s) is navtwin bench digi-open's to measure
     dev.set_sync_ops_timeout(DEADLINE)
     dev.open()
     try:

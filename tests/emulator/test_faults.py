@@ -157,12 +157,12 @@ def test_register_refuses_a_taken_kind_and_a_class_that_is_no_kind():
     class Other(LineFault):
         KIND = "nlos"
 
-    before = list(Fault.KINDS)
-    with pytest.raises(FaultError, match="'nlos' is taken"):
+    before = list(Fault.KINDS.names())
+    with pytest.raises(FaultError, match="'nlos' is already registered"):
         register(Other)
     with pytest.raises(FaultError, match="not a DeviceFault or LineFault"):
         register(Fault)
-    assert list(Fault.KINDS) == before
+    assert list(Fault.KINDS.names()) == before
     assert before[:len(SHIPPED)] == SHIPPED  # the shipped kinds, before any a user installed
 
 
@@ -183,7 +183,7 @@ def test_a_kind_from_an_installed_package_registers_through_its_entry_point(tmp_
     (info / "entry_points.txt").write_text("[navtwin.faults]\ntoy = toyfaults:Toy\n")
     out = subprocess.run(
         [sys.executable, "-c", "import json; from navtwin.emulator.faults import Fault; "
-                               "print(json.dumps(list(Fault.KINDS)))"],
+                               "print(json.dumps(list(Fault.KINDS.names())))"],
         capture_output=True, text=True, timeout=60,
         env={"PYTHONPATH": f"{root}:{tmp_path}", "PATH": ""})
     assert out.returncode == 0, out.stderr

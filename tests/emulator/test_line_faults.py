@@ -24,7 +24,7 @@ from navtwin.protocols.recording import FAULTS, Recording, RecordingError
 from navtwin.protocols.serial import wire_ns
 
 from ..helpers import navtwin
-from .world_helpers import shipped_kinds, variant
+from .world_helpers import variant
 
 PORTS = names()  # the lab's ports, in its order
 
@@ -45,7 +45,7 @@ def through(kind: str, chunks, seed: int = 1, after_ns: int = SEC, **settings):
     """The chunks a Line with one fault of *kind* delivers in a run that ends *after_ns*
     after the last chunk is ready, and its ledger entries."""
     settings = {"start_s": 0.0, "end_s": 1e6, **settings}
-    fault = Fault.KINDS[kind](port="sins", **settings)
+    fault = Fault.KINDS.get(kind)(port="sins", **settings)
     wrapper = fault.wrapper(stream(seed, "test"))
     wrapper.kind, wrapper.fault_index = kind, 0
     ledger = Ledger()
@@ -336,7 +336,7 @@ def test_a_release_goes_ahead_of_a_chunk_due_at_the_same_time_and_through_later_
 def test_pieces_held_past_the_end_of_the_run_are_not_sent():
     out, _ = through("slicing", [(SEC - 1, bytes(30))], piece_bytes=10, gap_s=0.4)
     assert len(out) == 3  # all before the end
-    fault = Fault.KINDS["slicing"](port="sins", start_s=0.0, end_s=10.0, piece_bytes=10, gap_s=0.5)
+    fault = Fault.KINDS.get("slicing")(port="sins", start_s=0.0, end_s=10.0, piece_bytes=10, gap_s=0.5)
     ledger = Ledger()
     line = Line("sins", Wire(BAUD), [fault.wrapper(stream(1, "t"))], ledger=ledger)
     line.put(SEC - 1, bytes(30))
@@ -349,7 +349,7 @@ def test_pieces_held_past_the_end_of_the_run_are_not_sent():
 
 # -- schedule ----------------------------------------------------------------------------------
 def test_periodic_episodes_in_active_on_arrays_and_their_helpers():
-    f = Fault.KINDS["anchor_outage"](anchor=1, start_s=1.0, end_s=1.25, repeat_s=1.0,
+    f = Fault.KINDS.get("anchor_outage")(anchor=1, start_s=1.0, end_s=1.25, repeat_s=1.0,
                                      until_s=3.5)
     t = np.arange(0, 6 * SEC, 50 * MS)
     on = f.active(t)
@@ -360,7 +360,7 @@ def test_periodic_episodes_in_active_on_arrays_and_their_helpers():
     assert f.next_active(0) == SEC and f.next_active(SEC + 300 * MS) == 2 * SEC
     assert f.next_active(3 * SEC + 300 * MS) is None  # no episode starts at or after 3.5 s
     assert f.at_active(300 * MS) == 2 * SEC + 50 * MS and f.at_active(750 * MS) is None
-    once = Fault.KINDS["anchor_outage"](anchor=1, start_s=1.0, end_s=2.0)
+    once = Fault.KINDS.get("anchor_outage")(anchor=1, start_s=1.0, end_s=2.0)
     assert once.next_active(3 * SEC) is None and once.at_active(2 * SEC) is None
 
 
@@ -397,7 +397,7 @@ def test_to_device_bytes_reach_the_device_through_the_same_wrappers():
     plain = Inbound("xbee", _Baud())
     plain.put(7 * MS, b"hello")
     assert plain.poll(7 * MS) == [(7 * MS, b"hello")] and plain.next_ns() is None
-    fault = Fault.KINDS["latency"](port="xbee", direction="to_device", start_s=0.0, end_s=1.0,
+    fault = Fault.KINDS.get("latency")(port="xbee", direction="to_device", start_s=0.0, end_s=1.0,
                                    delay_s=0.01)
     wrapper = fault.wrapper(stream(1, "t"))
     wrapper.kind, wrapper.direction = "latency", "to_device"
@@ -408,7 +408,7 @@ def test_to_device_bytes_reach_the_device_through_the_same_wrappers():
     assert late.poll(20 * MS) == [(17 * MS, b"hello")]
     assert [(e["direction"], e["start"], e["end"]) for e in ledger.entries] == \
         [("to_device", 0, 5)]
-    stuck = Fault.KINDS["stuck"](port="xbee", direction="to_device", start_s=0.0, end_s=0.5,
+    stuck = Fault.KINDS.get("stuck")(port="xbee", direction="to_device", start_s=0.0, end_s=0.5,
                                  buffer_bytes=3)
     inbound = Inbound("xbee", _Baud(), [stuck.wrapper(stream(1, "t"))])
     inbound.put(7 * MS, b"hello")
@@ -526,7 +526,7 @@ def test_every_kind_in_one_run_is_deterministic_and_its_recorded_ledger_matches(
     assert rec.faults() == b.ledger.entries  # the file holds what the run added
     kinds = {e["kind"] for e in b.ledger.entries}
     # every line kind, and the anchor outage on the reports it timed out
-    assert kinds == {k for k in shipped_kinds() if Fault.KINDS[k].ACTS_ON == "line"} | {"anchor_outage"}
+    assert kinds == {k for k in Fault.KINDS.built_in if Fault.KINDS.get(k).ACTS_ON == "line"} | {"anchor_outage"}
     assert {e["fault"] for e in b.ledger.entries} == set(range(0, 11))  # 0: the outage
     totals = {}
     for e in b.ledger.entries:

@@ -103,7 +103,7 @@ BAD = [
     ('[trajectory]\nwaypoints = [[6.0, 1.8], [9.8, "x"]]\n', "[trajectory] waypoints[1][1] must be a number"),
     ("[site]\nlatitude_deg = 100\n", "[site] latitude_deg must be in [-90, 90] (got 100 deg)"),
     ("[board]\nstart_ms = 0.1\n", "[board] start_ms 0.1 ms is before the first SPI read ends"),
-    ("[trajectory\nspeed = 1\n", "not valid TOML: Expected ']'"),
+    ("[trajectory\nspeed = 1\n", "not valid TOML (Expected ']'"),
 ]
 
 

@@ -17,12 +17,6 @@ from navtwin.protocols.nanoloc import SPEED_OF_LIGHT
 from navtwin.protocols.stream import Frame, nanoloc_decoder, sins_decoder
 
 
-def shipped_kinds() -> list[str]:
-    """The fault kinds navtwin ships, in registry order: a user's installed kinds are theirs
-    to test, and must not change what navtwin's own tests run."""
-    return [k for k, cls in Fault.KINDS.items() if cls.__module__.startswith("navtwin.")]
-
-
 def variant(tmp_path: Path, base: str, toml: str, name: str = "variant") -> object:
     """A scenario that starts from *base* and overrides what *toml* says."""
     path = tmp_path / f"{name}.toml"

@@ -96,10 +96,16 @@ GOOD = cal.Calibration(scale=1.05, bias={1: 0.25}, sigma_coefficients=(0.1,), si
     (GOOD.replace("version = 1", "version = 7"), "version 7 is not 1"),
     (GOOD.replace("scale = 1.05", "scale = 9.0"), "scale must be"),
     (GOOD.replace("1 = 0.25", "nine = 0.25", 1), "is not an anchor id"),
-    (GOOD.replace("1 = 0.25", "1 = 99.0", 1), "[bias_m] 1 must be"),
+    (GOOD.replace("1 = 0.25", "1 = 99.0", 1), "bias_m 1 must be in [-5, 5]"),
     (GOOD.replace("span_m = [0.6, 20.0]", "span_m = [20.0, 0.6]"), "span_m must be"),
     (GOOD.replace("[sigma]", "[sigmas]"), "unknown key 'sigmas'"),
     (GOOD + "[[", "not valid TOML"),
+    (GOOD.replace("1 = 0.25", "0 = 0.25", 1), "bias_m names anchor '0', which is not an anchor id (1..254)"),
+    (GOOD.replace("1 = 0.25", '1 = "x"', 1), "bias_m 1 must be a number (got 'x')"),
+    (GOOD.replace("[bias_m]\n1 = 0.25\n", "[bias_m]\n"), "bias_m is empty"),
+    (GOOD.replace("[bias_ci95_m]", "[bias_ci95_m]\n3 = 11.0"), "bias_ci95_m 3 must be in [0, 10]"),
+    (GOOD.replace("coefficients = [0.1]", "coefficients = []"), "coefficients must hold 1 to 8"),
+    (GOOD.replace("coefficients = [0.1]", "coefficients = [1000.0]"), "coefficients elements must be in [-100, 100]"),
 ])
 def test_bad_calibration_file_is_one_line(tmp_path, text, problem):
     path = tmp_path / "bad.toml"
@@ -170,3 +176,4 @@ def test_estimator_holds_the_calibration_and_corrects_as_range_scale_and_bias_do
     out_c = [e for k in range(50) for a in CORRIDOR_ANCHORS for e in uncorrected.feed(Exchange(
         0.1 * k + 0.025 * a, a, c.scale * math.dist((0.0, 0.0), CORRIDOR_ANCHORS[a][:2]) + c.bias[a]))]
     assert math.hypot(out_a[-1].x, out_a[-1].y) < 0.5 * math.hypot(out_c[-1].x, out_c[-1].y)
+

@@ -161,7 +161,7 @@ def test_cli_bad_run_dir_is_one_line_and_exit_2(tmp_path):
 
 
 @pytest.mark.parametrize("text, words", [("[]", "a JSON list"), ("{", "unreadable JSON"),
-                                         ('{"time_offset_s": "1"}', "time_offset_s '1'"),
+                                         ('{"time_offset_s": "1"}', "time_offset_s must be a number (got '1')"),
                                          ('{"audit": [1]}', "audit")])
 def test_a_report_json_that_is_no_lab_report_is_one_line_and_exit_2(run_dir, tmp_path, capsys,
                                                                     text, words):

@@ -30,7 +30,7 @@ def test_replay_speeds_replays_each_filter_set_over_the_same_recording(capsys):
     tracks' output instants (5 s of office at 10 Hz per track; wsn from its first fix)."""
     import json
 
-    from navtwin.cli.lab_bench import main
+    from navtwin.cli.main import main
     from navtwin.lab.bench import office_replays
 
     r = office_replays(5.0, {"one": ("sins",), "two": ("sins", "kf")}, runs=2)
@@ -40,5 +40,5 @@ def test_replay_speeds_replays_each_filter_set_over_the_same_recording(capsys):
         lo, hi = res["wall_s_range"]
         assert res["runs"] == 2 and lo <= res["wall_s"] <= hi
         assert res["recorded_s"] == pytest.approx(5.0, abs=0.1)
-    assert main(["replay", "--seconds", "5", "--runs", "1", "--filters", "wsn"]) == 0
+    assert main(["bench", "host-replay", "--seconds", "5", "--runs", "1", "--filters", "wsn"]) == 0
     assert json.loads(capsys.readouterr().out)["filters"] == ["wsn"]

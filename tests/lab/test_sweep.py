@@ -13,6 +13,7 @@ from scipy import stats
 from navtwin.cli.main import main
 from navtwin.emulator.scenario import load_scenario
 from navtwin.lab import evaluate, sweep
+from navtwin.protocols import __version__
 
 from ..helpers import cli_error
 
@@ -38,7 +39,7 @@ def test_two_workers_give_the_serial_table_bit_for_bit(tmp_path):
         meta = json.loads(f.schema_arrow.metadata[sweep.META_KEY])
         assert meta["scenario_hash"] == sweep.scenario_hash(load_scenario("office"))
         assert meta["seeds"] == [1, 4] and meta["filters"] == list(serial.filters)
-        assert meta["code_version"].startswith(sweep.__version__)
+        assert meta["code_version"].startswith(__version__)
 
 
 def test_the_local_cluster_runs_no_work_for_a_client_without_its_credentials():
