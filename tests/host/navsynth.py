@@ -7,17 +7,27 @@ Rotation), and TDMA range exchanges. Noise comes from a seeded numpy Generator.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from navtwin.host import config as host_config
+from navtwin.host.settings import EstimatorConfig
+
 OFFICE_ANCHORS = {1: (1.3, 1.6, 0.0), 2: (10.8, 1.6, 0.0), 3: (10.8, 5.4, 0.0), 4: (1.3, 5.4, 0.0)}
 OFFICE_START = (6.0, 1.8)
 LATITUDE_DEG = 34.316
 GRAVITY = 9.7952
 OMEGA_E = 7.2916e-5
+
+
+def office_config(**overrides) -> EstimatorConfig:
+    """The estimator's settings in the office lab: the shipped ``office`` host config's
+    (its anchors, site, start and [filters]), with *overrides* (``alignment_s=2.0``, ...)."""
+    return dataclasses.replace(host_config.load("office").estimator_config(), **overrides)
 
 
 @dataclass
