@@ -7,7 +7,7 @@ Who reads what: the host config (host.config) builds these tables from its TOML 
 makes each vehicle's EstimatorConfig from them (:meth:`EstimatorConfig.of`); the estimator and
 the tracks read the EstimatorConfig's fields by name (``cfg.alignment_s``, ``cfg.start``);
 neither imports the other. The defaults that the emulated lab (emulator.scenario) shares
-are written once in navtwin.common.lab.
+(site, alignment, x azimuth, gyro range, start) are written once in navtwin.common.lab.
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
+from navtwin.common import lab
 from navtwin.common.limits import ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M, RANGE_SCALE
 from navtwin.common.schema import Check, between, build, each, key, one_of, positive
 from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS, GYRO_LSB_DPS
@@ -33,8 +34,8 @@ def _hex16(v) -> bool:
 class Site:
     """The host config's [site]: where the lab is on the earth."""
 
-    latitude_deg: float = key(34.316, "deg", "geodetic latitude of the lab", between(*LATITUDE_DEG))
-    local_gravity: float = key(9.80665, "m/s^2", "local gravity", between(*GRAVITY_M_S2))
+    latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic latitude of the lab", between(*LATITUDE_DEG))
+    local_gravity: float = key(lab.LOCAL_GRAVITY, "m/s^2", "local gravity", between(*GRAVITY_M_S2))
 
 
 @dataclass(frozen=True)
@@ -42,7 +43,7 @@ class Vehicle:
     """The host config's [vehicle] (or one of its [[vehicles]]): where it stands at power-up,
     its tag and radio, its IMU's range."""
 
-    start: tuple[float, float] = key((0.0, 0.0), "m", "where the vehicle stands at power-up",
+    start: tuple[float, float] = key(lab.START, "m", "where the vehicle stands at power-up",
                                      each(between(-MAX_COORD_M, MAX_COORD_M)))
     heading_deg: float = key(0.0, "deg", "initial heading, counter-clockwise from +x",
                              between(-360, 360))
@@ -52,7 +53,7 @@ class Vehicle:
     router: str | None = key(None, "", "only this radio's SINS stream is used (SH+SL)",
                              Check(_hex16, "must be 16 hex digits (SH+SL)",
                                    'write it like "0013A20040A1B2D4"'))
-    gyro_range_dps: int = key(300, "deg/s", "ADIS16350 range set by SENS/AVG",
+    gyro_range_dps: int = key(lab.GYRO_RANGE_DPS, "deg/s", "ADIS16350 range set by SENS/AVG",
                               one_of(*GYRO_LSB_DPS))
 
 
@@ -67,9 +68,9 @@ class Tuning:
     (output_period_s 1e-300). The defaults are 000's office lab."""
 
     altitude_m: float = key(0.0, "m", "site altitude (gravity and earth rate)", between(-1000, 10000))
-    x_azimuth_deg: float = key(90.0, "deg", "azimuth of the area's +x, clockwise from north "
+    x_azimuth_deg: float = key(lab.X_AZIMUTH_DEG, "deg", "azimuth of the area's +x, clockwise from north "
                                "(90: x east)", between(0, 360))
-    alignment_s: float = key(5.0, "s", "stationary period from the board's power-up",
+    alignment_s: float = key(lab.ALIGNMENT_S, "s", "stationary period from the board's power-up",
                              positive(hi=3600))
     output_period_s: float = key(0.1, "s", "estimates at k times this", between(0.001, 60))
     range_sigma_m: float = key(0.4, "m", "one exchange's distance, 1 sigma", positive(hi=100))
