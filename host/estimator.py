@@ -56,11 +56,11 @@ from navtwin.protocols.nanoloc import STATUS_TIMEOUT, is_complete
 
 from . import tracks
 from .filters import ACCELERATION, ConstantAcceleration, Linear, Ranges
-from .measurements import Exchange, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
+from .measurements import Exchange, Fix, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
 from .settings import EstimatorConfig
 from .sins import Alignment, AlignmentResult, Strapdown
 from .tracks.base import Estimate, Track
-from .wsn import AnchorLayout, CycleGrouper, Fix, Solver, tdoa_covariance
+from .wsn import AnchorLayout, CycleGrouper, Solver, tdoa_covariance
 
 __all__ = ["DEVICES", "Estimate", "Estimator"]
 
