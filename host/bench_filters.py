@@ -69,7 +69,7 @@ def cases() -> dict[str, Callable[[], object]]:
         "ukf/range": step(UnscentedKalmanFilter, z_toa, r_toa, toa),
         "ukf/tdoa": step(UnscentedKalmanFilter, z_tdoa, r_tdoa, tdoa),
     }
-    sins = Strapdown(position=(6.0, 1.8), q=quat_from_euler(0.0, 0.0, 0.3), latitude_deg=34.316, gravity=9.7952)
+    sins = Strapdown(position=(6.0, 1.8), q=quat_from_euler(0.0, 0.0, 0.3), latitude_deg=34.316, local_gravity=9.7952)
     gyro, accel = (0.001, -0.002, 0.1), (0.05, 0.04, 9.7952)  # floats, as the estimator passes them
     out["sins"] = lambda: sins.step(DT, gyro, accel)
     out["estimator/imu"] = _estimator_step()

@@ -303,7 +303,7 @@ class Estimator:
         c = self.cfg
         self.aligned = a = self.alignment.result(c.heading_rad, math.radians(c.latitude_deg), c.x_azimuth_deg)
         self.sins = Strapdown(position=self.origin, q=a.q, gyro_bias=a.gyro_bias, latitude_deg=c.latitude_deg,
-                              gravity=c.local_gravity, altitude_m=c.altitude_m, x_azimuth_deg=c.x_azimuth_deg)
+                              local_gravity=c.local_gravity, altitude_m=c.altitude_m, x_azimuth_deg=c.x_azimuth_deg)
         self.sins.step(0.0, *self._last_sample)  # the interval to the next sample starts here
         self.t_aligned = self.t_imu
 
