@@ -2,7 +2,10 @@
 
 This is what the host knows about the lab without asking any device. It is read from TOML
 and declared on the schema (common.schema: every key with its unit, meaning and checks,
-written once; docs/host.md's key table is generated from it, :func:`markdown_table`)::
+written once; docs/host.md's key table is generated from it, :func:`markdown_table`): the
+[site], [vehicle] and [filters] tables are the estimator's settings (host.settings), of
+which :meth:`HostConfig.estimator_config` makes each vehicle's EstimatorConfig; the other
+sections are declared here::
 
     [site]
     latitude_deg = 34.316          # geodetic latitude of the lab
