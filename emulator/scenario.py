@@ -26,6 +26,7 @@ from navtwin.protocols.adis16350 import (ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DP
                                           VRW_M_S_RT_HR)
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
+from navtwin.common import lab
 from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
                               MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS, limit_problem)
 
@@ -62,9 +63,9 @@ def _ppm(doc: str):
 
 @dataclass(frozen=True)
 class Site:
-    latitude_deg: float = key(34.316, "deg", "geodetic latitude: projects the earth rate",
+    latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic latitude: projects the earth rate",
                               between(*LATITUDE_DEG))
-    local_gravity: float = key(9.80665, "m/s^2", "local gravity magnitude (with centrifugal part)",
+    local_gravity: float = key(lab.LOCAL_GRAVITY, "m/s^2", "local gravity magnitude (with centrifugal part)",
                                between(*GRAVITY_M_S2, "use the local gravity, about 9.78 to 9.83"))
 
 
@@ -74,7 +75,7 @@ class Area:
                                     each(positive("give a positive width and depth", hi=MAX_COORD_M)))
     origin: tuple[float, float] = key((0.0, 0.0), "m", "the corner with the smallest x and y",
                                       each(between(-MAX_COORD_M, MAX_COORD_M)))
-    x_azimuth_deg: float = key(90.0, "deg", "azimuth (clockwise from north) of +x; 90 = x east, y north",
+    x_azimuth_deg: float = key(lab.X_AZIMUTH_DEG, "deg", "azimuth (clockwise from north) of +x; 90 = x east, y north",
                                between(0, 360))
 
     def contains(self, x: float, y: float) -> bool:
@@ -109,7 +110,7 @@ class Trajectory:
     speed_m_s: float = key(REQUIRED, "m/s", "cruising speed along the line", positive("set a positive speed up to 100 m/s", hi=100))
     closed: bool = key(True, "", "the line is a closed loop (it must run straight through the start)")
     loops: int = key(1, "", "laps of a closed loop before the vehicle stops", between(1, 1000))
-    alignment_s: float = key(5.0, "s", "stationary alignment period at the start",
+    alignment_s: float = key(lab.ALIGNMENT_S, "s", "stationary alignment period at the start",
                               non_negative(hi=MAX_DURATION_S))
     accel_m_s2: float = key(0.2, "m/s^2", "peak acceleration of the smooth start and stop",
                             positive("set a positive acceleration up to 100 m/s^2", hi=100))
@@ -149,7 +150,7 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class Imu:
-    gyro_range_dps: int = key(300, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range",
+    gyro_range_dps: int = key(lab.GYRO_RANGE_DPS, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range",
                                 one_of(*sorted(GYRO_LSB_DPS)))
     filter_taps: int = key(4, "", "SENS/AVG bits 2:0 = log2(N): Bartlett window taps N",
                            one_of(1, 2, 4, 8, 16, 32, 64))

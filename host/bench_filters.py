@@ -15,26 +15,34 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
 from . import tracks
-from .estimator import Estimator, EstimatorConfig
+from .config import load
+from .estimator import Estimator
 from .filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter, Ranges,
                       UnscentedKalmanFilter, position_fix)
-from .measurements import Exchange, ImuSample, Range
+from .measurements import Exchange, Fix, ImuSample, Range
+from .settings import EstimatorConfig
 from .sins import Strapdown, quat_from_euler
-from .wsn import AnchorLayout, Fix, tdoa_covariance
+from .wsn import AnchorLayout, tdoa_covariance
 
 DT = 0.01
 X0 = np.array([6.0, 1.8, 0.3, 0.1, 0.05, -0.02])
 P0 = np.diag([0.2, 0.2, 0.05, 0.05, 0.1, 0.1]) ** 2
 
 
+def _office(filters: tuple[str, ...] = tracks.DEFAULT) -> EstimatorConfig:
+    """The office lab's settings (its shipped host config) for *filters*, aligning in 0.5 s."""
+    return replace(load("office").estimator_config(filters), alignment_s=0.5)
+
+
 def cases() -> dict[str, Callable[[], object]]:
     """name -> a callable doing one step on fresh state (deterministic inputs)."""
     model = ConstantAcceleration(0.5)
-    layout = AnchorLayout(EstimatorConfig().anchors)
+    layout = AnchorLayout(_office().anchors)
     z_acc, r_acc = np.array([0.05, -0.02]), 1.5**2 * np.eye(2)
     toa = Ranges(layout, (2,))
     z_toa, r_toa = toa.h(X0) + 0.1, np.array([[0.16]])
@@ -61,7 +69,7 @@ def cases() -> dict[str, Callable[[], object]]:
         "ukf/range": step(UnscentedKalmanFilter, z_toa, r_toa, toa),
         "ukf/tdoa": step(UnscentedKalmanFilter, z_tdoa, r_tdoa, tdoa),
     }
-    sins = Strapdown(position=(6.0, 1.8), q=quat_from_euler(0.0, 0.0, 0.3), latitude_deg=34.316, gravity=9.7952)
+    sins = Strapdown(position=(6.0, 1.8), q=quat_from_euler(0.0, 0.0, 0.3), latitude_deg=34.316, local_gravity=9.7952)
     gyro, accel = (0.001, -0.002, 0.1), (0.05, 0.04, 9.7952)  # floats, as the estimator passes them
     out["sins"] = lambda: sins.step(DT, gyro, accel)
     out["estimator/imu"] = _estimator_step()
@@ -76,7 +84,7 @@ def _error_state_steps() -> dict[str, Callable[[], object]]:
     out = {}
     p = np.array([6.0, 1.8])
     for name, kind in (("lc", "fix"), ("tc", "range"), ("fatci", "range")):
-        cfg = EstimatorConfig(alignment_s=0.5, filters=(name,))
+        cfg = _office((name,))
         est = Estimator(cfg)
         for k in range(60):  # through the alignment
             est.feed(ImuSample(k * DT, (0.0, 0.0, 0.0), (0.0, 0.0, 9.7952)))
@@ -106,7 +114,7 @@ def _error_state_steps() -> dict[str, Callable[[], object]]:
 def _estimator_step(filters: tuple[str, ...] = tracks.DEFAULT) -> Callable[[], object]:
     """One IMU sample (and 0.4 exchanges) of a parked vehicle through the default five
     tracks (or *filters*)."""
-    cfg = EstimatorConfig(alignment_s=0.5, filters=filters)
+    cfg = _office(filters)
     est = Estimator(cfg)
     rng = np.random.default_rng(0)
     layout = AnchorLayout(cfg.anchors)

@@ -2,7 +2,10 @@
 
 This is what the host knows about the lab without asking any device. It is read from TOML
 and declared on the schema (common.schema: every key with its unit, meaning and checks,
-written once; docs/host.md's key table is generated from it, :func:`markdown_table`)::
+written once; docs/host.md's key table is generated from it, :func:`markdown_table`): the
+[site], [vehicle] and [filters] tables are the estimator's settings (host.settings), of
+which :meth:`HostConfig.estimator_config` makes each vehicle's EstimatorConfig; the other
+sections are declared here::
 
     [site]
     latitude_deg = 34.316          # geodetic latitude of the lab
@@ -24,7 +27,7 @@ written once; docs/host.md's key table is generated from it, :func:`markdown_tab
 
     [filters]
     enabled = ["sins", "wsn", "kf", "ekf", "ukf"]   # default for --filters
-    alignment_s = 8.0              # the estimator's shared settings (host.estimator.Tuning)
+    alignment_s = 8.0              # the estimator's shared settings (host.settings.Tuning)
     range_bias_m = {1 = 0.3}       # c_i of 001 per anchor id
 
     [filters.ukf]                  # a track's own settings (its Settings class, host.tracks)
@@ -49,20 +52,17 @@ the key and the fix (:class:`ConfigError`).
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M,
-                           RANGE_BIAS_M)
-from navtwin.protocols.adis16350 import GYRO_LSB_DPS
+from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, MAX_HEIGHT_M, RANGE_BIAS_M
 from navtwin.common import tomlfile
-from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, each, key, one_of, rows
+from navtwin.common.schema import REQUIRED, Invalid, between, build, key, rows
 
 from . import calibration as range_calibration
 from . import tracks
 from .calibration import Calibration, CalibrationError
-from .estimator import EstimatorConfig, Tuning
+from .settings import EstimatorConfig, Site, Tuning, Vehicle
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 DEFAULT = "office"
@@ -78,38 +78,12 @@ class ConfigError(ValueError):
         super().__init__(message.replace("\n", "\\n"))
 
 
-def _hex16(v) -> bool:
-    return len(v) == 16 and all(c in "0123456789abcdefABCDEF" for c in v)
-
-
-@dataclass(frozen=True)
-class Site:
-    latitude_deg: float = key(0.0, "deg", "geodetic latitude of the lab", between(*LATITUDE_DEG))
-    local_gravity: float = key(9.80665, "m/s^2", "local gravity", between(*GRAVITY_M_S2))
-
-
 @dataclass(frozen=True)
 class Anchor:
     id: int = key(REQUIRED, "", "anchor id as the gateway reports it", between(*ANCHOR_IDS))
     x: float = key(REQUIRED, "m", "lab frame (x east, y north)", between(-MAX_COORD_M, MAX_COORD_M))
     y: float = key(REQUIRED, "m", "lab frame", between(-MAX_COORD_M, MAX_COORD_M))
     z: float = key(0.0, "m", "height, the tag's datum", between(-MAX_HEIGHT_M, MAX_HEIGHT_M))
-
-
-@dataclass(frozen=True)
-class Vehicle:
-    start: tuple[float, float] = key((0.0, 0.0), "m", "where the vehicle stands at power-up",
-                                     each(between(-MAX_COORD_M, MAX_COORD_M)))
-    heading_deg: float = key(0.0, "deg", "initial heading, counter-clockwise from +x",
-                             between(-360, 360))
-    tag_height: float = key(0.0, "m", "tag above the anchors' z = 0 plane",
-                            between(-MAX_HEIGHT_M, MAX_HEIGHT_M))
-    tag: int | None = key(None, "", "only this tag id's exchanges are used", between(*ANCHOR_IDS))
-    router: str | None = key(None, "", "only this radio's SINS stream is used (SH+SL)",
-                             Check(_hex16, "must be 16 hex digits (SH+SL)",
-                                   'write it like "0013A20040A1B2D4"'))
-    gyro_range_dps: int = key(300, "deg/s", "ADIS16350 range set by SENS/AVG",
-                              one_of(*GYRO_LSB_DPS))
 
 
 @dataclass(frozen=True)
@@ -157,22 +131,19 @@ class HostConfig:
         return {a.id: (a.x, a.y, a.z) for a in self.lab.anchors}
 
     latitude_deg = property(lambda self: self.lab.site.latitude_deg)
-    gravity = property(lambda self: self.lab.site.local_gravity)
+    local_gravity = property(lambda self: self.lab.site.local_gravity)
     vehicles = property(lambda self: self.lab.vehicles)
     hold_s = property(lambda self: self.lab.timing.hold_s)
 
     def estimator_config(self, filters: tuple[str, ...] | None = None,
                          vehicle: int = 1) -> EstimatorConfig:
-        """The :class:`navtwin.host.estimator.EstimatorConfig` of vehicle *vehicle* (numbered
-        from 1) for *filters* (default: the config's)."""
-        v = self.vehicles[vehicle - 1]
-        return EstimatorConfig(
-            **{f.name: getattr(self.tuning, f.name) for f in dataclasses.fields(Tuning)},
-            anchors=self.anchors, tag_height=v.tag_height, latitude_deg=self.latitude_deg,
-            gravity=self.gravity, start=v.start, heading0_rad=math.radians(v.heading_deg),
-            gyro_range_dps=v.gyro_range_dps, range_bias_m=dict(self.range_bias_m),
-            filters=tuple(filters or self.filters), settings=dict(self.settings), vehicle=vehicle,
-            calibration=self.calibration)
+        """The :class:`navtwin.host.settings.EstimatorConfig` of vehicle *vehicle* (numbered
+        from 1) for *filters* (default: the config's): made of the [site], that vehicle's and
+        the [filters] tables, checked once there."""
+        return EstimatorConfig.of(
+            self.lab.site, self.vehicles[vehicle - 1], self.tuning, anchors=self.anchors,
+            range_bias_m=dict(self.range_bias_m), filters=tuple(filters or self.filters),
+            settings=dict(self.settings), vehicle=vehicle, calibration=self.calibration)
 
     def to_dict(self) -> dict:
         """JSON-able form, the TOML file's layout (a recording's meta); :func:`from_dict`

@@ -46,26 +46,23 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields, replace
+from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
-from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, RANGE_SCALE
-from navtwin.common.schema import Check, between, build, each, key, one_of, positive
-from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS
 from navtwin.protocols import sins as sins_format
 from navtwin.protocols.nanoloc import STATUS_TIMEOUT, is_complete
 
 from . import tracks
-from .calibration import Calibration
 from .filters import ACCELERATION, ConstantAcceleration, Linear, Ranges
-from .measurements import Exchange, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
+from .measurements import Exchange, Fix, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
+from .settings import EstimatorConfig
 from .sins import Alignment, AlignmentResult, Strapdown
 from .tracks.base import Estimate, Track
-from .wsn import AnchorLayout, CycleGrouper, Fix, Solver, tdoa_covariance
+from .wsn import AnchorLayout, CycleGrouper, Solver, tdoa_covariance
 
-__all__ = ["DEVICES", "Estimate", "Estimator", "EstimatorConfig", "Tuning"]
+__all__ = ["DEVICES", "Estimate", "Estimator"]
 
 DEVICES = ("imu", "anchors")  # what can restart (a Restart record)
 
@@ -73,117 +70,9 @@ DEVICES = ("imu", "anchors")  # what can restart (a Restart record)
 STATIONARY = Linear(np.hstack([np.zeros((4, 2)), np.eye(4)]))
 
 
-def _methods() -> Check:
-    return one_of("toa", "tdoa")
-
-
-@dataclass(frozen=True)
-class Tuning:
-    """The estimator's shared settings (the host config's [filters] keys; docs/host.md).
-    Beyond their ranges the filters overflow (1e308), divide by zero or never finish
-    (output_period_s 1e-300). The defaults are 000's office lab."""
-
-    altitude_m: float = key(0.0, "m", "site altitude (gravity and earth rate)", between(-1000, 10000))
-    x_azimuth_deg: float = key(90.0, "deg", "azimuth of the area's +x, clockwise from north "
-                               "(90: x east)", between(0, 360))
-    alignment_s: float = key(5.0, "s", "stationary period from the board's power-up",
-                             positive(hi=3600))
-    output_period_s: float = key(0.1, "s", "estimates at k times this", between(0.001, 60))
-    range_sigma_m: float = key(0.4, "m", "one exchange's distance, 1 sigma", positive(hi=100))
-    range_scale: float = key(1.0, "", "f of 001: distance = (reported - c_i) / f",
-                             between(*RANGE_SCALE))
-    arw_deg_rt_hr: float = key(ARW_DEG_RT_HR, "deg/sqrt(h)", "gyro angle random walk (ADIS16350)",
-                               positive(hi=1000))
-    gyro_bias_instability_dps: float = key(GYRO_BIAS_INSTABILITY_DPS, "deg/s", "gyro in-run bias stability "
-                                           "(ADIS16350)", between(0, 100))
-    # SINS acceleration as a measurement (docs/filters.md): sigma^2 = accel_sigma_m_s2^2 +
-    # (tilt_inflation g s T)^2, s = the tilt rate the alignment leaves, T = time since it
-    accel_sigma_m_s2: float = key(1.0, "m/s^2", "SINS acceleration measurement, 1 sigma",
-                                  positive(hi=100))
-    tilt_inflation: float = key(10.0, "", "growth of that sigma with the tilt error",
-                                between(0, 1000))
-    jerk_psd: float = key(0.5, "m^2/s^5", "constant-acceleration model's white jerk",
-                          positive(hi=10000))
-    p0_sigma: tuple[float, float, float] = key((0.2, 0.02, 0.1), "m, m/s, m/s^2",
-                                               "initial position, velocity, acceleration sigma",
-                                               each(positive(hi=100)))
-    stationary_sigma: tuple[float, float] = key((0.01, 0.05), "m/s, m/s^2", "velocity, "
-                                                "acceleration while aligning", each(positive(hi=100)))
-    reinit_sigma: tuple[float, float] = key((1.0, 1.0), "m/s, m/s^2", "velocity, acceleration "
-                                            "of a re-initialisation", each(positive(hi=100)))
-    gate_probability: float = key(0.9999, "", "chi-square innovation gate",
-                                  Check(lambda v: 0 < v < 1, "must be in (0, 1)", "use e.g. 0.9999"))
-    gate_reopen_s: float = key(2.0, "s", "every update of one kind gated out this long: the "
-                               "track is off", positive(hi=3600))
-    extrapolated_after_s: float = key(0.5, "s", "no aiding for longer: an estimate is "
-                                      "extrapolated", positive(hi=3600))
-    imu_gap_s: float = key(0.5, "s", "a longer gap in the IMU stream is not bridged: the "
-                           "fusion tracks start again from the next fix", positive(hi=3600))
-    wsn_method: str = key("tdoa", "", "pure-WSN and KF fixes (000 eqs. 12-13)", _methods())
-    tight: str = key("tdoa", "", "EKF/UKF range measurement: per cycle (tdoa) or each range "
-                     "(toa)", _methods())
-    reference_anchor: int = key(1, "", "TDOA reference (000 eq. 12), an anchor id",
-                                between(*ANCHOR_IDS))
-    cycle_s: float = key(0.1, "s", "TDMA cycle: exchanges grouped within this window",
-                         between(0.001, 10))
-    max_lag_s: float = key(0.5, "s", "oldest measurement a fusion track applies",
-                           between(0, 60))
-    max_range_m: float = key(100.0, "m", "longer distances are implausible",
-                             positive(hi=MAX_COORD_M))
-    fix_margin_m: float | None = key(2.0, "m", "WSN fixes beyond the anchors' box grown by "
-                                     "this are refused", between(0, MAX_COORD_M))
-
-
-def _office_anchors() -> dict[int, tuple[float, float, float]]:
-    """The office lab's survey, written once: in host/configs/office.toml."""
-    from .config import load  # here: the config imports this module
-
-    return dict(load("office").anchors)
-
-
-@dataclass(frozen=True)
-class EstimatorConfig(Tuning):
-    """Everything the estimator needs: the shared settings, what the host config's other
-    sections say (site, anchors, vehicle), the tracks and their own settings."""
-
-    anchors: Mapping[int, tuple[float, ...]] = field(default_factory=lambda: _office_anchors())
-    tag_height: float = 0.0  # m, same datum as the anchors' z
-    latitude_deg: float = 34.316
-    gravity: float = 9.7952  # m/s^2, local
-    start: tuple[float, float] = (6.0, 1.8)  # m, where the vehicle rests during alignment
-    heading0_rad: float = 0.0  # initial heading (MEMS gyros cannot gyrocompass)
-    gyro_range_dps: int = 300  # ADIS16350 range: the service's word scale; counts overrange
-    range_bias_m: Mapping[int, float] = field(default_factory=dict)  # c_i of 001: calibrated delays
-    filters: tuple[str, ...] = tracks.DEFAULT
-    settings: Mapping[str, object] = field(default_factory=dict)  # track name -> its Settings
-    vehicle: int = 1  # which vehicle of the lab (host config): its estimates say so
-    calibration: Calibration | None = None  # 001's f, c_i, sigma(d): replaces range_scale, range_bias_m
-
-    def __post_init__(self):
-        unknown = [f for f in self.filters if f not in tracks.BUILT_IN]
-        if unknown:  # only then ask the registry and the entry points (a scan of sys.path)
-            known = tracks.names()
-            unknown = [f for f in unknown if f not in known]
-        if unknown or not self.filters:
-            known = tracks.names()
-            raise ValueError(f"filters: unknown {unknown or 'empty list'}; use some of {','.join(known)}")
-        # the schema's checks, the ones the host config applies (the same rule, once)
-        build(Tuning, {f.name: list(v) if isinstance(v, tuple) else v for f in fields(Tuning)
-                       if (v := getattr(self, f.name)) is not None})
-        if len(self.anchors) < 3:
-            raise ValueError(f"anchors: {len(self.anchors)} given; a 2-D fix needs at least 3, list them all")
-
-    @property
-    def tilt_rate_sigma(self) -> float:
-        """rad/s: gyro bias error left by averaging ARW over the alignment, and the bias's
-        in-run wander; the tilt error grows as this times the time since the alignment."""
-        arw = math.radians(self.arw_deg_rt_hr) / 60.0  # rad/sqrt(s)
-        return math.sqrt(arw**2 / self.alignment_s + math.radians(self.gyro_bias_instability_dps) ** 2)
-
-
 class Estimator:
-    def __init__(self, cfg: EstimatorConfig | None = None):
-        self.cfg = cfg = cfg or EstimatorConfig()
+    def __init__(self, cfg: EstimatorConfig):
+        self.cfg = cfg
         self.layout = AnchorLayout(cfg.anchors, cfg.tag_height)
         self.model = ConstantAcceleration(cfg.jerk_psd)
         self.solver = Solver(self.layout, cfg.range_sigma_m, cfg.wsn_method, cfg.reference_anchor,
@@ -217,7 +106,7 @@ class Estimator:
         self._origin_since: float | None = None  # after an IMU restart: the fixes from then on,
         self._origin_fixes = (np.zeros(2), 0)  # summed and counted, give it (at rest: their mean)
         self.reinit_count = 0  # every re-initialisation: one int to watch for a new one
-        self._tilt_growth = (cfg.tilt_inflation * cfg.gravity * cfg.tilt_rate_sigma) ** 2
+        self._tilt_growth = (cfg.tilt_inflation * cfg.local_gravity * cfg.tilt_rate_sigma) ** 2
         self._accel_var = cfg.accel_sigma_m_s2**2
         self.calibration = cal = cfg.calibration  # the tracks read its sigma(d)
         self._range_scale = cal.scale if cal else cfg.range_scale
@@ -412,9 +301,9 @@ class Estimator:
 
     def _start_strapdown(self) -> None:
         c = self.cfg
-        self.aligned = a = self.alignment.result(c.heading0_rad, math.radians(c.latitude_deg), c.x_azimuth_deg)
+        self.aligned = a = self.alignment.result(c.heading_rad, math.radians(c.latitude_deg), c.x_azimuth_deg)
         self.sins = Strapdown(position=self.origin, q=a.q, gyro_bias=a.gyro_bias, latitude_deg=c.latitude_deg,
-                              gravity=c.gravity, altitude_m=c.altitude_m, x_azimuth_deg=c.x_azimuth_deg)
+                              local_gravity=c.local_gravity, altitude_m=c.altitude_m, x_azimuth_deg=c.x_azimuth_deg)
         self.sins.step(0.0, *self._last_sample)  # the interval to the next sample starts here
         self.t_aligned = self.t_imu
 
@@ -477,7 +366,7 @@ class Estimator:
         """The estimates of the output instants before t (``through``: up to t inclusive)."""
         out = []
         while (b := self._next_out) < t or (through and b == t):
-            yaw = self.sins.yaw if self.sins is not None else self.cfg.heading0_rad
+            yaw = self.sins.yaw if self.sins is not None else self.cfg.heading_rad
             for track in self.tracks:
                 e = track.estimate(b, yaw)
                 if e is not None:

@@ -25,7 +25,7 @@ Range        one corrected exchange distance as a range measurement (each exchan
              EKF/UKF take it with ``tight = "toa"``, 001's tc and fatci always)
 Tdoa         one closed TDMA cycle's range differences to the reference anchor
              (``tight = "tdoa"``); ``meas`` None when too few anchors remain
-host.wsn.Fix        a WSN position fix of a closed TDMA cycle
+Fix          a WSN position fix of a closed TDMA cycle (host.wsn.Solver)
 FixRefused   a closed cycle that gave no fix, and why
 ===========  ===========================================================================
 
@@ -88,7 +88,20 @@ class Tdoa:
     z: Any = None
     R: Any = None
     meas: Any = None  # None: fewer than two differences remain
-    fix: Any = None  # host.wsn.Fix of the same cycle, if it gave one
+    fix: Any = None  # the Fix of the same cycle, if it gave one
+
+
+@dataclass(frozen=True, slots=True)
+class Fix:
+    """A WSN position fix. ``cov`` is the 2x2 position covariance (CRLB at ``p``); ``dropped``:
+    the anchors left out as outliers."""
+
+    t: float
+    p: Any  # 2, m
+    cov: Any  # 2x2, m^2
+    anchors: tuple[int, ...]
+    chi2: float
+    dropped: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -151,23 +151,23 @@ class Alignment:
         self._gyro += gyro
         self._accel += accel
 
-    def result(self, heading: float, latitude_rad: float, x_azimuth_deg: float = 90.0) -> AlignmentResult:
+    def result(self, heading_rad: float, latitude_rad: float, x_azimuth_deg: float = 90.0) -> AlignmentResult:
         if self.samples == 0:
             raise ValueError("alignment needs at least one IMU sample")
         f = self._accel / self.samples
         roll = math.atan2(f[1], f[2])
         pitch = math.atan2(-f[0], math.hypot(f[1], f[2]))
-        q = quat_from_euler(roll, pitch, heading)
+        q = quat_from_euler(roll, pitch, heading_rad)
         C = np.array(quat_to_dcm(q))
         bias = self._gyro / self.samples - C.T @ earth_rate_nav(latitude_rad, x_azimuth_deg)
-        return AlignmentResult(q, bias, roll, pitch, heading, self.samples, float(np.linalg.norm(f)))
+        return AlignmentResult(q, bias, roll, pitch, heading_rad, self.samples, float(np.linalg.norm(f)))
 
 
 class Strapdown:
     """The pure SINS: attitude, velocity and position from IMU samples alone."""
 
     def __init__(self, *, position, q: Sequence[float], gyro_bias=(0.0, 0.0, 0.0),
-                 velocity=(0.0, 0.0, 0.0), latitude_deg: float, gravity: float,
+                 velocity=(0.0, 0.0, 0.0), latitude_deg: float, local_gravity: float,
                  altitude_m: float = 0.0, x_azimuth_deg: float = 90.0):
         self._p: Vec3 = tuple(float(c) for c in [*position, 0.0][:3])
         self._v: Vec3 = tuple(float(c) for c in velocity)
@@ -180,9 +180,9 @@ class Strapdown:
         r_m, r_n = earth_radii(lat)  # once: over a room the latitude is constant
         self._r_m, self._r_n = r_m + altitude_m, r_n + altitude_m
         self._tan_lat = math.tan(lat)
-        self.gravity = float(gravity)  # g^n = (0, 0, -g) acts on v_U alone, which eq. 5 holds at 0
+        self.local_gravity = float(local_gravity)  # g^n = (0, 0, -g) acts on v_U alone, which eq. 5 holds at 0
         self._prev: tuple[Vec3, Vec3] | None = None  # last sample, bias removed
-        self.f_n: Vec3 = (0.0, 0.0, self.gravity)  # the last step's specific force, nav frame
+        self.f_n: Vec3 = (0.0, 0.0, self.local_gravity)  # the last step's specific force, nav frame
 
     @property
     def p(self) -> np.ndarray:

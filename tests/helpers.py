@@ -7,12 +7,14 @@ paper's survey (shared/specs/scenarios.md). Fixtures live in tests/conftest.py.
 """
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 from pathlib import Path
 
 from navtwin.cli.main import main
 from navtwin.host import config as host_config
+from navtwin.host.settings import EstimatorConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -70,6 +72,12 @@ OFFICE_ANCHORS = OFFICE.anchors
 OFFICE_START = OFFICE.vehicles[0].start
 LATITUDE_DEG = OFFICE.latitude_deg
 #: Local gravity of the lab, m/s^2.
-GRAVITY = OFFICE.gravity
+GRAVITY = OFFICE.local_gravity
 #: ``{anchor id: (x, y, z)}`` of paper 001's corridor survey, m.
 CORRIDOR_ANCHORS = host_config.load("corridor").anchors
+
+
+def office_config(**overrides) -> EstimatorConfig:
+    """The estimator's settings in the office lab: the shipped ``office`` host config's
+    (its anchors, site, start and [filters]), with *overrides* (``alignment_s=2.0``, ...)."""
+    return dataclasses.replace(OFFICE.estimator_config(), **overrides)

@@ -37,9 +37,9 @@ ALLOWED = {
 CLI_ENTRY = ROOT / "navtwin" / "__main__.py"
 
 
-def packages() -> list[str]:
+def packages(root: Path = ROOT) -> list[str]:
     """Our top-level packages: the repository's folders with an ``__init__.py``, tests aside."""
-    return sorted(p.parent.name for p in ROOT.glob("*/__init__.py") if p.parent.name != "tests")
+    return sorted(p.parent.name for p in root.glob("*/__init__.py") if p.parent.name != "tests")
 
 
 def imported_packages(source: str, module: str, ours: set[str]) -> list[tuple[int, str]]:
@@ -230,3 +230,91 @@ def test_no_port_name_decides_outside_the_port_declarations():
              for package in packages() for path, _ in modules(package) if path not in DECLARATIONS
              for line, name in port_name_decisions(path.read_text())]
     assert found == [], "read it from the port's declaration (protocols.ports) instead"
+
+
+def module_graph(root: Path = ROOT) -> dict[str, set[str]]:
+    """Each of our modules (dotted, a package by its own name) -> the modules of ours it
+    imports, at the top or inside a function alike; ``from pkg import name`` counts as
+    pkg.name when that is a module, else as pkg. An import under ``if TYPE_CHECKING:`` never
+    runs and is left out."""
+    paths = {}
+    for package in packages(root):
+        for path in sorted((root / package).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
+            paths[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+
+    def ours(target: str) -> str | None:
+        parts = target.split(".")
+        parts = parts[1:] if parts[0] == NAMESPACE else parts
+        while parts and ".".join(parts) not in paths:
+            parts = parts[:-1]
+        return ".".join(parts) or None
+
+    graph = {}
+    for module, path in paths.items():
+        tree = ast.parse(path.read_text())
+        typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
+                       and "TYPE_CHECKING" in ast.unparse(node.test)
+                       for stmt in node.body for n in ast.walk(stmt)}
+        here = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+        found = set()
+        for node in ast.walk(tree):
+            if id(node) in typing_only:
+                continue
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = ".".join((here[:len(here) - node.level + 1] if node.level else [])
+                                + (node.module.split(".") if node.module else []))
+                targets = [f"{base}.{a.name}" for a in node.names]  # ours() drops a non-module
+            else:
+                continue
+            found |= {m for t in targets if (m := ours(t)) and m != module}
+        graph[module] = found
+    return graph
+
+
+def import_cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One cycle of *graph* as the modules along it (the first one repeated at the end), or []."""
+    state: dict[str, int] = {}  # 1: on the path being walked, 2: done, no cycle through it
+    path: list[str] = []
+
+    def walk(module: str) -> list[str]:
+        state[module] = 1
+        path.append(module)
+        for nxt in sorted(graph.get(module, ())):
+            if state.get(nxt) == 1:
+                return path[path.index(nxt):] + [nxt]
+            if nxt not in state and (cycle := walk(nxt)):
+                return cycle
+        state[module] = 2
+        path.pop()
+        return []
+
+    for module in sorted(graph):
+        if module not in state and (cycle := walk(module)):
+            return cycle
+    return []
+
+
+def test_no_import_cycle_among_our_modules():
+    """Two modules that import each other (even inside a function) depend on their import
+    order and cannot be understood, tested or split apart alone: the shared part belongs in a
+    third module both import (as host.settings is for host.config and host.estimator)."""
+    cycle = import_cycle(module_graph())
+    assert cycle == [], "import cycle: " + " -> ".join(cycle)
+
+
+@pytest.mark.parametrize("files, cycle", [
+    ({"host/a.py": "from . import b", "host/b.py": "def f():\n    from .a import x"},
+     ["host.a", "host.b", "host.a"]),
+    ({"host/a.py": "from navtwin.host.b import y", "host/b.py": "import navtwin.host.a"},
+     ["host.a", "host.b", "host.a"]),
+    ({"host/a.py": "from . import b", "host/b.py": "if TYPE_CHECKING:\n    from .a import x"}, []),
+    ({"host/a.py": "from .b import y", "host/b.py": "import numpy"}, []),
+])
+def test_import_cycles_are_found_however_written(tmp_path, files, cycle):
+    for name, text in {"host/__init__.py": "", **files}.items():
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text(text)
+    assert import_cycle(module_graph(tmp_path)) == cycle

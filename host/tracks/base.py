@@ -5,7 +5,7 @@ A track is a class with a ``name`` (its ``filter`` in the output and its section
 :func:`navtwin.common.schema.key` (units, docs, checks: the config reads and documents it), and:
 
 * :meth:`handlers`: which records (host.measurements: ImuSample, Exchange, ...) and shared
-  products (Motion, Range, Tdoa, host.wsn.Fix, FixRefused) it takes, each with the method
+  products (Motion, Range, Tdoa, Fix, FixRefused: host.measurements) it takes, each with the method
   that takes it; the estimator calls these in time order;
 * :meth:`estimate`: what it emits at an output instant (an Estimate, or None before it has
   one), with ``extrapolated`` set from its last aiding;
@@ -92,7 +92,7 @@ class Track:
     reinit_since: float | None = None
 
     def reinit_at(self, fix) -> None:
-        """Start again at *fix* (a host.wsn.Fix) and clear ``reinit_since``."""
+        """Start again at *fix* (a host.measurements.Fix) and clear ``reinit_since``."""
         raise NotImplementedError
 
     @property

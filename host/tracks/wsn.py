@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from navtwin.host.measurements import FixRefused
-from navtwin.host.wsn import Fix
+from navtwin.host.measurements import Fix
 
 from .base import Track, estimate
 

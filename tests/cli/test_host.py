@@ -1,7 +1,6 @@
 """`navtwin host` / `navtwin replay` arguments and host config files: one-line errors."""
 import dataclasses
 import json
-import math
 import os
 
 import pytest
@@ -81,7 +80,7 @@ def test_office_config_is_the_survey_of_scenarios_md():
     assert {i: a[:2] for i, a in cfg.anchors.items()} == {
         1: (1.3, 1.6), 2: (10.8, 1.6), 3: (10.8, 5.4), 4: (1.3, 5.4)}
     assert cfg.vehicles[0].start == (6.0, 1.8) and cfg.vehicles[0].heading_deg == 0.0
-    assert cfg.latitude_deg == 34.316 and cfg.gravity == 9.7952
+    assert cfg.latitude_deg == 34.316 and cfg.local_gravity == 9.7952
     assert cfg.filters == DEFAULT
 
 
@@ -104,8 +103,8 @@ def test_estimator_config_carries_the_host_config():
     cfg = host_config.load("office")
     ec = cfg.estimator_config(("wsn", "ukf"))
     assert ec.filters == ("wsn", "ukf") and dict(ec.anchors) == cfg.anchors
-    assert ec.start == cfg.vehicles[0].start and ec.gravity == cfg.gravity
-    assert ec.heading0_rad == math.radians(cfg.vehicles[0].heading_deg)
+    assert ec.start == cfg.vehicles[0].start and ec.local_gravity == cfg.local_gravity
+    assert ec.heading_deg == cfg.vehicles[0].heading_deg
 
 
 def write(tmp_path, text: str) -> str:

@@ -7,6 +7,7 @@ Rotation), and TDMA range exchanges. Noise comes from a seeded numpy Generator.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 

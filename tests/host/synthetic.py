@@ -36,7 +36,7 @@ def synthetic_chunks(config: HostConfig, seconds: float, *, seed: int = 0, escap
     *ranging*, no exchanges."""
     imu_rng, radio_rng, range_rng = (stream(seed, n) for n in ("imu", "radio", "ranges"))
     me = config.vehicles[vehicle - 1]
-    g_counts = config.gravity / adis16350.STANDARD_GRAVITY
+    g_counts = config.local_gravity / adis16350.STANDARD_GRAVITY
     events = []
     n = int(seconds / sins.PERIOD_S)
     noise = imu_rng.normal(0.0, 1.0, (n, 6))

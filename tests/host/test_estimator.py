@@ -8,11 +8,11 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
-from navtwin.host.estimator import Estimate, Estimator, EstimatorConfig
+from navtwin.host.estimator import Estimate, Estimator
 from navtwin.host.measurements import Exchange, ImuSample, Restart
 from navtwin.host.tracks import DEFAULT
 
-from ..helpers import GRAVITY, OFFICE_ANCHORS
+from ..helpers import GRAVITY, OFFICE_ANCHORS, office_config
 from .navsynth import ellipse, exchanges, noisy_imu, perfect_imu, record
 
 FILTER_NAMES = DEFAULT
@@ -47,7 +47,7 @@ def synth_events(seconds, seed=1, *, noise=True, sigma=0.15, drop=lambda t, a: F
 
 
 def run(cfg=None, calls=None, **kw):
-    est = Estimator(cfg or EstimatorConfig(alignment_s=ALIGN, range_sigma_m=0.15))
+    est = Estimator(cfg or office_config(alignment_s=ALIGN, range_sigma_m=0.15))
     out = []
     for kind, args in calls if calls is not None else synth_events(**{"seconds": 30.0, **kw}):
         out += est.feed(record(kind, args))
@@ -70,19 +70,19 @@ def default_run():
 
 def test_config_errors_name_the_field_and_the_fix():
     with pytest.raises(ValueError, match=r"filters: unknown \['pf'\]; use some of sins,wsn,kf,ekf,ukf"):
-        EstimatorConfig(filters=("kf", "pf"))
+        office_config(filters=("kf", "pf"))
     with pytest.raises(ValueError, match="tight must be one of 'toa', 'tdoa' \\(got 'rss'\\); use one of 'toa', 'tdoa'"):
-        EstimatorConfig(tight="rss")
+        office_config(tight="rss")
     with pytest.raises(ValueError, match=r"output_period_s must be in \[0.001, 60\] \(got 0"):
-        EstimatorConfig(output_period_s=0)
+        office_config(output_period_s=0)
     with pytest.raises(ValueError, match="anchors: 2 given"):
-        EstimatorConfig(anchors={1: (0, 0), 2: (1, 0)})
+        office_config(anchors={1: (0, 0), 2: (1, 0)})
     with pytest.raises(ValueError, match=r"extrapolated_after_s must be in \(0, 3600\] \(got 0"):
-        EstimatorConfig(extrapolated_after_s=0.0)
+        office_config(extrapolated_after_s=0.0)
     with pytest.raises(ValueError, match=r"reinit_sigma must be a list of 2 numbers \(got \[1\]\)"):
-        EstimatorConfig(reinit_sigma=(1.0,))
+        office_config(reinit_sigma=(1.0,))
     with pytest.raises(ValueError, match="device 'gps': use one of imu, anchors"):
-        Estimator().feed(Restart(1.0, "gps"))
+        Estimator(office_config()).feed(Restart(1.0, "gps"))
 
 
 def test_one_estimate_per_filter_per_period_in_config_order(default_run):
@@ -159,7 +159,7 @@ def test_total_wsn_outage_coasts_on_the_sins_and_recovers():
 
 
 def test_bad_input_is_counted_not_fatal():
-    est = Estimator(EstimatorConfig(alignment_s=1.0))
+    est = Estimator(office_config(alignment_s=1.0))
     g, f = np.zeros(3), np.array([0.0, 0.0, GRAVITY])
     est.feed(ImuSample(0.0, g, f))
     est.feed(ImuSample(0.01, g, f, nd_ok=False))
@@ -178,7 +178,7 @@ def test_bad_input_is_counted_not_fatal():
 
 
 def test_late_measurements_use_their_lag_or_are_refused():
-    cfg = EstimatorConfig(alignment_s=ALIGN, tight="toa", filters=("ekf", "ukf"))
+    cfg = office_config(alignment_s=ALIGN, tight="toa", filters=("ekf", "ukf"))
     calls = synth_events(6.0, noise=False)
     imus = [c for c in calls if c[0] == "imu"]
     ranges = [c for c in calls if c[0] == "range"]
@@ -194,7 +194,7 @@ def test_late_measurements_use_their_lag_or_are_refused():
 
 
 def test_an_outlier_range_is_gated_in_the_tight_filters():
-    cfg = EstimatorConfig(alignment_s=ALIGN, tight="toa", range_sigma_m=0.15)
+    cfg = office_config(alignment_s=ALIGN, tight="toa", range_sigma_m=0.15)
     calls = synth_events(20.0, noise=True)
     k = next(i for i, (kind, a) in enumerate(calls) if kind == "range" and a[0] > 15.0)
     t, a, d, rssi, status = calls[k][1]
@@ -209,8 +209,8 @@ def test_an_outlier_range_is_gated_in_the_tight_filters():
 def test_calibrated_range_bias_is_removed():
     biased = dict(range_bias=0.5, seconds=12.0)
     cfg = dict(alignment_s=ALIGN, range_sigma_m=0.15, wsn_method="toa", filters=("wsn",))
-    _, raw = run(EstimatorConfig(**cfg), **biased)
-    _, fixed = run(EstimatorConfig(**cfg, range_bias_m={1: 0.5, 2: 0.5, 3: 0.5, 4: 0.5}), **biased)
+    _, raw = run(office_config(**cfg), **biased)
+    _, fixed = run(office_config(**cfg, range_bias_m={1: 0.5, 2: 0.5, 3: 0.5, 4: 0.5}), **biased)
     assert errors(fixed)["wsn"].mean() < 0.5 * errors(raw)["wsn"].mean()
 
 
@@ -225,7 +225,7 @@ def test_alignment_of_a_tilted_unit_is_reported():
 
 @pytest.mark.parametrize("filters", [("wsn",), ("kf",), ("ukf", "sins")])
 def test_a_subset_of_filters(filters):
-    est, out = run(EstimatorConfig(alignment_s=ALIGN, filters=filters, range_sigma_m=0.15), seconds=6.0)
+    est, out = run(office_config(alignment_s=ALIGN, filters=filters, range_sigma_m=0.15), seconds=6.0)
     assert {e.filter for e in out} == set(filters)
     assert (est.stats()["alignment"] is None) == (filters == ("wsn",))
 
@@ -247,7 +247,7 @@ def test_fusion_yaw_follows_the_turning_vehicle(default_run):
 
 @pytest.mark.parametrize("tight,wsn", [("toa", "toa"), ("tdoa", "toa"), ("toa", "tdoa")])
 def test_other_measurement_choices_also_track(tight, wsn):
-    est, out = run(EstimatorConfig(alignment_s=ALIGN, range_sigma_m=0.15, tight=tight, wsn_method=wsn,
+    est, out = run(office_config(alignment_s=ALIGN, range_sigma_m=0.15, tight=tight, wsn_method=wsn,
                                    filters=("wsn", "kf", "ekf", "ukf")), seconds=20.0)
     err = errors(out, ALIGN)
     for name in ("kf", "ekf", "ukf"):
@@ -320,7 +320,7 @@ def test_a_track_gated_out_for_too_long_starts_again_at_the_next_fix():
 def test_a_total_outage_marks_the_estimates_it_bridges_as_extrapolated():
     gone = lambda t, a: 12.0 <= t < 16.0
     _, out = run(drop=gone)
-    after = EstimatorConfig().extrapolated_after_s
+    after = office_config().extrapolated_after_s
     for e in out:
         if e.filter == "sins":
             assert not e.extrapolated  # the IMU never stopped
@@ -332,7 +332,7 @@ def test_a_total_outage_marks_the_estimates_it_bridges_as_extrapolated():
 
 def test_extrapolated_after_s_is_a_setting():
     gone = lambda t, a: 12.0 <= t < 16.0
-    _, out = run(EstimatorConfig(alignment_s=ALIGN, range_sigma_m=0.15, extrapolated_after_s=2.0,
+    _, out = run(office_config(alignment_s=ALIGN, range_sigma_m=0.15, extrapolated_after_s=2.0,
                                  filters=("ekf",)), drop=gone)
     marked = [e.t for e in out if e.extrapolated]
     assert marked and 14.0 <= min(marked) < 14.2 and max(marked) < 16.2

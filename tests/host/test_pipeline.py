@@ -43,7 +43,7 @@ def test_synthetic_lab_gives_every_sample_and_exchange_in_time_order():
     assert pipe.vehicles[0].imu_clock.aligner.rate == pytest.approx(30e-6, abs=10e-6)
     # level and standing: about 1 local g on z, nothing on the gyros beyond noise
     az = np.mean([c[3][2] for c in imu])
-    assert az == pytest.approx(OFFICE.gravity, abs=0.01)
+    assert az == pytest.approx(OFFICE.local_gravity, abs=0.01)
     assert np.abs([c[2] for c in imu]).max() < math.radians(0.5)
     # every 50th exchange timed out; the others give the distances to the start point
     timeouts = [c for c in ranges if c[3] is None]

@@ -23,7 +23,7 @@ DT = 0.01
 
 def run(tr, gyro, accel, **kw):
     """Strapdown started on the true state of tr[0]; returns (positions, yaws)."""
-    sins = Strapdown(position=tr.p[0], velocity=(*tr.v[0], 0.0), latitude_deg=LATITUDE_DEG, gravity=GRAVITY,
+    sins = Strapdown(position=tr.p[0], velocity=(*tr.v[0], 0.0), latitude_deg=LATITUDE_DEG, local_gravity=GRAVITY,
                      **{"q": quat_from_euler(0.0, 0.0, tr.yaw[0]), **kw})
     sins.step(0.0, gyro[0], accel[0])
     p, yaw = [sins.p[:2].copy()], [sins.yaw]
@@ -57,7 +57,7 @@ def test_stationary_unit_stays_put_with_earth_rate_and_gravity(azimuth):
     tr.yaw[:] = 0.7
     gyro, accel = perfect_imu(tr, roll=0.02, pitch=-0.03, x_azimuth_deg=azimuth)
     sins = Strapdown(position=tr.p[0], q=quat_from_euler(0.02, -0.03, 0.7), latitude_deg=LATITUDE_DEG,
-                     gravity=GRAVITY, x_azimuth_deg=azimuth)
+                     local_gravity=GRAVITY, x_azimuth_deg=azimuth)
     for k in range(len(t)):
         sins.step(DT if k else 0.0, gyro[k], accel[k])
     assert np.abs(sins.p[:2] - tr.p[0]).max() < 1e-6
@@ -72,7 +72,7 @@ def test_earth_rate_compensation_is_what_keeps_it_still():
     tr = ellipse(t, t_start=1e9)
     gyro, accel = perfect_imu(tr)
     p_ok, _ = run(tr, gyro, accel)
-    sins = Strapdown(position=tr.p[0], q=quat_from_euler(0, 0, 0), latitude_deg=-LATITUDE_DEG, gravity=GRAVITY)
+    sins = Strapdown(position=tr.p[0], q=quat_from_euler(0, 0, 0), latitude_deg=-LATITUDE_DEG, local_gravity=GRAVITY)
     for k in range(len(t)):
         sins.step(DT if k else 0.0, gyro[k], accel[k])
     assert np.abs(p_ok[-1] - tr.p[0]).max() < 1e-6
@@ -102,7 +102,7 @@ def test_alignment_recovers_roll_pitch_and_gyro_bias():
     al = Alignment()
     for g, f in zip(gyro + bias, accel):
         al.add(g, f)
-    res = al.result(heading=-1.1, latitude_rad=math.radians(LATITUDE_DEG))
+    res = al.result(heading_rad=-1.1, latitude_rad=math.radians(LATITUDE_DEG))
     assert res.samples == len(t)
     assert res.roll == pytest.approx(0.04, abs=1e-12)
     assert res.pitch == pytest.approx(-0.025, abs=1e-12)
@@ -142,7 +142,7 @@ def test_aligned_bias_makes_a_biased_gyro_hold_heading():
         al.add(g, f)
     res = al.result(0.0, math.radians(LATITUDE_DEG))
     sins = Strapdown(position=tr.p[0], q=res.q, gyro_bias=res.gyro_bias, latitude_deg=LATITUDE_DEG,
-                     gravity=GRAVITY)
+                     local_gravity=GRAVITY)
     for k in range(499, len(t)):
         sins.step(DT if k > 499 else 0.0, gyro[k], accel[k])
     assert abs(sins.yaw) < 1e-9
@@ -155,7 +155,7 @@ def test_correct_removes_the_estimated_errors_and_keeps_plain_floats():
     stays Python floats: numpy scalars in it made every later step about 4x slower."""
     q = quat_from_euler(0.01, -0.02, 0.9)
     sins = Strapdown(position=(6.0, 1.8), velocity=(0.3, -0.1, 0.0), q=q, latitude_deg=LATITUDE_DEG,
-                     gravity=GRAVITY)
+                     local_gravity=GRAVITY)
     dp, dv, da = np.array([0.2, -0.1]), np.array([0.05, 0.02]), np.array([1e-3, -2e-3, 0.03])
     sins.correct(dp, dv, da)
     np.testing.assert_allclose(sins.p, (5.8, 1.9, 0.0), atol=1e-15)

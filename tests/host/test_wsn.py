@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from navtwin.host.wsn import (AnchorLayout, CycleGrouper, Fix, Solver, tdoa_closed_form,
-                              tdoa_covariance, tdoa_whitening, toa_linear)
+from navtwin.host.measurements import Fix
+from navtwin.host.wsn import (AnchorLayout, CycleGrouper, Solver, tdoa_closed_form, tdoa_covariance,
+                              tdoa_whitening, toa_linear)
 
 from ..helpers import CORRIDOR_ANCHORS, OFFICE_ANCHORS
 

@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from navtwin.emulator import scenario, world
-from navtwin.host.estimator import Estimator, EstimatorConfig
+from navtwin.host.estimator import Estimator
+from navtwin.host.settings import EstimatorConfig
 from navtwin.protocols import adis16350, nanoloc
 from navtwin.protocols.stream import nanoloc_decoder, sins_decoder
 
@@ -62,8 +63,8 @@ def host_config(sc) -> EstimatorConfig:
     (x0, y0), (x1, y1) = sc.trajectory.waypoints[:2]
     return EstimatorConfig(
         anchors={a.id: (a.x, a.y, sc.anchor_z(a)) for a in sc.anchors}, tag_height=sc.tag.z,
-        latitude_deg=sc.site.latitude_deg, gravity=sc.site.local_gravity, x_azimuth_deg=sc.area.x_azimuth_deg,
-        start=(x0, y0), heading0_rad=math.atan2(y1 - y0, x1 - x0), alignment_s=sc.trajectory.alignment_s)
+        latitude_deg=sc.site.latitude_deg, local_gravity=sc.site.local_gravity, x_azimuth_deg=sc.area.x_azimuth_deg,
+        start=(x0, y0), heading_deg=math.degrees(math.atan2(y1 - y0, x1 - x0)), alignment_s=sc.trajectory.alignment_s)
 
 
 def run(w, calls, cfg):

@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from navtwin.host.estimator import Estimator, EstimatorConfig
+from navtwin.host.estimator import Estimator
+from navtwin.host.settings import EstimatorConfig
 from navtwin.host.filters.fuzzy import FuzzySystem
 from navtwin.host.measurements import Exchange, ImuSample
 from navtwin.host.tracks.fatci import FatciSettings, FatciTrack
 from navtwin.host.tracks.lc import LcTrack
 from navtwin.host.tracks.tc import TcSettings
 
-from ...helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS
+from ...helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS, office_config
 from ..navsynth import ellipse, exchanges, noisy_imu, perfect_imu
 
 skfuzzy = pytest.importorskip("skfuzzy")
@@ -53,7 +54,7 @@ def test_the_fuzzy_system_equals_scikit_fuzzy(inputs, outputs):
 
 
 def test_fatci_r_is_s_to_the_b_times_the_nominal_r():
-    est = Estimator(EstimatorConfig(filters=("fatci",)))
+    est = Estimator(office_config(filters=("fatci",)))
     s = FatciSettings()
     track = FatciTrack(est, s)
     fis = FuzzySystem(s.sigma_sets_m, s.s_sets)
@@ -70,7 +71,7 @@ def test_fatci_takes_sigma_of_d_from_the_estimators_calibration():
         def sigma(d):
             return 0.7  # MO fully: S is the MO set's centroid
 
-    est = Estimator(EstimatorConfig(filters=("fatci",)))
+    est = Estimator(office_config(filters=("fatci",)))
     est.calibration = Calibration()
     track = FatciTrack(est)
     s = track.settings
@@ -120,8 +121,8 @@ def model_run(track: str, seed: int, lone_after: float | None = None):
         ex = [(te, a, d) for te, a, d in ex if te < lone_after or a == 1]
     settings = (TcSettings(nlos_sigma_m=NLOS_SIGMA, nlos_walk_m_rt_s=NLOS_WALK, **NOISE) if track == "tc"
                 else LcTrack.Settings(**NOISE))
-    cfg = EstimatorConfig(anchors=OFFICE_ANCHORS, latitude_deg=LATITUDE_DEG, gravity=GRAVITY,
-                          start=tuple(start), heading0_rad=0.0, alignment_s=ALIGN_S,
+    cfg = EstimatorConfig(anchors=OFFICE_ANCHORS, latitude_deg=LATITUDE_DEG, local_gravity=GRAVITY,
+                          start=tuple(start), heading_deg=0.0, alignment_s=ALIGN_S,
                           range_sigma_m=RANGE_SIGMA, wsn_method="toa", p0_sigma=(sp, 1e-3, 0.1),
                           filters=(track,), settings={track: settings})
     est = Estimator(cfg)

@@ -1,0 +1,22 @@
+"""The lab's defaults: what the emulated lab (emulator.scenario) and the lab computer
+(host.settings) take when a scenario or a host config does not say, written once so that the
+two agree where they mean the same thing.
+
+The site is 000's lab (latitude 34.316 deg) with standard gravity; each shipped scenario and
+host config states its own site (local gravity 9.7952 m/s^2) and start, so these are what a
+new lab's file starts from.
+"""
+from navtwin.protocols.adis16350 import STANDARD_GRAVITY
+
+#: deg, geodetic latitude of the site: it projects the earth rate (000's lab).
+LATITUDE_DEG = 34.316
+#: m/s^2, local gravity where the site's is not surveyed: the standard value.
+LOCAL_GRAVITY = STANDARD_GRAVITY
+#: deg, azimuth (clockwise from north) of the area's +x: 90, x east and y north.
+X_AZIMUTH_DEG = 90.0
+#: s, how long the vehicle stands still after the IMU's power-up (the alignment).
+ALIGNMENT_S = 5.0
+#: deg/s, the ADIS16350's gyro range (SENS/AVG): its power-up setting.
+GYRO_RANGE_DPS = 300
+#: m, where the vehicle stands at power-up: the area's origin.
+START = (0.0, 0.0)
