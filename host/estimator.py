@@ -62,7 +62,7 @@ from .calibration import Calibration
 from .filters import ACCELERATION, ConstantAcceleration, Linear, Ranges
 from .measurements import Exchange, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
 from .sins import Alignment, AlignmentResult, Strapdown
-from .tracks.base import Estimate, Track
+from .tracks.base import Estimate, Track, TrackContext
 from .wsn import AnchorLayout, CycleGrouper, Fix, Solver, tdoa_covariance
 
 __all__ = ["DEVICES", "Estimate", "Estimator", "EstimatorConfig", "Tuning"]
@@ -189,7 +189,12 @@ class Estimator:
         self.solver = Solver(self.layout, cfg.range_sigma_m, cfg.wsn_method, cfg.reference_anchor,
                              cfg.gate_probability, cfg.fix_margin_m)
         self.grouper = CycleGrouper(len(self.layout.ids), cfg.cycle_s)
-        self.tracks: list[Track] = [tracks.get(n)(self, cfg.settings.get(n)) for n in cfg.filters]
+        self.calibration = cal = cfg.calibration
+        # None, not cal: the tracks were always built before the estimator held the
+        # calibration, so fatci has used sigma_poly_m even with one (a bug kept here for
+        # issue 18, whose estimates are bit-identical; passing cal fixes it)
+        self.context = TrackContext(cfg, self.model, self.layout, None, self, self, self)
+        self.tracks: list[Track] = [tracks.get(n)(self.context, cfg.settings.get(n)) for n in cfg.filters]
         takers: dict[type, list] = {}
         for track in self.tracks:
             for kind, handler in track.handlers().items():
@@ -197,7 +202,7 @@ class Estimator:
         self._takers = takers
         self._motion, self._range, self._tdoa, self._fix, self._refused = (
             takers.get(k, []) for k in (Motion, Range, Tdoa, Fix, FixRefused))
-        self._predicting = [track for track in self.tracks if hasattr(track, "predict")]
+        self._predicting = [track for track in self.tracks if track.predicts]
         self._own = {ImuSample: self._imu, Exchange: self._exchange, Restart: self._restart}
         self.need_sins = any(track.uses_strapdown for track in self.tracks)
         self.alignment = Alignment()
@@ -216,10 +221,8 @@ class Estimator:
         self.origin = tuple(cfg.start)  # where the strapdown starts when its alignment ends
         self._origin_since: float | None = None  # after an IMU restart: the fixes from then on,
         self._origin_fixes = (np.zeros(2), 0)  # summed and counted, give it (at rest: their mean)
-        self.reinit_count = 0  # every re-initialisation: one int to watch for a new one
         self._tilt_growth = (cfg.tilt_inflation * cfg.gravity * cfg.tilt_rate_sigma) ** 2
         self._accel_var = cfg.accel_sigma_m_s2**2
-        self.calibration = cal = cfg.calibration  # the tracks read its sigma(d)
         self._range_scale = cal.scale if cal else cfg.range_scale
         self._range_bias = dict(cal.bias) if cal else {int(a): float(c) for a, c in cfg.range_bias_m.items()}
         sv, sa = cfg.stationary_sigma
@@ -438,12 +441,10 @@ class Estimator:
                 total, n = self._origin_fixes[0] + fix.p, self._origin_fixes[1] + 1
                 self._origin_fixes, self.origin = (total, n), tuple((total / n).tolist())
             for track in self.tracks:
-                since = track.reinit_since
-                if since is not None and fix.t >= since:
-                    track.reinit_at(fix)
+                track.offer_fix(fix)
             for take in self._fix:
                 take(fix)
-        if self.cfg.tight == "tdoa" and self._tdoa:
+        if self._tdoa:
             m = self._tdoa_product(cycle, fix)
             for take in self._tdoa:
                 take(m)
@@ -494,6 +495,11 @@ class Estimator:
         return b - (self.t_first if t_aided is None else t_aided) > self.cfg.extrapolated_after_s
 
     # ---------------------------------------------------------------- status
+
+    @property
+    def reinit_count(self) -> int:
+        """Every re-initialisation so far: one int to watch for a new one."""
+        return sum(sum(track.reinits.values()) for track in self.tracks)
 
     def imu_gaps(self) -> dict:
         """IMU gaps so far: ``bridged`` (the state kept) and ``reinit`` (the tracks restarted)."""

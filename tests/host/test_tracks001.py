@@ -12,6 +12,7 @@ from scipy.stats import chi2
 from navtwin.host.estimator import Estimator, EstimatorConfig
 from navtwin.host.filters.fuzzy import FuzzySystem
 from navtwin.host.measurements import Exchange, ImuSample
+from navtwin.host.tracks.base import TrackContext
 from navtwin.host.tracks.fatci import FatciSettings, FatciTrack
 from navtwin.host.tracks.lc import LcTrack
 from navtwin.host.tracks.tc import TcSettings
@@ -54,7 +55,7 @@ def test_the_fuzzy_system_equals_scikit_fuzzy(inputs, outputs):
 def test_fatci_r_is_s_to_the_b_times_the_nominal_r():
     est = Estimator(EstimatorConfig(filters=("fatci",)))
     s = FatciSettings()
-    track = FatciTrack(est, s)
+    track = FatciTrack(est.context, s)
     fis = FuzzySystem(s.sigma_sets_m, s.s_sets)
     for d in (1.0, 5.0, 12.0, 30.0):
         sigma = s.sigma_poly_m[0] + s.sigma_poly_m[1] * d
@@ -70,8 +71,7 @@ def test_fatci_takes_sigma_of_d_from_the_estimators_calibration():
             return 0.7  # MO fully: S is the MO set's centroid
 
     est = Estimator(EstimatorConfig(filters=("fatci",)))
-    est.calibration = Calibration()
-    track = FatciTrack(est)
+    track = FatciTrack(TrackContext(est.cfg, est.model, est.layout, Calibration(), est, est, est))
     s = track.settings
     assert track.range_variance(2, 3.0) == pytest.approx(((s.s_sets[1] + 2 * s.s_sets[2]) / 3) ** s.b * 0.16,
                                                          rel=1e-4)
