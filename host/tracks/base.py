@@ -34,10 +34,11 @@ class TrackContext:
     """What a track may use of the estimator (``self.ctx``), and nothing more.
 
     Built by the estimator from its parts: the settings and models (fixed for the run), the
-    time base and its callbacks (the estimator: ``t``, ``t_predicted``, ``sync``, ``stale``,
-    ``on_innovation``), the inertial part (``sins``, ``origin``, ``t_imu``, ``t_aligned``)
-    and the ranging part (``fixes``). The dynamic members are read through at each access,
-    so a track sees the current value; a track changes none of them.
+    time base (host.timebase.FilterTime: ``t``, ``t_predicted``, ``sync``, ``stale``), the
+    inertial part (host.inertial.Inertial: ``sins``, ``origin``, ``t_imu``, ``t_aligned``),
+    the ranging part (host.ranging.Ranging: ``fixes``) and the estimator's
+    ``on_innovation``. The dynamic members are read through at each access, so a track sees
+    the current value; a track changes none of them.
     """
 
     __slots__ = {
@@ -53,24 +54,24 @@ class TrackContext:
         "stale": "stale(b, t_aided) -> bool: whether an estimate at b, last aided at t_aided "
                  "(None: never, only the configured start), is extrapolated "
                  "(extrapolated_after_s).",
-        "_estimator": "the time base's owner", "_inertial": "the strapdown's owner",
-        "_ranging": "the fixes' owner",
+        "_time": "the time base", "_inertial": "the strapdown's owner",
+        "_ranging": "the fixes' owner", "_estimator": "on_innovation's owner",
     }
 
-    def __init__(self, cfg, model, layout, calibration, estimator, inertial, ranging) -> None:
+    def __init__(self, cfg, model, layout, calibration, *, time, inertial, ranging, estimator) -> None:
         self.cfg, self.model, self.layout, self.calibration = cfg, model, layout, calibration
-        self.sync, self.stale = estimator.sync, estimator.stale
-        self._estimator, self._inertial, self._ranging = estimator, inertial, ranging
+        self.sync, self.stale = time.sync, time.stale
+        self._time, self._inertial, self._ranging, self._estimator = time, inertial, ranging, estimator
 
     @property
     def t(self) -> float | None:
         """The filter time (s): the latest measurement's; None before the first."""
-        return self._estimator.t
+        return self._time.t
 
     @property
     def t_predicted(self) -> float | None:
         """The time (s) the tracks with ``predicts`` are predicted to (<= t; :meth:`sync`)."""
-        return self._estimator.t_predicted
+        return self._time.t_predicted
 
     @property
     def on_innovation(self) -> Callable | None:
