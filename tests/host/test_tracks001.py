@@ -71,7 +71,9 @@ def test_fatci_takes_sigma_of_d_from_the_estimators_calibration():
             return 0.7  # MO fully: S is the MO set's centroid
 
     est = Estimator(EstimatorConfig(filters=("fatci",)))
-    track = FatciTrack(TrackContext(est.cfg, est.model, est.layout, Calibration(), est, est, est))
+    ctx = TrackContext(est.cfg, est.context.model, est.layout, Calibration(), time=est.time,
+                       inertial=est.inertial, ranging=est.ranging, estimator=est)
+    track = FatciTrack(ctx)
     s = track.settings
     assert track.range_variance(2, 3.0) == pytest.approx(((s.s_sets[1] + 2 * s.s_sets[2]) / 3) ** s.b * 0.16,
                                                          rel=1e-4)
