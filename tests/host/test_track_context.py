@@ -132,8 +132,8 @@ def test_a_track_written_against_the_context_runs_and_sees_the_shared_state(regi
 @pytest.mark.parametrize("name", ["reacher", "writer"])
 def test_a_track_touching_an_undeclared_member_or_writing_one_fails_loudly(registered, name):
     est = Estimator(cfg(name))
-    with pytest.raises(AttributeError, match="'TrackContext' object (has no attribute 'ranging'|"
-                                             "attribute 't' .*has no setter|can't set attribute)"):
+    with pytest.raises(AttributeError, match="'TrackContext' object has no attribute 'ranging'|"
+                                             "property 't' of 'TrackContext' object has no setter"):
         for r in standing(1.0):
             est.feed(r)
 
