@@ -22,9 +22,9 @@ from . import tracks
 from .estimator import Estimator, EstimatorConfig
 from .filters import (ACCELERATION, ConstantAcceleration, ExtendedKalmanFilter, KalmanFilter, Ranges,
                       UnscentedKalmanFilter, position_fix)
-from .measurements import Exchange, ImuSample, Range
+from .measurements import Exchange, Fix, ImuSample, Range
 from .sins import Strapdown, quat_from_euler
-from .wsn import AnchorLayout, Fix, tdoa_covariance
+from .wsn import AnchorLayout, tdoa_covariance
 
 DT = 0.01
 X0 = np.array([6.0, 1.8, 0.3, 0.1, 0.05, -0.02])

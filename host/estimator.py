@@ -59,11 +59,11 @@ from . import tracks
 from .calibration import Calibration
 from .filters import ConstantAcceleration
 from .inertial import Inertial
-from .measurements import Exchange, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
+from .measurements import Exchange, Fix, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
 from .ranging import Ranging
 from .timebase import FilterTime
 from .tracks.base import Estimate, Track, TrackContext
-from .wsn import AnchorLayout, Fix
+from .wsn import AnchorLayout
 
 __all__ = ["DEVICES", "Estimate", "Estimator", "EstimatorConfig", "Tuning"]
 

@@ -147,7 +147,7 @@ class Inertial:
         return Motion(t_s, "accel", np.array(acceleration[:2]), R, ACCELERATION)
 
     def fix(self, fix) -> None:
-        """A WSN fix (host.wsn.Fix): after an IMU restart, until the strapdown realigns,
+        """A WSN fix (host.measurements.Fix): after an IMU restart, until the strapdown realigns,
         the origin is the mean of the fixes since the restart (the vehicle is at rest)."""
         if self.sins is None and self._origin_since is not None and fix.t >= self._origin_since:
             total, n = self._origin_fixes[0] + fix.p, self._origin_fixes[1] + 1

@@ -25,7 +25,8 @@ Range        one corrected exchange distance as a range measurement (each exchan
              EKF/UKF take it with ``tight = "toa"``, 001's tc and fatci always)
 Tdoa         one closed TDMA cycle's range differences to the reference anchor
              (``tight = "tdoa"``); ``meas`` None when too few anchors remain
-host.wsn.Fix        a WSN position fix of a closed TDMA cycle
+Fix          a WSN position fix of a closed TDMA cycle (host.wsn.Solver): ``p`` (m),
+             ``cov`` its 2x2 covariance (the CRLB at p), the anchors it used
 FixRefused   a closed cycle that gave no fix, and why
 ===========  ===========================================================================
 
@@ -36,7 +37,10 @@ a record it does not process itself straight to those tracks.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,7 +92,19 @@ class Tdoa:
     z: Any = None
     R: Any = None
     meas: Any = None  # None: fewer than two differences remain
-    fix: Any = None  # host.wsn.Fix of the same cycle, if it gave one
+    fix: Any = None  # the Fix of the same cycle, if it gave one
+
+
+@dataclass(frozen=True, slots=True)
+class Fix:
+    """A WSN position fix. ``cov`` is the 2x2 position covariance (CRLB at ``p``)."""
+
+    t: float
+    p: np.ndarray
+    cov: np.ndarray
+    anchors: tuple[int, ...]
+    chi2: float
+    dropped: tuple[int, ...] = ()  # anchors the solver dropped as outliers
 
 
 @dataclass(frozen=True, slots=True)

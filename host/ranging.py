@@ -21,8 +21,8 @@ import numpy as np
 from navtwin.protocols.nanoloc import STATUS_TIMEOUT, is_complete
 
 from .filters import Ranges
-from .measurements import Exchange, FixRefused, Range, Tdoa
-from .wsn import AnchorLayout, Cycle, CycleGrouper, Fix, Solver, tdoa_covariance
+from .measurements import Exchange, Fix, FixRefused, Range, Tdoa
+from .wsn import AnchorLayout, Cycle, CycleGrouper, Solver, tdoa_covariance
 
 
 class Ranging:

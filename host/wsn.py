@@ -53,6 +53,7 @@ from itertools import combinations
 import numpy as np
 
 from .filters.linalg import solve
+from .measurements import Fix
 
 _ONES2 = np.ones(2)
 _I2 = np.eye(2)
@@ -146,18 +147,6 @@ def chi2_gate(dof: int, probability: float) -> float:
     from scipy.stats import chi2  # here: scipy.stats costs every navtwin command ~0.7 s to import
 
     return float(chi2.ppf(probability, dof))
-
-
-@dataclass(frozen=True, slots=True)
-class Fix:
-    """A WSN position fix. ``cov`` is the 2x2 position covariance (CRLB at ``p``)."""
-
-    t: float
-    p: np.ndarray
-    cov: np.ndarray
-    anchors: tuple[int, ...]
-    chi2: float
-    dropped: tuple[int, ...] = ()
 
 
 def toa_linear(layout: AnchorLayout, idx: np.ndarray, r: np.ndarray) -> np.ndarray:

@@ -5,7 +5,7 @@ A track is a class with a ``name`` (its ``filter`` in the output and its section
 :func:`navtwin.common.schema.key` (units, docs, checks: the config reads and documents it), and:
 
 * :meth:`handlers`: which records (host.measurements: ImuSample, Exchange, ...) and shared
-  products (Motion, Range, Tdoa, host.wsn.Fix, FixRefused) it takes, each with the method
+  products (Motion, Range, Tdoa, host.measurements: Fix, FixRefused) it takes, each with the method
   that takes it; the estimator calls these in time order;
 * :meth:`predict` (with ``predicts = True``): a state on the shared motion model, predicted
   to the filter time with the other such tracks (:meth:`TrackContext.sync`);
@@ -103,7 +103,7 @@ class TrackContext:
 
     @property
     def fixes(self) -> list:
-        """The last two WSN fixes (host.wsn.Fix), oldest first, of distinct times; fewer
+        """The last two WSN fixes (host.measurements.Fix), oldest first, of distinct times; fewer
         at the start and after a restart."""
         return self._ranging.fixes
 
@@ -185,14 +185,14 @@ class Track:
         self.reinit_since = t
 
     def offer_fix(self, fix) -> None:
-        """A new WSN fix (host.wsn.Fix), before the tracks that take fixes see it: a track
+        """A new WSN fix (host.measurements.Fix), before the tracks that take fixes see it: a track
         waiting since a discontinuity no later than the fix starts again at it."""
         since = self.reinit_since
         if since is not None and fix.t >= since and self.reinit_at(fix):
             self.reinit_since, self.reinit_fix = None, fix
 
     def reinit_at(self, fix) -> bool:
-        """Start again at *fix* (a host.wsn.Fix); False: not yet, keep waiting."""
+        """Start again at *fix* (a host.measurements.Fix); False: not yet, keep waiting."""
         raise NotImplementedError
 
     @property

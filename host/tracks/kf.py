@@ -3,7 +3,7 @@ measures the SINS nav-frame acceleration and each WSN position fix (with its lag
 from __future__ import annotations
 
 from navtwin.host.filters import KalmanFilter, position_fix
-from navtwin.host.wsn import Fix
+from navtwin.host.measurements import Fix
 
 from .fusion import FusionTrack
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from navtwin.host.filters.errorstate import NAV
-from navtwin.host.wsn import Fix
+from navtwin.host.measurements import Fix
 
 from .errorstate import ErrorStateTrack
 

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.measurements import FixRefused
-from navtwin.host.wsn import Fix
+from navtwin.host.measurements import Fix, FixRefused
 
 from .base import Track, estimate
 

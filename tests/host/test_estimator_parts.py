@@ -11,10 +11,10 @@ import pytest
 
 from navtwin.host.estimator import EstimatorConfig
 from navtwin.host.inertial import Inertial
-from navtwin.host.measurements import Exchange, FixRefused, ImuSample
+from navtwin.host.measurements import Exchange, Fix, FixRefused, ImuSample
 from navtwin.host.ranging import Ranging
 from navtwin.host.timebase import FilterTime
-from navtwin.host.wsn import AnchorLayout, Fix
+from navtwin.host.wsn import AnchorLayout
 
 from .navsynth import GRAVITY, OFFICE_ANCHORS
 

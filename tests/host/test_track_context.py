@@ -11,9 +11,8 @@ import pytest
 
 from navtwin.host import tracks
 from navtwin.host.estimator import Estimator, EstimatorConfig
-from navtwin.host.measurements import Exchange, ImuSample, Motion
+from navtwin.host.measurements import Exchange, Fix, ImuSample, Motion
 from navtwin.host.tracks.base import Track, TrackContext, estimate
-from navtwin.host.wsn import Fix
 
 from .navsynth import GRAVITY, OFFICE_ANCHORS
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from navtwin.common.schema import between, key
 from navtwin.host.tracks.base import Track, estimate
-from navtwin.host.wsn import Fix
+from navtwin.host.measurements import Fix
 
 
 @dataclass(frozen=True)
