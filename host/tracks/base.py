@@ -5,8 +5,8 @@ A track is a class with a ``name`` (its ``filter`` in the output and its section
 :func:`navtwin.common.schema.key` (units, docs, checks: the config reads and documents it), and:
 
 * :meth:`handlers`: which records (host.measurements: ImuSample, Exchange, ...) and shared
-  products (Motion, Range, Tdoa, host.measurements: Fix, FixRefused) it takes, each with the method
-  that takes it; the estimator calls these in time order;
+  products (host.measurements: Motion, Range, Tdoa, Fix, FixRefused) it takes, each with the
+  method that takes it; the estimator calls these in time order;
 * :meth:`predict` (with ``predicts = True``): a state on the shared motion model, predicted
   to the filter time with the other such tracks (:meth:`TrackContext.sync`);
 * :meth:`estimate`: what it emits at an output instant (an Estimate, or None before it has
