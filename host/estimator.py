@@ -194,15 +194,20 @@ class Estimator:
         # calibration None: the tracks were always built before the estimator held it, so
         # fatci has used sigma_poly_m even with one (a bug kept while issue 18 keeps the
         # estimates bit-identical; passing self.calibration fixes it)
-        self.context = TrackContext(cfg, ConstantAcceleration(cfg.jerk_psd), self.layout, None, time=self.time,
-                                    inertial=self.inertial, ranging=self.ranging, estimator=self)
-        self.tracks: list[Track] = [cls(self.context, cfg.settings.get(n)) for n, cls in zip(cfg.filters, classes)]
+        self.context = TrackContext(cfg, ConstantAcceleration(cfg.jerk_psd), self.layout, None,
+                                    time=self.time, inertial=self.inertial, ranging=self.ranging,
+                                    estimator=self)
+        self.tracks: list[Track] = [cls(self.context, cfg.settings.get(n))
+                                    for n, cls in zip(cfg.filters, classes)]
         self.time.predicting = [track for track in self.tracks if track.predicts]
         self._takers: dict[type, list] = {}  # record or product type -> its takers' handlers
         for track in self.tracks:
             for kind, handler in track.handlers().items():
                 self._takers.setdefault(kind, []).append(handler)
-        self._own = {ImuSample: self._imu, Exchange: self._exchange, Restart: self._restart}
+        # record type -> (its part's check, its processing); other types: straight to takers
+        self._own = {ImuSample: (self.inertial.accept, self._imu),
+                     Exchange: (self.ranging.accept, self._exchange),
+                     Restart: (self._restartable, self._restart)}
         # opt-in: fn(t, filter, kind, dim, nis, accepted) per gated fusion update (the NIS
         # the report draws); None costs the tracks one attribute test
         self.on_innovation: Callable | None = None
@@ -213,33 +218,42 @@ class Estimator:
 
     def feed(self, record) -> list[Estimate]:
         """One measurement record (host.measurements), in time order; the estimates of the
-        output instants it passes."""
-        own = self._own.get(type(record))
-        return own(record) if own is not None else self._other(record)
-
-    def _imu(self, rec: ImuSample) -> list[Estimate]:
-        sample = self.inertial.accept(rec)
-        if sample is None:
+        output instants it passes. A record its part accepts: the instants before it, its
+        processing, the tracks that take its type, the instants up to it."""
+        accept, process = self._own.get(type(record)) or (self._acceptable, None)
+        if not accept(record):
             return []
-        out = self._begin(rec.t)
+        t = record.t
+        if self.time.t is None:  # the first measurement: everything starts
+            self.time.start(t)
+            for track in self.tracks:
+                track.start(t)
+        out = self._emit(t, through=False) if self.time.next_out < t else []
+        self.time.advance(t)
+        if process is not None:
+            process(record)
+        self._give(type(record), record)
+        return out + self._emit(t, through=True) if self.time.next_out <= t else out
+
+    def _give(self, kind: type, item) -> None:
+        """A record or product to the tracks that take its kind, in output order."""
+        for take in self._takers.get(kind, ()):
+            take(item)
+
+    def _imu(self, rec: ImuSample) -> None:
         if self.inertial.gap(rec.t):
             for track in self.tracks:
                 track.gap(rec.t)
-        acceleration = self.inertial.step(rec.t, *sample)
+        acceleration = self.inertial.step(rec.t)
         if Motion in self._takers:  # a product is made only when a track takes it
             self._give(Motion, self.inertial.motion(rec.t, acceleration))
-        return self._end(rec, out)
 
-    def _exchange(self, rec: Exchange) -> list[Estimate]:
-        if not self.ranging.accept(rec):
-            return []
-        out = self._begin(rec.t)
+    def _exchange(self, rec: Exchange) -> None:
         d = self.ranging.distance(rec)
         if d is not None and Range in self._takers:
             self._give(Range, self.ranging.range(rec, d, self.time.t))
         for cycle in self.ranging.add(rec, d):
             self._cycle(cycle)
-        return self._end(rec, out)
 
     def _cycle(self, cycle) -> None:
         """A closed TDMA cycle: its fix (the SINS origin after a restart, the tracks waiting
@@ -256,54 +270,34 @@ class Estimator:
         if Tdoa in self._takers:
             self._give(Tdoa, self.ranging.tdoa(cycle, fix, self.time.t))
 
-    def _give(self, kind: type, item) -> None:
-        """A record or product to the tracks that take its kind, in output order."""
-        for take in self._takers.get(kind, ()):
-            take(item)
+    def _restartable(self, rec: Restart) -> bool:
+        if rec.device not in DEVICES:
+            raise ValueError(f"device {rec.device!r}: use one of {', '.join(DEVICES)}")
+        if math.isfinite(rec.t):
+            return True
+        self.input_rejections["restart_implausible"] += 1
+        return False
 
-    def _restart(self, rec: Restart) -> list[Estimate]:
+    def _restart(self, rec: Restart) -> None:
         """``device`` (one of ``DEVICES``) restarted: its clock began a new epoch at t, so
         what the tracks hold need not be where the vehicle is: each track resets, no cycle
         spans it, and after an IMU restart the strapdown realigns (host.inertial)."""
-        if rec.device not in DEVICES:
-            raise ValueError(f"device {rec.device!r}: use one of {', '.join(DEVICES)}")
-        if not math.isfinite(rec.t):
-            self.input_rejections["restart_implausible"] += 1
-            return []
-        out = self._begin(rec.t)
         for track in self.tracks:
             track.restart(rec.device, rec.t)
         self.ranging.restart()
         if rec.device == "imu":
             self.inertial.restart(rec.t, rec.uptime_s)
-        return self._end(rec, out)
 
-    def _other(self, rec) -> list[Estimate]:
-        """A record the estimator does not process: straight to the tracks that take it."""
+    def _acceptable(self, rec) -> bool:
+        """A record the estimator does not process goes straight to the tracks that take it."""
         if type(rec) not in self._takers:
             raise TypeError(f"no track takes {type(rec).__name__} records; enable one that does")
-        if not math.isfinite(rec.t):
-            self.input_rejections[f"{type(rec).__name__}_implausible"] += 1
-            return []
-        return self._end(rec, self._begin(rec.t))
+        if math.isfinite(rec.t):
+            return True
+        self.input_rejections[f"{type(rec).__name__}_implausible"] += 1
+        return False
 
     # ---------------------------------------------------------------- output instants
-
-    def _begin(self, t: float) -> list[Estimate]:
-        """Start the tracks at the first measurement; emit the instants before t."""
-        if self.time.t is None:
-            self.time.start(t)
-            for track in self.tracks:
-                track.start(t)
-        out = self._emit(t, through=False) if self.time.next_out < t else []
-        self.time.advance(t)
-        return out
-
-    def _end(self, rec, out: list[Estimate]) -> list[Estimate]:
-        """The record to the tracks that take its type; out and the estimates of the output
-        instants up to its time."""
-        self._give(type(rec), rec)
-        return out + self._emit(rec.t, through=True) if self.time.next_out <= rec.t else out
 
     def _emit(self, t: float, through: bool) -> list[Estimate]:
         """The estimates of the output instants before t (``through``: up to t inclusive)."""

@@ -52,7 +52,8 @@ class Inertial:
         self.t_imu: float | None = None
         self.t_aligned: float | None = None
         self._t_first: float | None = None  # the alignment counts from here (the power-up)
-        self._last_sample: tuple[tuple, tuple] | None = None  # (gyro, accel)
+        self.sample: tuple[tuple, tuple] | None = None  # the accepted sample's (gyro, accel)
+        self._last_sample: tuple[tuple, tuple] | None = None  # the alignment's last one
         self.origin = tuple(cfg.start)  # where the strapdown starts when its alignment ends
         self._origin_since: float | None = None  # after an IMU restart: the fixes from then on,
         self._origin_fixes = (np.zeros(2), 0)  # summed and counted, give it (at rest: their mean)
@@ -66,27 +67,29 @@ class Inertial:
         self.counts: Counter = Counter()
         self.rejections: Counter = Counter()
 
-    def accept(self, rec: ImuSample) -> tuple[tuple, tuple] | None:
-        """The sample's (gyro, accel) as plain floats (the strapdown's arithmetic is faster
-        on them than on small arrays), or None: rejected (counted by reason)."""
+    def accept(self, rec: ImuSample) -> bool:
+        """Whether the sample is taken (else counted by reason); taken, its (gyro, accel) as
+        plain floats are ``sample`` (the strapdown's arithmetic is faster on them than on
+        small arrays), for :meth:`step`."""
         self.counts["samples"] += 1
         t_s = rec.t
         gyro = tuple(map(float, rec.gyro))
         accel = tuple(map(float, rec.accel))
         if not (math.isfinite(t_s) and all(map(math.isfinite, gyro)) and all(map(math.isfinite, accel))):
             self.rejections["imu_implausible"] += 1
-            return None
+            return False
         if rec.uptime_s is not None and self._t_first is None:  # even on a stale sample
             self._t_first = self._power_up(t_s, rec.uptime_s)
         if not rec.nd_ok:  # a repeated register read: the next sample covers the interval
             self.rejections["imu_stale"] += 1
-            return None
+            return False
         if self.t_imu is not None and t_s <= self.t_imu:
             self.rejections["imu_out_of_order"] += 1
-            return None
+            return False
         if max(map(abs, gyro)) >= self._gyro_limit:
             self.counts["overrange"] += 1  # saturated, still the best reading there is
-        return gyro, accel
+        self.sample = gyro, accel
+        return True
 
     def _power_up(self, t_s: float, uptime_s: float) -> float | None:
         """When the board that has been up *uptime_s* at t_s powered up, if that is within
@@ -113,8 +116,10 @@ class Inertial:
         """IMU gaps so far: ``bridged`` (the state kept) and ``reinit`` (the tracks restarted)."""
         return {"bridged": self.counts["gaps_bridged"], "reinit": self.counts["gaps_reinit"]}
 
-    def step(self, t: float, gyro: tuple, accel: tuple) -> tuple | None:
-        """Advance alignment or strapdown; the nav-frame horizontal acceleration once aligned."""
+    def step(self, t: float) -> tuple | None:
+        """Advance alignment or strapdown with the accepted ``sample``, at t; the nav-frame
+        horizontal acceleration once aligned."""
+        gyro, accel = self.sample
         if self._t_first is None:
             self._t_first = t
         try:

@@ -96,9 +96,8 @@ def inertial(**kw) -> Inertial:
 
 
 def feed(part: Inertial, t: float, gyro=(0.0, 0.0, 0.0), accel=(0.0, 0.0, GRAVITY), **kw):
-    sample = part.accept(ImuSample(t, gyro, accel, **kw))
-    if sample is not None:
-        return part.step(t, *sample)
+    if part.accept(ImuSample(t, gyro, accel, **kw)):
+        return part.step(t)
     return "rejected"
 
 
