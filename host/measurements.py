@@ -25,8 +25,7 @@ Range        one corrected exchange distance as a range measurement (each exchan
              EKF/UKF take it with ``tight = "toa"``, 001's tc and fatci always)
 Tdoa         one closed TDMA cycle's range differences to the reference anchor
              (``tight = "tdoa"``); ``meas`` None when too few anchors remain
-Fix          a WSN position fix of a closed TDMA cycle (host.wsn.Solver): ``p`` (m),
-             ``cov`` its 2x2 covariance (the CRLB at p), the anchors it used
+Fix          a WSN position fix of a closed TDMA cycle (host.wsn.Solver)
 FixRefused   a closed cycle that gave no fix, and why
 ===========  ===========================================================================
 
@@ -37,10 +36,7 @@ a record it does not process itself straight to those tracks.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    import numpy as np
+from typing import Any
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,14 +93,15 @@ class Tdoa:
 
 @dataclass(frozen=True, slots=True)
 class Fix:
-    """A WSN position fix. ``cov`` is the 2x2 position covariance (CRLB at ``p``)."""
+    """A WSN position fix. ``cov`` is the 2x2 position covariance (CRLB at ``p``); ``dropped``:
+    the anchors left out as outliers."""
 
     t: float
-    p: np.ndarray
-    cov: np.ndarray
+    p: Any  # 2, m
+    cov: Any  # 2x2, m^2
     anchors: tuple[int, ...]
     chi2: float
-    dropped: tuple[int, ...] = ()  # anchors the solver dropped as outliers
+    dropped: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -26,7 +26,8 @@ import numpy as np
 
 from navtwin.common.schema import key, positive
 from navtwin.host.filters.errorstate import NAV, ErrorStateFilter
-from navtwin.host.measurements import Fix, ImuSample
+from navtwin.host.measurements import ImuSample
+from navtwin.host.measurements import Fix
 from navtwin.host.wsn import chi2_gate
 
 from .base import Track, estimate

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.measurements import Fix, Motion, Range, Tdoa
+from navtwin.host.measurements import Motion, Range, Tdoa
+from navtwin.host.measurements import Fix
 from navtwin.host.wsn import chi2_gate
 
 from .base import Track, estimate

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.measurements import Fix, FixRefused
+from navtwin.host.measurements import FixRefused
+from navtwin.host.measurements import Fix
 
 from .base import Track, estimate
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from navtwin.host.measurements import Fix
-from navtwin.host.wsn import (AnchorLayout, CycleGrouper, Solver, tdoa_closed_form,
-                              tdoa_covariance, tdoa_whitening, toa_linear)
+from navtwin.host.wsn import (AnchorLayout, CycleGrouper, Solver, tdoa_closed_form, tdoa_covariance,
+                              tdoa_whitening, toa_linear)
 
 from .navsynth import OFFICE_ANCHORS
 
