@@ -5,28 +5,107 @@ A track is a class with a ``name`` (its ``filter`` in the output and its section
 :func:`navtwin.common.schema.key` (units, docs, checks: the config reads and documents it), and:
 
 * :meth:`handlers`: which records (host.measurements: ImuSample, Exchange, ...) and shared
-  products (Motion, Range, Tdoa, Fix, FixRefused: host.measurements) it takes, each with the method
-  that takes it; the estimator calls these in time order;
+  products (host.measurements: Motion, Range, Tdoa, Fix, FixRefused) it takes, each with the
+  method that takes it; the estimator calls these in time order;
+* :meth:`predict` (with ``predicts = True``): a state on the shared motion model, predicted
+  to the filter time with the other such tracks (:meth:`TrackContext.sync`);
 * :meth:`estimate`: what it emits at an output instant (an Estimate, or None before it has
   one), with ``extrapolated`` set from its last aiding;
-* :meth:`restart`: its reset when a device restarts (a discontinuity), counted with
-  :meth:`count_reinit`; :meth:`gap` likewise after a gap in the IMU stream too long to bridge; a track that starts again from a WSN fix sets ``reinit_since``;
+* :meth:`restart`: its reset when a device restarts, :meth:`gap` after a gap in the IMU
+  stream too long to bridge; a track that then starts again from the next WSN fix calls
+  :meth:`discontinuity`, and the estimator offers it each new fix (:meth:`offer_fix`,
+  which calls its :meth:`reinit_at`);
 * its stats: ``updates`` and ``rejections`` (Counters by kind or reason) and ``reinits``.
 
-The estimator (``est``) owns what several tracks share: the time base (``est.t``), the
-output instants, the alignment and the strapdown (``est.sins``, ``est.aligned``), the WSN
-fixes (``est.fixes``), the motion model and the shared settings (``est.cfg``).
+A track sees the estimator only through its :class:`TrackContext` (``self.ctx``): the time
+base, the shared settings and models, the strapdown and the WSN fixes, read-only. Nothing
+else of the estimator is reachable from it: an undeclared member is an AttributeError.
 """
 from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, ClassVar
+from typing import Callable, ClassVar
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from navtwin.host.estimator import Estimator
+
+class TrackContext:
+    """What a track may use of the estimator (``self.ctx``), and nothing more.
+
+    Built by the estimator from its parts: the settings and models (fixed for the run), the
+    time base (host.timebase.FilterTime: ``t``, ``t_predicted``, ``sync``, ``stale``), the
+    inertial part (host.inertial.Inertial: ``sins``, ``origin``, ``t_imu``, ``t_aligned``),
+    the ranging part (host.ranging.Ranging: ``fixes``) and the estimator's
+    ``on_innovation``. The dynamic members are read through at each access, so a track sees
+    the current value; a track changes none of them.
+    """
+
+    __slots__ = {
+        "cfg": "The estimator's settings (host.settings.EstimatorConfig: the host config's "
+               "[filters] keys, the site, the anchors, the start).",
+        "model": "The shared constant-acceleration motion model (host.filters."
+                 "ConstantAcceleration, jerk_psd) that the fusion tracks predict on.",
+        "layout": "The anchors (host.wsn.AnchorLayout: ids, positions, the tag height).",
+        "calibration": "001's range calibration (host.calibration.Calibration: f, c_i, "
+                       "sigma(d)), or None without one.",
+        "sync": "sync(): predict every track with ``predicts`` to the filter time ``t`` "
+                "(lazily: call it before an update when t_predicted < t).",
+        "stale": "stale(b, t_aided) -> bool: whether an estimate at b, last aided at t_aided "
+                 "(None: never, only the configured start), is extrapolated "
+                 "(extrapolated_after_s).",
+        "_time": "the time base", "_inertial": "the strapdown's owner",
+        "_ranging": "the fixes' owner", "_estimator": "on_innovation's owner",
+    }
+
+    def __init__(self, cfg, model, layout, calibration, *, time, inertial, ranging, estimator) -> None:
+        self.cfg, self.model, self.layout, self.calibration = cfg, model, layout, calibration
+        self.sync, self.stale = time.sync, time.stale
+        self._time, self._inertial, self._ranging, self._estimator = time, inertial, ranging, estimator
+
+    @property
+    def t(self) -> float | None:
+        """The filter time (s): the latest measurement's; None before the first."""
+        return self._time.t
+
+    @property
+    def t_predicted(self) -> float | None:
+        """The time (s) the tracks with ``predicts`` are predicted to (<= t; :meth:`sync`)."""
+        return self._time.t_predicted
+
+    @property
+    def on_innovation(self) -> Callable | None:
+        """fn(t, filter, kind, dim, nis, accepted), to call after each gated update (the
+        NIS the report draws), or None (the usual: test it before building the arguments)."""
+        return self._estimator.on_innovation
+
+    @property
+    def sins(self):
+        """The estimator's strapdown (host.sins.Strapdown: p, v, yaw, f_n, copy()), None
+        until the alignment ends (and again from an IMU restart until it realigns)."""
+        return self._inertial.sins
+
+    @property
+    def origin(self) -> tuple[float, float]:
+        """Where the strapdown starts when its alignment ends (m): the configured start, or
+        after an IMU restart the mean of the fixes since."""
+        return self._inertial.origin
+
+    @property
+    def t_imu(self) -> float | None:
+        """The time (s) of the latest IMU sample the strapdown took."""
+        return self._inertial.t_imu
+
+    @property
+    def t_aligned(self) -> float | None:
+        """The time (s) the alignment ended, None while it runs."""
+        return self._inertial.t_aligned
+
+    @property
+    def fixes(self) -> list:
+        """The last two WSN fixes (host.measurements.Fix), oldest first, of distinct times; fewer
+        at the start and after a restart."""
+        return self._ranging.fixes
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,13 +144,20 @@ class Track:
     uses_strapdown: ClassVar[bool] = False
     #: Takes updates, so its stats report updates and rejections.
     aided: ClassVar[bool] = True
+    #: Has a state on the shared motion model: :meth:`predict` is called with the others.
+    predicts: ClassVar[bool] = False
 
-    def __init__(self, est: Estimator, settings=None) -> None:
-        self.est = est
+    def __init__(self, ctx: TrackContext, settings=None) -> None:
+        self.ctx = ctx
         self.settings = self.Settings() if settings is None else settings
         self.updates: Counter = Counter()
         self.rejections: Counter = Counter()
         self.reinits: Counter = Counter()
+        #: The time of a discontinuity: the track starts again at the first WSN fix no
+        #: older than it (:meth:`offer_fix`); None while it runs.
+        self.reinit_since: float | None = None
+        #: The fix it last started again at: its cycle's other updates are the same ranges.
+        self.reinit_fix = None
 
     def handlers(self) -> dict[type, Callable]:
         """Record or product type -> the method that takes it."""
@@ -80,19 +166,33 @@ class Track:
     def start(self, t: float) -> None:
         """The first measurement of the run, at t."""
 
+    def predict(self, dt: float) -> None:
+        """Predict the state dt seconds on (only with ``predicts``; :meth:`TrackContext.sync`
+        calls it, dt >= 0)."""
+
     def restart(self, device: str, t: float) -> None:
         """``device`` restarted at t: what the track holds need not be where the vehicle is."""
 
     def gap(self, t: float) -> None:
         """The IMU stream had a gap longer than ``imu_gap_s`` before t, which the strapdown
-        did not bridge (host.estimator)."""
+        did not bridge (host.inertial)."""
 
-    #: Set to the time of a discontinuity by a track that starts again from the first WSN
-    #: fix newer than it: the estimator then calls :meth:`reinit_at` with that fix.
-    reinit_since: float | None = None
+    def discontinuity(self, cause: str, t: float) -> None:
+        """Off for ``cause`` at t: start again from the next WSN fix no older than t
+        (counted once per discontinuity, however many causes it has)."""
+        if self.reinit_since is None:
+            self.count_reinit(cause)
+        self.reinit_since = t
 
-    def reinit_at(self, fix) -> None:
-        """Start again at *fix* (a host.measurements.Fix) and clear ``reinit_since``."""
+    def offer_fix(self, fix) -> None:
+        """A new WSN fix (host.measurements.Fix), before the tracks that take fixes see it: a track
+        waiting since a discontinuity no later than the fix starts again at it."""
+        since = self.reinit_since
+        if since is not None and fix.t >= since and self.reinit_at(fix):
+            self.reinit_since, self.reinit_fix = None, fix
+
+    def reinit_at(self, fix) -> bool:
+        """Start again at *fix* (a host.measurements.Fix); False: not yet, keep waiting."""
         raise NotImplementedError
 
     @property
@@ -105,4 +205,3 @@ class Track:
 
     def count_reinit(self, cause: str) -> None:
         self.reinits[cause] += 1
-        self.est.reinit_count += 1

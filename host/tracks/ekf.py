@@ -12,4 +12,4 @@ class EkfTrack(TightTrack):
     name = "ekf"
 
     def make_filter(self, x0, P0):
-        return ExtendedKalmanFilter(x0, P0, self.est.model)
+        return ExtendedKalmanFilter(x0, P0, self.ctx.model)

@@ -1,7 +1,7 @@
 """What 001's tracks (lc, tc, fatci) share: a closed-loop error-state filter
 (host.filters.errorstate) on a strapdown of their own.
 
-Strapdown. The estimator's strapdown (``est.sins``) is the pure SINS, which the sins track
+Strapdown. The estimator's strapdown (``ctx.sins``) is the pure SINS, which the sins track
 reports and the CA tracks measure; an error-state track corrects its strapdown after every
 update, so it runs a copy: taken when the alignment ends, then stepped with every IMU sample
 the estimator accepts (the same samples, the same integration) and predicted at the IMU
@@ -54,16 +54,14 @@ class ErrorStateTrack(Track):
     uses_strapdown = True
     extra = 0  # random-walk states after the nav part
 
-    def __init__(self, est, settings=None) -> None:
-        super().__init__(est, settings)
+    def __init__(self, ctx, settings=None) -> None:
+        super().__init__(ctx, settings)
         s = self.settings
         self._gyro_psd = (math.radians(s.gyro_noise_deg_rt_hr) / 60.0) ** 2
         self._accel_psd = (s.accel_noise_m_s_rt_hr / 60.0) ** 2
         self.nav = None  # the track's strapdown (host.sins.Strapdown)
         self.filter: ErrorStateFilter | None = None
         self.t_nav: float | None = None
-        self.reinit_since: float | None = None
-        self._reinit_fix: Fix | None = None
         self._aided: float | None = None
         self._gated_since: float | None = None
 
@@ -98,11 +96,11 @@ class ErrorStateTrack(Track):
         self._gated_since = None
 
     def imu(self, rec: ImuSample) -> None:
-        est = self.est
-        if est.sins is None:
+        sins = self.ctx.sins
+        if sins is None:
             return
         if self.nav is None:  # the alignment ended with this sample: start from its strapdown
-            self.nav = est.sins.copy()
+            self.nav = sins.copy()
             self._reset()
             self.t_nav = rec.t
             self.reinit_since = None
@@ -120,39 +118,34 @@ class ErrorStateTrack(Track):
         if self.filter is not None:
             self.rejections["numerical_reset"] += 1
         self.filter = None
-        sp, sv, _ = self.est.cfg.p0_sigma
+        sp, sv, _ = self.ctx.cfg.p0_sigma
         self._new_filter(sp**2 * np.eye(2), sv**2)
 
     def restart(self, device: str, t: float) -> None:
-        self._discontinuity("restart", t)
+        self.discontinuity("restart", t)
         if device == "imu":
             self.nav = self.filter = None  # a new alignment gives the attitude
 
     def gap(self, t: float) -> None:
-        self._discontinuity("gap", t)
+        self.discontinuity("gap", t)
 
-    def _discontinuity(self, cause: str, t: float) -> None:
-        if self.reinit_since is None:
-            self.count_reinit(cause)
-        self.reinit_since = t
-
-    def reinit_at(self, fix: Fix) -> None:
+    def reinit_at(self, fix: Fix) -> bool:
         """Start again at ``fix``, at rest with ``reinit_sigma`` on velocity, the attitude
         kept; before the strapdown realigned after an IMU restart, wait for it."""
         if self.nav is None:
-            return
-        sv, _ = self.est.cfg.reinit_sigma
+            return False
+        sv, _ = self.ctx.cfg.reinit_sigma
         self.nav.place(fix.p, (0.0, 0.0))
         self._new_filter(fix.cov, sv**2)
-        self.reinit_since, self._reinit_fix = None, fix
         self._aided = fix.t
+        return True
 
     # -- updates ----------------------------------------------------------------------------
     def ready(self, t: float) -> bool:
         """Whether a measurement at t can update the track (else counted ``late``)."""
         if self.nav is None or self.pending:
             return False
-        if self.t_nav - t > self.est.cfg.max_lag_s:
+        if self.t_nav - t > self.ctx.cfg.max_lag_s:
             self.rejections["late"] += 1
             return False
         return True
@@ -164,7 +157,7 @@ class ErrorStateTrack(Track):
 
     def _update(self, kind: str, t: float, z, H, R, dof: int) -> bool:
         """One gated update and its feedback into the strapdown; counts the outcome."""
-        cfg = self.est.cfg
+        cfg = self.ctx.cfg
         try:
             inn = self.filter.update(z, H, R, chi2_gate(dof, cfg.gate_probability))
         except np.linalg.LinAlgError:
@@ -175,7 +168,7 @@ class ErrorStateTrack(Track):
             if self._gated_since is None:
                 self._gated_since = t
             elif t - self._gated_since > cfg.gate_reopen_s:
-                self._discontinuity("gated", t)  # every update gated out so long: the track is off
+                self.discontinuity("gated", t)  # every update gated out so long: the track is off
             return False
         dx = self.filter.take_nav()
         self.nav.correct(dx[0:2], dx[2:4], dx[4:7])
@@ -186,15 +179,15 @@ class ErrorStateTrack(Track):
 
     # -- output -----------------------------------------------------------------------------
     def estimate(self, b: float, yaw: float):
-        est = self.est
+        ctx = self.ctx
         if self.nav is None:
-            sp, sv, _ = est.cfg.p0_sigma
+            sp, sv, _ = ctx.cfg.p0_sigma
             cov = np.diag([sp**2, sp**2, sv**2, sv**2])
-            return estimate(b, self.name, est.origin, (0.0, 0.0), yaw, cov, est.stale(b, None))
+            return estimate(b, self.name, ctx.origin, (0.0, 0.0), yaw, cov, ctx.stale(b, None))
         lead = b - self.t_nav
         p, v = self.nav.p[:2] + lead * self.nav.v[:2], self.nav.v[:2]
         F = np.eye(4)
         F[0, 2] = F[1, 3] = lead
         cov = F.dot(self.filter.P[:4, :4]).dot(F.T)
-        stale = self.pending or est.stale(b, self._aided)
+        stale = self.pending or ctx.stale(b, self._aided)
         return estimate(b, self.name, p, v, self.nav.yaw, cov, stale)

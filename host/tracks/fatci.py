@@ -8,7 +8,7 @@ deviation::
 
 Eq. 31 is written R_{k+1} = S^b R_k; applied recursively it would shrink or grow R without
 bound whenever S != 1, so R_k is read as the nominal R_0 of every range. sigma(d) is the
-calibration's fitted curve (``est.calibration.sigma``, from ``navtwin calibrate``) when the
+calibration's fitted curve (``ctx.calibration.sigma``, from ``navtwin calibrate``) when the
 host has one, else the polynomial ``sigma_poly_m`` of these settings.
 
 Defaults: input peaks 0.1, 0.4, 0.7 m (0.4 = range_sigma_m's default); output peaks 0.05,
@@ -56,13 +56,13 @@ class FatciTrack(TcTrack):
     name = "fatci"
     Settings = FatciSettings
 
-    def __init__(self, est, settings=None) -> None:
-        super().__init__(est, settings)
+    def __init__(self, ctx, settings=None) -> None:
+        super().__init__(ctx, settings)
         s = self.settings
         fis = FuzzySystem(s.sigma_sets_m, s.s_sets)
         self._grid = np.linspace(s.sigma_sets_m[0], s.sigma_sets_m[2], _TABLE_POINTS)
         self._table = fis(self._grid) ** s.b * self._sigma2
-        calibration = getattr(est, "calibration", None)
+        calibration = ctx.calibration
         self.sigma = calibration.sigma if calibration is not None else np.polynomial.Polynomial(s.sigma_poly_m)
 
     def range_variance(self, row: int, distance: float) -> float:

@@ -1,9 +1,9 @@
 """What the fusion tracks (kf, ekf, ukf) share: a filter on the constant-acceleration
 state x = [x, y, vx, vy, ax, ay] (host.filters), gated updates, re-initialisation.
 
-Time. The fusion tracks keep one predicted time, the estimator's (``est.t_predicted``):
-before an update the estimator predicts every fusion track to the filter time at once
-(:meth:`Estimator.sync`), so one predict spans the exchanges that updated none of them. A
+Time. The fusion tracks keep one predicted time, the estimator's (``ctx.t_predicted``):
+before an update a track has every fusion track predicted to the filter time at once
+(:meth:`TrackContext.sync`), so one predict spans the exchanges that updated none of them. A
 measurement older than the filter time is applied with its lag through the motion model
 if the lag is at most ``max_lag_s``, else rejected as ``late``.
 
@@ -30,12 +30,11 @@ POSITION_KINDS = frozenset(("fix", "tdoa", "range"))  # the updates that aid a t
 
 class FusionTrack(Track):
     uses_strapdown = True
+    predicts = True
 
-    def __init__(self, est, settings=None) -> None:
-        super().__init__(est, settings)
+    def __init__(self, ctx, settings=None) -> None:
+        super().__init__(ctx, settings)
         self.filter = None
-        self.reinit_since: float | None = None  # a fix newer than this starts the track again
-        self._reinit_fix: Fix | None = None  # the fix it last started again at
         self._aided: float | None = None  # time of its last position update
         self._gated_since: dict[str, float] = {}  # kind -> first rejection of a run of them
 
@@ -52,11 +51,11 @@ class FusionTrack(Track):
         self._gated_since = {}  # a new track has no run of rejections
 
     def _p0(self) -> np.ndarray:
-        sp, sv, sa = self.est.cfg.p0_sigma
+        sp, sv, sa = self.ctx.cfg.p0_sigma
         return np.diag([sp**2, sp**2, sv**2, sv**2, sa**2, sa**2])
 
     def start(self, t: float) -> None:
-        self._new_filter(np.array([*self.est.cfg.start, 0.0, 0.0, 0.0, 0.0]), self._p0())
+        self._new_filter(np.array([*self.ctx.cfg.start, 0.0, 0.0, 0.0, 0.0]), self._p0())
 
     def predict(self, dt: float) -> None:
         try:
@@ -67,35 +66,28 @@ class FusionTrack(Track):
     def _reset(self) -> None:
         """A covariance lost positive definiteness (never seen; rounding can do it): start
         again at the latest WSN fix, else the SINS."""
-        est = self.est
+        ctx = self.ctx
         self.rejections["numerical_reset"] += 1
-        p = est.fixes[-1].p if est.fixes else est.sins.p[:2] if est.sins else est.cfg.start
-        v = est.sins.v[:2] if est.sins else (0.0, 0.0)
+        p = ctx.fixes[-1].p if ctx.fixes else ctx.sins.p[:2] if ctx.sins else ctx.cfg.start
+        v = ctx.sins.v[:2] if ctx.sins else (0.0, 0.0)
         self._new_filter(np.array([*p, *v, 0.0, 0.0]), self._p0())
 
     def restart(self, device: str, t: float) -> None:
-        self._discontinuity("restart", t)
+        self.discontinuity("restart", t)
 
     def gap(self, t: float) -> None:
-        self._discontinuity("gap", t)  # its motion input stopped: the state is not the vehicle's
+        self.discontinuity("gap", t)  # its motion input stopped: the state is not the vehicle's
 
-    def _discontinuity(self, cause: str, t: float) -> None:
-        """Off for ``cause``: start again from the next fix newer than t (counted once per
-        discontinuity, however many causes it has)."""
-        if self.reinit_since is None:
-            self.count_reinit(cause)
-        self.reinit_since = t
-
-    def reinit_at(self, fix: Fix) -> None:
+    def reinit_at(self, fix: Fix) -> bool:
         """Start again at ``fix``: its position and covariance, at rest but with
         ``reinit_sigma`` on velocity and acceleration (they are unknown). The track takes no
         other update from this fix's cycle (the same ranges)."""
-        sv, sa = self.est.cfg.reinit_sigma
+        sv, sa = self.ctx.cfg.reinit_sigma
         P0 = np.diag([0.0, 0.0, sv**2, sv**2, sa**2, sa**2])
         P0[:2, :2] = fix.cov
         self._new_filter(np.array([*fix.p, 0.0, 0.0, 0.0, 0.0]), P0)
-        self.reinit_since, self._reinit_fix = None, fix
         self._aided = fix.t
+        return True
 
     # -- updates ----------------------------------------------------------------------------
     def motion(self, m: Motion) -> None:
@@ -103,18 +95,18 @@ class FusionTrack(Track):
 
     def _update(self, kind: str, z, R, meas, t: float) -> None:
         """One gated update; counts the outcome by kind or reason."""
-        est = self.est
-        cfg = est.cfg
-        if est.t - t > cfg.max_lag_s:
+        ctx = self.ctx
+        cfg = ctx.cfg
+        if ctx.t - t > cfg.max_lag_s:
             self.rejections["late"] += 1
             return
-        if est.t_predicted < est.t:
-            est.sync()
+        if ctx.t_predicted < ctx.t:
+            ctx.sync()
         f = self.filter
         try:
             inn = f.update(z, R, meas, chi2_gate(meas.dim, cfg.gate_probability))
-            if est.on_innovation is not None:
-                est.on_innovation(t, self.name, kind, meas.dim, inn.nis, inn.accepted)
+            if ctx.on_innovation is not None:
+                ctx.on_innovation(t, self.name, kind, meas.dim, inn.nis, inn.accepted)
             if not inn.accepted:
                 gated_for = t - self._gated_since.setdefault(kind, t)
                 if gated_for > cfg.gate_reopen_s and kind not in POSITION_KINDS:
@@ -125,7 +117,7 @@ class FusionTrack(Track):
                     self.rejections["gate"] += 1
                     if gated_for > cfg.gate_reopen_s:
                         # every position update gated out for so long: the track, not the WSN, is off
-                        self._discontinuity("gated", t)
+                        self.discontinuity("gated", t)
                     return
         except np.linalg.LinAlgError:
             self._reset()
@@ -138,9 +130,9 @@ class FusionTrack(Track):
 
     # -- output -----------------------------------------------------------------------------
     def estimate(self, b: float, yaw: float):
-        est = self.est
-        x, P = est.model.propagate(self.filter.x, self.filter.P, b - est.t_predicted)
-        stale = self.pending or est.stale(b, self._aided)  # waiting: off
+        ctx = self.ctx
+        x, P = ctx.model.propagate(self.filter.x, self.filter.P, b - ctx.t_predicted)
+        stale = self.pending or ctx.stale(b, self._aided)  # waiting: off
         return estimate(b, self.name, x[:2], x[2:4], yaw, P[:4, :4], stale)
 
 
@@ -149,7 +141,7 @@ class TightTrack(FusionTrack):
     reference anchor (``tight = "tdoa"``) or each range at its own time (``"toa"``)."""
 
     def handlers(self) -> dict:
-        if self.est.cfg.tight == "toa":  # the estimator makes Range products for any taker
+        if self.ctx.cfg.tight == "toa":  # the estimator makes Range and Tdoa products for their takers
             return {**super().handlers(), Range: self.range}
         return {**super().handlers(), Tdoa: self.tdoa}
 
@@ -157,7 +149,7 @@ class TightTrack(FusionTrack):
         self._update("range", m.z, m.R, m.meas, m.t)
 
     def tdoa(self, m: Tdoa) -> None:
-        if m.fix is not None and m.fix is self._reinit_fix:
+        if m.fix is not None and m.fix is self.reinit_fix:
             return
         self.rejections["implausible"] += m.implausible
         if m.meas is None:

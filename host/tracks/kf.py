@@ -12,13 +12,13 @@ class KfTrack(FusionTrack):
     name = "kf"
 
     def make_filter(self, x0, P0):
-        return KalmanFilter(x0, P0, self.est.model)
+        return KalmanFilter(x0, P0, self.ctx.model)
 
     def handlers(self) -> dict:
         return {**super().handlers(), Fix: self.fix}
 
     def fix(self, fix: Fix) -> None:
-        if fix is self._reinit_fix:
+        if fix is self.reinit_fix:
             return
-        est = self.est
-        self._update("fix", fix.p, fix.cov, position_fix(max(est.t - fix.t, 0.0)), fix.t)
+        ctx = self.ctx
+        self._update("fix", fix.p, fix.cov, position_fix(max(ctx.t - fix.t, 0.0)), fix.t)

@@ -20,7 +20,7 @@ class LcTrack(ErrorStateTrack):
         return {**super().handlers(), Fix: self.fix}
 
     def fix(self, fix: Fix) -> None:
-        if fix is self._reinit_fix or not self.ready(fix.t):
+        if fix is self.reinit_fix or not self.ready(fix.t):
             return
         p, lead = self.position_at(fix.t)
         H = np.zeros((2, NAV))

@@ -33,22 +33,23 @@ class SinsTrack(Track):
             self.count_reinit("restart")
 
     def gap(self, t: float) -> None:
-        if self.est.sins is not None:  # dead reckoning over an unknown stretch
+        if self.ctx.sins is not None:  # dead reckoning over an unknown stretch
             self.count_reinit("gap")
 
     def estimate(self, b: float, yaw: float):
-        est = self.est
-        sp, sv, _ = est.cfg.p0_sigma
+        ctx = self.ctx
+        sp, sv, _ = ctx.cfg.p0_sigma
         pp, pv, vv = float(sp) ** 2, 0.0, float(sv) ** 2
-        if est.sins is None:
-            p, v = est.origin, (0.0, 0.0)
+        sins = ctx.sins
+        if sins is None:
+            p, v = ctx.origin, (0.0, 0.0)
         else:
-            dt = b - est.t_imu
-            v = est.sins.v[:2]
-            p = est.sins.p[:2] + v * dt
+            dt = b - ctx.t_imu
+            v = sins.v[:2]
+            p = sins.p[:2] + v * dt
             # velocity random walk q per axis: P_pp = q T^3/3, P_pv = q T^2/2, P_vv = q T
-            T = b - est.t_aligned
+            T = b - ctx.t_aligned
             q = (self.settings.vrw_m_s_rt_hr / 60.0) ** 2
             pp, pv, vv = pp + q * (T**3 / 3), pv + q * (T**2 / 2), vv + q * T
         cov = [pp, 0.0, pv, 0.0, 0.0, pp, 0.0, pv, pv, 0.0, vv, 0.0, 0.0, pv, 0.0, vv]  # (x, y) alike
-        return estimate(b, self.name, p, v, yaw, cov, est.stale(b, est.t_imu))
+        return estimate(b, self.name, p, v, yaw, cov, ctx.stale(b, ctx.t_imu))

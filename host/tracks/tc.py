@@ -38,10 +38,10 @@ class TcTrack(ErrorStateTrack):
     name = "tc"
     Settings = TcSettings
 
-    def __init__(self, est, settings=None) -> None:
-        self.extra = len(est.layout.ids)  # one NLOS state per anchor, in the layout's order
-        super().__init__(est, settings)
-        self._sigma2 = est.cfg.range_sigma_m**2
+    def __init__(self, ctx, settings=None) -> None:
+        self.extra = len(ctx.layout.ids)  # one NLOS state per anchor, in the layout's order
+        super().__init__(ctx, settings)
+        self._sigma2 = ctx.cfg.range_sigma_m**2
 
     def extra_psd(self) -> float:
         return self.settings.nlos_walk_m_rt_s**2
@@ -61,7 +61,7 @@ class TcTrack(ErrorStateTrack):
             return
         row = int(m.meas.idx[0])
         p, lead = self.position_at(m.t)
-        r, u = self.est.layout.geometry(p, m.meas.idx)
+        r, u = self.ctx.layout.geometry(p, m.meas.idx)
         rho_wsn = float(m.z[0])
         H = np.zeros((1, NAV + self.extra))
         H[0, 0:2] = u[0]

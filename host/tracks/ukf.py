@@ -24,4 +24,4 @@ class UkfTrack(TightTrack):
 
     def make_filter(self, x0, P0):
         s = self.settings
-        return UnscentedKalmanFilter(x0, P0, self.est.model, s.alpha, s.beta, s.kappa)
+        return UnscentedKalmanFilter(x0, P0, self.ctx.model, s.alpha, s.beta, s.kappa)

@@ -31,11 +31,11 @@ class WsnTrack(Track):
         self.rejections[m.reason] += 1
 
     def restart(self, device: str, t: float) -> None:
-        if self.est.fixes:
+        if self.ctx.fixes:
             self.count_reinit("restart")
 
     def estimate(self, b: float, yaw: float):
-        fixes = self.est.fixes
+        fixes = self.ctx.fixes
         if len(fixes) < 2:
             return None
         f0, f1 = fixes
@@ -45,4 +45,4 @@ class WsnTrack(Track):
         cov[:2, :2] = f1.cov
         cov[:2, 2:] = cov[2:, :2] = f1.cov / dt
         cov[2:, 2:] = (f0.cov + f1.cov) / dt**2
-        return estimate(b, self.name, f1.p, v, None, cov, self.est.stale(b, f1.t))
+        return estimate(b, self.name, f1.p, v, None, cov, self.ctx.stale(b, f1.t))

@@ -39,8 +39,8 @@ class Toy(Track):
     name = "{name}"
     Settings = ToySettings
 
-    def __init__(self, est, settings=None):
-        super().__init__(est, settings)
+    def __init__(self, ctx, settings=None):
+        super().__init__(ctx, settings)
         self.last = None
 
     def handlers(self):
@@ -55,7 +55,7 @@ class Toy(Track):
         if f is None:
             return None
         return estimate(b, self.name, (f.p[0] + self.settings.offset_m, f.p[1]), (0.0, 0.0), None,
-                        [0.0] * 16, self.est.stale(b, f.t))
+                        [0.0] * 16, self.ctx.stale(b, f.t))
 '''
 
 

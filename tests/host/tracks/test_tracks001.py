@@ -13,6 +13,7 @@ from navtwin.host.estimator import Estimator
 from navtwin.host.settings import EstimatorConfig
 from navtwin.host.filters.fuzzy import FuzzySystem
 from navtwin.host.measurements import Exchange, ImuSample
+from navtwin.host.tracks.base import TrackContext
 from navtwin.host.tracks.fatci import FatciSettings, FatciTrack
 from navtwin.host.tracks.lc import LcTrack
 from navtwin.host.tracks.tc import TcSettings
@@ -56,7 +57,7 @@ def test_the_fuzzy_system_equals_scikit_fuzzy(inputs, outputs):
 def test_fatci_r_is_s_to_the_b_times_the_nominal_r():
     est = Estimator(office_config(filters=("fatci",)))
     s = FatciSettings()
-    track = FatciTrack(est, s)
+    track = FatciTrack(est.context, s)
     fis = FuzzySystem(s.sigma_sets_m, s.s_sets)
     for d in (1.0, 5.0, 12.0, 30.0):
         sigma = s.sigma_poly_m[0] + s.sigma_poly_m[1] * d
@@ -72,8 +73,9 @@ def test_fatci_takes_sigma_of_d_from_the_estimators_calibration():
             return 0.7  # MO fully: S is the MO set's centroid
 
     est = Estimator(office_config(filters=("fatci",)))
-    est.calibration = Calibration()
-    track = FatciTrack(est)
+    ctx = TrackContext(est.cfg, est.context.model, est.layout, Calibration(), time=est.time,
+                       inertial=est.inertial, ranging=est.ranging, estimator=est)
+    track = FatciTrack(ctx)
     s = track.settings
     assert track.range_variance(2, 3.0) == pytest.approx(((s.s_sets[1] + 2 * s.s_sets[2]) / 3) ** s.b * 0.16,
                                                          rel=1e-4)
