@@ -32,7 +32,6 @@ import json
 import math
 import os
 import re
-import tomllib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from hashlib import sha256
@@ -43,6 +42,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from scipy.stats import t as student_t
 
+from navtwin.common import tomlfile
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
 from navtwin.host.output import estimate_line
 from navtwin.host.replay import emulator_settings
@@ -90,7 +90,7 @@ def default_filters(sc: Scenario) -> tuple[str, ...]:
 @functools.lru_cache(maxsize=4)
 def _scenario(text: str, name: str) -> Scenario:
     # tasks carry the canonical TOML (a Scenario does not pickle); parsed once per worker
-    return parse_scenario(tomllib.loads(text), name)
+    return parse_scenario(tomlfile.parse(text, name), name)
 
 
 def seed_cells(sc: Scenario, seed: int, filters: tuple[str, ...],
