@@ -10,11 +10,11 @@ run through the host's pipeline with the new track.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
-import textwrap
 from pathlib import Path
+
+from .helpers import navtwin
+from .packages import write
 
 #: the package, one module per extension point (a module that imports emulator.faults must
 #: not be the one that declares the package's fault kind: importing emulator.faults loads it)
@@ -150,20 +150,11 @@ hush = maglab.fault:Hush
 
 def install(tmp_path: Path) -> dict:
     """The package in *tmp_path*; the environment of a process that has it installed."""
-    info = tmp_path / "maglab-1.0.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: maglab\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text(ENTRY_POINTS)
-    (tmp_path / "maglab").mkdir()
-    for name, text in MAGLAB.items():
-        (tmp_path / "maglab" / name).write_text(textwrap.dedent(text))
-    path = os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), str(tmp_path)) if p)
-    return {**os.environ, "PYTHONPATH": path}
+    return write(tmp_path, "maglab", ENTRY_POINTS, {f"maglab/{name}": text for name, text in MAGLAB.items()})
 
 
-def navtwin(env: dict, *argv) -> subprocess.CompletedProcess:
-    p = subprocess.run([sys.executable, "-m", "navtwin", *map(str, argv)], capture_output=True,
-                       text=True, env=env, timeout=300)
+def run(env: dict, *argv) -> subprocess.CompletedProcess:
+    p = navtwin(*argv, env=env, timeout=300)
     assert p.returncode == 0, p.stderr
     return p
 
@@ -172,7 +163,7 @@ def test_a_package_adds_a_port_with_its_decoder_a_track_and_a_fault_kind(tmp_pat
     env = install(tmp_path / "pkg")
     rec = tmp_path / "rec"
     # the magnetometer's line is quiet from 1 s to 1.5 s: five frames lost
-    navtwin(env, "emulate", "--scenario", "office", "--seed", "7", "--speed", "max",
+    run(env, "emulate", "--scenario", "office", "--seed", "7", "--speed", "max",
             "--duration", "3", "--record", rec, "--fault", "hush:port=mag,start_s=1,end_s=1.5")
     meta = json.loads((rec / "recording.json").read_text())
     assert set(meta["ports"]) == {"sins", "xbee", "nanoloc", "mag"}
@@ -181,7 +172,7 @@ def test_a_package_adds_a_port_with_its_decoder_a_track_and_a_fault_kind(tmp_pat
     assert {f["kind"] for f in faults} == {"hush"} and len(faults) == 5
 
     # navtwin decode reads the port's recording with its format (found from the declaration)
-    lines = [json.loads(line) for line in navtwin(env, "decode", rec, "--format", "mag")
+    lines = [json.loads(line) for line in run(env, "decode", rec, "--format", "mag")
              .stdout.splitlines()]
     frames = [r for r in lines if "seq" in r]
     assert [r["seq"] for r in frames] == [s for s in range(30) if not 10 <= s < 15]
@@ -190,7 +181,7 @@ def test_a_package_adds_a_port_with_its_decoder_a_track_and_a_fault_kind(tmp_pat
 
     # the host reads the port (its decoder, its frames counted) and runs the package's track
     out = tmp_path / "est.jsonl"
-    p = navtwin(env, "replay", rec, "--config", "office", "--filters", "sins,heading",
+    p = run(env, "replay", rec, "--config", "office", "--filters", "sins,heading",
                 "--out", out)
     summary = json.loads(p.stderr.strip().splitlines()[-1])["summary"]
     assert summary["ports"]["mag"] == {"bytes": 150, "frames": 25, "errors": {}}
@@ -198,4 +189,4 @@ def test_a_package_adds_a_port_with_its_decoder_a_track_and_a_fault_kind(tmp_pat
     estimates = [json.loads(line) for line in out.read_text().splitlines()]
     assert {e["filter"] for e in estimates} == {"sins", "heading"}
     # and the live host takes the port as an input of its own
-    assert "--mag PORT" in navtwin(env, "host", "--help").stdout
+    assert "--mag PORT" in run(env, "host", "--help").stdout

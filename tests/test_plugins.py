@@ -1,10 +1,11 @@
 """protocols.plugins.Registry: the one way tracks, fault kinds, commands, benchmarks and ports are
 found (built in, registered in process, entry points of installed packages)."""
-import sys
 
 import pytest
 
 from navtwin.protocols.plugins import Registry, entry_points
+
+from .packages import install
 
 
 def _check(name, obj):
@@ -15,14 +16,8 @@ def _check(name, obj):
 @pytest.fixture
 def package(tmp_path, monkeypatch):
     """An installed package declaring two entry points in the group ``navtwin.toys``."""
-    (tmp_path / "toys.py").write_text("SEVEN = 7\nWORD = 'seven'\n")
-    info = tmp_path / "toys-1.0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toys\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[navtwin.toys]\nseven = toys:SEVEN\nword = toys:WORD\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    yield
-    sys.modules.pop("toys", None)
+    install(tmp_path, monkeypatch, "toys", "[navtwin.toys]\nseven = toys:SEVEN\nword = toys:WORD\n",
+            "SEVEN = 7\nWORD = 'seven'\n")
 
 
 def test_names_list_built_in_then_registered_then_entry_points(package):
@@ -59,11 +54,7 @@ def test_a_name_is_taken_once_and_unregister_gives_it_back():
 
 
 def test_an_entry_point_that_does_not_load_names_its_package(tmp_path, monkeypatch):
-    info = tmp_path / "broken-1.0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: broken\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[navtwin.toys]\ngone = no_such_module_here:X\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
+    install(tmp_path, monkeypatch, "broken", "[navtwin.toys]\ngone = no_such_module_here:X\n", None)
     reg = Registry("navtwin.toys", "toy")
     with pytest.raises(ValueError, match="^entry point gone = 'no_such_module_here:X' in "
                        "navtwin.toys does not load .*; fix or uninstall the package"):

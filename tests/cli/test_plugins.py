@@ -3,11 +3,11 @@ edit of navtwin: what ``pip install`` of a package declaring them would give."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 from pathlib import Path
 
 from ..helpers import navtwin
+from ..packages import write
 
 PLUGIN = '''
 from navtwin.cli.main import UsageError
@@ -45,13 +45,7 @@ labext = labext:benchmarks
 
 def with_labext(tmp_path: Path, *argv: str) -> subprocess.CompletedProcess:
     """``navtwin *argv`` with the user package labext installed (in *tmp_path*)."""
-    (tmp_path / "labext.py").write_text(PLUGIN)
-    info = tmp_path / "labext-1.0.dist-info"
-    info.mkdir(exist_ok=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: labext\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text(ENTRY_POINTS)
-    path = os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), str(tmp_path)) if p)
-    return navtwin(*argv, env={**os.environ, "PYTHONPATH": path})
+    return navtwin(*argv, env=write(tmp_path, "labext", ENTRY_POINTS, {"labext.py": PLUGIN}))
 
 
 def test_a_user_package_adds_a_subcommand(tmp_path):

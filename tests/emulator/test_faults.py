@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-import textwrap
 from dataclasses import dataclass
 
 import pytest
@@ -20,6 +19,7 @@ from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
 
 from .world_helpers import variant
+from ..packages import write
 
 PORTS = names()  # the lab's ports, in its order
 
@@ -167,7 +167,7 @@ def test_register_refuses_a_taken_kind_and_a_class_that_is_no_kind():
 
 
 def test_a_kind_from_an_installed_package_registers_through_its_entry_point(tmp_path, root):
-    (tmp_path / "toyfaults.py").write_text(textwrap.dedent("""
+    write(tmp_path, "toyfaults", "[navtwin.faults]\ntoy = toyfaults:Toy\n", {"toyfaults.py": """
         from dataclasses import dataclass
         from navtwin.emulator.faults import LineFault
 
@@ -176,11 +176,7 @@ def test_a_kind_from_an_installed_package_registers_through_its_entry_point(tmp_
             KIND = "toy"
             def wrapper(self, rng):
                 raise NotImplementedError
-        """))
-    info = tmp_path / "toyfaults-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toyfaults\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text("[navtwin.faults]\ntoy = toyfaults:Toy\n")
+        """})
     out = subprocess.run(
         [sys.executable, "-c", "import json; from navtwin.emulator.faults import Fault; "
                                "print(json.dumps(list(Fault.KINDS.names())))"],

@@ -18,6 +18,7 @@ from navtwin.host.replay import replay
 from navtwin.protocols.recording import Recording
 
 from ...helpers import OFFICE
+from ...packages import write
 from ..synthetic import synthetic_chunks
 
 
@@ -114,10 +115,7 @@ def test_a_bad_setting_of_a_registered_track_is_one_line(registered, tmp_path):
 
 def test_an_entry_point_track_runs_in_replay(tmp_path, monkeypatch):
     toy_module(tmp_path, monkeypatch, "navtwin_toy_ep", "toy_ep")
-    dist = tmp_path / "navtwin_toy-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: navtwin-toy\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(f"[{tracks.GROUP}]\ntoy_ep = navtwin_toy_ep:Toy\n")
+    write(tmp_path, "navtwin_toy", f"[{tracks.GROUP}]\ntoy_ep = navtwin_toy_ep:Toy\n")
     assert "toy_ep" in tracks.names()
     rec = write_host_recording(tmp_path / "rec", OFFICE, ("kf",),
                                synthetic_chunks(OFFICE, 4.0, seed=5))
