@@ -31,6 +31,7 @@ sections are declared here::
     range_bias_m = {1 = 0.3}       # c_i of 001 per anchor id
 
     [filters.ukf]                  # a track's own settings (its Settings class, host.tracks)
+    tight = "toa"                  # the UKF's range measurement (the EKF's: [filters.ekf])
     alpha = 1.0
 
     [timing]
