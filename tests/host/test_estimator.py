@@ -248,8 +248,8 @@ def test_fusion_yaw_follows_the_turning_vehicle(default_run):
 
 @pytest.mark.parametrize("ranges,wsn", [("toa", "toa"), ("tdoa", "toa"), ("toa", "tdoa")])
 def test_other_measurement_choices_also_track(ranges, wsn):
-    est, out = run(office_config(alignment_s=ALIGN, range_sigma_m=0.15, settings=tight(ranges), wsn_method=wsn,
-                                   filters=("wsn", "kf", "ekf", "ukf")), seconds=20.0)
+    est, out = run(office_config(alignment_s=ALIGN, range_sigma_m=0.15, settings=tight(ranges),
+                                 wsn_method=wsn, filters=("wsn", "kf", "ekf", "ukf")), seconds=20.0)
     err = errors(out, ALIGN)
     for name in ("kf", "ekf", "ukf"):
         assert err[name].mean() < err["wsn"].mean() and err[name].max() < 0.5, name

@@ -139,8 +139,8 @@ def test_corridor_stays_on_track():
     sc = scenario.load_scenario("corridor")
     w, calls = lab_inputs(sc, None)
     raw = run(w, calls, host_config(sc))[0]
-    cal = dataclasses.replace(host_config(sc), range_scale=sc.ranging.scale, wsn_method="toa", settings=tight("toa"),
-                              range_bias_m={a.id: a.range_bias_m for a in sc.anchors})
+    cal = dataclasses.replace(host_config(sc), range_scale=sc.ranging.scale, wsn_method="toa",
+                              settings=tight("toa"), range_bias_m={a.id: a.range_bias_m for a in sc.anchors})
     calibrated = run(w, calls, cal)[0]
     table("corridor, uncalibrated (TDOA)", {None: (raw,)}, paper=False)
     table("corridor, calibrated f and c_i (TOA)", {None: (calibrated,)}, paper=False)
