@@ -2,15 +2,16 @@
 
 A table is a dataclass whose fields carry their unit, meaning and checks (:func:`key`).
 :func:`build` turns a parsed TOML dict into the dataclass and raises :class:`Invalid` with
-ONE line naming the key, the problem and the fix; :func:`dump` writes it back as TOML
-(every key, defaults included, so the text is the scenario exactly as run); :func:`rows`
-lists every key for the documentation. Field types understood: bool, int, float, str,
-dict (a table passed on as it is), a map keyed by id (``dict[int, float]`` with
-``key(..., ids=("anchor", (1, 254)))``: ``{1 = 0.3, 2 = 0.25}``, the field's checks applied
-to each value), ``float | None`` (optional), fixed and variable tuples of numbers, tuples of
-points, a nested table (dataclass) and an array of tables (``tuple[Table, ...]``; a class
-attribute ``KINDS``, a protocols.plugins.Registry, maps a ``kind`` key to one dataclass per
-kind). :func:`value` checks one value alike (a command-line number, a figure in a file).
+ONE line naming the key, the problem and the fix (:func:`plain` gives the dict back);
+:func:`dump` writes it back as TOML (every key, defaults included, so the text is the
+scenario exactly as run); :func:`rows` lists every key for the documentation. Field types
+understood: bool, int, float, str, dict (a table passed on as it is), a map keyed by id
+(``dict[int, float]`` with ``key(..., ids=("anchor", (1, 254)))``: ``{1 = 0.3, 2 = 0.25}``,
+the field's checks applied to each value), ``float | None`` (optional), fixed and variable
+tuples of numbers, tuples of points, a nested table (dataclass) and an array of tables
+(``tuple[Table, ...]``; a class attribute ``KINDS``, a protocols.plugins.Registry, maps a
+``kind`` key to one dataclass per kind). :func:`value` checks one value alike (a
+command-line number, a figure in a file).
 """
 from __future__ import annotations
 
@@ -351,6 +352,17 @@ def _sections(obj, path: str, header: str) -> list[str]:
             plain.append(f"{f.name} = {_scalar(v, f.metadata.get('hex', 0))}")
     head = [header] if header and (plain or header.startswith("\n[[")) else []
     return head + plain + tables
+
+
+def plain(obj, table: type | None = None):
+    """Table *obj* as the data :func:`build` reads back (sub-tables as dicts, tuples as lists,
+    None left out); with *table* (a base of obj's class) only that table's keys."""
+    if dataclasses.is_dataclass(obj):
+        return {f.name: plain(v) for f in dataclasses.fields(table or obj)
+                if (v := getattr(obj, f.name)) is not None}
+    if isinstance(obj, tuple):
+        return [plain(v) for v in obj]
+    return obj
 
 
 # -- documentation -------------------------------------------------------------------------

@@ -31,6 +31,7 @@ sections are declared here::
     range_bias_m = {1 = 0.3}       # c_i of 001 per anchor id
 
     [filters.ukf]                  # a track's own settings (its Settings class, host.tracks)
+    tight = "toa"                  # the UKF's range measurement (the EKF's: [filters.ekf])
     alpha = 1.0
 
     [timing]
@@ -57,7 +58,7 @@ from pathlib import Path
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, MAX_HEIGHT_M, RANGE_BIAS_M
 from navtwin.common import tomlfile
-from navtwin.common.schema import REQUIRED, Invalid, between, build, key, rows
+from navtwin.common.schema import REQUIRED, Invalid, between, build, key, plain, rows
 
 from . import calibration as range_calibration
 from . import tracks
@@ -148,14 +149,14 @@ class HostConfig:
     def to_dict(self) -> dict:
         """JSON-able form, the TOML file's layout (a recording's meta); :func:`from_dict`
         reads it back exactly."""
-        doc = _plain(self.lab)
+        doc = plain(self.lab)
         if len(self.vehicles) == 1:  # the one-vehicle layout: [vehicle]
             doc["vehicle"] = doc.pop("vehicles")[0]
-        filters = {"enabled": list(self.filters), **_plain(self.tuning)}
+        filters = {"enabled": list(self.filters), **plain(self.tuning)}
         if self.range_bias_m:
             filters["range_bias_m"] = {str(a): c for a, c in sorted(self.range_bias_m.items())}
         for name, s in self.settings.items():
-            filters[name] = _plain(s)
+            filters[name] = plain(s)
         out = {"name": self.name, **doc, "filters": filters}
         if self.calibration is not None:  # inline: a recording replays without the file
             out["calibration"] = self.calibration.to_dict()
@@ -171,16 +172,6 @@ def with_calibration(config: HostConfig, calibration: Calibration) -> HostConfig
                           f"the config's [[anchors]]; use the calibration of this lab")
     tuning = dataclasses.replace(config.tuning, range_scale=1.0)
     return dataclasses.replace(config, tuning=tuning, range_bias_m={}, calibration=calibration)
-
-
-def _plain(obj):
-    """A schema table as TOML-like data: tuples as lists, None left out."""
-    if dataclasses.is_dataclass(obj):
-        return {f.name: _plain(v) for f in dataclasses.fields(obj)
-                if (v := getattr(obj, f.name)) is not None}
-    if isinstance(obj, tuple):
-        return [_plain(v) for v in obj]
-    return obj
 
 
 #: [filters] keys of the first recorded layout that now live in a track's own section.
@@ -203,6 +194,25 @@ def _from_flat(d: dict) -> dict:
     if "hold_s" in d:
         out["timing"] = {"hold_s": d["hold_s"]}
     return out
+
+
+#: The tracks that ``tight`` in [filters] set, in the layout before it moved to their sections.
+_SHARED_TIGHT = ("ekf", "ukf")
+
+
+def _from_shared_tight(filt: dict) -> dict:
+    """The [filters] of the layout with ``tight`` shared (configs and host recordings written
+    before issue 18, the flat navtwin 0.1 layout too) in today's: ``tight = X`` there meant X
+    for both the EKF and the UKF, so it goes to [filters.ekf] and [filters.ukf], where a
+    ``tight`` of their own wins."""
+    filt = dict(filt)
+    if "tight" in filt:
+        shared = filt.pop("tight")
+        for track in _SHARED_TIGHT:
+            own = filt.get(track, {})
+            if isinstance(own, dict):  # else the track's section is refused as not a table
+                filt[track] = {"tight": shared, **own}
+    return filt
 
 
 def from_dict(d: dict, source: str = "config") -> HostConfig:
@@ -288,7 +298,7 @@ def _config(doc: dict, name: str, directory: Path | None = None) -> HostConfig:
     filt = doc.get("filters", {})
     if not isinstance(filt, dict):
         raise ConfigError("[filters] must be a table")
-    filt = dict(filt)
+    filt = _from_shared_tight(filt)
     anchors = {a.id for a in lab.anchors}
     kw: dict = {}
     if "enabled" in filt:

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, fields
 
 from navtwin.common import lab
 from navtwin.common.limits import ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M, RANGE_SCALE
-from navtwin.common.schema import Check, between, build, each, key, one_of, positive
+from navtwin.common.schema import Check, between, build, each, key, one_of, plain, positive
 from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS, GYRO_LSB_DPS
 
 from . import tracks
@@ -55,10 +55,6 @@ class Vehicle:
                                    'write it like "0013A20040A1B2D4"'))
     gyro_range_dps: int = key(lab.GYRO_RANGE_DPS, "deg/s", "ADIS16350 range set by SENS/AVG",
                               one_of(*GYRO_LSB_DPS))
-
-
-def _methods() -> Check:
-    return one_of("toa", "tdoa")
 
 
 @dataclass(frozen=True)
@@ -103,9 +99,7 @@ class Tuning:
                                       "extrapolated", positive(hi=3600))
     imu_gap_s: float = key(0.5, "s", "a longer gap in the IMU stream is not bridged: the "
                            "fusion tracks start again from the next fix", positive(hi=3600))
-    wsn_method: str = key("tdoa", "", "pure-WSN and KF fixes (000 eqs. 12-13)", _methods())
-    tight: str = key("tdoa", "", "EKF/UKF range measurement: per cycle (tdoa) or each range "
-                     "(toa)", _methods())
+    wsn_method: str = key("tdoa", "", "pure-WSN and KF fixes (000 eqs. 12-13)", one_of("toa", "tdoa"))
     reference_anchor: int = key(1, "", "TDOA reference (000 eq. 12), an anchor id",
                                 between(*ANCHOR_IDS))
     cycle_s: float = key(0.1, "s", "TDMA cycle: exchanges grouped within this window",
@@ -126,8 +120,8 @@ TABLES = (Site, Vehicle, Tuning)
 class EstimatorConfig(Tuning, Vehicle, Site):
     """Everything the estimator needs: the lab's [site], one [vehicle], the shared [filters]
     settings (its fields, by inheritance: declared once), the anchor survey, the tracks and
-    their own settings. Checked when made: each table's keys by its schema, and what spans
-    them (at least 3 anchors, known tracks)."""
+    their own settings. Checked when made: each table's keys by its schema (the tracks' own
+    settings too), and what spans them (at least 3 anchors, known tracks)."""
 
     anchors: Mapping[int, tuple[float, ...]] = field(kw_only=True)  # id -> (x, y, z), m
     range_bias_m: Mapping[int, float] = field(default_factory=dict)  # c_i of 001: calibrated delays
@@ -151,8 +145,9 @@ class EstimatorConfig(Tuning, Vehicle, Site):
             known = tracks.names()
             raise ValueError(f"filters: unknown {unknown or 'empty list'}; use some of {','.join(known)}")
         for table in TABLES:  # each key's checks, as the host config's TOML gets them
-            build(table, {f.name: list(v) if isinstance(v, tuple) else v for f in fields(table)
-                          if (v := getattr(self, f.name)) is not None})
+            build(table, plain(self, table))
+        for name, own in self.settings.items():  # and each track's own, its [filters.<name>]
+            build(type(own), plain(own), (("filters", 0), (name, 0)))
         if len(self.anchors) < 3:
             raise ValueError(f"anchors: {len(self.anchors)} given; a 2-D fix needs at least 3, list them all")
 

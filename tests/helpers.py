@@ -15,6 +15,8 @@ from pathlib import Path
 from navtwin.cli.main import main
 from navtwin.host import config as host_config
 from navtwin.host.settings import EstimatorConfig
+from navtwin.host.tracks.fusion import TightSettings
+from navtwin.host.tracks.ukf import UkfSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -81,3 +83,9 @@ def office_config(**overrides) -> EstimatorConfig:
     """The estimator's settings in the office lab: the shipped ``office`` host config's
     (its anchors, site, start and [filters]), with *overrides* (``alignment_s=2.0``, ...)."""
     return dataclasses.replace(OFFICE.estimator_config(), **overrides)
+
+
+def tight(method: str) -> dict:
+    """An EstimatorConfig's ``settings`` that make the EKF and UKF measure ranges by *method*
+    (``"toa"``: each range, ``"tdoa"``: each cycle's differences; their ``tight`` key)."""
+    return {"ekf": TightSettings(tight=method), "ukf": UkfSettings(tight=method)}

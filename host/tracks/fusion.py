@@ -17,8 +17,11 @@ with ``reinit_sigma`` on velocity and acceleration. A device restart does the sa
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from navtwin.common.schema import key, one_of
 from navtwin.host.measurements import Motion, Range, Tdoa
 from navtwin.host.measurements import Fix
 from navtwin.host.wsn import chi2_gate
@@ -136,12 +139,23 @@ class FusionTrack(Track):
         return estimate(b, self.name, x[:2], x[2:4], yaw, P[:4, :4], stale)
 
 
+@dataclass(frozen=True)
+class TightSettings:
+    """A tightly coupled track's own settings (``[filters.ekf]``; ``[filters.ukf]`` extends
+    them)."""
+
+    tight: str = key("tdoa", "", "range measurement: per cycle (tdoa) or each range (toa)",
+                     one_of("toa", "tdoa"))
+
+
 class TightTrack(FusionTrack):
     """Tightly coupled: measures the ranges themselves, each cycle's differences to the
-    reference anchor (``tight = "tdoa"``) or each range at its own time (``"toa"``)."""
+    reference anchor (its ``tight = "tdoa"``) or each range at its own time (``"toa"``)."""
+
+    Settings = TightSettings
 
     def handlers(self) -> dict:
-        if self.ctx.cfg.tight == "toa":  # the estimator makes Range and Tdoa products for their takers
+        if self.settings.tight == "toa":  # the estimator makes Range and Tdoa products for their takers
             return {**super().handlers(), Range: self.range}
         return {**super().handlers(), Tdoa: self.tdoa}
 

@@ -157,7 +157,24 @@ def test_configs_recorded_in_the_first_layout_still_load(root):
     tuned = host_config.from_dict(v1["tuned"])
     assert (tuned.settings["ukf"].alpha, tuned.settings["ukf"].kappa) == (0.5, 0.0)
     assert tuned.settings["sins"].vrw_m_s_rt_hr == 3.0
-    assert tuned.range_bias_m == {1: 0.3} and tuned.tuning.tight == "toa" and tuned.vehicles[0].tag == 16
+    assert tuned.range_bias_m == {1: 0.3} and tuned.vehicles[0].tag == 16
+    assert tuned.settings["ekf"].tight == tuned.settings["ukf"].tight == "toa"
+
+
+def test_a_tight_shared_in_filters_still_means_both_tight_tracks(tmp_path):
+    """Configs and host recordings written before issue 18 have ``tight`` in [filters], for
+    the EKF and the UKF at once; it reads as each one's own, which a section's ``tight`` beats."""
+    shared = host_config.load(write(tmp_path, ANCHORS + '[filters]\ntight = "toa"\n'
+                                    '[filters.ukf]\nalpha = 0.5\n'))
+    own = host_config.load(write(tmp_path, ANCHORS + '[filters.ekf]\ntight = "toa"\n'
+                                 '[filters.ukf]\ntight = "toa"\nalpha = 0.5\n'))
+    assert shared == own and shared.settings["ukf"].alpha == 0.5
+    assert host_config.from_dict(shared.to_dict()) == shared
+    both = host_config.load(write(tmp_path, ANCHORS + '[filters]\ntight = "toa"\n'
+                                  '[filters.ukf]\ntight = "tdoa"\n'))
+    assert (both.settings["ekf"].tight, both.settings["ukf"].tight) == ("toa", "tdoa")
+    with pytest.raises(ConfigError, match=r"\[filters.ekf\] tight must be one of 'toa', 'tdoa'"):
+        host_config.load(write(tmp_path, ANCHORS + '[filters]\ntight = "rss"\n'))
 
 
 def test_a_config_file_that_is_not_utf8_gets_one_line(tmp_path):

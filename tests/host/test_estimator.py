@@ -12,7 +12,7 @@ from navtwin.host.estimator import Estimate, Estimator
 from navtwin.host.measurements import Exchange, ImuSample, Restart
 from navtwin.host.tracks import DEFAULT
 
-from ..helpers import GRAVITY, OFFICE_ANCHORS, office_config
+from ..helpers import GRAVITY, OFFICE_ANCHORS, office_config, tight
 from .navsynth import ellipse, exchanges, noisy_imu, perfect_imu, record
 
 FILTER_NAMES = DEFAULT
@@ -71,8 +71,9 @@ def default_run():
 def test_config_errors_name_the_field_and_the_fix():
     with pytest.raises(ValueError, match=r"filters: unknown \['pf'\]; use some of sins,wsn,kf,ekf,ukf"):
         office_config(filters=("kf", "pf"))
-    with pytest.raises(ValueError, match="tight must be one of 'toa', 'tdoa' \\(got 'rss'\\); use one of 'toa', 'tdoa'"):
-        office_config(tight="rss")
+    with pytest.raises(ValueError, match=r"\[filters.ekf\] tight must be one of 'toa', 'tdoa' \(got 'rss'\); "
+                                         "use one of 'toa', 'tdoa'"):
+        office_config(settings=tight("rss"))
     with pytest.raises(ValueError, match=r"output_period_s must be in \[0.001, 60\] \(got 0"):
         office_config(output_period_s=0)
     with pytest.raises(ValueError, match="anchors: 2 given"):
@@ -178,7 +179,7 @@ def test_bad_input_is_counted_not_fatal():
 
 
 def test_late_measurements_use_their_lag_or_are_refused():
-    cfg = office_config(alignment_s=ALIGN, tight="toa", filters=("ekf", "ukf"))
+    cfg = office_config(alignment_s=ALIGN, settings=tight("toa"), filters=("ekf", "ukf"))
     calls = synth_events(6.0, noise=False)
     imus = [c for c in calls if c[0] == "imu"]
     ranges = [c for c in calls if c[0] == "range"]
@@ -194,7 +195,7 @@ def test_late_measurements_use_their_lag_or_are_refused():
 
 
 def test_an_outlier_range_is_gated_in_the_tight_filters():
-    cfg = office_config(alignment_s=ALIGN, tight="toa", range_sigma_m=0.15)
+    cfg = office_config(alignment_s=ALIGN, settings=tight("toa"), range_sigma_m=0.15)
     calls = synth_events(20.0, noise=True)
     k = next(i for i, (kind, a) in enumerate(calls) if kind == "range" and a[0] > 15.0)
     t, a, d, rssi, status = calls[k][1]
@@ -245,10 +246,10 @@ def test_fusion_yaw_follows_the_turning_vehicle(default_run):
             assert e.yaw is None
 
 
-@pytest.mark.parametrize("tight,wsn", [("toa", "toa"), ("tdoa", "toa"), ("toa", "tdoa")])
-def test_other_measurement_choices_also_track(tight, wsn):
-    est, out = run(office_config(alignment_s=ALIGN, range_sigma_m=0.15, tight=tight, wsn_method=wsn,
-                                   filters=("wsn", "kf", "ekf", "ukf")), seconds=20.0)
+@pytest.mark.parametrize("ranges,wsn", [("toa", "toa"), ("tdoa", "toa"), ("toa", "tdoa")])
+def test_other_measurement_choices_also_track(ranges, wsn):
+    est, out = run(office_config(alignment_s=ALIGN, range_sigma_m=0.15, settings=tight(ranges),
+                                 wsn_method=wsn, filters=("wsn", "kf", "ekf", "ukf")), seconds=20.0)
     err = errors(out, ALIGN)
     for name in ("kf", "ekf", "ukf"):
         assert err[name].mean() < err["wsn"].mean() and err[name].max() < 0.5, name

@@ -24,6 +24,7 @@ from navtwin.host.settings import EstimatorConfig
 from navtwin.protocols import adis16350, nanoloc
 from navtwin.protocols.stream import nanoloc_decoder, sins_decoder
 
+from ..helpers import tight
 from ..host.navsynth import record
 
 pytestmark = pytest.mark.slow
@@ -96,7 +97,7 @@ def office():
     inputs = {seed: lab_inputs(sc, seed) for seed in SEEDS}
     results = {seed: (*run(w, calls, host_config(sc)), sc.duration_s) for seed, (w, calls) in inputs.items()}
     table("office, defaults (TDOA)", results)
-    toa = dataclasses.replace(host_config(sc), wsn_method="toa", tight="toa")
+    toa = dataclasses.replace(host_config(sc), wsn_method="toa", settings=tight("toa"))
     table("office, TOA fixes and ranges", {seed: run(w, calls, toa) for seed, (w, calls) in inputs.items()})
     return results
 
@@ -138,8 +139,8 @@ def test_corridor_stays_on_track():
     sc = scenario.load_scenario("corridor")
     w, calls = lab_inputs(sc, None)
     raw = run(w, calls, host_config(sc))[0]
-    cal = dataclasses.replace(host_config(sc), range_scale=sc.ranging.scale, wsn_method="toa", tight="toa",
-                              range_bias_m={a.id: a.range_bias_m for a in sc.anchors})
+    cal = dataclasses.replace(host_config(sc), range_scale=sc.ranging.scale, wsn_method="toa",
+                              settings=tight("toa"), range_bias_m={a.id: a.range_bias_m for a in sc.anchors})
     calibrated = run(w, calls, cal)[0]
     table("corridor, uncalibrated (TDOA)", {None: (raw,)}, paper=False)
     table("corridor, calibrated f and c_i (TOA)", {None: (calibrated,)}, paper=False)

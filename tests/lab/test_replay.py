@@ -1,6 +1,8 @@
 """Replay: a host recording gives the pipeline's estimates exactly; emulator recordings
 get synthesised arrival times."""
+import dataclasses
 import json
+import shutil
 
 import pytest
 
@@ -14,7 +16,7 @@ from navtwin.protocols import sins
 from navtwin.protocols.recording import Recording, RecordingWriter
 from navtwin.protocols.serial import wire_ns
 
-from ..helpers import OFFICE, navtwin
+from ..helpers import OFFICE, navtwin, tight
 from ..host.fake_estimator import RecordingEstimator
 from . import lab_bytes
 
@@ -69,6 +71,22 @@ def test_recorded_config_is_used_unless_overridden(host_recording):
     assert settings(rec, config=corridor)["config"] == corridor
 
 
+def test_a_recording_with_tight_shared_in_filters_replays_as_it_ran(host_recording, tmp_path):
+    """Host recordings made before issue 18 hold ``tight`` in the config's [filters], the EKF's
+    and UKF's range measurement at once: they replay as the config with it in both tracks'
+    own sections (and not as the default TDOA)."""
+    path, data = host_recording
+    old = tmp_path / "rec"
+    shutil.copytree(path, old)
+    meta = json.loads((old / "recording.json").read_text())
+    meta["host"]["config"]["filters"]["tight"] = "toa"
+    (old / "recording.json").write_text(json.dumps(meta))
+    got = []
+    replay(Recording(old), lambda es: got.extend(map(estimate_line, es)))
+    toa = direct_lines(data, config=dataclasses.replace(OFFICE, settings=tight("toa")))
+    assert "".join(got) == toa != direct_lines(data)
+
+
 def _emulator_recording(path, chunks_by_port):
     meta = {"source": "navtwin emulate", "scenario": "office", "seed": 1,
             "ports": {"sins": {"baud": 115200}, "xbee": {"baud": 115200, "api_mode": 2},
@@ -117,8 +135,6 @@ def test_replay_runs_an_emulator_recording_through_the_pipeline(tmp_path):
 def _broken_copy(host_recording, tmp_path, unknown_filter=False, untimed=slice(0, 0)):
     """A copy of the host recording whose meta names an unknown filter, or whose xbee index
     has no arrival time on the lines *untimed*."""
-    import shutil
-
     d = tmp_path / "rec"
     shutil.copytree(host_recording[0], d)
     if unknown_filter:
