@@ -1,12 +1,15 @@
 """`navtwin diff` end to end: recordings and byte files, exit 0 / 1 / 2 like diff, --json."""
 import json
+import re
+import subprocess
+import sys
 
 import pytest
 
 from navtwin.protocols import sins
 
 from .. import recorded
-from ..helpers import navtwin, one_line_error
+from ..helpers import ROOT, navtwin, one_line_error
 
 
 @pytest.fixture(scope="module")
@@ -83,3 +86,31 @@ def test_help_names_every_option():
     for option in ("--format", "--port", "--max", "--time-tolerance", "--json", "--api1",
                    "--gyro-range", "0 equal, 1 different, 2 bad input"):
         assert option in " ".join(p.stdout.split()), option
+
+
+@pytest.mark.pty
+def test_the_testing_guides_golden_test(tmp_path):
+    """docs/testing.md's regression test, as a user's project runs it: it passes against a
+    golden of the same seed, and fails with the diff against one of another seed."""
+    text = (ROOT / "docs" / "testing.md").read_text(encoding="utf-8")
+    section = text.split("## A byte-stream regression test", 1)[1].split("\n## ", 1)[0]
+    [example] = re.findall(r"^```python\n(.*?)^```", section, re.M | re.S)
+    tests = tmp_path / "tests"
+    tests.mkdir()
+    (tests / "test_office_bytes.py").write_text(example)
+
+    def run_with_golden(seed: int) -> subprocess.CompletedProcess:
+        golden = tests / "golden" / "office-seed1"
+        p = navtwin("emulate", "--scenario", "office", "--seed", seed, "--speed", "max",
+                    "--duration", 2, "--record", golden, "--overwrite", "--quiet")
+        assert p.returncode == 0, p.stderr
+        return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                               str(tests)], cwd=tmp_path, capture_output=True, text=True,
+                              timeout=120)
+
+    p = run_with_golden(1)
+    assert p.returncode == 0 and "1 passed" in p.stdout, p.stdout[-3000:]
+    p = run_with_golden(2)
+    assert p.returncode == 1 and "1 failed" in p.stdout, p.stdout[-3000:]
+    assert "first divergence: byte 7 at device time 0.001000 s (seq 0)" in p.stdout
+    assert "seq 0: SUPPLY_OUT 0x" in p.stdout
