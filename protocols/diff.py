@@ -78,17 +78,18 @@ def _raw(v) -> str:
 
 @dataclass(frozen=True)
 class FrameRef:
-    """A frame of one side: its key (``seq``, or its index in the stream), type, byte
-    offset and chunk times."""
+    """A frame of one side: its key (its ``seq`` if *by_seq*, else its index among the
+    frames of its format without one), type, byte offset and chunk times."""
 
     key: int
+    by_seq: bool
     type: int
     offset: int
     t_device_ns: int | None = None
     t_wall_ns: int | None = None
 
     def to_json(self) -> dict:
-        return {"key": self.key, "type": self.type, "offset": self.offset,
+        return {"key": self.key, "by": "seq" if self.by_seq else "position", "type": self.type, "offset": self.offset,
                 "t_device_ns": self.t_device_ns, "t_wall_ns": self.t_wall_ns}
 
 
@@ -117,14 +118,15 @@ class Timing:
 
 @dataclass(frozen=True)
 class Divergence:
-    """The first byte at which the streams differ; ``frame``: the key of A's frame there."""
+    """The first byte at which the streams differ; ``frame``: A's frame there, if any."""
 
     offset: int
     t_device_ns: int | None
-    frame: int | None
+    frame: FrameRef | None
 
     def to_json(self) -> dict:
-        return {"offset": self.offset, "t_device_ns": self.t_device_ns, "frame": self.frame}
+        return {"offset": self.offset, "t_device_ns": self.t_device_ns,
+                "frame": self.frame.to_json() if self.frame else None}
 
 
 @dataclass
@@ -162,10 +164,10 @@ class PortDiff:
     errors_a: Bounded  # decode errors only in A
     errors_b: Bounded
     timing: Bounded
-    keyed: bool  # frames aligned by their seq (else by position)
 
-    def _key(self, ref: FrameRef) -> str:
-        return f"seq {ref.key}" if self.keyed else f"frame {ref.key}"
+    @staticmethod
+    def _key(ref: FrameRef) -> str:
+        return f"seq {ref.key}" if ref.by_seq else f"frame {ref.key}"
 
     @property
     def equal(self) -> bool:
@@ -180,7 +182,6 @@ class PortDiff:
 
     def to_json(self) -> dict:
         return {"port": self.port, "format": self.format, "equal": self.equal,
-                "aligned_by": "seq" if self.keyed else "position",
                 "summary": self.summary(),
                 "first_divergence": self.first.to_json() if self.first else None,
                 "changed": self.changed.to_json(), "only_a": self.only_a.to_json(),
@@ -198,8 +199,7 @@ class PortDiff:
         if self.first:
             at = (f" at device time {self.first.t_device_ns / 1e9:.6f} s"
                   if self.first.t_device_ns is not None else "")
-            inside = (f" ({'seq' if self.keyed else 'frame'} {self.first.frame})"
-                      if self.first.frame is not None else "")
+            inside = f" ({self._key(self.first.frame)})" if self.first.frame else ""
             lines.append(f"  first divergence: byte {self.first.offset}{at}{inside}")
         for c in self.changed.items:
             lines.append(f"  {self._key(c.a)}: " + "; ".join(f.text() for f in c.fields))
@@ -262,28 +262,42 @@ class _Side:
     t_wall: list[int | None]
     frames: list[Frame] = field(default_factory=list)
     errors: list[DecodeError] = field(default_factory=list)
+    keys: list[tuple] = field(default_factory=list)  # each frame's, for the alignment
 
     def times(self, offset: int) -> tuple[int | None, int | None]:
         i = bisect.bisect_right(self.starts, offset) - 1
         return (self.t_device[i], self.t_wall[i]) if i >= 0 else (None, None)
 
-    def ref(self, index: int, keyed: bool) -> FrameRef:
-        f = self.frames[index]
-        return FrameRef(f.fields["seq"] if keyed else index, f.type, f.offset,
-                        *self.times(f.offset))
+    def ref(self, index: int) -> FrameRef:
+        f, (_, by, key) = self.frames[index], self.keys[index]
+        return FrameRef(key, by == "seq", f.type, f.offset, *self.times(f.offset))
 
 
 def _decode(side: _Side, fmt: formats.Format, escaped: bool) -> None:
+    """Decode the side's bytes; each frame's key is ``(format, "seq", seq)`` where its layout
+    has a ``seq``, else ``(format, "n", its index among that format's frames without one)``
+    (a chain passes the coordinator's own frames between the SINS frames it carries)."""
     dec = fmt.make(escaped=escaped)
+    unsequenced: Counter = Counter()
     for ev in dec.feed(side.data) + dec.flush():
-        (side.frames if isinstance(ev, Frame) else side.errors).append(ev)
+        if not isinstance(ev, Frame):
+            side.errors.append(ev)
+            continue
+        side.frames.append(ev)
+        if ev.known and "seq" in ev.fields:
+            side.keys.append((ev.format, "seq", ev.fields["seq"]))
+        else:
+            side.keys.append((ev.format, "n", unsequenced[ev.format]))
+            unsequenced[ev.format] += 1
 
 
-def _fields(fmt: formats.Format, frame: Frame, gyro_range: int) -> dict[str, tuple]:
-    """name -> (raw, value in units or None, unit) of a frame's fields."""
+def _fields(frame: Frame, gyro_range: int) -> dict[str, tuple]:
+    """name -> (raw, value in units or None, unit) of a frame's fields, as the format of its
+    layout gives them (a chain's frames are another format's: xbee-sins gives SINS frames)."""
     if not frame.known:
         return {"type": (frame.type, None, ""), "payload": (frame.fields["payload"].hex().upper(),
                                                             None, "")}
+    fmt = formats.get(frame.format)
     if fmt.labelled is not None:
         return fmt.label(frame, gyro_range)
     out: dict[str, tuple] = {}
@@ -293,10 +307,10 @@ def _fields(fmt: formats.Format, frame: Frame, gyro_range: int) -> dict[str, tup
     return out
 
 
-def _changes(fmt, fa: Frame, fb: Frame, gyro_range: int) -> tuple[FieldChange, ...]:
+def _changes(fa: Frame, fb: Frame, gyro_range: int) -> tuple[FieldChange, ...]:
     if fa.type != fb.type or fa.known != fb.known:
         return (FieldChange("type", fa.type, fb.type),)
-    a, b = _fields(fmt, fa, gyro_range), _fields(fmt, fb, gyro_range)
+    a, b = _fields(fa, gyro_range), _fields(fb, gyro_range)
     out = []
     for name in dict.fromkeys([*a, *b]):
         ra, va, unit = a.get(name, (None, None, ""))
@@ -345,14 +359,13 @@ def _first_byte(a: bytes, b: bytes) -> int | None:
     return lo
 
 
-def _error_keys(side: _Side, keyed: bool) -> list[tuple]:
+def _error_keys(side: _Side) -> list[tuple]:
     """Each decode error's (kind, size, key of the frame before it), in order."""
     starts = [f.offset for f in side.frames]
     keys = []
     for e in side.errors:
         before = bisect.bisect_left(starts, e.offset) - 1
-        prev = (side.frames[before].fields["seq"] if keyed else before) if before >= 0 else None
-        keys.append((e.kind, e.size, prev))
+        keys.append((e.kind, e.size, side.keys[before] if before >= 0 else None))
     return keys
 
 
@@ -365,27 +378,22 @@ def _compare(port: str, fmt: formats.Format | None, a: _Side, b: _Side, *, escap
     if fmt is not None:
         _decode(a, fmt, escaped_a)
         _decode(b, fmt, escaped_b)
-    keyed = all(f.known and "seq" in f.fields for f in a.frames + b.frames) and \
-        bool(a.frames or b.frames)
-    key_a = [f.fields["seq"] if keyed else None for f in a.frames]
-    key_b = [f.fields["seq"] if keyed else None for f in b.frames]
-    for i, j in _align(key_a, key_b):
+    for i, j in _align(a.keys, b.keys):
         if j is None:
-            only_a.add(a.ref(i, keyed))
+            only_a.add(a.ref(i))
         elif i is None:
-            only_b.add(b.ref(j, keyed))
+            only_b.add(b.ref(j))
         else:
-            ra, rb = a.ref(i, keyed), b.ref(j, keyed)
+            ra, rb = a.ref(i), b.ref(j)
             if a.frames[i].raw != b.frames[j].raw:
-                changed.add(FrameChange(ra, rb, _changes(fmt, a.frames[i], b.frames[j],
-                                                         gyro_range)))
+                changed.add(FrameChange(ra, rb, _changes(a.frames[i], b.frames[j], gyro_range)))
             for clock in ("t_device_ns", "t_wall_ns"):
                 ta, tb = getattr(ra, clock), getattr(rb, clock)
                 if ta is not None and tb is not None:
                     if abs(tb - ta) > tolerance_ns:
                         timing.add(Timing(ra, rb, clock, tb - ta))
                     break
-    ka, kb = _error_keys(a, keyed), _error_keys(b, keyed)
+    ka, kb = _error_keys(a), _error_keys(b)
     for shown, side, keys, other in ((err_a, a, ka, kb), (err_b, b, kb, ka)):
         extra = Counter(keys) - Counter(other)
         for e, k in zip(side.errors, keys):
@@ -394,14 +402,12 @@ def _compare(port: str, fmt: formats.Format | None, a: _Side, b: _Side, *, escap
                 shown.add({"error": e.kind, "offset": e.offset, "size": e.size})
     first = None
     if first_at is not None:
-        frame = next((f for f in reversed(a.frames) if f.offset <= first_at), None)
         t_dev = a.times(first_at)[0] if first_at < len(a.data) else b.times(first_at)[0]
-        frame_key = None
-        if frame is not None and first_at < frame.offset + len(frame.raw):
-            frame_key = frame.fields["seq"] if keyed else a.frames.index(frame)
-        first = Divergence(first_at, t_dev, frame_key)
+        at = bisect.bisect_right([f.offset for f in a.frames], first_at) - 1
+        inside = at >= 0 and first_at < a.frames[at].offset + len(a.frames[at].raw)
+        first = Divergence(first_at, t_dev, a.ref(at) if inside else None)
     return PortDiff(port, fmt.name if fmt else None, len(a.data), len(b.data), len(a.frames),
-                    len(b.frames), first, changed, only_a, only_b, err_a, err_b, timing, keyed)
+                    len(b.frames), first, changed, only_a, only_b, err_a, err_b, timing)
 
 
 def _recording_side(rec: Recording, port: str) -> _Side:

@@ -38,7 +38,7 @@ def test_two_seeds_name_the_first_differing_frame_and_field(runs):
     p = d.ports["sins"]
     a, b = (runs[n] / "sins.bin" for n in ("one", "two"))
     first = next(i for i, (x, y) in enumerate(zip(a.read_bytes(), b.read_bytes())) if x != y)
-    assert p.first.offset == first and p.first.frame == first // FRAME  # seq n at byte 30 n
+    assert p.first.offset == first and p.first.frame.key == first // FRAME  # seq n: byte 30 n
     assert p.first.t_device_ns == 1_000_000  # the first frame's chunk, from sins.csv
     assert p.changed.count == 200 and len(p.changed.items) == 3
     c = p.changed.items[0]
@@ -64,7 +64,7 @@ def test_one_flipped_bit_is_that_frame(runs, tmp_path):
     d = diff_recordings(runs["one"], b)
     assert not d.equal and d.ports["xbee"].equal and d.ports["nanoloc"].equal
     p = d.ports["sins"]
-    assert (p.first.offset, p.first.frame) == (at, 7)
+    assert (p.first.offset, p.first.frame.key, p.first.frame.by_seq) == (at, 7, True)
     assert p.first.t_device_ns == 71_000_000
     assert [r.key for r in p.only_a.items] == [7] and p.only_a.items[0].offset == 7 * FRAME
     assert p.changed.count == 0 and p.only_b.count == 0 and p.errors_a.count == 0
@@ -116,7 +116,7 @@ def test_timing_beyond_the_tolerance(runs, tmp_path):
 def test_frames_without_seq_align_by_position(runs):
     """XBee API frames carry no seq: the n-th frame of A pairs with the n-th of B."""
     p = diff_recordings(runs["one"], runs["two"], ports=["xbee"]).ports["xbee"]
-    assert not p.keyed
+    assert not any(c.a.by_seq or c.b.by_seq for c in p.changed.items)
     assert all(c.a.key == c.b.key for c in p.changed.items)
     assert "data" in {f.name for f in p.changed.items[0].fields}
 
@@ -126,3 +126,12 @@ def test_bad_inputs(runs, tmp_path):
         diff_recordings(runs["one"], tmp_path)
     with pytest.raises(DiffError, match=r"^port: nope in neither recording"):
         diff_recordings(runs["one"], runs["two"], ports=["nope"])
+
+
+def test_the_sins_stream_inside_xbee_packets_names_the_register(runs):
+    """xbee-sins: the chain's frames are SINS frames, so their words are named as on the
+    board's own port."""
+    a, b = ((runs[n] / "xbee.bin").read_bytes() for n in ("one", "two"))
+    p = diff_bytes(a, b, "xbee-sins").ports["xbee-sins"]
+    assert p.changed.count == 200 and p.changed.items[0].a.by_seq
+    assert "ZGYRO_OUT" in {f.name for f in p.changed.items[0].fields}
