@@ -8,9 +8,10 @@ from .helpers import navtwin
 
 
 def office(directory: Path, seed: int) -> Path:
-    """A 2 s office run of seed *seed* recorded into *directory*."""
+    """A 2 s office run of seed *seed* recorded into *directory* (its links in a directory
+    of its own beside it: the default one may be another emulator's)."""
     p = navtwin("emulate", "--scenario", "office", "--speed", "max", "--duration", 2,
-                "--seed", seed, "--record", directory)
+                "--seed", seed, "--record", directory, "--link-dir", f"{directory}.links")
     assert p.returncode == 0, p.stderr
     return directory
 

@@ -104,7 +104,8 @@ def test_the_testing_guides_golden_test(tmp_path):
     def run_with_golden(seed: int) -> subprocess.CompletedProcess:
         golden = tests / "golden" / "office-seed1"
         p = navtwin("emulate", "--scenario", "office", "--seed", seed, "--speed", "max",
-                    "--duration", 2, "--record", golden, "--overwrite", "--quiet")
+                    "--duration", 2, "--record", golden, "--overwrite", "--quiet",
+                    "--link-dir", tmp_path / "links")
         assert p.returncode == 0, p.stderr
         return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                                str(tests)], cwd=tmp_path, capture_output=True, text=True,
