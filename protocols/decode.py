@@ -43,6 +43,24 @@ def sins_record(frame: Frame, gyro_range: int) -> dict:
                 temp_c=list(s.temp_c), supply_v=s.supply_v, aux_v=s.aux_v)
 
 
+#: (unit, the Sample attribute and index) of each register word of a SINS frame, in order
+_WORD_UNITS = (("V", "supply_v", None), *(("deg/s", "gyro_dps", i) for i in range(3)),
+               *(("g", "accel_g", i) for i in range(3)), *(("degC", "temp_c", i) for i in range(3)),
+               ("V", "aux_v", None))
+
+
+def sins_labelled(frame: Frame, gyro_range: int) -> dict:
+    """A SINS frame's fields for ``navtwin diff``: ``seq``, then each register word by its
+    name (ZGYRO_OUT) with its value in engineering units."""
+    f = frame.fields
+    s = adis16350.words_to_sample(f["words"], gyro_range)
+    out: dict = {"seq": (f["seq"], None, "")}
+    for name, word, (unit, attr, i) in zip(adis16350.REGISTERS, f["words"], _WORD_UNITS):
+        v = getattr(s, attr)
+        out[name] = (word, v if i is None else v[i], unit)
+    return out
+
+
 def nanoloc_record(frame: Frame, gyro_range: int) -> dict:
     f = frame.fields
     complete = nanoloc.is_complete(f["status"])

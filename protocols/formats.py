@@ -46,6 +46,9 @@ class Format:
     *record(frame, gyro_range)*: a frame's fields as JSON-able values with engineering units.
     Either may be given as ``"module:attribute"``, imported when first used (the command
     line lists the formats without importing the frame layouts).
+    *labelled(frame, gyro_range)*: optional, a frame's fields by name as ``(raw, value in
+    engineering units or None, unit)``, for ``navtwin diff`` (``ZGYRO_OUT 0x8123 -> 0x8124
+    (+0.07326 deg/s)``); without it a diff names the fields of *record*.
     *carries*: what the host makes of the frames: ``imu`` samples, ``ranges``, ``radio``
     (the coordinator's own frames: link quality, API mode); other frames are counted.
     """
@@ -56,6 +59,7 @@ class Format:
     api_mode: bool = False
     record: Callable[[Any, int], dict] | str = plain_record
     carries: str = ""
+    labelled: Callable[[Any, int], dict] | str | None = None
 
     @cached_property
     def _decoder(self) -> Callable[..., Any]:
@@ -65,6 +69,11 @@ class Format:
     def render(self) -> Callable[[Any, int], dict]:
         """*record*, imported."""
         return load(self.record) if isinstance(self.record, str) else self.record
+
+    @cached_property
+    def label(self) -> Callable[[Any, int], dict]:
+        """*labelled*, imported."""
+        return load(self.labelled) if isinstance(self.labelled, str) else self.labelled
 
     def make(self, *, escaped: bool = True):
         """A fresh decoder (*escaped*: XBee API mode 2, for the formats with an API mode)."""
@@ -82,7 +91,8 @@ def _check(name: str, fmt) -> None:
 
 _STREAM, _DECODE = "navtwin.protocols.stream", "navtwin.protocols.decode"
 SINS = Format("sins", f"{_STREAM}:sins_decoder", "the SINS board's frames",
-              record=f"{_DECODE}:sins_record", carries="imu")
+              record=f"{_DECODE}:sins_record", carries="imu",
+              labelled=f"{_DECODE}:sins_labelled")
 NANOLOC = Format("nanoloc", f"{_STREAM}:nanoloc_decoder", "the nanoLOC gateway's reports",
                  record=f"{_DECODE}:nanoloc_record", carries="ranges")
 XBEE = Format("xbee", f"{_STREAM}:XBeeDecoder", "XBee API frames", api_mode=True,

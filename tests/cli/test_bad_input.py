@@ -176,6 +176,14 @@ CASES = {
                          {"x.bin": ""}, ["--baud"]),
     "decode --baud 10**12": (["decode", "x.bin", "--format", "sins", "--baud", "1000000000000"],
                              {"x.bin": ""}, ["--baud"]),
+    # navtwin diff
+    "diff --time-tolerance nan": (["diff", GOLDEN, GOLDEN, "--time-tolerance", "nan"], {},
+                                  ["--time-tolerance", "finite"]),
+    "diff --time-tolerance -1": (["diff", GOLDEN, GOLDEN, "--time-tolerance", "-1"], {},
+                                 ["--time-tolerance"]),
+    "diff --max 1.5": (["diff", GOLDEN, GOLDEN, "--max", "1.5"], {}, ["--max", "integer"]),
+    "diff on a file that is no recording": (["diff", GOLDEN, "x.bin"], {"x.bin": ""},
+                                            ["x.bin", "no recording.json", "--format"]),
     # navtwin host
     "host --duration nan": ([*HOST, "--duration", "nan"], {}, ["--duration", "finite"]),
     "host --duration inf": ([*HOST, "--duration", "inf"], {}, ["--duration", "finite"]),
