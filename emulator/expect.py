@@ -1,0 +1,170 @@
+"""Expectations on a running lab's ports: wait for a frame, assert none comes, or silence.
+
+A :class:`PortWatch` reads one port as a client would (opens its stable link, raw 8N1 at the
+port's rate, decodes with the port's declared format in the scenario's API mode, see
+protocols.match) and waits *on the data* with a deadline: ``select`` on the PTY, never a
+sleep. Hang-ups (``lab.unplug``) close its end; it opens the link again once it is back.
+
+Time. In a real-time lab a timeout is wall time. In virtual time (``--speed max`` or a
+factor) it is device time: the lab's own clock, ``virtual_s`` in the control socket's
+``status`` (the same for every port, unlike a SINS frame's counter, which only the SINS
+stream carries and a board reset restarts). Everything readable is read before the clock is
+asked, and the clock is asked at least every :data:`CLOCK_S` of wall time while waiting, so
+a window may end up to that much wall time of device time late (at ``--speed max`` a few
+device seconds), never early.
+"""
+from __future__ import annotations
+
+import errno
+import os
+import select
+import termios
+import time
+import tty
+
+from ..protocols.match import Match, Stream
+
+CLOCK_S = 0.05  # wall time between two readings of a virtual-time lab's clock
+CHUNK = 65536
+
+
+class ExpectError(AssertionError):
+    """An expectation on a lab port failed; the message says what was awaited, where, for how
+    long, and the last frames decoded."""
+
+
+class ExpectTimeout(ExpectError):
+    """``expect``: the awaited bytes or frame did not come in time."""
+
+
+class Unexpected(ExpectError):
+    """``expect_none`` saw a match, or ``idle`` saw bytes."""
+
+
+class PortWatch:
+    """One port of *lab* (emulator.api.Lab), read for expectations."""
+
+    def __init__(self, lab, port: str, *, format: str, baud: int, escaped: bool,
+                 gyro_range: int) -> None:
+        self.lab, self.port, self.baud = lab, port, baud
+        self.stream = Stream(format, escaped=escaped, gyro_range=gyro_range)
+        self.fd: int | None = None
+        self._open()
+
+    # -- the port as a client reads it -----------------------------------------------------
+    def _open(self) -> None:
+        link = self.lab.ports.get(self.port)
+        try:
+            fd = os.open(link, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError:  # unplugged: no link until it is plugged back
+            return
+        tty.setraw(fd)
+        attrs = termios.tcgetattr(fd)
+        attrs[4] = attrs[5] = getattr(termios, f"B{self.baud}")
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+        self.fd = fd
+
+    def _hang_up(self) -> None:
+        os.close(self.fd)
+        self.fd = None
+
+    def _drain(self) -> int:
+        """Read what is readable now into the stream; the bytes read."""
+        if self.fd is None:
+            self._open()
+        got = 0
+        while self.fd is not None:
+            try:
+                data = os.read(self.fd, CHUNK)
+            except BlockingIOError:
+                break
+            except OSError as e:
+                if e.errno != errno.EIO:
+                    raise
+                data = b""  # EIO: the emulator closed its end (unplugged)
+            if not data:
+                self._hang_up()
+                break
+            got += len(data)
+            self.stream.feed(data)
+        return got
+
+    def _wait(self, seconds: float) -> None:
+        """Until bytes are readable or *seconds* of wall time have passed."""
+        if self.fd is None:
+            select.select([], [], [], seconds)  # nothing to wait on until the link is back
+        else:
+            select.select([self.fd], [], [], seconds)
+
+    def close(self) -> None:
+        if self.fd is not None:
+            self._hang_up()
+
+    # -- time ------------------------------------------------------------------------------
+    @property
+    def virtual(self) -> bool:
+        return self.lab.info["speed"] != "realtime"
+
+    def now(self) -> float:
+        """Device time (virtual time) or wall time, in seconds."""
+        return self.lab.status()["virtual_s"] if self.virtual else time.monotonic()
+
+    def _until(self, seconds: float, done) -> tuple[object, float, float]:
+        """Feed the stream until ``done()`` gives a result or *seconds* (device or wall time)
+        pass; (result or None, device seconds waited, wall seconds waited)."""
+        t0, w0 = self.now(), time.monotonic()
+        while True:
+            self._drain()
+            found = done()
+            if found is not None:
+                return found, self.now() - t0, time.monotonic() - w0
+            now = self.now()
+            if now - t0 >= seconds:  # what was written before the clock read is readable
+                self._drain()
+                return done(), now - t0, time.monotonic() - w0
+            if not self.lab.running():
+                self._drain()
+                found = done()
+                if found is None:
+                    raise ExpectError(self._message(f"the lab ended while waiting on port "
+                                                    f"{self.port!r}", now - t0,
+                                                    time.monotonic() - w0))
+                return found, now - t0, time.monotonic() - w0
+            self._wait(CLOCK_S if self.virtual else seconds - (now - t0))
+
+    def _message(self, head: str, device_s: float, wall_s: float) -> str:
+        clock = (f"{device_s:.3f} s device time ({wall_s:.3f} s wall, lab at speed "
+                 f"{self.lab.info['speed']})" if self.virtual else f"{wall_s:.3f} s wall time "
+                 "(real-time lab)")
+        return (f"{head} after {clock}; {self.stream.bytes} bytes read on port {self.port!r} "
+                f"in all; last frames decoded:\n{self.stream.last_frames()}")
+
+    # -- the expectations ------------------------------------------------------------------
+    def expect(self, match, timeout: float):
+        m = Match(match)
+        found, dev, wall = self._until(timeout, lambda: self.stream.take(m))
+        if found is None:
+            raise ExpectTimeout(self._message(f"lab.expect: nothing matching {m} on port {self.port!r} within "
+                                              f"{timeout:g} s", dev, wall))
+        return found
+
+    def expect_none(self, match, within: float) -> None:
+        m = Match(match)
+        self._drain()
+        self.stream.skip()  # what came before the call is not in the window
+        found, dev, wall = self._until(within, lambda: self.stream.take(m))
+        if found is not None:
+            what = found.group(0) if hasattr(found, "group") else found
+            raise Unexpected(self._message(f"lab.expect_none: {m} came on port {self.port!r} "
+                                           f"within the {within:g} s window: {what!r}",
+                                           dev, wall))
+
+    def idle(self, seconds: float) -> None:
+        self._drain()
+        self.stream.skip()
+        start = self.stream.bytes
+        seen = lambda: (self.stream.bytes - start) or None  # noqa: E731 - bytes since the call
+        came, dev, wall = self._until(seconds, seen)
+        if came is not None:
+            raise Unexpected(self._message(f"lab.idle: port {self.port!r} was not idle for "
+                                           f"{seconds:g} s: {came} bytes came", dev, wall))
