@@ -9,9 +9,10 @@ Time. In a real-time lab a timeout is wall time. In virtual time (``--speed max`
 factor) it is device time: the lab's own clock, ``virtual_s`` in the control socket's
 ``status`` (the same for every port, unlike a SINS frame's counter, which only the SINS
 stream carries and a board reset restarts). Everything readable is read before the clock is
-asked, and the clock is asked at least every :data:`CLOCK_S` of wall time while waiting, so
-a window may end up to that much wall time of device time late (at ``--speed max`` a few
-device seconds), never early.
+judged, and the clock is read at least every :data:`CLOCK_S` of wall time while waiting. At a
+factor the lab writes each chunk at its device time, so a window holds to that much wall
+time; at ``--speed max`` the lab writes a block of device time (runner.MAX_BLOCK_NS, 1 s) at
+once, ahead of its clock, so a window's edges hold to about a block.
 """
 from __future__ import annotations
 

@@ -101,3 +101,10 @@ def test_bad_matches_and_ports_are_one_line_errors(office):
         office.expect("sins", 5, timeout=1)
     with pytest.raises(ValueError, match="the lab has no port 'gps'; use one of sins, xbee"):
         office.expect("gps", b"x", timeout=1)
+
+
+def test_a_board_reset_seen_by_expect(office):
+    """The plugin's docstring example: the counter starts again after a reset."""
+    office.expect("sins", lambda f: f.seq >= 200, timeout=DEADLINE_S)
+    office.reset("board")
+    assert office.expect("sins", lambda f: f.seq < 5, timeout=DEADLINE_S).seq < 5
