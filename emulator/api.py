@@ -41,8 +41,6 @@ import time
 from contextlib import contextmanager
 from typing import Iterator
 
-from ..protocols import ports
-from ..protocols.ports import DEFAULT_BAUD
 from .control import Control
 from .expect import ExpectError, ExpectTimeout, PortWatch, Unexpected
 from .scenario import load_scenario
@@ -123,14 +121,8 @@ class Lab:
 
     def _watch(self, port: str) -> PortWatch:
         if port not in self._watches:
-            if port not in self.info["ports"]:
-                raise ValueError(f"port: the lab has no port {port!r}; use one of "
-                                 f"{', '.join(self.info['ports'])}")
             scenario = load_scenario(self._scenario_ref or self.info["scenario"])
-            settings = scenario.ports.get(port, {})
-            self._watches[port] = PortWatch(
-                self, port, format=ports.get(port).format, baud=settings.get("baud", DEFAULT_BAUD),
-                escaped=settings.get("api_mode", 2) == 2, gyro_range=scenario.imu.gyro_range_dps)
+            self._watches[port] = PortWatch(self, port, scenario)
         return self._watches[port]
 
     def _line(self, timeout: float) -> dict:

@@ -20,10 +20,13 @@ import errno
 import os
 import select
 import termios
+import threading
 import time
 import tty
 
+from ..protocols import ports
 from ..protocols.match import Match, Stream
+from ..protocols.ports import DEFAULT_BAUD
 
 CLOCK_S = 0.05  # wall time between two readings of a virtual-time lab's clock
 CHUNK = 65536
@@ -45,12 +48,29 @@ class Unexpected(ExpectError):
 class PortWatch:
     """One port of *lab* (emulator.api.Lab), read for expectations."""
 
-    def __init__(self, lab, port: str, *, format: str, baud: int, escaped: bool,
-                 gyro_range: int) -> None:
-        self.lab, self.port, self.baud = lab, port, baud
-        self.stream = Stream(format, escaped=escaped, gyro_range=gyro_range)
+    def __init__(self, lab, port: str, scenario) -> None:
+        if port not in lab.ports:
+            raise ValueError(f"port: the lab has no port {port!r}; use one of "
+                             f"{', '.join(lab.ports)}")
+        settings = scenario.ports.get(port, {})
+        self.lab, self.port = lab, port
+        self.baud = settings.get("baud", DEFAULT_BAUD)
+        self._stream_args = dict(format=ports.get(port).format,
+                                 escaped=settings.get("api_mode", 2) == 2,
+                                 gyro_range=scenario.imu.gyro_range_dps)
+        self.stream = self.tap()
+        self._taps: list[Stream] = []
         self.fd: int | None = None
         self._open()
+
+    def tap(self) -> Stream:
+        """A stream of this port with its own position (a ``--fail-on`` beside the expects)."""
+        return Stream(**self._stream_args)
+
+    def add_tap(self) -> Stream:
+        tap = self.tap()
+        self._taps.append(tap)
+        return tap
 
     # -- the port as a client reads it -----------------------------------------------------
     def _open(self) -> None:
@@ -87,7 +107,8 @@ class PortWatch:
                 self._hang_up()
                 break
             got += len(data)
-            self.stream.feed(data)
+            for stream in (self.stream, *self._taps):
+                stream.feed(data)
         return got
 
     def _wait(self, seconds: float) -> None:
@@ -169,3 +190,71 @@ class PortWatch:
         if came is not None:
             raise Unexpected(self._message(f"lab.idle: port {self.port!r} was not idle for "
                                            f"{seconds:g} s: {came} bytes came", dev, wall))
+
+
+class Checks:
+    """``navtwin emulate --expect/--fail-on/--timeout``: on each port, its expects in order
+    and its fail-ons all along (each on a tap of its own, so they see every frame), one thread
+    per port. :attr:`failure` is the first failure's message; :attr:`passed` is set when every
+    expect was seen (the run can stop) or, with fail-ons only, when *timeout* passed clean."""
+
+    def __init__(self, lab, scenario, expects: list[tuple[str, Match]],
+                 fail_ons: list[tuple[str, Match]], timeout: float | None) -> None:
+        names = list(dict.fromkeys(p for p, _ in expects + fail_ons))
+        self.watches = {p: PortWatch(lab, p, scenario) for p in names}
+        self.expects = {p: [m for q, m in expects if q == p] for p in names}
+        self.fail_ons = {p: [(m, self.watches[p].add_tap()) for q, m in fail_ons if q == p]
+                         for p in names}
+        self.lab, self.timeout = lab, timeout
+        self._remaining = len(expects)
+        self._any_expects = bool(expects)
+        self._lock = threading.Lock()
+        self.failure: str | None = None
+        self.passed = False
+
+    def run(self) -> None:
+        """Until every port's checks are decided or one fails (then the others stop too)."""
+        threads = [threading.Thread(target=self._port, args=(p,), daemon=True)
+                   for p in self.watches]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        self.passed = self.failure is None
+        for w in self.watches.values():
+            w.close()
+
+    def _port(self, port: str) -> None:
+        watch, pending = self.watches[port], list(self.expects[port])
+        t0, w0 = watch.now(), time.monotonic()
+        while self.failure is None:
+            watch._drain()
+            for m, tap in self.fail_ons[port]:
+                found = tap.take(m)
+                if found is not None:
+                    what = found.group(0) if hasattr(found, "group") else found
+                    return self._fail(watch, f"--fail-on: {m} came on port {port!r}: {what!r}",
+                                      t0, w0)
+            while pending and watch.stream.take(pending[0]) is not None:
+                pending.pop(0)
+                with self._lock:
+                    self._remaining -= 1
+            if self._any_expects and self._remaining == 0:
+                return  # every expect seen: the fail-ons are done watching too
+            if not pending and not self.fail_ons[port]:
+                return
+            if self.timeout is not None and watch.now() - t0 >= self.timeout:
+                if pending:
+                    self._fail(watch, f"--expect: nothing matching {pending[0]} on port "
+                                      f"{port!r} within {self.timeout:g} s", t0, w0)
+                return
+            if not self.lab.running():
+                if pending:
+                    self._fail(watch, f"--expect: the run ended before {pending[0]} came on "
+                                      f"port {port!r}", t0, w0)
+                return
+            watch._wait(CLOCK_S)
+
+    def _fail(self, watch: PortWatch, head: str, t0: float, w0: float) -> None:
+        if self.failure is None:
+            self.failure = watch._message(head, watch.now() - t0, time.monotonic() - w0)

@@ -106,6 +106,48 @@ class Match:
             return False
 
 
+def parse(text: str) -> Match:
+    """A :class:`Match` written on a command line (``navtwin emulate --expect PORT:PATTERN``):
+    ``hex:7E0005`` bytes, ``re:REGEX`` a regex on the raw stream (its text as Latin-1 bytes:
+    ``re:\\x7e\\x00``), or ``FIELD=VALUE,...``: a frame whose fields all equal the values
+    (integers in any base, ``type=0x8B,status=0``; else the field's text, ``command=AP``)."""
+    kind, _, body = text.partition(":")
+    if kind == "hex":
+        try:
+            return Match(bytes.fromhex(body))
+        except ValueError:
+            raise ValueError(f"pattern {text!r}: {body!r} is not hex bytes; write e.g. "
+                             "hex:7E0005") from None
+    if kind == "re":
+        try:
+            return Match(re.compile(body.encode("latin-1"), re.S))
+        except (re.error, UnicodeEncodeError) as e:
+            raise ValueError(f"pattern {text!r}: not a byte regex ({e}); write e.g. "
+                             "re:\\x7e\\x00.\\x8b") from None
+    want = {}
+    for item in text.split(","):
+        field, eq, value = item.partition("=")
+        if not eq or not field.strip():
+            raise ValueError(f"pattern {text!r}: write hex:BYTES, re:REGEX or FIELD=VALUE,... "
+                             "(e.g. type=0x8B,status=0)")
+        try:
+            want[field.strip()] = int(value, 0)
+        except ValueError:
+            want[field.strip()] = value
+
+    def fields(f: FrameView) -> bool:
+        return all(_text(getattr(f, k)) == v if isinstance(v, str) else getattr(f, k) == v
+                   for k, v in want.items())
+
+    m = Match(fields)
+    m.text = f"a frame with {text}"
+    return m
+
+
+def _text(value) -> str:
+    return value.decode("latin-1") if isinstance(value, bytes) else str(value)
+
+
 class Stream:
     """One port's bytes as a client reads them: decoded with the port's *format*
     (protocols.formats; *escaped*: API mode 2), the raw tail since the last match, and the

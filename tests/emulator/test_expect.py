@@ -2,6 +2,7 @@
 
 Every wait is on the port's data with a deadline; the generous ones (DEADLINE_S) are for
 events that must come, the short ones are the windows under test."""
+import json
 import re
 import time
 
@@ -10,7 +11,7 @@ import pytest
 from navtwin.emulator.api import ExpectTimeout, Unexpected, emulate
 from navtwin.protocols import xbee
 
-from ..helpers import DEADLINE_S
+from ..helpers import DEADLINE_S, navtwin, one_line_error
 
 pytestmark = pytest.mark.pty
 
@@ -108,3 +109,49 @@ def test_a_board_reset_seen_by_expect(office):
     office.expect("sins", lambda f: f.seq >= 200, timeout=DEADLINE_S)
     office.reset("board")
     assert office.expect("sins", lambda f: f.seq < 5, timeout=DEADLINE_S).seq < 5
+
+
+# -- navtwin emulate --expect / --fail-on / --timeout: shell CI ----------------------------------
+def _emulate(tmp_path, *args):
+    return navtwin("emulate", "--scenario", "office", "--speed", "max", "--quiet",
+                   "--link-dir", tmp_path / "links", *args)
+
+
+def test_cli_expects_met_stop_the_run_with_status_0(tmp_path):
+    r = _emulate(tmp_path, "--expect", "sins:seq=300", "--expect", "sins:seq=310",
+                 "--expect", "nanoloc:anchor=2,status=0x0F", "--expect", "xbee:re:\\x7e",
+                 "--timeout", "30")
+    assert r.returncode == 0, r.stderr
+    done = json.loads(r.stdout.splitlines()[-1])
+    assert done["interrupted"] and done["virtual_s"] < 70  # stopped once all had come
+
+
+def test_cli_expect_timeout_is_status_3_with_the_last_frames(tmp_path):
+    r = _emulate(tmp_path, "--expect", "sins:seq=65000", "--timeout", "3")
+    assert r.returncode == 3
+    assert json.loads(r.stdout.splitlines()[-1])["done"]
+    head, frames = r.stderr.split("last frames decoded:\n")
+    assert head.startswith("navtwin emulate: --expect: nothing matching a frame with seq=65000 "
+                           "on port 'sins' within 3 s after ")
+    assert "s device time" in head and "lab at speed max" in head
+    assert all("format=sins" in f and "accel_g=[" in f for f in frames.splitlines())
+
+
+def test_cli_fail_on_is_status_3_and_passes_when_absent(tmp_path):
+    r = _emulate(tmp_path, "--fail-on", "nanoloc:anchor=3", "--timeout", "10")
+    assert r.returncode == 3
+    assert re.match(r"navtwin emulate: --fail-on: a frame with anchor=3 came on port 'nanoloc': "
+                    r"format=nanoloc .*anchor=3 ", r.stderr)
+    r = _emulate(tmp_path, "--fail-on", "nanoloc:anchor=9", "--timeout", "3")
+    assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--expect", "gps:hex:7E"], ["--expect", "PORT one of sins, xbee, nanoloc"]),
+    (["--expect", "sins:hex:7G"], ["--expect", "is not hex bytes"]),
+    (["--fail-on", "sins:re:("], ["--fail-on", "not a byte regex"]),
+    (["--expect", "sins:seq"], ["--expect", "FIELD=VALUE"]),
+    (["--timeout", "3"], ["--timeout bounds --expect/--fail-on"]),
+])
+def test_cli_bad_expectations_are_one_line_errors(tmp_path, args, words):
+    one_line_error(_emulate(tmp_path, *args), *words)
