@@ -58,17 +58,15 @@ class PortWatch:
         self._stream_args = dict(format=ports.get(port).format,
                                  escaped=settings.get("api_mode", 2) == 2,
                                  gyro_range=scenario.imu.gyro_range_dps)
-        self.stream = self.tap()
+        self.stream = Stream(**self._stream_args)
         self._taps: list[Stream] = []
         self.fd: int | None = None
         self._open()
 
     def tap(self) -> Stream:
-        """A stream of this port with its own position (a ``--fail-on`` beside the expects)."""
-        return Stream(**self._stream_args)
-
-    def add_tap(self) -> Stream:
-        tap = self.tap()
+        """Another stream of this port's bytes, with its own position (a ``--fail-on``
+        beside the expects), fed as :attr:`stream` is."""
+        tap = Stream(**self._stream_args)
         self._taps.append(tap)
         return tap
 
@@ -89,11 +87,10 @@ class PortWatch:
         os.close(self.fd)
         self.fd = None
 
-    def _drain(self) -> int:
-        """Read what is readable now into the stream; the bytes read."""
+    def drain(self) -> None:
+        """Read what is readable now into the streams."""
         if self.fd is None:
             self._open()
-        got = 0
         while self.fd is not None:
             try:
                 data = os.read(self.fd, CHUNK)
@@ -106,12 +103,10 @@ class PortWatch:
             if not data:
                 self._hang_up()
                 break
-            got += len(data)
             for stream in (self.stream, *self._taps):
                 stream.feed(data)
-        return got
 
-    def _wait(self, seconds: float) -> None:
+    def wait(self, seconds: float) -> None:
         """Until bytes are readable or *seconds* of wall time have passed."""
         if self.fd is None:
             select.select([], [], [], seconds)  # nothing to wait on until the link is back
@@ -136,25 +131,25 @@ class PortWatch:
         pass; (result or None, device seconds waited, wall seconds waited)."""
         t0, w0 = self.now(), time.monotonic()
         while True:
-            self._drain()
+            self.drain()
             found = done()
             if found is not None:
                 return found, self.now() - t0, time.monotonic() - w0
             now = self.now()
             if now - t0 >= seconds:  # what was written before the clock read is readable
-                self._drain()
+                self.drain()
                 return done(), now - t0, time.monotonic() - w0
             if not self.lab.running():
-                self._drain()
+                self.drain()
                 found = done()
                 if found is None:
-                    raise ExpectError(self._message(f"the lab ended while waiting on port "
+                    raise ExpectError(self.message(f"the lab ended while waiting on port "
                                                     f"{self.port!r}", now - t0,
                                                     time.monotonic() - w0))
                 return found, now - t0, time.monotonic() - w0
-            self._wait(CLOCK_S if self.virtual else seconds - (now - t0))
+            self.wait(CLOCK_S if self.virtual else seconds - (now - t0))
 
-    def _message(self, head: str, device_s: float, wall_s: float) -> str:
+    def message(self, head: str, device_s: float, wall_s: float) -> str:
         clock = (f"{device_s:.3f} s device time ({wall_s:.3f} s wall, lab at speed "
                  f"{self.lab.info['speed']})" if self.virtual else f"{wall_s:.3f} s wall time "
                  "(real-time lab)")
@@ -166,29 +161,29 @@ class PortWatch:
         m = Match(match)
         found, dev, wall = self._until(timeout, lambda: self.stream.take(m))
         if found is None:
-            raise ExpectTimeout(self._message(f"lab.expect: nothing matching {m} on port {self.port!r} within "
+            raise ExpectTimeout(self.message(f"lab.expect: nothing matching {m} on port {self.port!r} within "
                                               f"{timeout:g} s", dev, wall))
         return found
 
     def expect_none(self, match, within: float) -> None:
         m = Match(match)
-        self._drain()
+        self.drain()
         self.stream.skip()  # what came before the call is not in the window
         found, dev, wall = self._until(within, lambda: self.stream.take(m))
         if found is not None:
             what = found.group(0) if hasattr(found, "group") else found
-            raise Unexpected(self._message(f"lab.expect_none: {m} came on port {self.port!r} "
+            raise Unexpected(self.message(f"lab.expect_none: {m} came on port {self.port!r} "
                                            f"within the {within:g} s window: {what!r}",
                                            dev, wall))
 
     def idle(self, seconds: float) -> None:
-        self._drain()
+        self.drain()
         self.stream.skip()
         start = self.stream.bytes
         seen = lambda: (self.stream.bytes - start) or None  # noqa: E731 - bytes since the call
         came, dev, wall = self._until(seconds, seen)
         if came is not None:
-            raise Unexpected(self._message(f"lab.idle: port {self.port!r} was not idle for "
+            raise Unexpected(self.message(f"lab.idle: port {self.port!r} was not idle for "
                                            f"{seconds:g} s: {came} bytes came", dev, wall))
 
 
@@ -203,7 +198,7 @@ class Checks:
         names = list(dict.fromkeys(p for p, _ in expects + fail_ons))
         self.watches = {p: PortWatch(lab, p, scenario) for p in names}
         self.expects = {p: [m for q, m in expects if q == p] for p in names}
-        self.fail_ons = {p: [(m, self.watches[p].add_tap()) for q, m in fail_ons if q == p]
+        self.fail_ons = {p: [(m, self.watches[p].tap()) for q, m in fail_ons if q == p]
                          for p in names}
         self.lab, self.timeout = lab, timeout
         self._remaining = len(expects)
@@ -228,7 +223,7 @@ class Checks:
         watch, pending = self.watches[port], list(self.expects[port])
         t0, w0 = watch.now(), time.monotonic()
         while self.failure is None:
-            watch._drain()
+            watch.drain()
             for m, tap in self.fail_ons[port]:
                 found = tap.take(m)
                 if found is not None:
@@ -253,8 +248,8 @@ class Checks:
                     self._fail(watch, f"--expect: the run ended before {pending[0]} came on "
                                       f"port {port!r}", t0, w0)
                 return
-            watch._wait(CLOCK_S)
+            watch.wait(CLOCK_S)
 
     def _fail(self, watch: PortWatch, head: str, t0: float, w0: float) -> None:
         if self.failure is None:
-            self.failure = watch._message(head, watch.now() - t0, time.monotonic() - w0)
+            self.failure = watch.message(head, watch.now() - t0, time.monotonic() - w0)
