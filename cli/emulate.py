@@ -26,7 +26,19 @@ DIR/nanoloc). On start it prints one JSON line {"ready": true, "ports": {...}, "
 prints a final {"done": true, ...} line with frames, bytes and drop counts per port, and
 per fault kind the injections and bytes touched (the recording's faults.jsonl lists each).
 Progress goes to stderr every few seconds. While it runs, `navtwin ctl` (DIR/control)
-injects faults, unplugs and replugs ports."""
+injects faults, unplugs and replugs ports.
+
+For shell CI, --expect PORT:PATTERN (repeatable) waits for each pattern on its port, in the
+order given per port, and stops the run with status 0 once all have come; --fail-on
+PORT:PATTERN fails the run as soon as it comes (until the expects are all seen, or the
+--timeout, or the end of the run). PATTERN: hex:7E0005 (bytes), re:REGEX (a regex on the raw
+stream, its text as Latin-1 bytes), or FIELD=VALUE,... (a decoded frame whose fields equal
+those values, integers in any base: type=0x88,command=AP,status=0). --timeout S bounds the
+wait, in device time at --speed max or a FACTOR. Exit status 3: an expect timed out (or the
+run ended first) or a fail-on came; the message names it, with the port's last frames."""
+
+#: exit status of a failed --expect / --fail-on (2 stays bad input, like Wokwi CI's own code)
+EXPECT_FAILED = 3
 
 
 def register(sub) -> None:
@@ -53,6 +65,17 @@ def register(sub) -> None:
                    help="add a fault to the scenario's [[faults]] (repeatable), e.g. "
                         "byte_drop:port=sins,probability=0.01,start_s=0,end_s=5; keys and "
                         "checks as in [[faults]] (docs/scenarios.md), values as TOML scalars")
+    p.add_argument("--expect", action="append", default=[], type=_check_arg,
+                   metavar="PORT:PATTERN",
+                   help="wait for PATTERN on PORT (repeatable; in order per port); the run "
+                        "stops with status 0 once every expect came, status 3 if one did not "
+                        "within --timeout or the run")
+    p.add_argument("--fail-on", action="append", default=[], type=_check_arg,
+                   metavar="PORT:PATTERN",
+                   help="status 3 as soon as PATTERN comes on PORT (repeatable)")
+    p.add_argument("--timeout", type=number(0, MAX_DURATION_S, above=True), metavar="S",
+                   help="with --expect/--fail-on: seconds (device time in virtual time) to "
+                        "wait; --fail-on alone passes once they are over")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_emulate)
 
@@ -64,6 +87,34 @@ def _speed(text: str) -> float | None:
         return parse_speed(text)
     except RunError as e:
         raise argparse.ArgumentTypeError(str(e).removeprefix("speed: ")) from None
+
+
+def _check_arg(text: str):
+    """PORT:PATTERN -> (port, protocols.match.Match)."""
+    from navtwin.protocols import ports
+    from navtwin.protocols.match import parse
+
+    port, colon, pattern = text.partition(":")
+    if not colon or port not in ports.names():
+        raise argparse.ArgumentTypeError(f"{text!r}: write PORT:PATTERN with PORT one of "
+                                         f"{', '.join(ports.names())}")
+    try:
+        return port, parse(pattern)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+class _ThisRun:
+    """The running emulation as emulator.expect sees a lab: its ports, speed and clock."""
+
+    def __init__(self, info: dict, ended: threading.Event) -> None:
+        from navtwin.emulator.control import Control
+
+        self.info, self.ports, self._ended = info, info["ports"], ended
+        self.status = Control(info["link_dir"]).status
+
+    def running(self) -> bool:
+        return not self._ended.is_set()
 
 
 def _check_record_dir(path: str, overwrite: bool) -> None:
@@ -100,14 +151,32 @@ def run_emulate(args) -> int:
     except (LinkDirError, RunError) as e:
         raise UsageError(str(e)) from None
     # stop cleanly, links removed, on Ctrl-C, kill and a closed terminal
+    if args.timeout is not None and not (args.expect or args.fail_on):
+        raise UsageError("--timeout bounds --expect/--fail-on; pass one of them, or "
+                         "--duration to bound the run")
+    checks, ended = None, threading.Event()
     with emu, stop_on_signals(stop, (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)):
-        _emit(emu.info())
+        info = emu.info()
+        _emit(info)
+        if args.expect or args.fail_on:
+            from navtwin.emulator.expect import Checks
+
+            checks = Checks(_ThisRun(info, ended), scenario, args.expect, args.fail_on,
+                            args.timeout)
+            watcher = threading.Thread(target=lambda: (checks.run(), stop.set()), daemon=True)
+            watcher.start()
         summary = emu.run(stop)
+        ended.set()
+        if checks is not None:
+            watcher.join()
     if emu.record_error is not None:  # the run ended there; the recording is closed
         summary["recording_error"] = str(emu.record_error)
     _emit(summary)  # after close: the recording is complete when "done" appears
     if emu.record_error is not None:
         raise UsageError(f"--record {emu.record_error}")
+    if checks is not None and checks.failure is not None:
+        print(f"navtwin emulate: {checks.failure}", file=sys.stderr, flush=True)
+        return EXPECT_FAILED
     return 0
 
 

@@ -9,12 +9,23 @@
         ...
         lab.fault("bit_errors", 5.0, port="xbee", ber=1e-4)   # live control: now, for 5 s
         lab.unplug("sins"); lab.replug("sins")          # the cable pulled and plugged back
+        lab.expect("sins", lambda f: f.seq >= 100, timeout=5)   # a SINS frame, by its fields
+        lab.expect("xbee", b"\x7e", timeout=5)         # bytes (or re.compile(rb"...")) on the raw stream
+        lab.expect_none("nanoloc", lambda f: f.anchor == 3, within=2)
+        lab.unplug("sins"); lab.idle("sins", 1.0)      # no byte for 1 s
         summary = lab.wait_done(timeout=60)             # or leave the block: the lab is stopped
 
 The lab runs as a subprocess of ``navtwin emulate`` (the same program users run), so its
 state, threads and signal handling stay out of the test process, and a crash or hang of
 either side cannot take the other down. Each lab gets its own private link directory
 (``mkdtemp``, mode 0700) unless ``link_dir`` is given, so labs can run side by side.
+
+Expectations (emulator.expect): ``expect``, ``expect_none`` and ``idle`` read the port as a
+client would (its declared format, the scenario's API mode), so the port they read is theirs:
+a test's own code reads the other ports, or reads this one after its expectations. Their
+timeouts are device time in a virtual-time lab (``speed="max"`` or a factor), wall time in a
+real-time one; a failure is an AssertionError (``ExpectTimeout``, ``Unexpected``) naming what
+was awaited, where, for how long, and the last frames decoded with their fields.
 """
 from __future__ import annotations
 
@@ -31,6 +42,8 @@ from contextlib import contextmanager
 from typing import Iterator
 
 from .control import Control
+from .expect import ExpectError, ExpectTimeout, PortWatch, Unexpected
+from .scenario import load_scenario
 
 
 class EmulatorError(RuntimeError):
@@ -40,7 +53,9 @@ class EmulatorError(RuntimeError):
 class Lab:
     """A running ``navtwin emulate`` subprocess."""
 
-    def __init__(self, args: list[str], ready_timeout: float) -> None:
+    def __init__(self, args: list[str], ready_timeout: float, scenario: str | None = None) -> None:
+        self._scenario_ref = scenario  # for the ports' rates, API mode and gyro range
+        self._watches: dict[str, PortWatch] = {}
         self._stderr = tempfile.TemporaryFile()
         self.process = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                         stderr=self._stderr)
@@ -85,6 +100,30 @@ class Lab:
 
     def status(self) -> dict:
         return self.control.status()
+
+    # expectations on the ports (emulator.expect)
+    def expect(self, port: str, match, timeout: float):
+        """Wait for *match* on *port*: bytes or a compiled bytes regex (searched in the raw
+        stream; returns the ``re.Match``), or a predicate on each decoded frame (given a
+        protocols.match.FrameView: ``f.type``, ``f.seq``, ``f.status``, ``f.record``; returns
+        the matching one). The stream is consumed up to the match: the next expect on the
+        port starts after it. *timeout*: device seconds (virtual time) or wall seconds;
+        :class:`ExpectTimeout` after it."""
+        return self._watch(port).expect(match, timeout)
+
+    def expect_none(self, port: str, match, within: float) -> None:
+        """:class:`Unexpected` if *match* comes on *port* within *within* s from now."""
+        self._watch(port).expect_none(match, within)
+
+    def idle(self, port: str, seconds: float) -> None:
+        """:class:`Unexpected` if any byte comes on *port* within *seconds* from now."""
+        self._watch(port).idle(seconds)
+
+    def _watch(self, port: str) -> PortWatch:
+        if port not in self._watches:
+            scenario = load_scenario(self._scenario_ref or self.info["scenario"])
+            self._watches[port] = PortWatch(self, port, scenario)
+        return self._watches[port]
 
     def _line(self, timeout: float) -> dict:
         """The next JSON line on the emulator's stdout, waiting at most *timeout* s."""
@@ -138,6 +177,8 @@ class Lab:
         self.close()
 
     def close(self) -> None:
+        for watch in self._watches.values():
+            watch.close()
         self.process.stdout.close()
         self._stderr.close()
 
@@ -168,7 +209,7 @@ def emulate(scenario: str = "office", *, seed: int | None = None, speed: str | f
         private = link_dir = tempfile.mkdtemp(prefix="navtwin-lab-")
     try:
         lab = Lab(command(scenario, seed=seed, speed=speed, duration=duration, link_dir=link_dir,
-                          record=record, overwrite=overwrite), ready_timeout)
+                          record=record, overwrite=overwrite), ready_timeout, str(scenario))
         try:
             yield lab
         finally:
@@ -184,4 +225,5 @@ def emulate(scenario: str = "office", *, seed: int | None = None, speed: str | f
             shutil.rmtree(private, ignore_errors=True)
 
 
-__all__ = ["emulate", "Lab", "EmulatorError", "command"]
+__all__ = ["emulate", "Lab", "EmulatorError", "command", "ExpectError", "ExpectTimeout",
+           "Unexpected"]

@@ -12,11 +12,22 @@ Fixtures:
 Options: ``--navtwin-speed realtime|max|FACTOR`` (default realtime) and ``--navtwin-seed N``
 (default: the scenario's) are the defaults of every lab the fixtures start.
 
+The labs have the expectations of :class:`navtwin.emulator.api.Lab` (emulator.expect):
+``lab.expect(port, match, timeout)`` (bytes, a bytes regex, or a predicate on decoded frames),
+``lab.expect_none(port, match, within)`` and ``lab.idle(port, seconds)``, with timeouts in
+device time when ``--navtwin-speed`` is ``max`` or a factor, and failures (AssertionErrors)
+that show the last frames decoded with their fields.
+
 Example::
 
     def test_my_host_reads_sins(navtwin_office):
         with serial.Serial(navtwin_office.ports["sins"], 115200, timeout=2) as ser:
             assert ser.read(30)
+
+    def test_the_board_restarts_its_counter(navtwin_office):
+        navtwin_office.expect("sins", lambda f: f.seq >= 200, timeout=10)
+        navtwin_office.reset("board")
+        navtwin_office.expect("sins", lambda f: f.seq < 5, timeout=10)
 """
 from __future__ import annotations
 
