@@ -1,0 +1,116 @@
+"""``navtwin emulate --rfc2217``: pyserial's rfc2217:// client on the lab's ports."""
+from __future__ import annotations
+
+import json
+import random
+import select
+import socket
+import subprocess
+import time
+
+import pytest
+import serial
+
+from navtwin.protocols.stream import DecodeError, Frame, sins_decoder
+
+from ..helpers import NAVTWIN, navtwin, one_line_error
+
+DEADLINE = 30.0
+PORTS = ("sins", "xbee", "nanoloc")
+
+
+def free_range(n: int = len(PORTS)) -> int:
+    """A first TCP port with *n* free loopback ports from it (the server binds PORT.. PORT+n-1)."""
+    for _ in range(100):
+        first = random.randrange(20000, 60000)
+        socks = []
+        try:
+            for i in range(n):
+                s = socket.socket()
+                socks.append(s)
+                s.bind(("127.0.0.1", first + i))
+            return first
+        except OSError:
+            continue
+        finally:
+            for s in socks:
+                s.close()
+    raise RuntimeError("no free range of loopback TCP ports")
+
+
+@pytest.fixture
+def lab(tmp_path):
+    first = free_range()
+    proc = subprocess.Popen([*NAVTWIN, "emulate", "--scenario", "office", "--seed", "7",
+                             "--rfc2217", f"127.0.0.1:{first}", "--link-dir", tmp_path / "l",
+                             "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert select.select([proc.stdout], [], [], DEADLINE)[0]
+        yield first, json.loads(proc.stdout.readline())
+    finally:
+        proc.terminate()
+        proc.communicate(timeout=DEADLINE)
+
+
+def read_sins(url: str, baud: int, n: int = 3000) -> tuple[list, list]:
+    """*n* bytes of the SINS port read at *baud*; its (frames, decode errors)."""
+    with serial.serial_for_url(url, baudrate=baud, timeout=0.5) as port:
+        data = b""
+        deadline = time.monotonic() + DEADLINE
+        while len(data) < n and time.monotonic() < deadline:
+            data += port.read(n - len(data))
+    assert len(data) == n, "the port gave too few bytes before the deadline"
+    events = sins_decoder().decode(data)
+    return ([e for e in events if isinstance(e, Frame)],
+            [e for e in events if isinstance(e, DecodeError)])
+
+
+@pytest.mark.pty
+def test_ready_line_lists_one_url_per_port_in_the_labs_order(lab):
+    first, ready = lab
+    assert list(ready["rfc2217"]) == list(PORTS)
+    assert ready["rfc2217"] == {p: f"rfc2217://127.0.0.1:{first + i}"
+                                for i, p in enumerate(PORTS)}
+
+
+@pytest.mark.pty
+def test_pyserial_at_the_ports_rate_reads_crc_valid_sins_frames(lab):
+    _, ready = lab
+    frames, errors = read_sins(ready["rfc2217"]["sins"], 115200)
+    assert len(frames) >= 100  # 3000 bytes of 26-byte frames, the first maybe cut
+    assert [f.type for f in frames] == [frames[0].type] * len(frames)
+    assert sum(1 for e in errors if e.kind != "garbage") == 0
+
+
+@pytest.mark.pty
+def test_a_client_at_9600_baud_reads_garbage(lab):
+    _, ready = lab
+    frames, errors = read_sins(ready["rfc2217"]["sins"], 9600, n=1500)
+    assert frames == [] and errors
+
+
+@pytest.mark.pty
+def test_settings_are_answered_with_the_values_in_force(lab):
+    """The raw protocol: 0xFF in a value is doubled, 0 asks, server codes are +100."""
+    _, ready = lab
+    port = int(ready["rfc2217"]["nanoloc"].rsplit(":", 1)[1])
+    with socket.create_connection(("127.0.0.1", port), timeout=DEADLINE) as s:
+        iac, sb, se = 255, 250, 240
+        s.sendall(bytes([iac, 251, 44,  # WILL COM-PORT-OPTION
+                         iac, sb, 44, 1, 0, 0, 0x4B, 0, iac, se,  # SET-BAUDRATE 19200
+                         iac, sb, 44, 1, 0, 0, 0, 0, iac, se,  # ... and ask for it
+                         iac, sb, 44, 5, 8, iac, se]))  # SET-CONTROL DTR on
+        want = [bytes([iac, sb, 44, 101, 0, 0, 0x4B, 0, iac, se])] * 2 + \
+            [bytes([iac, sb, 44, 105, 8, iac, se])]
+        got = b""
+        deadline = time.monotonic() + DEADLINE
+        while time.monotonic() < deadline and not all(w in got for w in want):
+            got += s.recv(4096)
+    assert bytes([iac, 253, 44]) in got  # DO COM-PORT-OPTION
+    assert got.count(want[0]) == 2 and want[2] in got
+
+
+def test_bad_address_is_one_line_with_exit_2(tmp_path):
+    one_line_error(navtwin("emulate", "--scenario", "office", "--rfc2217", "host:99999",
+                           "--link-dir", tmp_path / "l"), "[HOST:]PORT")
