@@ -38,13 +38,18 @@ def free_range(n: int = len(PORTS)) -> int:
     raise RuntimeError("no free range of loopback TCP ports")
 
 
-@pytest.fixture
-def lab(tmp_path):
+def start(tmp_path, *args):
     first = free_range()
     proc = subprocess.Popen([*NAVTWIN, "emulate", "--scenario", "office", "--seed", "7",
                              "--rfc2217", f"127.0.0.1:{first}", "--link-dir", tmp_path / "l",
-                             "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             "--quiet", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
+    return first, proc
+
+
+@pytest.fixture
+def lab(tmp_path):
+    first, proc = start(tmp_path)
     try:
         assert select.select([proc.stdout], [], [], DEADLINE)[0]
         yield first, json.loads(proc.stdout.readline())
@@ -114,3 +119,30 @@ def test_settings_are_answered_with_the_values_in_force(lab):
 def test_bad_address_is_one_line_with_exit_2(tmp_path):
     one_line_error(navtwin("emulate", "--scenario", "office", "--rfc2217", "host:99999",
                            "--link-dir", tmp_path / "l"), "[HOST:]PORT")
+
+
+@pytest.mark.pty
+@pytest.mark.slow
+def test_navtwin_host_on_rfc2217_gets_the_labs_bytes_and_its_estimates(tmp_path):
+    """The host on all three ports over RFC 2217 records exactly a stretch of what the
+    devices sent (the emulator's own recording), and its estimates replay from that
+    recording byte for byte: the same bytes as on the PTYs, so the same estimates."""
+    _, proc = start(tmp_path, "--record", tmp_path / "emu")
+    try:
+        assert select.select([proc.stdout], [], [], DEADLINE)[0]
+        urls = json.loads(proc.stdout.readline())["rfc2217"]
+        host = navtwin("host", *(a for p in PORTS for a in (f"--{p}", urls[p])),
+                       "--duration", "4", "--out", tmp_path / "live.jsonl",
+                       "--record", tmp_path / "rec")
+        assert host.returncode == 0, host.stderr
+    finally:
+        proc.terminate()
+        proc.communicate(timeout=DEADLINE)
+    for p in PORTS:
+        got = (tmp_path / "rec" / f"{p}.bin").read_bytes()
+        assert len(got) > 1000 and got in (tmp_path / "emu" / f"{p}.bin").read_bytes(), p
+    live = (tmp_path / "live.jsonl").read_text()
+    assert {json.loads(x)["filter"] for x in live.splitlines()} >= {"sins", "kf", "ekf", "ukf"}
+    replay = navtwin("replay", tmp_path / "rec")
+    assert replay.returncode == 0, replay.stderr
+    assert replay.stdout == live
