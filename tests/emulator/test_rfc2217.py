@@ -6,11 +6,14 @@ import random
 import select
 import socket
 import subprocess
+import threading
 import time
+from pathlib import Path
 
 import pytest
 import serial
 
+from navtwin.emulator.rfc2217 import Session
 from navtwin.protocols.stream import DecodeError, Frame, sins_decoder
 
 from ..helpers import NAVTWIN, navtwin, one_line_error
@@ -85,6 +88,7 @@ def test_pyserial_at_the_ports_rate_reads_crc_valid_sins_frames(lab):
     frames, errors = read_sins(ready["rfc2217"]["sins"], 115200)
     assert len(frames) >= 100  # 3000 bytes of 26-byte frames, the first maybe cut
     assert [f.type for f in frames] == [frames[0].type] * len(frames)
+    assert any(0xFF in f.raw for f in frames)  # sent as IAC IAC, read back as one byte
     assert sum(1 for e in errors if e.kind != "garbage") == 0
 
 
@@ -146,3 +150,15 @@ def test_navtwin_host_on_rfc2217_gets_the_labs_bytes_and_its_estimates(tmp_path)
     replay = navtwin("replay", tmp_path / "rec")
     assert replay.returncode == 0, replay.stderr
     assert replay.stdout == live
+
+
+def test_the_parser_undoubles_iac_and_drops_commands_across_reads():
+    """Towards the device: IAC IAC is one data 0xFF, other commands are no data, even
+    when a read ends inside them (the parser keeps its state between reads)."""
+    session = Session(None, Path("unused"), threading.Event())
+    stream = (b"\x01\xff\xff\x02\xff\xf1\x03"  # data 01 FF 02, a NOP, data 03
+              b"\xff\xfa\x2c\x0c\x03\xff\xf0")  # PURGE-DATA (answered, not data)
+    answered = []
+    session._subnegotiation = answered.append
+    got = b"".join(session._telnet(stream[i:i + 1]) for i in range(len(stream)))
+    assert got == b"\x01\xff\x02\x03" and answered == [b"\x2c\x0c\x03"]
