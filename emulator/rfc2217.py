@@ -28,6 +28,9 @@ Protocol (RFC 854/856/858, RFC 2217), per connection:
   (1: received from the device, 2: towards the device, 3: both). NOTIFY-LINESTATE and
   NOTIFY-MODEMSTATE are never sent (masks acknowledged): no line has a state to tell.
 
+A client's settings last as long as its connection: the port's termios are put back as
+they were when it closes, so the next client (TCP or local) does not inherit a 9600.
+
 One client per port at a time: a second connection is closed at once, as a serial port
 held open by one program is busy for another.
 """
@@ -166,11 +169,13 @@ class Session:
             self.conn.close()  # unplugged: no device node, as for a local client
             return
         try:
+            before = termios.tcgetattr(self.fd)
             tty.setraw(self.fd)
             self._offer()
             self._pump()
-        except OSError:
-            pass  # the client or the port went away
+            termios.tcsetattr(self.fd, termios.TCSANOW, before)
+        except (OSError, termios.error):
+            pass  # the client or the port went away (a hung-up PTY: termios.error)
         finally:
             os.close(self.fd)
             self.conn.close()

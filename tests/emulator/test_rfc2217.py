@@ -162,3 +162,16 @@ def test_the_parser_undoubles_iac_and_drops_commands_across_reads():
     session._subnegotiation = answered.append
     got = b"".join(session._telnet(stream[i:i + 1]) for i in range(len(stream)))
     assert got == b"\x01\xff\x02\x03" and answered == [b"\x2c\x0c\x03"]
+
+
+@pytest.mark.pty
+def test_a_clients_rate_ends_with_its_connection(lab):
+    _, ready = lab
+    read_sins(ready["rfc2217"]["sins"], 9600, n=100)
+    with open(ready["ports"]["sins"], "rb", buffering=0) as local:  # sets no termios
+        data = b""
+        deadline = time.monotonic() + DEADLINE
+        while len(data) < 300 and time.monotonic() < deadline:
+            assert select.select([local], [], [], DEADLINE)[0]
+            data += local.read(300)
+    assert [e for e in sins_decoder().decode(data) if isinstance(e, Frame)]
