@@ -175,3 +175,13 @@ def test_a_clients_rate_ends_with_its_connection(lab):
             assert select.select([local], [], [], DEADLINE)[0]
             data += local.read(300)
     assert [e for e in sins_decoder().decode(data) if isinstance(e, Frame)]
+
+
+def test_a_tcp_port_in_use_is_one_line_with_exit_2(tmp_path):
+    first = free_range()
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", first + 1))  # the xbee port's
+        taken.listen(1)
+        one_line_error(navtwin("emulate", "--scenario", "office", "--rfc2217", str(first),
+                               "--link-dir", tmp_path / "l"), f"{first + 1}", "choose other")
+    assert not (tmp_path / "l").exists()  # links and directory removed on the way out
