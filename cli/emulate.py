@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
@@ -76,6 +77,12 @@ def register(sub) -> None:
     p.add_argument("--timeout", type=number(0, MAX_DURATION_S, above=True), metavar="S",
                    help="with --expect/--fail-on: seconds (device time in virtual time) to "
                         "wait; --fail-on alone passes once they are over")
+    p.add_argument("--rfc2217", metavar="[HOST:]PORT",
+                   help="also serve every port as an RFC 2217 server (pyserial rfc2217://, "
+                        "ser2net-style clients, navtwin host), one TCP port each from PORT in "
+                        "the lab's port order, on loopback unless HOST is given; the ready "
+                        "line lists them under \"rfc2217\". The baud and stop bits the client "
+                        "sets are the device's view of it, as on the PTY")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_emulate)
 
@@ -117,6 +124,24 @@ class _ThisRun:
         return not self._ended.is_set()
 
 
+@contextlib.contextmanager
+def _rfc2217(address: str | None, links: dict[str, str]):
+    """The RFC 2217 servers of --rfc2217 (None without it), closed with the run."""
+    if address is None:
+        yield None
+        return
+    from navtwin.emulator.rfc2217 import Rfc2217Error, Rfc2217Servers, parse_address
+
+    try:
+        servers = Rfc2217Servers(dict(links), *parse_address(address))
+    except Rfc2217Error as e:
+        raise UsageError(str(e)) from None
+    try:
+        yield servers
+    finally:
+        servers.close()
+
+
 def _check_record_dir(path: str, overwrite: bool) -> None:
     d = Path(path)
     if d.is_symlink():
@@ -155,8 +180,11 @@ def run_emulate(args) -> int:
         raise UsageError("--timeout bounds --expect/--fail-on; pass one of them, or "
                          "--duration to bound the run")
     checks, ended = None, threading.Event()
-    with emu, stop_on_signals(stop, (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)):
+    with emu, stop_on_signals(stop, (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)), \
+            _rfc2217(args.rfc2217, emu.links) as servers:
         info = emu.info()
+        if servers is not None:
+            info["rfc2217"] = servers.urls
         _emit(info)
         if args.expect or args.fail_on:
             from navtwin.emulator.expect import Checks
