@@ -178,7 +178,7 @@ class Recorder(_Relay):
         for (port, direction), buf in self.data.items():
             (directory / f"{port}.{direction}.bin").write_bytes(bytes(buf))
         ports = {}
-        for name in self.masters:
+        for name in self.ports:
             settings = self.scenario.ports.get(name, {})
             ports[name] = {"format": lab_ports.get(name).frame_format,
                            "escaped": settings.get("api_mode", 2) == 2}
@@ -209,7 +209,7 @@ class Player(_Relay):
         super().__init__(index["ports"])
         self.data = {(c["port"], c["dir"]): (directory / f"{c['port']}.{c['dir']}.bin").read_bytes()
                      for c in index["chunks"]}
-        self.received = {name: bytearray() for name in self.masters}
+        self.received = {name: bytearray() for name in self.ports}
         self._port_of = {fd: n for n, fd in self.masters.items()}
         self._next = 0  # the first chunk not yet served or awaited
         self.mismatch: str | None = None  # the port whose write differed
