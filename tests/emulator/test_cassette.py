@@ -1,5 +1,6 @@
 """Cassettes as a user meets them: a separate pytest run of a user's test file, recorded with
-``--navtwin-record`` against the real lab, then replayed with no emulator process."""
+``--navtwin-record`` against the real lab, then replayed with no emulator process; and goldens
+written by ``--navtwin-update-goldens`` and compared with by ``navtwin_golden``."""
 import json
 import os
 import subprocess
@@ -90,7 +91,35 @@ def test_a_missing_cassette_says_how_to_record_it(tmp_path):
     assert not (tmp_path / "cassettes").exists()
 
 
-def test_the_record_flag_is_in_pytest_help(tmp_path):
+def test_the_flags_are_in_pytest_help(tmp_path):
     out = subprocess.run([sys.executable, "-m", "pytest", "--help", "-p", "no:cacheprovider"],
                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert "--navtwin-record" in out.stdout
+    assert "--navtwin-record" in out.stdout and "--navtwin-update-goldens" in out.stdout
+
+
+GOLDEN_TEST = textwrap.dedent('''
+    import os
+    from navtwin.emulator.api import emulate
+
+    def test_office_bytes(navtwin_golden, tmp_path):
+        seed = int(os.environ.get("SEED", "1"))
+        with emulate("office", seed=seed, speed="max", duration=1, record=tmp_path / "run") as lab:
+            lab.wait_done(timeout=60)
+        navtwin_golden(tmp_path / "run")
+''')
+
+
+@pytest.mark.pty
+def test_update_goldens_writes_the_golden_the_next_runs_compare_with(tmp_path):
+    (tmp_path / "test_user.py").write_text(GOLDEN_TEST)
+    out = run(tmp_path)
+    assert out.returncode == 1 and "pytest --navtwin-update-goldens" in out.stdout, out.stdout
+    out = run(tmp_path, "--navtwin-update-goldens")
+    assert out.returncode == 0, out.stdout + out.stderr
+    golden = tmp_path / "goldens" / "test_office_bytes"
+    assert json.loads((golden / "recording.json").read_text())["seed"] == 1
+    out = run(tmp_path)
+    assert out.returncode == 0, out.stdout + out.stderr
+    out = run(tmp_path, env={"SEED": "2"})  # another run's bytes: the diff says where
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "sins (sins): differs" in out.stdout and "first divergence" in out.stdout
