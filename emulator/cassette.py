@@ -166,7 +166,7 @@ class Recorder(_Relay):
         if fd == self.masters[port]:  # the host code wrote
             self._log(port, "write", data)
             self.send(self.lab_fds[port], data)
-        else:  # the device sent: logged when relayed, in order with the host's writes
+        else:  # the device sent: logged as it came, in order with the host's writes
             self._log(port, "read", data)
             self.send(self.masters[port], data)
 
