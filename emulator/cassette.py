@@ -199,12 +199,12 @@ class Player(_Relay):
         index_path = directory / INDEX
         if not index_path.exists():
             raise CassetteError(f"no cassette at {directory}: record it once with "
-                                f"`pytest --navtwin-record` (the lab runs for that run only)")
+                                f"'pytest --navtwin-record' (the lab runs for that run only)")
         index = json.loads(index_path.read_text())
         if index.get("version") != VERSION:
             raise CassetteError(f"{index_path}: cassette version {index.get('version')!r}, "
                                 f"this navtwin replays {VERSION}; record it again with "
-                                f"`pytest --navtwin-record`")
+                                f"'pytest --navtwin-record'")
         self.index = index
         super().__init__(index["ports"])
         self.data = {(c["port"], c["dir"]): (directory / f"{c['port']}.{c['dir']}.bin").read_bytes()
@@ -256,4 +256,4 @@ class Player(_Relay):
                             f"({len(recorded)} bytes recorded, {len(got)} written):\n{diff.text()}")
         if problems:
             raise CassetteError("\n".join(problems) + "\nif the change is meant, record the "
-                                "cassette again with `pytest --navtwin-record`")
+                                "cassette again with 'pytest --navtwin-record'")

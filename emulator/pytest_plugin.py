@@ -106,11 +106,11 @@ def navtwin_golden(request):
             shutil.copytree(run, golden)
             return
         if not golden.exists():
-            pytest.fail(f"no golden at {golden}: write it with `pytest --navtwin-update-goldens`",
+            pytest.fail(f"no golden at {golden}: write it with 'pytest --navtwin-update-goldens'",
                         pytrace=False)
         diff = diff_recordings(golden, run)
         assert diff.equal, (diff.text() + "\nif the change is meant, rewrite the golden with "
-                            "`pytest --navtwin-update-goldens`")
+                            "'pytest --navtwin-update-goldens'")
 
     return check
 
