@@ -9,8 +9,26 @@ Fixtures:
 ``navtwin_office``, ``navtwin_corridor``, ``navtwin_corridor_outage``
     one running lab of that shipped scenario with the command-line defaults.
 
+``navtwin_cassette``
+    a factory for tests of your own host code that need no lab once recorded:
+    ``ports = navtwin_cassette("office", seed=3)`` returns ``{port: PTY path}``. With
+    ``pytest --navtwin-record`` it starts the lab (as ``navtwin_lab``) and relays each port
+    through a PTY of its own, saving the exchange at teardown as the test's cassette,
+    ``cassettes/<test name>/`` beside the test file (emulator.cassette, format there and in
+    docs/testing.md). Without the flag it replays that cassette with no emulator process:
+    the recorded device bytes in order, each after the writes that preceded it, and fails the
+    test with the frame-level diff (protocols.diff) when the host code writes something else.
+
+``navtwin_golden``
+    ``navtwin_golden(run)`` compares the recording directory *run* (``emulate(...,
+    record=run)``) with the test's golden, the recording ``goldens/<test name>/`` beside the
+    test file, frame by frame (protocols.diff), and fails with the diff's text when they
+    differ; with ``pytest --navtwin-update-goldens`` it writes *run* as the golden instead.
+
 Options: ``--navtwin-speed realtime|max|FACTOR`` (default realtime) and ``--navtwin-seed N``
-(default: the scenario's) are the defaults of every lab the fixtures start.
+(default: the scenario's) are the defaults of every lab the fixtures start;
+``--navtwin-record`` records the cassettes instead of replaying them;
+``--navtwin-update-goldens`` rewrites the goldens instead of comparing with them.
 
 The labs have the expectations of :class:`navtwin.emulator.api.Lab` (emulator.expect):
 ``lab.expect(port, match, timeout)`` (bytes, a bytes regex, or a predicate on decoded frames),
@@ -31,12 +49,17 @@ Example::
 """
 from __future__ import annotations
 
+import re
+import shutil
 from contextlib import ExitStack
+from pathlib import Path
 
 import pytest
 
+from ..protocols.diff import diff_recordings
 from .api import emulate
-from .scenario import SCENARIO_NAMES
+from .cassette import Player, Recorder
+from .scenario import SCENARIO_NAMES, load_scenario
 
 
 def pytest_addoption(parser) -> None:
@@ -46,6 +69,12 @@ def pytest_addoption(parser) -> None:
     group.addoption("--navtwin-seed", type=int, default=None, metavar="N",
                     help="seed of the labs started by the navtwin fixtures "
                          "(default: the scenario's)")
+    group.addoption("--navtwin-record", action="store_true", default=False,
+                    help="navtwin_cassette: run the lab and record each test's cassette "
+                         "(default: replay the cassettes with no lab)")
+    group.addoption("--navtwin-update-goldens", action="store_true", default=False,
+                    help="navtwin_golden: write each test's run as its golden recording "
+                         "(default: compare the run with the golden)")
 
 
 @pytest.fixture
@@ -58,6 +87,59 @@ def navtwin_lab(request):
             return stack.enter_context(emulate(scenario, **kw))
 
         yield start
+
+
+def _test_dir(request, kind: str) -> Path:
+    """``<kind>/<test name>/`` beside the test file (parameters made file-name safe)."""
+    return request.node.path.parent / kind / re.sub(r"[^\w.-]", "_", request.node.name)
+
+
+@pytest.fixture
+def navtwin_golden(request):
+    """``navtwin_golden(run)``: the recording *run* compared with the test's golden, or
+    written as it with ``--navtwin-update-goldens``."""
+    golden = _test_dir(request, "goldens")
+
+    def check(run) -> None:
+        if request.config.getoption("navtwin_update_goldens"):
+            shutil.rmtree(golden, ignore_errors=True)
+            shutil.copytree(run, golden)
+            return
+        if not golden.exists():
+            pytest.fail(f"no golden at {golden}: write it with 'pytest --navtwin-update-goldens'",
+                        pytrace=False)
+        diff = diff_recordings(golden, run)
+        assert diff.equal, (diff.text() + "\nif the change is meant, rewrite the golden with "
+                            "'pytest --navtwin-update-goldens'")
+
+    return check
+
+
+@pytest.fixture
+def navtwin_cassette(request, navtwin_lab):
+    """Factory fixture: ``navtwin_cassette(scenario="office", **emulate_keywords) -> {port:
+    PTY path}``, recorded against the lab with ``--navtwin-record``, else replayed."""
+    directory = _test_dir(request, "cassettes")
+    relays = []
+
+    def ports(scenario: str = "office", **kw) -> dict[str, str]:
+        if relays:
+            raise ValueError("navtwin_cassette: one cassette per test; call it once")
+        if request.config.getoption("navtwin_record"):
+            relay = Recorder(navtwin_lab(scenario, **kw), load_scenario(scenario))
+        else:
+            relay = Player(directory)
+        relays.append(relay)
+        relay.start()
+        return dict(relay.ports)
+
+    yield ports
+    for relay in relays:
+        relay.close()
+        if isinstance(relay, Recorder):
+            relay.save(directory)
+        else:
+            relay.check()
 
 
 def _scenario_fixture(name: str):

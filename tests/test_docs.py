@@ -105,7 +105,7 @@ def test_the_tutorial_example_tests_pass():
                         str(ROOT / "docs" / "examples")], cwd=ROOT, capture_output=True,
                        text=True, timeout=240)
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-2000:]
-    assert re.search(r"\b5 passed\b", p.stdout), p.stdout[-2000:]
+    assert re.search(r"\b6 passed\b", p.stdout), p.stdout[-2000:]
 
 
 @pytest.mark.pty
