@@ -42,3 +42,8 @@ def cut_chunk(directory: Path, port: str, index: int) -> bytes:
     (directory / f"{port}.bin").write_bytes(b"".join(c.data for c in chunks))
     (directory / f"{port}.csv").write_text("\n".join(lines) + "\n")
     return cut.data
+
+
+def compared_runs(base: Path) -> dict[str, Path]:
+    """Seeds 1, 2 and 1 again, each a 2 s office run in *base*: what the diff tests compare."""
+    return {name: office(base / name, seed) for name, seed in (("one", 1), ("two", 2), ("again", 1))}

@@ -14,9 +14,7 @@ from ..helpers import ROOT, navtwin, one_line_error
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    base = tmp_path_factory.mktemp("runs")
-    return {name: recorded.office(base / name, seed)
-            for name, seed in (("one", 1), ("two", 2), ("again", 1))}
+    return recorded.compared_runs(tmp_path_factory.mktemp("runs"))
 
 
 def test_same_seed_exits_0(runs):

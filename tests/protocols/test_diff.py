@@ -16,10 +16,7 @@ WORDS_AT = 6  # byte offset of the first register word in a SINS frame
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    """Seeds 1, 2 and 1 again, each a 2 s office run."""
-    base = tmp_path_factory.mktemp("runs")
-    return {name: recorded.office(base / name, seed)
-            for name, seed in (("one", 1), ("two", 2), ("again", 1))}
+    return recorded.compared_runs(tmp_path_factory.mktemp("runs"))
 
 
 def test_same_seed_is_equal(runs):
