@@ -11,7 +11,7 @@ from pathlib import Path
 
 from navtwin.common.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
 
-from .main import UsageError, number, stop_on_signals
+from .main import UsageError, flagged, number, stop_on_signals
 
 #: --seed and --duration, shared with ``navtwin lab``.
 seed = number(*SEEDS, integer=True)
@@ -135,7 +135,7 @@ def _rfc2217(address: str | None, links: dict[str, str]):
     try:
         servers = Rfc2217Servers(dict(links), *parse_address(address))
     except Rfc2217Error as e:
-        raise UsageError(str(e)) from None
+        raise UsageError(flagged(str(e))) from None
     try:
         yield servers
     finally:

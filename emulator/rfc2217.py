@@ -76,7 +76,7 @@ def parse_address(text: str) -> tuple[str, int]:
     host, colon, port = text.rpartition(":")
     host = host.strip("[]") if colon else "127.0.0.1"
     if not port.isdigit() or not 0 < int(port) < 65536:
-        raise Rfc2217Error(f"--rfc2217 {text!r}: write [HOST:]PORT with PORT a TCP port 1-65535")
+        raise Rfc2217Error(f"rfc2217: {text!r}: write [HOST:]PORT with PORT a TCP port 1-65535")
     return host or "127.0.0.1", int(port)
 
 
@@ -91,7 +91,7 @@ class Rfc2217Servers:
         try:
             for i, (name, link) in enumerate(links.items()):
                 if first + i > 65535:
-                    raise Rfc2217Error(f"--rfc2217: {len(links)} ports from {first} pass 65535; "
+                    raise Rfc2217Error(f"rfc2217: {len(links)} ports from {first} pass 65535; "
                                        "choose a lower first PORT")
                 sock = self._listen(host, first + i)
                 self._listeners.append(sock)
@@ -109,7 +109,7 @@ class Rfc2217Servers:
             family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
             sock = socket.socket(family, socket.SOCK_STREAM)
         except OSError as e:
-            raise Rfc2217Error(f"--rfc2217 {host}: {e.strerror or e}; give an address of "
+            raise Rfc2217Error(f"rfc2217: {host}: {e.strerror or e}; give an address of "
                                "this machine") from None
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
@@ -117,7 +117,7 @@ class Rfc2217Servers:
             sock.listen(1)
         except OSError as e:
             sock.close()
-            raise Rfc2217Error(f"--rfc2217 {host}:{port}: {e.strerror}; choose other TCP "
+            raise Rfc2217Error(f"rfc2217: {host}:{port}: {e.strerror}; choose other TCP "
                                "ports (one per serial port from the first)") from None
         return sock
 
