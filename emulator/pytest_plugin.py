@@ -56,10 +56,8 @@ from pathlib import Path
 
 import pytest
 
-from ..protocols.diff import diff_recordings
 from .api import emulate
-from .cassette import Player, Recorder
-from .scenario import SCENARIO_NAMES, load_scenario
+from .scenario import SCENARIO_NAMES
 
 
 def pytest_addoption(parser) -> None:
@@ -108,6 +106,9 @@ def navtwin_golden(request):
         if not golden.exists():
             pytest.fail(f"no golden at {golden}: write it with 'pytest --navtwin-update-goldens'",
                         pytrace=False)
+        from ..protocols.diff import diff_recordings  # here: pytest loads this plugin in
+        # every session of an environment with navtwin, most of which never compare
+
         diff = diff_recordings(golden, run)
         assert diff.equal, (diff.text() + "\nif the change is meant, rewrite the golden with "
                             "'pytest --navtwin-update-goldens'")
@@ -119,6 +120,9 @@ def navtwin_golden(request):
 def navtwin_cassette(request, navtwin_lab):
     """Factory fixture: ``navtwin_cassette(scenario="office", **emulate_keywords) -> {port:
     PTY path}``, recorded against the lab with ``--navtwin-record``, else replayed."""
+    from .cassette import Player, Recorder  # here, as diff_recordings above
+    from .scenario import load_scenario
+
     directory = _test_dir(request, "cassettes")
     relays = []
 
