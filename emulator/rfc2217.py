@@ -45,6 +45,7 @@ import tty
 from pathlib import Path
 
 from .pty import SPEED_BAUD  # the table the port reads the client's rate with
+from .uart_rx import CSIZE_BITS  # and the one it reads the data bits with
 
 IAC, DONT, DO, WONT, WILL, SB, SE = 255, 254, 253, 252, 251, 250, 240
 BINARY, SGA, COM_PORT = 0, 3, 44
@@ -59,7 +60,7 @@ CONTROL_QUERIES = {0: ("flow", 1), 4: ("break", 6), 7: ("dtr", 8), 10: ("rts", 1
 CONTROL_SETS = {**{v: "flow" for v in (1, 2, 3, 17, 18, 19)}, 5: "break", 6: "break",
                 8: "dtr", 9: "dtr", 11: "rts", 12: "rts",
                 **{v: "inflow" for v in (14, 15, 16)}}
-CSIZES = {5: termios.CS5, 6: termios.CS6, 7: termios.CS7, 8: termios.CS8}
+CSIZES = {bits: flag for flag, bits in CSIZE_BITS.items()}  # data bits -> c_cflag CSIZE
 #: RFC 2217 parity codes -> c_cflag bits (MARK and SPACE: stick parity, kept as asked)
 PARITY_FLAGS = {1: 0, 2: termios.PARENB | termios.PARODD, 3: termios.PARENB,
                 4: termios.PARENB | termios.PARODD, 5: termios.PARENB}
