@@ -181,7 +181,7 @@ class Recorder(_Relay):
         for name in self.ports:
             settings = self.scenario.ports.get(name, {})
             ports[name] = {"format": lab_ports.get(name).frame_format,
-                           "escaped": settings.get("api_mode", 2) == 2}
+                           "escaped": lab_ports.escaped(settings)}
         index = {"version": VERSION, "scenario": self.lab.info.get("scenario"),
                  "seed": self.lab.info.get("seed"), "ports": ports, "chunks": self.chunks}
         (directory / INDEX).write_text(json.dumps(index, indent=1) + "\n")

@@ -56,7 +56,7 @@ class PortWatch:
         self.lab, self.port = lab, port
         self.baud = settings.get("baud", DEFAULT_BAUD)
         self._stream_args = dict(format=ports.get(port).format,
-                                 escaped=settings.get("api_mode", 2) == 2,
+                                 escaped=ports.escaped(settings),
                                  gyro_range=scenario.imu.gyro_range_dps)
         self.stream = Stream(**self._stream_args)
         self._taps: list[Stream] = []

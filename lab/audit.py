@@ -315,7 +315,7 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
         if host.reads[p] and None in marks:
             raise AuditError(f"{host_dir}/{p}.csv: a read without its read columns; a host "
                              f"recording has them on every read: re-record it")
-        escaped = settings.get(p, {}).get("api_mode", 2) == 2  # its API mode at the start
+        escaped = lab_ports.escaped(settings.get(p, {}))  # its API mode at the start
         results.append(audit_port(p, b"".join(c.data for c in emu.chunks(p)), reads, entries,
                                   escaped, marks if host.reads[p] else None))
     old = [p for p in ports if not host.reads[p]]

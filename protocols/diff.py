@@ -422,7 +422,7 @@ def _recording_side(rec: Recording, port: str) -> _Side:
 
 
 def _escaped(rec: Recording, port: str) -> bool:
-    return rec.meta["ports"].get(port, {}).get("api_mode", 2) == 2
+    return lab_ports.escaped(rec.meta["ports"].get(port, {}))
 
 
 def _port_format(port: str) -> formats.Format | None:

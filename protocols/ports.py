@@ -84,6 +84,13 @@ PORTS: Registry[Port] = Registry("navtwin.ports", "port",
                                  check=_check, error=PortError)
 
 
+def escaped(settings) -> bool:
+    """Whether a port's settings (its table in a scenario's or a recording's ``ports``) say
+    XBee API mode 2, escaped: the mode when they name none (a port without an API mode
+    ignores it)."""
+    return settings.get("api_mode", 2) == 2
+
+
 def listed() -> tuple[Port, ...]:
     """Every port, in the lab's order."""
     return tuple(sorted((p for _, p in PORTS.items()), key=lambda p: p.order))
