@@ -18,6 +18,8 @@ Fixtures:
     docs/testing.md). Without the flag it replays that cassette with no emulator process:
     the recorded device bytes in order, each after the writes that preceded it, and fails the
     test with the frame-level diff (protocols.diff) when the host code writes something else.
+    A recording run saves the cassette only when the test passed: a failed test keeps the
+    cassette it had (a warning says so), so a broken run never becomes the reference.
 
 ``navtwin_golden``
     ``navtwin_golden(run)`` compares the recording directory *run* (``emulate(...,
@@ -73,6 +75,18 @@ def pytest_addoption(parser) -> None:
     group.addoption("--navtwin-update-goldens", action="store_true", default=False,
                     help="navtwin_golden: write each test's run as its golden recording "
                          "(default: compare the run with the golden)")
+
+
+_OUTCOME = pytest.StashKey[str]()
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_makereport(item, call):
+    # the call phase's outcome, for the fixtures that act at teardown on how the test went
+    report = yield
+    if report.when == "call":
+        item.stash[_OUTCOME] = report.outcome
+    return report
 
 
 @pytest.fixture
@@ -141,7 +155,12 @@ def navtwin_cassette(request, navtwin_lab):
     for relay in relays:
         relay.close()
         if isinstance(relay, Recorder):
-            relay.save(directory)
+            if request.node.stash.get(_OUTCOME, "failed") == "passed":
+                relay.save(directory)
+            else:
+                request.node.warn(pytest.PytestWarning(
+                    f"navtwin_cassette: the test did not pass; {directory} keeps the cassette "
+                    "it had (fix the test and record again)"))
         else:
             relay.check()
 

@@ -26,6 +26,7 @@ USER_TEST = textwrap.dedent('''
                 chunk = ser.read(256)
                 assert chunk, f"no answer to {COMMAND}"
                 got += chunk
+        assert not os.environ.get("FAIL_AFTER"), "the user's own check failed"
 ''')
 
 # replay runs: no lab may start, and no child process may exist at the end of the test
@@ -70,6 +71,13 @@ def test_recorded_against_the_lab_replays_without_it_and_a_changed_write_fails(t
     answer_at = read.index(bytes([0x88, 7]) + b"AP")
     later = [c for c in index["chunks"][first_write:] if c["port"] == "xbee" and c["dir"] == "read"]
     assert later and later[0]["offset"] <= answer_at
+
+    # a recording run whose test fails keeps the cassette it had, and says so
+    before = {f.name: f.read_bytes() for f in cassette.iterdir()}
+    out = run(tmp_path, "--navtwin-record", env={"AT_COMMAND": "ID", "FAIL_AFTER": "1"})
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert "keeps the cassette it had" in out.stdout
+    assert {f.name: f.read_bytes() for f in cassette.iterdir()} == before
 
     (tmp_path / "conftest.py").write_text(NO_LAB)
     out = run(tmp_path)
