@@ -3,16 +3,19 @@ README.md and docs/tutorial.md parses with today's command line, and the tutoria
 (docs/examples/) run against the emulated lab."""
 from __future__ import annotations
 
+import json
+import os
 import re
 import shlex
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from navtwin.cli.main import build_parser
 
-from .helpers import ROOT
+from .helpers import NAVTWIN, ROOT
 
 DOCS = ("README.md", "docs/tutorial.md")
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.M | re.S)
@@ -97,15 +100,43 @@ def test_the_readme_python_runs_quietly(tmp_path):
     assert len(p.stderr.splitlines()) < 5, p.stderr[:3000]
 
 
+def ci_job(tmp_path, golden):
+    """docs/examples/ci/lab-tests.sh as the CI job of docs/testing.md runs it, on the
+    tutorial's example tests (docs/examples/), with *golden* as the golden recording."""
+    return subprocess.run(["bash", str(ROOT / "docs" / "examples" / "ci" / "lab-tests.sh")],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "GOLDEN": str(golden),
+                               "TESTS": str(ROOT / "docs" / "examples"),
+                               "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"})
+
+
 @pytest.mark.pty
 @pytest.mark.slow
-def test_the_tutorial_example_tests_pass():
-    """docs/examples/ run as the tutorial runs them: pytest with navtwin's plugin."""
-    p = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                        str(ROOT / "docs" / "examples")], cwd=ROOT, capture_output=True,
-                       text=True, timeout=240)
-    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-2000:]
-    assert re.search(r"\b6 passed\b", p.stdout), p.stdout[-2000:]
+def test_the_ci_job_example_runs_the_tutorial_tests_and_keeps_a_golden(tmp_path):
+    """The CI job passes on a golden of the same run, and the tutorial's example tests pass
+    in it (pytest with navtwin's plugin, expect and the cassette)."""
+    golden = tmp_path / "golden"
+    made = subprocess.run([*NAVTWIN, "emulate", "--scenario", "office", "--seed", "1",
+                           "--speed", "max", "--duration", "2", "--record", golden, "--quiet"],
+                          capture_output=True, text=True, timeout=120)
+    assert made.returncode == 0, made.stderr
+    job = ci_job(tmp_path, golden)
+    assert job.returncode == 0, job.stdout[-3000:] + job.stderr[-2000:]
+    assert re.search(r"\b6 passed\b", job.stdout), job.stdout[-2000:]
+    assert "sins (sins): equal" in (tmp_path / "lab-artifacts" / "diff.txt").read_text()
+
+
+def test_the_ci_job_example_fails_on_a_changed_golden_with_the_diff(tmp_path):
+    golden = tmp_path / "golden"
+    made = subprocess.run([*NAVTWIN, "emulate", "--scenario", "office", "--seed", "2",
+                           "--speed", "max", "--duration", "2", "--record", golden, "--quiet"],
+                          capture_output=True, text=True, timeout=120)
+    assert made.returncode == 0, made.stderr
+    job = ci_job(tmp_path, golden)
+    assert job.returncode == 1, job.stdout[-3000:] + job.stderr[-2000:]
+    assert "first divergence" in job.stdout and "record the golden again" in job.stderr
+    assert json.loads((tmp_path / "lab-artifacts" / "diff.json").read_text())
+    assert "passed" not in job.stdout  # the job stops at the first failing step
 
 
 @pytest.mark.pty
