@@ -15,7 +15,11 @@ Tasks are chunks of seeds worth at least :data:`MIN_TASK_VIRTUAL_S` of scenario 
 0.2 s of work here; Dask's overhead is about 1 ms a task): one seed a task for the shipped
 scenarios, several for a short ``duration``. A seed that raises is run once more in its task; a
 task lost with its worker is resubmitted once by Dask (``retries=1``); a cell that fails twice
-is a row with ``status`` "failed" and the error's line, never dropped.
+is a row with ``status`` "failed" and the error's line, never dropped. While tasks are out,
+the scheduler is asked every :data:`WATCH_S` that no task finishes whether it still answers
+and has workers: a sweep whose scheduler is gone, or that has had no worker for
+:data:`NO_WORKERS_S`, ends with one line (:class:`SweepError`) rather than waiting forever; the
+rows done are in the parts, so the same command finishes it later.
 
 The output directory holds one Parquet file per run (``part-NNNN.parquet``, a row group per
 task as it completes) whose metadata (:data:`META_KEY`) names the code version, the scenario's
@@ -32,6 +36,7 @@ import json
 import math
 import os
 import re
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from hashlib import sha256
@@ -55,6 +60,11 @@ from .run import run_in_memory, truth
 MIN_TASK_VIRTUAL_S = 10.0
 #: Seconds to wait for a named scheduler before refusing it.
 CONNECT_TIMEOUT_S = 10.0
+#: While tasks are out, the scheduler is asked this often whether it is there and has
+#: workers; a sweep on a cluster without workers for NO_WORKERS_S ends (work never lost: the
+#: rows taken are in the parts, and a rerun computes the rest).
+WATCH_S = 5.0
+NO_WORKERS_S = 60.0
 #: The Parquet files' key-value metadata key (a JSON object).
 META_KEY = b"navtwin.sweep"
 #: The name of a part, the only thing a sweep's output directory holds.
@@ -316,19 +326,51 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
 
 
 def _on_dask(client: Client, tasks, text, name, filters, duration, take) -> None:
-    from distributed import as_completed
+    from distributed import wait
 
     n = len(tasks)
     futures = client.client.map(run_chunk, [text] * n, [name] * n, tasks, [filters] * n,
                                 [duration] * n, pure=False, retries=1)
     chunk_of = {f.key: c for f, c in zip(futures, tasks)}
-    for f in as_completed(futures):
-        if f.status == "finished":
-            take(f.result())
-        else:  # lost twice (e.g. its worker died): its cells are failed rows
-            err = _error_line(f.exception())
-            take([_failed(name, s, flt, err) for s in chunk_of[f.key] for flt in filters])
-        f.release()
+    pending, watch = set(futures), _Watch(client)
+    while pending:
+        try:
+            done, pending = wait(pending, timeout=WATCH_S, return_when="FIRST_COMPLETED")
+        except TimeoutError:  # none done for a while: is the cluster still there?
+            watch.check()
+            continue
+        for f in done:
+            if f.status == "finished":
+                take(f.result())
+            else:  # lost twice (e.g. its worker died): its cells are failed rows
+                err = _error_line(f.exception())
+                take([_failed(name, s, flt, err) for s in chunk_of[f.key] for flt in filters])
+            f.release()
+
+
+class _Watch:
+    """Whether the cluster a sweep waits on can still finish it: its scheduler answers and
+    has had workers within NO_WORKERS_S."""
+
+    def __init__(self, client: Client) -> None:
+        self.client = client
+        self.staffed = time.monotonic()
+
+    def check(self) -> None:
+        address = self.client.address
+        try:
+            # asked of the scheduler now (scheduler_info() is a copy Dask refreshes itself)
+            workers = self.client.client.ncores(callback_timeout=WATCH_S)
+        except (OSError, TimeoutError, RuntimeError) as e:
+            raise SweepError(f"scheduler: {address}: lost during the sweep ({_error_line(e)}); "
+                             "the rows done are kept, run the sweep again to finish it") from None
+        now = time.monotonic()
+        if workers:
+            self.staffed = now
+        elif now - self.staffed > NO_WORKERS_S:
+            raise SweepError(f"scheduler: {address}: no workers for {NO_WORKERS_S:g} s; start "
+                             "workers (dask worker ADDRESS) or omit the scheduler for a "
+                             "LocalCluster, then run the sweep again")
 
 
 # ---------------------------------------------------------------- the table over seeds

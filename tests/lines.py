@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 import threading
 import time
 
@@ -36,19 +37,28 @@ class Lines:
     def wait(self, pred, what: str, timeout: float) -> dict:
         """The first JSON line for which *pred* is true; AssertionError at the end of the
         stream or after *timeout* s."""
+        def parsed(line: str):
+            try:
+                obj = json.loads(line)
+            except json.JSONDecodeError:
+                return None
+            return obj if pred(obj) else None
+
+        return self._first(parsed, what, timeout)
+
+    def search(self, pattern: str, what: str, timeout: float) -> re.Match:
+        """The match of the regex *pattern* in the first line that has one (as :meth:`wait`)."""
+        return self._first(re.compile(pattern).search, what, timeout)
+
+    def _first(self, found, what: str, timeout: float):
         deadline = time.monotonic() + timeout
         seen = 0
         with self._cond:
             while True:
                 while seen < len(self.lines):
-                    line = self.lines[seen]
                     seen += 1
-                    try:
-                        obj = json.loads(line)
-                    except json.JSONDecodeError:
-                        continue
-                    if pred(obj):
-                        return obj
+                    if (hit := found(self.lines[seen - 1])) is not None:
+                        return hit
                 if self.ended:
                     raise AssertionError(f"{what}: the stream ended first")
                 left = deadline - time.monotonic()

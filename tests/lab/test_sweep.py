@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -16,6 +17,7 @@ from navtwin.lab import evaluate, sweep
 from navtwin.protocols import __version__
 
 from ..helpers import cli_error
+from ..lines import Lines
 
 #: Short runs: 5 s of office is two seeds a task (MIN_TASK_VIRTUAL_S), so chunks are exercised.
 SHORT = 5.0
@@ -62,6 +64,40 @@ def test_the_local_cluster_runs_no_work_for_a_client_without_its_credentials():
                     intruder.submit(print, "ran").result(timeout=5)
         result = sweep.run("office", [1], ("kf",), duration=2.0, client=client)
     assert [r["status"] for r in result.rows] == ["ok"]
+
+
+def test_a_sweep_on_a_cluster_without_workers_ends_with_one_line(monkeypatch):
+    """A cluster that cannot run the work ends the sweep with a SweepError, not a wait
+    without end."""
+    monkeypatch.setattr(sweep, "WATCH_S", 0.2)
+    monkeypatch.setattr(sweep, "NO_WORKERS_S", 1.0)
+    with sweep.Client(workers=1) as client:
+        client.cluster.scale(0)
+        deadline = time.monotonic() + 60
+        while client.client.scheduler_info()["workers"]:
+            assert time.monotonic() < deadline, "the worker did not stop"
+            time.sleep(0.1)  # polling the scheduler: Dask has no wait for fewer workers
+        with pytest.raises(sweep.SweepError, match=r"no workers for 1 s; start workers"):
+            sweep.run("office", [1], ("kf",), duration=2.0, client=client)
+
+
+def test_a_sweep_whose_scheduler_dies_ends_with_one_line(monkeypatch):
+    monkeypatch.setattr(sweep, "WATCH_S", 0.2)
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
+                                  "--host", "127.0.0.1", "--port", "0", "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        address = Lines(scheduler.stderr).search(r"Scheduler at:\s+(\S+)", "scheduler address",
+                                                  timeout=60).group(1)
+        with sweep.Client(address) as client:
+            scheduler.kill()
+            scheduler.wait(timeout=60)
+            with pytest.raises(sweep.SweepError, match=r"lost during the sweep .*run the sweep "
+                                                       r"again to finish it"):
+                sweep.run("office", [1], ("kf",), duration=2.0, client=client)
+    finally:
+        scheduler.kill()
+        scheduler.wait(timeout=60)
 
 
 def _counting(monkeypatch, fail: set[int] = frozenset()) -> list[int]:
