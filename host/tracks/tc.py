@@ -11,6 +11,11 @@ each exchange, corrected with c_i and f)::
 One range is one scalar update, so a lone anchor still aids the track (no fix needed). The
 e_i are estimates, not fed back: they stay in the filter, and a re-initialisation keeps
 them.
+
+A change from the paper. 001's eqs. 17, 18 and 21-24 write one NLOS error epsilon_d shared
+by every anchor's range; an NLOS error belongs to an anchor's path (an obstacle between the
+tag and that anchor), so by default each anchor has its own (``nlos_states = "per_anchor"``).
+``nlos_states = "shared"`` is the paper's form: one state, -1 in every range's H.
 """
 from __future__ import annotations
 
@@ -18,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.common.schema import key, positive
+from navtwin.common.schema import key, one_of, positive
 from navtwin.host.filters.errorstate import NAV
 from navtwin.host.measurements import Range
 
@@ -32,6 +37,9 @@ class TcSettings(ErrorStateSettings):
     nlos_walk_m_rt_s: float = key(0.05, "m/sqrt(s)", "random walk of each NLOS error (eq. 17's "
                                   "nabla_epsilon); uncalibrated, e_i also follows (f - 1) d",
                                   positive(hi=100))
+    nlos_states: str = key("per_anchor", "", "NLOS random-walk states: per_anchor (one for "
+                           "each anchor's path) or shared (001 eqs. 17-24: one for all)",
+                           one_of("per_anchor", "shared"))
 
 
 class TcTrack(ErrorStateTrack):
@@ -39,7 +47,10 @@ class TcTrack(ErrorStateTrack):
     Settings = TcSettings
 
     def __init__(self, ctx, settings=None) -> None:
-        self.extra = len(ctx.layout.ids)  # one NLOS state per anchor, in the layout's order
+        settings = settings or self.Settings()
+        # one NLOS state per anchor, in the layout's order, or the paper's one for all
+        self._shared = settings.nlos_states == "shared"
+        self.extra = 1 if self._shared else len(ctx.layout.ids)
         super().__init__(ctx, settings)
         self._sigma2 = ctx.cfg.range_sigma_m**2
 
@@ -66,6 +77,6 @@ class TcTrack(ErrorStateTrack):
         H = np.zeros((1, NAV + self.extra))
         H[0, 0:2] = u[0]
         H[0, 2:4] = lead * u[0]
-        H[0, NAV + row] = -1.0
+        H[0, NAV + (0 if self._shared else row)] = -1.0
         R = np.array([[self.range_variance(row, rho_wsn)]])
         self._update("range", m.t, np.array([r[0] - rho_wsn]), H, R, 1)

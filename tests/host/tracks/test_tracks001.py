@@ -16,7 +16,7 @@ from navtwin.host.measurements import Exchange, ImuSample
 from navtwin.host.tracks.base import TrackContext
 from navtwin.host.tracks.fatci import FatciSettings, FatciTrack
 from navtwin.host.tracks.lc import LcTrack
-from navtwin.host.tracks.tc import TcSettings
+from navtwin.host.tracks.tc import TcSettings, TcTrack
 
 from ...helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS, office_config
 from ..navsynth import ellipse, exchanges, noisy_imu, perfect_imu
@@ -64,6 +64,13 @@ def test_fatci_r_is_s_to_the_b_times_the_nominal_r():
         assert track.range_variance(0, d) == pytest.approx(float(fis(sigma)) ** s.b * 0.4**2, rel=1e-4)
 
 
+def _context(calibration=None) -> TrackContext:
+    """A track context of an office estimator, with *calibration*."""
+    est = Estimator(office_config(filters=("fatci",)))
+    return TrackContext(est.cfg, est.context.model, est.layout, calibration, time=est.time,
+                        inertial=est.inertial, ranging=est.ranging, estimator=est)
+
+
 def test_fatci_takes_sigma_of_d_from_the_estimators_calibration():
     class Calibration:  # host.calibration.Calibration's interface
         scale, bias = 1.0, {}
@@ -72,10 +79,7 @@ def test_fatci_takes_sigma_of_d_from_the_estimators_calibration():
         def sigma(d):
             return 0.7  # MO fully: S is the MO set's centroid
 
-    est = Estimator(office_config(filters=("fatci",)))
-    ctx = TrackContext(est.cfg, est.context.model, est.layout, Calibration(), time=est.time,
-                       inertial=est.inertial, ranging=est.ranging, estimator=est)
-    track = FatciTrack(ctx)
+    track = FatciTrack(_context(Calibration()))
     s = track.settings
     assert track.range_variance(2, 3.0) == pytest.approx(((s.s_sets[1] + 2 * s.s_sets[2]) / 3) ** s.b * 0.16,
                                                          rel=1e-4)
@@ -91,13 +95,15 @@ NOISE = dict(gyro_noise_deg_rt_hr=4.2, accel_noise_m_s_rt_hr=2.0, attitude_sigma
 RUNS = 20
 
 
-def model_run(track: str, seed: int, lone_after: float | None = None):
+def model_run(track: str, seed: int, lone_after: float | None = None,
+              nlos: str = "per_anchor", form: str | None = None):
     """One run whose truth follows the error-state model: a perfect IMU at rest (so the
     alignment is exact), then white gyro and accelerometer noise of the filter's densities;
     the start off by the configured p0_sigma; ranges with white noise of range_sigma_m and,
-    for tc, each anchor's NLOS random walk of the filter's sigma and walk; from
-    ``lone_after`` s on anchor 1's ranges alone. Returns the estimates' (t, error of
-    (x, y, vx, vy), cov)."""
+    for tc, each anchor's NLOS random walk of the filter's sigma and walk (*nlos* "shared":
+    001's one walk for every anchor, and the filter in that form unless *form* names another);
+    from ``lone_after`` s on
+    anchor 1's ranges alone. Returns the estimates' (t, error of (x, y, vx, vy), cov)."""
     rng = np.random.default_rng(seed)
     traj = lambda t: ellipse(t, omega=0.1, t_start=ALIGN_S + 1.0, ramp=4.0)  # noqa: E731
     t = np.arange(0.0, DURATION_S, 0.01)
@@ -111,17 +117,20 @@ def model_run(track: str, seed: int, lone_after: float | None = None):
     start = tr.p[0] + rng.normal(0.0, sp, 2)
     ex = exchanges(traj, OFFICE_ANCHORS, duration=DURATION_S, sigma=RANGE_SIGMA, rng=rng, t0=0.003)
     if track == "tc":  # e_i(k+1) = e_i(k) + w (001 eq. 17), per exchange of anchor i
-        walk = {a: rng.normal(0.0, NLOS_SIGMA) for a in OFFICE_ANCHORS}
-        last = {a: 0.0 for a in OFFICE_ANCHORS}
+        path = {a: (0 if nlos == "shared" else a) for a in OFFICE_ANCHORS}
+        walk = {p: rng.normal(0.0, NLOS_SIGMA) for p in set(path.values())}
+        last = {p: 0.0 for p in walk}
         noisy = []
         for te, a, d in ex:
-            walk[a] += rng.normal(0.0, NLOS_WALK * math.sqrt(te - last[a]))
-            last[a] = te
-            noisy.append((te, a, d + walk[a]))
+            walk[path[a]] += rng.normal(0.0, NLOS_WALK * math.sqrt(te - last[path[a]]))
+            last[path[a]] = te
+            noisy.append((te, a, d + walk[path[a]]))
         ex = noisy
     if lone_after is not None:
         ex = [(te, a, d) for te, a, d in ex if te < lone_after or a == 1]
-    settings = (TcSettings(nlos_sigma_m=NLOS_SIGMA, nlos_walk_m_rt_s=NLOS_WALK, **NOISE) if track == "tc"
+    settings = (TcSettings(nlos_sigma_m=NLOS_SIGMA, nlos_walk_m_rt_s=NLOS_WALK,
+                           nlos_states=form or nlos,
+                           **NOISE) if track == "tc"
                 else LcTrack.Settings(**NOISE))
     cfg = EstimatorConfig(anchors=OFFICE_ANCHORS, latitude_deg=LATITUDE_DEG, local_gravity=GRAVITY,
                           start=tuple(start), heading_deg=0.0, alignment_s=ALIGN_S,
@@ -144,9 +153,12 @@ def model_run(track: str, seed: int, lone_after: float | None = None):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("track", ["lc", "tc"])
-def test_nees_is_within_its_95_percent_chi_square_bounds(track):
-    runs = [model_run(track, seed) for seed in range(RUNS)]
+@pytest.mark.parametrize("track, nlos", [("lc", "per_anchor"), ("tc", "per_anchor"),
+                                         ("tc", "shared")])
+def test_nees_is_within_its_95_percent_chi_square_bounds(track, nlos):
+    """Each form of tc is consistent on data with its own NLOS model: one walk per anchor,
+    or 001's one walk for all (``nlos_states = "shared"``)."""
+    runs = [model_run(track, seed, nlos=nlos) for seed in range(RUNS)]
     nees = np.array([[err.dot(np.linalg.solve(cov, err)) for _, err, cov in run] for run in runs])
     mean = nees.mean(axis=0)  # over the runs, at each instant
     lo, hi = chi2.ppf([0.025, 0.975], 4 * RUNS) / RUNS
@@ -154,6 +166,23 @@ def test_nees_is_within_its_95_percent_chi_square_bounds(track):
     # a consistent filter has 95 % of the instants inside; each instant is one test
     assert inside.mean() >= 0.85, (lo, hi, np.round(mean, 2))
     assert lo <= mean.mean() <= hi
+
+
+@pytest.mark.slow
+def test_the_shared_nlos_form_uses_one_state_and_wins_on_data_with_one_walk():
+    """001's form (one NLOS walk for every anchor) is a filter with one extra state; on data
+    whose anchors share one walk it beats the per-anchor form, which must learn the walk
+    once per anchor (paired over seeds; the per-anchor form is still consistent there, the
+    NEES test above, being the more general model)."""
+    errors = {}
+    for form in ("per_anchor", "shared"):
+        settings = TcSettings(nlos_states=form)
+        assert TcTrack(_context(), settings).extra == (1 if form == "shared" else len(OFFICE_ANCHORS))
+        errors[form] = np.array([np.mean([np.hypot(*err[:2]) for _, err, _ in
+                                          model_run("tc", seed, nlos="shared", form=form)])
+                                 for seed in range(8)])
+    d = errors["per_anchor"] - errors["shared"]
+    assert d.mean() - 2 * d.std(ddof=1) / math.sqrt(d.size) > 0, d
 
 
 @pytest.mark.slow
