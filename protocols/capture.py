@@ -127,7 +127,7 @@ class Written:
         return f"{sum(self.packets.values())} packets, {self.clock} time: {per or 'no packets'}"
 
 
-def _clock(recording: Recording, clock: str) -> str:
+def clock_for(recording: Recording, clock: str) -> str:
     """The chunk attribute the timestamps come from: *clock*'s, or the wall clock's in a
     recording without device times (a host's)."""
     if clock not in CLOCKS:
@@ -137,7 +137,7 @@ def _clock(recording: Recording, clock: str) -> str:
         return "wall"  # a host recording: arrival times are all it has
     if firsts and all(getattr(c, CLOCKS[clock]) is None for c in firsts):
         raise CaptureError(f"clock: the recording has no {clock} times (an emulator run at "
-                           f"--speed max has device times only); use the device clock")
+                           f"full speed has device times only); use the device clock")
     return clock
 
 
@@ -183,11 +183,11 @@ def write_recording(recording: Recording, out: BinaryIO, *, clock: str = "device
     per port, a packet per chunk, timestamps on *clock* (``device`` or ``wall``; ``device``
     falls back to wall in a recording without device times). *streams*: other streams (the
     radio's air), each its packets in time order, merged in. What was written."""
-    used = _clock(recording, clock)
+    used = clock_for(recording, clock)
     other = {"device": "wall", "wall": "device"}[used]
     settings = recording.meta["ports"]
+    faults = _Faults(recording.faults())  # validated before a byte is written
     capture = Capture(out, {p: s for p, s in settings.items() if "of" not in s})
-    faults = _Faults(recording.faults())
     written = Written(used)
 
     def count(name: str, data: bytes) -> None:
