@@ -128,8 +128,8 @@ class Written:
 
 
 def clock_for(recording: Recording, clock: str) -> str:
-    """The chunk attribute the timestamps come from: *clock*'s, or the wall clock's in a
-    recording without device times (a host's)."""
+    """The clock the timestamps of *recording* come from: *clock* (``device`` or ``wall``),
+    or ``wall`` for ``device`` in a recording without device times (a host's)."""
     if clock not in CLOCKS:
         raise CaptureError(f"clock: {clock!r} is not one of {', '.join(CLOCKS)}")
     firsts = [c for c in (next(recording.chunks(p), None) for p in recording.ports) if c]
