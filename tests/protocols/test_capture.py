@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import io
 import math
+import random
 import re
 
 import pytest
 
-from navtwin.protocols import adis16350, sins, xbee
+from navtwin.protocols import adis16350, nanoloc, sins, xbee
 from navtwin.protocols.capture import (LINKTYPES, UNDISSECTED, CaptureError, Packet,
                                        dissectors_path, write_recording)
 from navtwin.protocols.decode import decode
@@ -302,3 +303,51 @@ def test_other_streams_merge_in_time_order_on_their_own_interfaces(tmp_path):
     assert written.packets == {"sins": 2, "air": 2}
     assert [(r["interface"], _ns(r["time"])) for r in packets(capture)] == [
         ("sins", 10), ("air", 20), ("sins", 30), ("air", 40)]
+
+
+def test_damaged_and_random_packets_never_break_the_dissectors(tmp_path):
+    """Frames of every type the dissectors know, several to a packet, then a bit flipped,
+    the head or tail cut, or random bytes instead: every packet dissects without a Lua error."""
+    rnd = random.Random(19)
+    words = [0x8000] * 11
+    frames = [xbee.frame_data(0x95, src64=1, src16=0x7E7D, options=3, remote16=3, remote64=4,
+                              ni="LAB-COORD", parent16=0xFFFE, device_type=1, source_event=1,
+                              profile=0xC105, manufacturer=0x101E, device_type_id=0x11),
+              xbee.frame_data(0x8B, frame_id=1, dest16=0x7D84, retries=0, delivery=0,
+                              discovery=1),
+              xbee.frame_data(0x10, frame_id=1, dest64=0x13, dest16=0xFFFE, radius=0, options=0,
+                              data=b"\x11\x13"),
+              xbee.frame_data(0x97, frame_id=1, src64=1, src16=2, command=b"NI", status=0,
+                              value=b"abc"),
+              xbee.frame_data(0x91, src64=1, src16=2, src_endpoint=0, dest_endpoint=0,
+                              cluster=0x8002, profile=0, options=1, data=b"\x01\x00"),
+              xbee.frame_data(0x90, src64=1, src16=2, options=1,
+                              data=sins.build_sample(7, words)),
+              bytes([0x42, 1, 2]), bytes([0x95]), bytes([0x8B, 1])]
+    valid = {"sins": [sins.build_sample(i, words) for i in range(3)],
+             "nanoloc": [nanoloc.build_report(seq=1, t_us=2, anchor=1, tag=16, status=s, rssi=-60,
+                                              tau=[4, 3, 2, 1]) for s in (0x0F, 0x40, 0x80)],
+             "xbee_escaped": [xbee.wrap(d, True) for d in frames],
+             "xbee": [xbee.wrap(d, False) for d in frames]}
+    linktype = {fmt + ("_escaped" if escaped else ""): lt for (fmt, escaped), lt in LINKTYPES.items()}
+    capture, n = tmp_path / "damaged.pcapng", 0
+    with open(capture, "wb") as f:
+        w = Writer(f)
+        for name, vs in valid.items():
+            interface = w.interface(name, linktype[name])
+            for _ in range(150):
+                data = bytearray(b"".join(rnd.choice(vs) for _ in range(rnd.randrange(1, 4))))
+                damage = rnd.randrange(5)
+                if damage == 1:
+                    data[rnd.randrange(len(data))] ^= 1 << rnd.randrange(8)
+                elif damage == 2:
+                    data = data[rnd.randrange(len(data)):]
+                elif damage == 3:
+                    data = data[:rnd.randrange(1, len(data) + 1)]
+                elif damage == 4:
+                    data = bytearray(rnd.randbytes(rnd.randrange(1, 64)))
+                w.packet(interface, n, bytes(data))
+                n += 1
+    shown = fields(capture, "frame.number", "_ws.lua.text", "_ws.expert.message")
+    assert len(shown) == n
+    assert not [row for row in shown if any("Lua" in m for m in row[1] + row[2])]
