@@ -12,12 +12,14 @@
 --   navtwin.nanoloc  seq, t_us, anchor, tag, status, rssi, tau1..tau4 (ps), distance_m, crc_ok
 --   navtwin.xbee     start, length, type, the frame's fields (src64, src16, options, rf_data,
 --                    command, at_status, ...), checksum, checksum_ok; 0x90 RF data is
---                    dissected as the SINS stream it carries
+--                    dissected as the SINS stream it carries; API mode 2 (escaped) on
+--                    USER2, mode 1 on USER3 (framed by navtwin.xbee_api1, shown as navtwin.xbee)
 --   navtwin.garbage  bytes of a packet that are no complete frame
 --
 -- A packet is one chunk of a port's byte stream: every complete frame in it is dissected, the
 -- rest shows as garbage / partial frame. Frames split across packets are not reassembled.
--- The search resyncs as navtwin's stream decoders do (protocols/stream.py): a candidate that
+-- A frame whose CRC or checksum fails is shown, flagged (crc_ok false, an expert error); the
+-- search resyncs as navtwin's stream decoders do (protocols/stream.py): a candidate that
 -- fails its length or integrity check is left one byte after its start (API mode 2: at the
 -- next bare 7E).
 
