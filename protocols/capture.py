@@ -11,13 +11,24 @@ whose format has no dissector is captured as :data:`UNDISSECTED` (raw bytes).
 Directions. A packet's epb_flags say which way it went, seen from the lab computer:
 ``to_host`` bytes (a device's writes) are inbound, ``to_device`` ones (what the host wrote to
 the coordinator) outbound. Both directions of a port share its interface.
+
+A recording as a capture (:func:`write_recording`, ``navtwin pcap``): every chunk of every
+port is one packet, in time order across the ports, on the clock asked for (device time by
+default; a host recording has wall time only); the other clock and the fault ledger's entries
+that touch the chunk's bytes go in the packet's comment. A recording's port whose settings
+say ``{"of": PORT}`` (a host recording's ``xbee.tx``) is PORT's ``to_device`` direction.
 """
 from __future__ import annotations
 
-from typing import BinaryIO
+import bisect
+import heapq
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO, Iterable, Iterator, NamedTuple
 
 from . import ports
 from .pcapng import INBOUND, LINKTYPE_USER0, OUTBOUND, Writer
+from .recording import Chunk, Recording
 
 #: (frame format, XBee API mode 2) -> link type; the Lua dissectors read the same table
 LINKTYPES = {
@@ -33,9 +44,25 @@ DIRECTION = {"to_host": INBOUND, "to_device": OUTBOUND}
 def linktype(port: str, settings: dict) -> int:
     """The link type of port *port* with its *settings* (a recording's or scenario's
     ``ports`` table): its frames' format, in its API mode."""
-    declared = ports.get(port)
+    try:
+        declared = ports.get(port)
+    except KeyError:  # a port this navtwin does not know: its bytes, undissected
+        return UNDISSECTED
     key = (declared.frame_format, declared.api_mode and ports.escaped(settings))
     return LINKTYPES.get(key, UNDISSECTED)
+
+
+def _doc(port: str) -> str:
+    try:
+        return ports.get(port).doc
+    except KeyError:
+        return ""
+
+
+def dissectors_path() -> Path:
+    """The Lua file of navtwin's Wireshark dissectors (shipped in the package):
+    ``tshark -X lua_script:PATH``, or copy it to ~/.local/lib/wireshark/plugins/."""
+    return Path(__file__).resolve().parent / "wireshark" / "navtwin.lua"
 
 
 class Capture:
@@ -56,7 +83,7 @@ class Capture:
         """Port *name*'s interface, declared when first used."""
         if name not in self.interfaces:
             self.interface(name, linktype(name, self.settings.get(name, {})),
-                           ports.get(name).doc)
+                           _doc(name))
         return self.interfaces[name]
 
     def chunk(self, port: str, t_ns: int, data: bytes, direction: str = "to_host",
@@ -67,3 +94,125 @@ class Capture:
 
     def flush(self) -> None:
         self.writer.flush()
+
+
+CLOCKS = {"device": "t_device_ns", "wall": "t_wall_ns"}
+
+
+class CaptureError(ValueError):
+    """A recording that cannot be written as asked: one line naming the setting and the fix."""
+
+
+class Packet(NamedTuple):
+    """One packet of a stream that is not a port (the air), for :func:`write_recording`."""
+    t_ns: int
+    interface: str
+    linktype: int
+    data: bytes
+    direction: str = "to_host"
+    comment: str = ""
+
+
+@dataclass
+class Written:
+    """What :func:`write_recording` wrote: the clock of the timestamps, and per interface
+    its packets and bytes, in the order the interfaces were declared."""
+    clock: str
+    packets: dict[str, int] = field(default_factory=dict)
+    bytes: dict[str, int] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        per = ", ".join(f"{name} {n} packets ({self.bytes[name]} bytes)"
+                        for name, n in self.packets.items())
+        return f"{sum(self.packets.values())} packets, {self.clock} time: {per or 'no packets'}"
+
+
+def clock_for(recording: Recording, clock: str) -> str:
+    """The clock the timestamps of *recording* come from: *clock* (``device`` or ``wall``),
+    or ``wall`` for ``device`` in a recording without device times (a host's)."""
+    if clock not in CLOCKS:
+        raise CaptureError(f"clock: {clock!r} is not one of {', '.join(CLOCKS)}")
+    firsts = [c for c in (next(recording.chunks(p), None) for p in recording.ports) if c]
+    if clock == "device" and firsts and all(c.t_device_ns is None for c in firsts):
+        return "wall"  # a host recording: arrival times are all it has
+    if firsts and all(getattr(c, CLOCKS[clock]) is None for c in firsts):
+        raise CaptureError(f"clock: the recording has no {clock} times (an emulator run at "
+                           f"full speed has device times only); use the device clock")
+    return clock
+
+
+class _Faults:
+    """The fault ledger's entries by the port (and direction) whose bytes they touch: the
+    entries that touch a chunk, found by bisection on their starts."""
+
+    def __init__(self, entries: list[dict]) -> None:
+        self.by_stream: dict[tuple, tuple[list[int], list[dict], int]] = {}
+        grouped: dict[tuple, list[dict]] = {}
+        for e in entries:
+            if e["port"] is not None and e["start"] is not None:
+                grouped.setdefault((e["port"], e["direction"] or "to_host"), []).append(e)
+        for key, es in grouped.items():
+            es.sort(key=lambda e: e["start"])
+            self.by_stream[key] = ([e["start"] for e in es], es,
+                                   max(e["end"] - e["start"] for e in es))
+
+    def touching(self, port: str, direction: str, start: int, end: int) -> list[dict]:
+        """The entries whose bytes [start, end) of the stream overlap the chunk's [start,
+        end); an entry of removed bytes (start == end) touches the chunk it is in."""
+        starts, entries, longest = self.by_stream.get((port, direction), ((), (), 0))
+        hi = bisect.bisect_left(starts, end)
+        lo = bisect.bisect_left(starts, start - longest, 0, hi)
+        return [e for e in entries[lo:hi] if max(e["end"], e["start"] + 1) > start]
+
+
+def _fault_note(e: dict) -> str:
+    span = f"bytes {e['start']}..{e['end']}" if e["end"] > e["start"] else f"at byte {e['start']}"
+    return f"fault {e['kind']} #{e['fault']} {span}"
+
+
+def _port_packets(recording: Recording, clock: str) -> Iterator[tuple[int, Chunk]]:
+    """Every chunk of every port in time order on *clock* (ties: port name order)."""
+    attr = CLOCKS[clock]
+    for chunk in recording.merged(clock=attr):
+        yield getattr(chunk, attr) or 0, chunk
+
+
+def write_recording(recording: Recording, out: BinaryIO, *, clock: str = "device",
+                    streams: Iterable[Iterable[Packet]] = ()) -> Written:
+    """Write *recording* to *out* as a pcapng capture (the module docstring): one interface
+    per port, a packet per chunk, timestamps on *clock* (``device`` or ``wall``; ``device``
+    falls back to wall in a recording without device times). *streams*: other streams (the
+    radio's air), each its packets in time order, merged in. What was written."""
+    used = clock_for(recording, clock)
+    other = {"device": "wall", "wall": "device"}[used]
+    settings = recording.meta["ports"]
+    faults = _Faults(recording.faults())  # validated before a byte is written
+    capture = Capture(out, {p: s for p, s in settings.items() if "of" not in s})
+    written = Written(used)
+
+    def count(name: str, data: bytes) -> None:
+        written.packets[name] = written.packets.get(name, 0) + 1
+        written.bytes[name] = written.bytes.get(name, 0) + len(data)
+
+    ports_ = ((t, 0, chunk) for t, chunk in _port_packets(recording, used))
+    others = (((p.t_ns, 1, p) for p in stream) for stream in streams)
+    for t, _, item in heapq.merge(ports_, *others, key=lambda x: x[:2]):
+        if isinstance(item, Packet):
+            if item.interface not in capture.interfaces:
+                capture.interface(item.interface, item.linktype)
+            capture.chunk(item.interface, t, item.data, item.direction, item.comment)
+            count(item.interface, item.data)
+            continue
+        port, direction = item.port, "to_host"
+        if "of" in settings[port]:
+            port, direction = settings[port]["of"], "to_device"
+        notes = []
+        other_t = getattr(item, CLOCKS[other])
+        if other_t is not None:
+            notes.append(f"{CLOCKS[other]}={other_t}")
+        notes += [_fault_note(e) for e in faults.touching(
+            port, direction, item.offset, item.offset + len(item.data))]
+        capture.chunk(port, t, item.data, direction, "; ".join(notes))
+        count(port, item.data)
+    capture.flush()
+    return written

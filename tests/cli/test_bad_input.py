@@ -184,6 +184,14 @@ CASES = {
     "diff --max 1.5": (["diff", GOLDEN, GOLDEN, "--max", "1.5"], {}, ["--max", "integer"]),
     "diff on a file that is no recording": (["diff", GOLDEN, "x.bin"], {"x.bin": ""},
                                             ["x.bin", "no recording.json", "--format"]),
+    # navtwin pcap
+    "pcap on a file that is no recording": (["pcap", "x.bin", "-o", "o.pcapng"], {"x.bin": ""},
+                                            ["x.bin", "no recording.json"]),
+    "pcap --clock wall of a full-speed run": (["pcap", GOLDEN, "-o", "o.pcapng", "--clock", "wall"],
+                                              {}, ["--clock", "no wall times"]),
+    "pcap without --out": (["pcap", GOLDEN], {}, ["--out"]),
+    "pcap --out in a missing folder": (["pcap", GOLDEN, "-o", "no/o.pcapng"], {},
+                                       ["--out no/o.pcapng", "No such file"]),
     # navtwin host
     "host --duration nan": ([*HOST, "--duration", "nan"], {}, ["--duration", "finite"]),
     "host --duration inf": ([*HOST, "--duration", "inf"], {}, ["--duration", "finite"]),
