@@ -22,11 +22,12 @@ from typing import NamedTuple
 
 import numpy as np
 
+from navtwin.protocols import zigbee
+from navtwin.protocols.ieee802154 import ACK_NS, BYTE_NS
+
 from .clock import serial_queue
 
-RF_OVERHEAD_BYTES = 33  # PHY 6 + MAC 9 + NWK 8 + APS 8 + FCS 2
-NS_PER_RF_BYTE = 32_000  # 8 bits at 250 kbit/s
-ACK_NS = 544_000  # 12-symbol turnaround + 11-byte ACK frame
+RF_OVERHEAD_BYTES = zigbee.OVERHEAD_BYTES  # PHY 6 + MAC 9 + NWK 8 + APS 8 + FCS 2
 OPT_ACKNOWLEDGED = 0x01  # 0x90 receive option: unicast, acknowledged
 
 
@@ -106,7 +107,7 @@ class Link:
         self._hits = hits
         lost = effect.lost
         backoff = np.rint(u[:, tries:] * s.jitter_ms * 1e6).astype(np.int64)
-        air = ((sizes + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE)[:, None]
+        air = ((sizes + RF_OVERHEAD_BYTES) * BYTE_NS)[:, None]
         attempt = backoff + air + np.where(lost, round(s.retry_ms * 1e6), ACK_NS)
         delivered = ~lost.all(axis=1)
         retries = np.where(delivered, np.argmin(lost, axis=1), s.max_retries)

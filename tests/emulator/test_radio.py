@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from navtwin.protocols.serial import char_ns
-from navtwin.emulator.radio import ACK_NS, NS_PER_RF_BYTE, RF_OVERHEAD_BYTES, Link, Router
+from navtwin.emulator.radio import RF_OVERHEAD_BYTES, Link, Router
+from navtwin.protocols.ieee802154 import ACK_NS, BYTE_NS
 from navtwin.emulator.rng import stream
 from navtwin.emulator.faults import LinkLoss
 from navtwin.emulator.scenario import load_scenario
@@ -72,7 +73,7 @@ def test_link_timing_without_loss():
     arrival, delivered, _ = link.transmit(ready, np.full(200, 30))
     assert delivered.all()
     delay = arrival - ready
-    air = (30 + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE
+    air = (30 + RF_OVERHEAD_BYTES) * BYTE_NS
     fixed = air + spec.latency_ms * 1e6
     assert delay.min() >= fixed and delay.max() <= fixed + spec.jitter_ms * 1e6
     assert np.mean(delay - fixed) == pytest.approx(spec.jitter_ms * 1e6 / 2, rel=0.15)  # uniform backoff
@@ -84,7 +85,7 @@ def test_link_queue_serialises_packets():
                 stream(1, "t"))
     ready = np.zeros(5, dtype=np.int64)  # five packets at once: one after the other
     arrival, _, _ = link.transmit(ready, np.full(5, 84))
-    service = (84 + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE + ACK_NS
+    service = (84 + RF_OVERHEAD_BYTES) * BYTE_NS + ACK_NS
     assert np.array_equal(np.diff(arrival), np.full(4, service))
 
 
@@ -106,7 +107,7 @@ def test_loss_and_retry_statistics():
     failed = [o for o in outcomes if not o[0]]
     assert all(o[1] == r for o in failed)
     # giving up takes all attempts: at least (r + 1) airtimes and ACK waits
-    air = (30 + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE
+    air = (30 + RF_OVERHEAD_BYTES) * BYTE_NS
     assert min(o[2] for o in failed) >= (r + 1) * (air + spec.retry_ms * 1e6)
 
 
