@@ -67,6 +67,7 @@ import numpy as np
 from navtwin.protocols import xbee
 from navtwin.protocols.stream import Frame, XBeeDecoder
 from navtwin.protocols.xbee import AtStatus, DeliveryStatus, FrameType, ModemStatus
+from navtwin.protocols.zigbee import DEFAULT_RADIUS
 
 from . import zdo
 
@@ -134,7 +135,7 @@ PARAMS: dict[str, Param] = {
     "ID": Param(8, 0), "DH": Param(4, 0), "DL": Param(4, 0), "DD": Param(4, 0x30000),
     "NT": Param(1, 0x3C, valid=_range(0x20, 0xFF)), "NO": Param(1, 0, valid=_range(0, 7)),
     "SC": Param(2, 0x1FFE, valid=_range(1, 0x7FFF)), "SD": Param(1, 3, valid=_range(0, 7)),
-    "ZS": Param(1, 0, valid=_range(0, 2)), "NJ": Param(1, 0xFF), "NH": Param(1, 0x1E),
+    "ZS": Param(1, 0, valid=_range(0, 2)), "NJ": Param(1, 0xFF), "NH": Param(1, DEFAULT_RADIUS),
     "BH": Param(1, 0, valid=_range(0, 0x1E)), "AR": Param(1, 0xFF),
     "JV": Param(1, 0, valid=_range(0, 1)), "NW": Param(2, 0, valid=_range(0, 0x64FF)),
     "JN": Param(1, 0, valid=_range(0, 1)),

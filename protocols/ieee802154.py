@@ -83,13 +83,21 @@ ACK_NS = TURNAROUND_NS + (PHY_HEADER_BYTES + ACK_PSDU_BYTES) * BYTE_NS
 DataFrame = Struct("header" / DataHeader, "payload" / GreedyBytes)
 
 
+def _table_entry(byte: int) -> int:
+    crc = byte
+    for _ in range(8):
+        crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1  # 0x8408: 0x1021 bit-reversed
+    return crc
+
+
+_FCS_TABLE = tuple(_table_entry(b) for b in range(256))
+
+
 def fcs(data: bytes) -> int:
-    """CRC-16/KERMIT of *data* (the 802.15.4 FCS)."""
+    """CRC-16/KERMIT of *data* (the 802.15.4 FCS), a byte at a time."""
     crc = 0
     for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+        crc = (crc >> 8) ^ _FCS_TABLE[(crc ^ byte) & 0xFF]
     return crc
 
 
