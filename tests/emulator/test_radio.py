@@ -70,7 +70,7 @@ def test_link_timing_without_loss():
     spec = load_scenario("office").link
     link = Link(replace(spec, per_attempt_loss=0.0), [], stream(1, "t"))
     ready = np.arange(200, dtype=np.int64) * 10_000_000
-    arrival, delivered, _ = link.transmit(ready, np.full(200, 30))
+    arrival, delivered, *_ = link.transmit(ready, np.full(200, 30))
     assert delivered.all()
     delay = arrival - ready
     air = (30 + RF_OVERHEAD_BYTES) * BYTE_NS
@@ -84,7 +84,7 @@ def test_link_queue_serialises_packets():
     link = Link(replace(spec, per_attempt_loss=0.0, jitter_ms=0.0), [],
                 stream(1, "t"))
     ready = np.zeros(5, dtype=np.int64)  # five packets at once: one after the other
-    arrival, _, _ = link.transmit(ready, np.full(5, 84))
+    arrival, *_ = link.transmit(ready, np.full(5, 84))
     service = (84 + RF_OVERHEAD_BYTES) * BYTE_NS + ACK_NS
     assert np.array_equal(np.diff(arrival), np.full(4, service))
 
@@ -97,7 +97,7 @@ def test_loss_and_retry_statistics():
                 stream(7, "t"))
     n = 40_000
     ready = np.arange(n, dtype=np.int64) * 20_000_000
-    _, delivered, _ = link.transmit(ready, np.full(n, 30))
+    _, delivered, *_ = link.transmit(ready, np.full(n, 30))
     lost = 1 - delivered.mean()
     assert lost == pytest.approx(p ** (r + 1), abs=4 * math.sqrt(p ** (r + 1) / n))
     outcomes = [link.unicast(i * 20_000_000, 30) for i in range(5000)]
@@ -115,7 +115,7 @@ def test_link_loss_window_drops_everything_inside():
     spec = load_scenario("office").link
     link = Link(spec, [LinkLoss(start_s=1.0, end_s=2.0)], stream(3, "t"))
     ready = np.arange(300, dtype=np.int64) * 10_000_000
-    _, delivered, _ = link.transmit(ready, np.full(300, 30))
+    _, delivered, *_ = link.transmit(ready, np.full(300, 30))
     inside = (ready >= 1e9) & (ready < 2e9)
     assert not delivered[inside].any() and delivered[~inside].mean() > 0.99
     assert link.unicast(1_500_000_000, 10)[0] is False
