@@ -18,7 +18,7 @@ retries), IEEE 802.15.4-2006 (250 kbit/s, 54-symbol ACK wait), xbee-api-facts.md
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -163,11 +163,16 @@ class Link:
         return (start + offset, delivered, marks,
                 attempts._replace(on_air_ns=start[:, None] + attempts.on_air_ns))
 
-    def unicast(self, t_ns: int, nbytes: int) -> tuple[bool, int, int]:
+    def unicast(self, t_ns: int, nbytes: int,
+                air: Callable[[Attempts], None] | None = None) -> tuple[bool, int, int]:
         """One packet offered at *t_ns*: (delivered, retries, latency_ns); the latency is to
-        delivery, or to giving up when the packet is lost."""
-        delivered, retries, offset, service, *_ = self._attempts(
-            np.array([t_ns], dtype=np.int64), np.array([nbytes], dtype=np.int64))
+        delivery, or to giving up when the packet is lost. *air* is given its attempts
+        (``on_air_ns`` in true time)."""
+        attempts = self._attempts(np.array([t_ns], dtype=np.int64),
+                                  np.array([nbytes], dtype=np.int64))
+        delivered, retries, offset, service = attempts[:4]
+        if air is not None:
+            air(attempts._replace(on_air_ns=t_ns + attempts.on_air_ns))
         ok = bool(delivered[0])
         return ok, int(retries[0]), int(offset[0] if ok else service[0])
 
@@ -194,13 +199,15 @@ class Sender:
         self.radius = radius
         self.sent = 0
 
-    def frames(self, attempts: Attempts, i: int, src16: int, dst16: int,
-               data: bytes) -> list[AirFrame]:
-        """The air of packet *i* of *attempts* (Link.transmit's) from *src16* to *dst16*
-        carrying *data*: each attempt, and the ACK of the one received."""
+    def frames(self, attempts: Attempts, i: int, src16: int, dst16: int, data: bytes,
+               radius: int | None = None, **aps) -> list[AirFrame]:
+        """The air of packet *i* of *attempts* (Link.transmit's or unicast's) from *src16* to
+        *dst16* carrying *data* (*radius*: when not the radio's; *aps*: endpoints, cluster
+        and profile when not Digi's data endpoints, zigbee.data_packet): each attempt, and
+        the ACK of the one received."""
         seq, self.sent = self.sent & 0xFF, self.sent + 1
-        psdu = ieee802154.data_frame(seq, self.pan, dst16, src16,
-                                     zigbee.data_packet(dst16, src16, self.radius, seq, seq, data))
+        psdu = ieee802154.data_frame(seq, self.pan, dst16, src16, zigbee.data_packet(
+            dst16, src16, self.radius if radius is None else radius, seq, seq, data, **aps))
         out = []
         for k in range(int(attempts.count[i])):
             t = int(attempts.on_air_ns[i, k])

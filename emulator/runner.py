@@ -40,7 +40,8 @@ speed also every ``MAX_BLOCK_NS`` of virtual time), so a killed run leaves a rep
 prefix. A write that fails ends the run (``record_error``).
 
 The air. The frames the radio hop puts on the air (emulator.world ``air``: each attempt of
-the router's packets, lost or received, and the coordinator's MAC ACKs) are handed out as the
+the router's packets, lost or received, and the coordinator's MAC ACKs; the coordinator's
+``air``: its transmit requests to the router) are handed out as the
 loop's virtual time passes them, to the recording's ``air`` stream (one chunk a PSDU,
 ``t_device_ns`` its first bit on the air, ``t_wall_ns`` as a port chunk's) and to
 ``air_sink`` (a callable given each emulator.radio.AirFrame), in time order; at the end the
@@ -366,9 +367,9 @@ class Emulation:
                 self._enqueue(ev)
             self._now_ns = now
             self._to_device(now)
+            self._on_air(now, wall - t0 if paced else None)  # before host writes stamped now
             if not paced:  # everything known so far, in one go
                 now = END if feed.exhausted else feed.known_ns
-            self._on_air(now, wall - t0 if paced else None)
             delivered = False
             for line in self.lines.values():
                 for chunk in line.poll(now, feed.known_ns, self.end_ns):
@@ -485,9 +486,16 @@ class Emulation:
             self.sink(chunk)
 
     def _on_air(self, until_ns: int, wall_ns: int | None) -> None:
-        """Hand the air's frames before *until_ns* (and the run's end) to the recording and
-        the air sink."""
-        for frame in self.world.air(min(until_ns, self.end_ns)):
+        """Hand the air's frames before *until_ns* (and the run's end), the world's and the
+        coordinator's, to the recording and the air sink in time order. *until_ns* is the
+        loop's time, before which no host write comes any more, so no frame comes later
+        that is earlier than one handed out."""
+        until_ns = min(until_ns, self.end_ns)
+        sent = self.coordinator.air
+        mine = [f for f in sent if f.t_ns < until_ns]
+        if mine:
+            self.coordinator.air = [f for f in sent if f.t_ns >= until_ns]
+        for frame in sorted(self.world.air(until_ns) + mine, key=lambda f: f.t_ns):
             if self.recorder is not None:
                 self.recorder.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC).write(
                     frame.psdu, frame.t_ns, wall_ns)

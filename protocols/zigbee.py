@@ -95,11 +95,12 @@ _NWK = struct.Struct("<HHBB")  # dst, src, radius, seq: NwkHeader after its cont
 _APS = struct.Struct("<BHHBB")  # dst endpoint, cluster, profile, src endpoint, counter
 
 
-def data_packet(dst: int, src: int, radius: int, nwk_seq: int, aps_counter: int,
-                data: bytes) -> bytes:
-    """The NWK and APS headers and *data*, from Digi endpoint to Digi endpoint
-    (= ``DataPacket.build``)."""
+def data_packet(dst: int, src: int, radius: int, nwk_seq: int, aps_counter: int, data: bytes,
+                *, src_endpoint: int = DIGI_ENDPOINT, dest_endpoint: int = DIGI_ENDPOINT,
+                cluster: int = DIGI_DATA_CLUSTER, profile: int = DIGI_PROFILE) -> bytes:
+    """The NWK and APS headers and *data*, by default from Digi's data endpoint to Digi's
+    (an explicit 0x11 transmit request names its own; = ``DataPacket.build``)."""
     return (NWK_FC + _NWK.pack(dst, src, radius, nwk_seq & 0xFF)
-            + APS_FC + _APS.pack(DIGI_ENDPOINT, DIGI_DATA_CLUSTER, DIGI_PROFILE, DIGI_ENDPOINT,
+            + APS_FC + _APS.pack(dest_endpoint, cluster, profile, src_endpoint,
                                  aps_counter & 0xFF)
             + data)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import pytest
 
 from navtwin.emulator.runner import AIR, Emulation
-from navtwin.protocols import ieee802154, zigbee
+from navtwin.protocols import ieee802154, xbee, zigbee
 from navtwin.protocols.capture import Capture
 from navtwin.protocols.pcapng import LINKTYPE_IEEE802_15_4_WITHFCS
 from navtwin.protocols.recording import Recording
@@ -158,3 +158,52 @@ def test_wireshark_decodes_the_recorded_air(tmp_path):
     data = [r for r in rows if r[0] == "0x0001"]
     assert data and all(r[3:] == [my, "0xc105"] for r in data)
     assert {r[0] for r in rows} == {"0x0001", "0x0002"}
+
+
+def test_the_coordinators_transmit_requests_are_on_the_air_in_time_order(tmp_path):
+    """0x10 and 0x11 to the router: data frames from 0x0000 to the router's MY (a 0x11 with
+    its endpoints, cluster, profile and radius), the router's ACK after a received attempt,
+    merged into the recorded air in time order; the router's own frames as without them."""
+    sc = variant(tmp_path, "office", "duration_s = 1.0\n")
+    router = sc.routers_for(SEED)[0]
+    dest64 = router["SH"] << 32 | router["SL"]
+    requests = [(100_000_000, xbee.build(0x10, True, frame_id=1, dest64=dest64, dest16=0xFFFE,
+                                         radius=0, options=0, data=b"hello router")),
+                (300_000_000, xbee.build(0x11, True, frame_id=2, dest64=dest64, dest16=0xFFFE,
+                                         src_endpoint=0xE8, dest_endpoint=0xE6,
+                                         cluster=0x0021, profile=0xC105, radius=5, options=0,
+                                         data=b"\x01AP"))]
+    with Emulation(sc, SEED, speed=None, ports=False, record=tmp_path / "rec") as emu:
+        for t, frame in requests:
+            emu.inbound.put(t, frame)
+        emu.run()
+    rec = Recording(tmp_path / "rec")
+    chunks = list(rec.chunks(AIR))
+    assert [c.t_device_ns for c in chunks] == sorted(c.t_device_ns for c in chunks)
+    down = []
+    for i, c in enumerate(chunks):
+        if c.data[:2] != ieee802154.DATA_FC:
+            continue
+        mac = ieee802154.DataFrame.parse(c.data[:-2])
+        if mac.header.src == zigbee.COORDINATOR16:
+            ack = chunks[i + 1].data if i + 1 < len(chunks) else b""
+            down.append((c.t_device_ns, mac.header.dst, zigbee.DataPacket.parse(mac.payload),
+                         ack == ieee802154.ack_frame(mac.header.seq)))
+    assert [d[2].data for d in down if d[3]] == [b"hello router", b"\x01AP"]
+    (t1, dst1, first, _), (t2, dst2, second, _) = [d for d in down if d[3]]
+    assert dst1 == dst2 == router["MY"] and 100e6 <= t1 < 200e6 and 300e6 <= t2 < 400e6
+    assert (first.nwk.radius, first.aps.dst_endpoint, first.aps.cluster) == (0x1E, 0xE8, 0x0011)
+    assert (second.nwk.radius, second.aps.dst_endpoint, second.aps.src_endpoint,
+            second.aps.cluster, second.aps.profile) == (5, 0xE6, 0xE8, 0x0021, 0xC105)
+    # the coordinator counts its own frames
+    assert (first.nwk.seq, second.nwk.seq) == (0, 1)
+    # the router's packets are on the air as in a run without the host
+    (tmp_path / "alone").mkdir()
+    alone = recorded(tmp_path / "alone", duration_s=1.0)
+    assert routers(chunks) == routers(list(alone.chunks(AIR))) != []
+
+
+def routers(chunks) -> list[tuple[int, bytes]]:
+    """The router's data frames among *chunks* of the air, with their times."""
+    return [(c.t_device_ns, c.data) for c in chunks if c.data[:2] == ieee802154.DATA_FC
+            and ieee802154.DataFrame.parse(c.data[:-2]).header.src != zigbee.COORDINATOR16]
