@@ -103,3 +103,12 @@ def test_a_corrupted_frame_fails_wiresharks_fcs_check(tmp_path):
     psdu[12] ^= 0x01
     (frame,) = dissect([bytes(psdu)], tmp_path)
     assert frame["wpan.fcs_ok"] == "0"
+
+
+def test_the_documented_vector():
+    """docs/protocols.md section 4."""
+    psdu = ieee802154.data_frame(5, 0x3A7C, 0, 0x5B21, zigbee.data_packet(
+        0, 0x5B21, 0x1E, 5, 5, bytes.fromhex("A55A0118")))
+    assert psdu.hex(" ").upper() == ("61 88 05 7C 3A 00 00 21 5B 48 00 00 00 21 5B 1E 05 00 E8 "
+                                     "11 00 05 C1 E8 05 A5 5A 01 18 47 05")
+    assert ieee802154.ack_frame(5).hex(" ").upper() == "02 00 05 15 E2"
