@@ -38,10 +38,15 @@ class Attempt:
 
 
 def recorded(tmp_path, faults: str = "", duration_s: float = 4.0):
+    """A recorded run of office; the air sink must have been given the recorded air."""
     sc = variant(tmp_path, "office", f"duration_s = {duration_s}\n{faults}")
-    with Emulation(sc, SEED, speed=None, ports=False, record=tmp_path / "rec") as emu:
+    sunk: list = []
+    with Emulation(sc, SEED, speed=None, ports=False, record=tmp_path / "rec",
+                   air_sink=sunk.append) as emu:
         emu.run()
-    return Recording(tmp_path / "rec")
+    rec = Recording(tmp_path / "rec")
+    assert [(f.t_ns, f.psdu) for f in sunk] == [(c.t_device_ns, c.data) for c in rec.chunks(AIR)]
+    return rec
 
 
 def attempts(rec: Recording) -> list[Attempt]:
