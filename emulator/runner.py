@@ -41,11 +41,11 @@ prefix. A write that fails ends the run (``record_error``).
 
 The air. The frames the radio hop puts on the air (emulator.world ``air``: each attempt of
 the router's packets, lost or received, and the coordinator's MAC ACKs; the coordinator's
-``air``: its transmit requests to the router) are handed out as the
-loop's virtual time passes them, to the recording's ``air`` stream (one chunk a PSDU,
-``t_device_ns`` its first bit on the air, ``t_wall_ns`` as a port chunk's) and to
-``air_sink`` (a callable given each emulator.radio.AirFrame), in time order; at the end the
-rest up to where the run got.
+``air``: its transmit requests to the router) are handed out in time order as the loop's
+virtual time passes them (before a host write stamped later can add one), to the
+recording's ``air`` stream (one chunk a PSDU, ``t_device_ns`` its first bit on the air,
+``t_wall_ns`` when paced the loop's wake-up that handed it out) and to ``air_sink`` (a
+callable given each emulator.radio.AirFrame); at the end the rest up to where the run got.
 
 Faults. The scenario's line faults are wrappers on their port's line (``to_host``) or on
 what the host writes to the xbee port (``to_device``: an ``uart.Inbound`` between the PTY
