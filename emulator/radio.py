@@ -14,6 +14,12 @@ always inside a ``link_loss`` fault), the ACK wait (retry_ms) before the next at
 max_retries lost retries the packet is gone. A delivered packet reaches the coordinator's
 radio latency_ms after the end of its successful airtime. Sources: Digi ZB manual (NP, RO,
 retries), IEEE 802.15.4-2006 (250 kbit/s, 54-symbol ACK wait), xbee-api-facts.md section 5.
+
+Air. The 33 bytes of overhead are the headers of the frame each attempt puts on the air
+(protocols.ieee802154, protocols.zigbee, sized there); :class:`Sender` builds those frames
+from the attempts the link drew (:class:`Attempts`: each one's first bit on the air, lost
+or not), and the receiver's MAC ACK one turnaround after each received one. The air adds
+no draw: the frames are a view of the same attempts.
 """
 from __future__ import annotations
 
