@@ -58,7 +58,8 @@ def register(sub) -> None:
                         "$XDG_RUNTIME_DIR/navtwin or /tmp/navtwin-UID)")
     p.add_argument("--record", metavar="DIR",
                    help="write a recording: DIR/recording.json, <port>.bin and <port>.csv per "
-                        "port, scenario.toml and truth.csv (not through a symbolic link; "
+                        "port, air.bin and air.csv (the radio hop's IEEE 802.15.4 frames), "
+                        "scenario.toml and truth.csv (not through a symbolic link; "
                         "flushed every 0.5 s, so a killed run leaves a replayable prefix)")
     p.add_argument("--overwrite", action="store_true",
                    help="with --record: replace the recording already in DIR")

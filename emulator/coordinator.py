@@ -15,7 +15,9 @@ bit 0 is set) and answers the host's API frames as XBee ZB firmware 21A7 does
             0x24 address not found (unknown 64-bit address), 0x25 route not found
             (unknown 16-bit address), 0x23 self-addressed; broadcasts always 0x00.
             A 0x11 to the router's ZDO endpoint (0, profile 0) is also answered by the
-            router's stack (emulator.zdo): a 0x91 from it when AO bit 0 is set
+            router's stack (emulator.zdo): a 0x91 from it when AO bit 0 is set.
+            A unicast to the router goes on the air (``air``, emulator.radio.Sender):
+            each attempt a data frame from MY to the router, and the router's ACK
 0x17        remote AT command to the router -> 0x97 with the router's register value,
             status 4 when the request or the answer is lost or the address is unknown
 ==========  ===========================================================================
@@ -67,8 +69,10 @@ import numpy as np
 from navtwin.protocols import xbee
 from navtwin.protocols.stream import Frame, XBeeDecoder
 from navtwin.protocols.xbee import AtStatus, DeliveryStatus, FrameType, ModemStatus
+from navtwin.protocols.zigbee import DEFAULT_RADIUS
 
 from . import zdo
+from .radio import Sender
 
 MS = 1_000_000
 RESPONSE_DELAY_NS = 3 * MS
@@ -134,7 +138,7 @@ PARAMS: dict[str, Param] = {
     "ID": Param(8, 0), "DH": Param(4, 0), "DL": Param(4, 0), "DD": Param(4, 0x30000),
     "NT": Param(1, 0x3C, valid=_range(0x20, 0xFF)), "NO": Param(1, 0, valid=_range(0, 7)),
     "SC": Param(2, 0x1FFE, valid=_range(1, 0x7FFF)), "SD": Param(1, 3, valid=_range(0, 7)),
-    "ZS": Param(1, 0, valid=_range(0, 2)), "NJ": Param(1, 0xFF), "NH": Param(1, 0x1E),
+    "ZS": Param(1, 0, valid=_range(0, 2)), "NJ": Param(1, 0xFF), "NH": Param(1, DEFAULT_RADIUS),
     "BH": Param(1, 0, valid=_range(0, 0x1E)), "AR": Param(1, 0xFF),
     "JV": Param(1, 0, valid=_range(0, 1)), "NW": Param(2, 0, valid=_range(0, 0x64FF)),
     "JN": Param(1, 0, valid=_range(0, 1)),
@@ -282,7 +286,7 @@ class Coordinator:
 
     registers: Registers
     remotes: list[Remote]
-    link: Any  # .unicast(t_ns, nbytes) -> (delivered, retries, latency_ns)
+    link: Any  # .unicast(t_ns, nbytes, air=None) -> (delivered, retries, latency_ns)
     rng: np.random.Generator
     response_delay_ns: int = RESPONSE_DELAY_NS
     faults: tuple = ()  # emulator.faults acting on the coordinator: off while one is active
@@ -292,10 +296,14 @@ class Coordinator:
     ignored: int = field(default=0, init=False)  # host frames the firmware does not handle
     dropped_tx_buffer: int = field(default=0, init=False)  # RF packets the UART had no room for
     _prefix: dict = field(default_factory=dict, init=False)
+    #: the frames its transmit requests put on the air (emulator.radio.AirFrame), in the order
+    #: sent, until the run takes them
+    air: list = field(default_factory=list, init=False)
 
     def __post_init__(self) -> None:
         self._sync_line()
         self._decoder = XBeeDecoder(self.escaped)
+        self._sender = Sender(self.registers.values["OI"])
 
     # -- UART side ------------------------------------------------------------------------
     def _sync_line(self) -> None:
@@ -494,7 +502,8 @@ class Coordinator:
             t += ADDRESS_TIMEOUT_NS
             to16 = 0xFFFD
         else:
-            delivered, retries, latency = self.link.unicast(t_ns, len(data))
+            delivered, retries, latency = self.link.unicast(
+                t_ns, len(data), air=lambda attempts: self._on_air(attempts, node, f))
             t = t_ns + max(self.response_delay_ns, latency)
             status = DeliveryStatus.SUCCESS if delivered else DeliveryStatus.NETWORK_ACK_FAILURE
             to16 = node.addr16 if delivered else 0xFFFD
@@ -506,6 +515,14 @@ class Coordinator:
         return [Output(t, Reply(xbee.frame_data(
             FrameType.TRANSMIT_STATUS, frame_id=fid, dest16=to16, retries=min(retries, 0xFF),
             delivery=status, discovery=discovery))), *answers]
+
+    def _on_air(self, attempts, node: Remote, f: dict) -> None:
+        """Transmit request *f*'s attempts to *node* as frames on the air (a 0x11's own
+        endpoints, cluster and profile; its radius, 0 meaning NH)."""
+        aps = {k: f[k] for k in ("src_endpoint", "dest_endpoint", "cluster", "profile") if k in f}
+        self.air += self._sender.frames(attempts, 0, self.registers.values["MY"], node.addr16,
+                                        f["data"], f.get("radius") or self.registers.values["NH"],
+                                        **aps)
 
     def _zdo(self, t_ns: int, f: dict, node: Remote) -> list[Output]:
         """The node's answer to a ZDO request it received at *t_ns* (emulator.zdo): a 0x91

@@ -14,19 +14,26 @@ always inside a ``link_loss`` fault), the ACK wait (retry_ms) before the next at
 max_retries lost retries the packet is gone. A delivered packet reaches the coordinator's
 radio latency_ms after the end of its successful airtime. Sources: Digi ZB manual (NP, RO,
 retries), IEEE 802.15.4-2006 (250 kbit/s, 54-symbol ACK wait), xbee-api-facts.md section 5.
+
+Air. The 33 bytes of overhead are the headers of the frame each attempt puts on the air
+(protocols.ieee802154, protocols.zigbee, sized there); :class:`Sender` builds those frames
+from the attempts the link drew (:class:`Attempts`: each one's first bit on the air, lost
+or not), and the receiver's MAC ACK one turnaround after each received one. The air adds
+no draw: the frames are a view of the same attempts.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
+from navtwin.protocols import ieee802154, zigbee
+from navtwin.protocols.ieee802154 import ACK_NS, BYTE_NS, TURNAROUND_NS
+
 from .clock import serial_queue
 
-RF_OVERHEAD_BYTES = 33  # PHY 6 + MAC 9 + NWK 8 + APS 8 + FCS 2
-NS_PER_RF_BYTE = 32_000  # 8 bits at 250 kbit/s
-ACK_NS = 544_000  # 12-symbol turnaround + 11-byte ACK frame
+RF_OVERHEAD_BYTES = zigbee.OVERHEAD_BYTES  # PHY 6 + MAC 9 + NWK 8 + APS 8 + FCS 2
 OPT_ACKNOWLEDGED = 0x01  # 0x90 receive option: unicast, acknowledged
 
 
@@ -80,6 +87,24 @@ class AttemptEffects:
     u: np.ndarray
 
 
+class Attempts(NamedTuple):
+    """The attempts of n packets (``Link.max_retries + 1`` columns; packet i makes
+    ``count[i]`` of them, the rest are never sent)."""
+
+    delivered: np.ndarray  # (n,) bool
+    retries: np.ndarray  # (n,) retries before delivery (max_retries when lost)
+    offset: np.ndarray  # (n,) first attempt's start to delivery at the coordinator's radio
+    service: np.ndarray  # (n,) how long the packet holds the radio
+    on_air_ns: np.ndarray  # (n, tries) each attempt's first bit (preamble) on the air
+    lost: np.ndarray  # (n, tries) bool: the attempt was not received (not ACKed)
+    air_ns: np.ndarray  # (n,) one attempt's PPDU duration
+
+    @property
+    def count(self) -> np.ndarray:
+        """Attempts made per packet: up to the delivering one, or every one when lost."""
+        return self.retries + 1
+
+
 class Link:
     """One direction of the RF link with its own random stream."""
 
@@ -91,9 +116,9 @@ class Link:
         self._hits: list = []  # (fault, packets in its episode) of the last packets sent
         self._lost: dict | None = None  # a fault's packets lost since the last delivered one
 
-    def _attempts(self, start_ns: np.ndarray, sizes: np.ndarray):
-        """(delivered, retries, delivery offset, service time) for packets whose first
-        attempt starts at *start_ns*; offsets are ns from that start."""
+    def _attempts(self, start_ns: np.ndarray, sizes: np.ndarray) -> "Attempts":
+        """Every attempt of packets whose first attempt starts at *start_ns*; offsets are ns
+        from that start."""
         s = self.spec
         n, tries = len(start_ns), s.max_retries + 1
         u = self.rng.random((n, 2 * tries))
@@ -106,23 +131,26 @@ class Link:
         self._hits = hits
         lost = effect.lost
         backoff = np.rint(u[:, tries:] * s.jitter_ms * 1e6).astype(np.int64)
-        air = ((sizes + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE)[:, None]
+        air = ((sizes + RF_OVERHEAD_BYTES) * BYTE_NS)[:, None]
         attempt = backoff + air + np.where(lost, round(s.retry_ms * 1e6), ACK_NS)
         delivered = ~lost.all(axis=1)
         retries = np.where(delivered, np.argmin(lost, axis=1), s.max_retries)
-        before = np.cumsum(attempt, axis=1) - attempt  # start of each attempt
+        on_air = np.cumsum(attempt, axis=1) - attempt + backoff  # each attempt's first bit
         rows = np.arange(n)
-        offset = before[rows, retries] + backoff[rows, retries] + air[:, 0] + round(s.latency_ms * 1e6)
-        service = np.where(delivered, before[rows, retries] + attempt[rows, retries], attempt.sum(axis=1))
-        return delivered, retries, offset, service
+        offset = on_air[rows, retries] + air[:, 0] + round(s.latency_ms * 1e6)
+        service = np.where(delivered, on_air[rows, retries] - backoff[rows, retries]
+                           + attempt[rows, retries], attempt.sum(axis=1))
+        return Attempts(delivered, retries, offset, service, on_air, lost, air[:, 0])
 
     def transmit(self, ready_ns: np.ndarray, sizes: np.ndarray):
-        """Send packets in order, one at a time: (arrival_ns, delivered) per packet, and the
-        ledger marks by packet index: the first packet delivered after packets a link fault
-        lost says which fault, when and how many."""
+        """Send packets in order, one at a time: (arrival_ns, delivered) per packet, the
+        ledger marks by packet index (the first packet delivered after packets a link fault
+        lost says which fault, when and how many), and the attempts (:class:`Attempts`, their
+        ``on_air_ns`` in true time)."""
         sizes = np.asarray(sizes, dtype=np.int64)
         start = np.asarray(ready_ns, dtype=np.int64)
-        delivered, _, offset, service = self._attempts(start, sizes)
+        attempts = self._attempts(start, sizes)
+        delivered, offset, service = attempts.delivered, attempts.offset, attempts.service
         marks: dict[int, tuple] = {}
         if self._hits or self._lost:
             for i in range(len(start)):
@@ -138,12 +166,59 @@ class Link:
         start, end = serial_queue(start, service, self.busy_until)
         if len(end):
             self.busy_until = int(end[-1])
-        return start + offset, delivered, marks
+        return (start + offset, delivered, marks,
+                attempts._replace(on_air_ns=start[:, None] + attempts.on_air_ns))
 
-    def unicast(self, t_ns: int, nbytes: int) -> tuple[bool, int, int]:
+    def unicast(self, t_ns: int, nbytes: int,
+                air: Callable[[Attempts], None] | None = None) -> tuple[bool, int, int]:
         """One packet offered at *t_ns*: (delivered, retries, latency_ns); the latency is to
-        delivery, or to giving up when the packet is lost."""
-        delivered, retries, offset, service = self._attempts(np.array([t_ns], dtype=np.int64),
-                                                             np.array([nbytes], dtype=np.int64))
+        delivery, or to giving up when the packet is lost. *air* is given its attempts
+        (``on_air_ns`` in true time)."""
+        attempts = self._attempts(np.array([t_ns], dtype=np.int64),
+                                  np.array([nbytes], dtype=np.int64))
+        delivered, retries, offset, service = attempts[:4]
+        if air is not None:
+            air(attempts._replace(on_air_ns=t_ns + attempts.on_air_ns))
         ok = bool(delivered[0])
         return ok, int(retries[0]), int(offset[0] if ok else service[0])
+
+
+class AirFrame(NamedTuple):
+    """One frame on the air: its PSDU (MAC frame with FCS, protocols.ieee802154) and the
+    true time of its first bit (preamble)."""
+
+    t_ns: int
+    psdu: bytes
+
+
+class Sender:
+    """A radio's data frames on the air, and its peer's ACKs of them.
+
+    ZigBee counts the MAC sequence number, the NWK sequence number and the APS counter
+    separately per radio; the radio sends nothing else that is modelled here (no route
+    discovery, link status or APS ACKs), so all three count its packets, from 0 at power-on,
+    modulo 256. A retry repeats the frame, its MAC sequence number included.
+    """
+
+    def __init__(self, pan: int, radius: int = zigbee.DEFAULT_RADIUS) -> None:
+        self.pan = pan
+        self.radius = radius
+        self.sent = 0
+
+    def frames(self, attempts: Attempts, i: int, src16: int, dst16: int, data: bytes,
+               radius: int | None = None, **aps) -> list[AirFrame]:
+        """The air of packet *i* of *attempts* (Link.transmit's or unicast's) from *src16* to
+        *dst16* carrying *data* (*radius*: when not the radio's; *aps*: endpoints, cluster
+        and profile when not Digi's data endpoints, zigbee.data_packet): each attempt, and
+        the ACK of the one received."""
+        seq, self.sent = self.sent & 0xFF, self.sent + 1
+        psdu = ieee802154.data_frame(seq, self.pan, dst16, src16, zigbee.data_packet(
+            dst16, src16, self.radius if radius is None else radius, seq, seq, data, **aps))
+        out = []
+        for k in range(int(attempts.count[i])):
+            t = int(attempts.on_air_ns[i, k])
+            out.append(AirFrame(t, psdu))
+            if not attempts.lost[i, k]:
+                out.append(AirFrame(t + int(attempts.air_ns[i]) + TURNAROUND_NS,
+                                    ieee802154.ack_frame(seq)))
+        return out

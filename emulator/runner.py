@@ -39,6 +39,14 @@ paced, in an idle gap, as world generation is, but never more than ``FLUSH_S`` l
 speed also every ``MAX_BLOCK_NS`` of virtual time), so a killed run leaves a replayable
 prefix. A write that fails ends the run (``record_error``).
 
+The air. The frames the radio hop puts on the air (emulator.world ``air``: each attempt of
+the router's packets, lost or received, and the coordinator's MAC ACKs; the coordinator's
+``air``: its transmit requests to the router) are handed out in time order as the loop's
+virtual time passes them (before a host write stamped later can add one), to the
+recording's ``air`` stream (one chunk a PSDU, ``t_device_ns`` its first bit on the air,
+``t_wall_ns`` when paced the loop's wake-up that handed it out) and to ``air_sink`` (a
+callable given each emulator.radio.AirFrame); at the end the rest up to where the run got.
+
 Faults. The scenario's line faults are wrappers on their port's line (``to_host``) or on
 what the host writes to the xbee port (``to_device``: an ``uart.Inbound`` between the PTY
 and the coordinator); each draws from its own stream ``faults.line.{n}`` (n counting the
@@ -61,6 +69,7 @@ from typing import Callable
 from navtwin.common.limits import SPEEDS, span
 from navtwin.common.schema import Invalid, build
 from navtwin.protocols import ports as lab_ports
+from navtwin.protocols.pcapng import LINKTYPE_IEEE802_15_4_WITHFCS
 from navtwin.protocols.recording import FAULTS, FLUSH_S, RecordingWriteError, RecordingWriter
 
 from .control import SOCKET as CONTROL_SOCKET, ControlError, ControlServer, Inject
@@ -69,6 +78,7 @@ from .devices import DEVICES
 from .faults import Fault, LineFault, acting_on
 from .ledger import Ledger
 from .pty import LinkDir, PtyPort
+from .radio import AirFrame
 from .rng import stream
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
 from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked
@@ -84,6 +94,10 @@ PREFILL_NS = SEC  # generated before the clock starts
 MAX_BLOCK_NS = SEC
 FLUSH_NS = int(FLUSH_S * SEC)
 TRUTH_STEP_NS = 10 * SEC  # truth rows made at a time: bounds memory when --speed max races ahead
+AIR = "air"  # the recording's stream of the radio hop's frames
+AIR_DOC = ("the XBee hop on the air: IEEE 802.15.4 PSDUs with FCS (ZigBee NWK and APS data "
+           "frames of the router's packets, every attempt, and the coordinator's MAC ACKs); "
+           "t_device_ns = the frame's first bit on the air")
 
 
 class RunError(ValueError):
@@ -159,7 +173,8 @@ class Emulation:
                  record: str | os.PathLike | None = None, ports: bool = True,
                  response_delay_ns: int | None = None,
                  progress: Callable[[str], None] | None = None,
-                 sink: Callable[[Chunk], None] | None = None) -> None:
+                 sink: Callable[[Chunk], None] | None = None,
+                 air_sink: Callable[[AirFrame], None] | None = None) -> None:
         from .world import World
 
         self.scenario = scenario
@@ -174,6 +189,7 @@ class Emulation:
                            f"length of scenario {scenario.name}; pass a duration in that range")
         self.progress = progress
         self.sink = sink
+        self.air_sink = air_sink
         self.coordinator = self._coordinator(response_delay_ns)
         self.devices = {p.name: DEVICES.get(p.device)(self, p) for p in lab_ports.listed()}
         bauds = {name: dev.settings["baud"] for name, dev in self.devices.items()}
@@ -279,6 +295,7 @@ class Emulation:
         self._truth_ns = 0  # truth.csv has the rows before this
         self._flush_cost_ns = 0  # a decaying maximum of the wall time one flush takes
         try:
+            rec.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC)  # there, empty or not
             rec.write_file("scenario.toml", self.scenario.to_toml().encode())
             rec.file("truth.csv").append(TRUTH_HEADER)
             rec.file(FAULTS)  # the ledger: there, and empty, even when no fault acts
@@ -350,6 +367,7 @@ class Emulation:
                 self._enqueue(ev)
             self._now_ns = now
             self._to_device(now)
+            self._on_air(now, wall - t0 if paced else None)  # before host writes stamped now
             if not paced:  # everything known so far, in one go
                 now = END if feed.exhausted else feed.known_ns
             delivered = False
@@ -466,6 +484,23 @@ class Emulation:
             self.recorder.port(chunk.port).write(chunk.data, chunk.start_ns, wall_ns)
         if self.sink is not None:
             self.sink(chunk)
+
+    def _on_air(self, until_ns: int, wall_ns: int | None) -> None:
+        """Hand the air's frames before *until_ns* (and the run's end), the world's and the
+        coordinator's, to the recording and the air sink in time order. *until_ns* is the
+        loop's time, before which no host write comes any more, so no frame comes later
+        that is earlier than one handed out."""
+        until_ns = min(until_ns, self.end_ns)
+        sent = self.coordinator.air
+        mine = [f for f in sent if f.t_ns < until_ns]
+        if mine:
+            self.coordinator.air = [f for f in sent if f.t_ns >= until_ns]
+        for frame in sorted(self.world.air(until_ns) + mine, key=lambda f: f.t_ns):
+            if self.recorder is not None:
+                self.recorder.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC).write(
+                    frame.psdu, frame.t_ns, wall_ns)
+            if self.air_sink is not None:
+                self.air_sink(frame)
 
     def _report(self, elapsed_ns: int) -> None:
         v = self.reached_ns / SEC
@@ -611,6 +646,11 @@ class Emulation:
 
     def close(self) -> None:
         """Finish the recording (truth.csv up to where the run got), close ports, remove links."""
+        if getattr(self, "reached_ns", None) is not None:  # it ran (close may come twice)
+            try:
+                self._on_air(self.reached_ns, None)  # the frames the loop had not reached
+            except RecordingWriteError as e:
+                self.record_error = self.record_error or e
         rec, self.recorder = getattr(self, "recorder", None), None
         if rec is not None:
             rec.meta["interrupted"] = self.interrupted

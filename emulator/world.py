@@ -11,6 +11,10 @@ before:
 - ``Event(t, "xbee", RfPacket)``: an RF packet the coordinator's radio received at t (after
   the router's packetisation, latency and retries; lost packets never appear).
 
+Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
+(emulator.radio.AirFrame: every attempt, received or lost, and the coordinator's MAC ACK of
+each received one), in time order, once ``advance`` has reached *until_ns*.
+
 The devices run in fixed blocks of true time (BLOCK_NS); an event is generated with the
 block of its cause (frame tick, packet closing, exchange start) and is never earlier than
 it, so the events do not depend on how the caller slices time. Every random draw comes
@@ -26,12 +30,13 @@ from typing import NamedTuple
 import numpy as np
 
 from navtwin.protocols import ports
+from navtwin.protocols.zigbee import COORDINATOR16
 
 from .board import Board
 from .faults import acting_on
 from .imu import Adis16350
 from .nanoloc import NanolocNetwork
-from .radio import OPT_ACKNOWLEDGED, Link, Router
+from .radio import OPT_ACKNOWLEDGED, AirFrame, Link, Router, Sender
 from .rng import stream
 from .scenario import BLOCK_S, Scenario
 from .trajectory import Trajectory
@@ -89,6 +94,7 @@ class Vehicle:
         self.router = Router(router["NP"], router["RO"], self.board.char_ns)
         self.uplink = Link(sc.link, acting_on(sc.faults, "link"),
                            self._stream(seed, "xbee.link.router"))
+        self.sender = Sender(router["OI"])  # its frames on the air
         self.faults = tuple(acting_on(sc.faults, "router", vehicle=number))  # its router's
         self._rejoin_rng = self._stream(seed, "xbee.router.rejoin")  # new MYs after rejoins
         self._absent: dict | None = None  # the router's packets lost while out of the network
@@ -96,18 +102,20 @@ class Vehicle:
     def _stream(self, seed: int, name: str):
         return stream(seed, name if self.number == 1 else f"vehicle{self.number}.{name}")
 
-    def block(self, lo: int, hi: int, more: bool) -> tuple[list[Event], list[Event]]:
-        """The board's SINS frames written in [lo, hi) and the RF packets they become
-        (*more*: the run goes on after *hi*, so an open packet waits for the next bytes)."""
+    def block(self, lo: int, hi: int, more: bool) -> tuple[list[Event], list[Event],
+                                                           list[AirFrame]]:
+        """The board's SINS frames written in [lo, hi), the RF packets they become (*more*:
+        the run goes on after *hi*, so an open packet waits for the next bytes) and the frames
+        those packets put on the air (none while the router is out of the network)."""
         self.imu.generate(lo, hi)
         t_sins, frames, marks = self.board.frames(lo, hi)
         events = [Event(t, "sins", f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
         times = self.board.byte_times(t_sins).ravel()
         packets = self.router.packetise(b"".join(frames), times, next_byte)
-        arrival, delivered, lost = self.uplink.transmit(packets.ready_ns,
-                                                        [len(p) for p in packets.payloads])
-        out, (absent, cause) = [], self._out_of_network(packets.ready_ns)
+        arrival, delivered, lost, attempts = self.uplink.transmit(
+            packets.ready_ns, [len(p) for p in packets.payloads])
+        out, air, (absent, cause) = [], [], self._out_of_network(packets.ready_ns)
         for i, (t, p, ok) in enumerate(zip(arrival.tolist(), packets.payloads, delivered.tolist())):
             marks = lost.get(i, ())
             if absent is not None:
@@ -119,10 +127,11 @@ class Vehicle:
                 if self._absent is not None:  # back in the network, under a new address
                     self.src16 = int(self._rejoin_rng.integers(1, 0xFFF8))
                     marks, self._absent = marks + ({**self._absent, "my": self.src16},), None
+            air += self.sender.frames(attempts, i, self.src16, COORDINATOR16, p)
             if ok:
                 out.append(Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p),
                                  marks))
-        return events, out
+        return events, out, air
 
     def _out_of_network(self, ready_ns):
         """(which packets the router sends while a router fault has it out of the network,
@@ -162,17 +171,22 @@ class World:
         self._pending: list[Event] = []  # generated, not yet returned, in order
         self._times: list[int] = []  # their t_ns
         self._returned_ns = 0
+        self._air: list[AirFrame] = []  # generated, not yet returned, in order
 
     # -- generation -------------------------------------------------------------------------
     def _block(self) -> list[Event]:
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
         self._generated_ns = hi
-        sins, rf = [], []
+        sins, rf, air = [], [], []
         for vehicle in self.vehicles:
-            s, r = vehicle.block(lo, hi, hi < self.duration_ns)
+            s, r, a = vehicle.block(lo, hi, hi < self.duration_ns)
             sins += s
             rf += r
+            air += a
+        if air:
+            self._air += [f for f in air if f.t_ns < self.duration_ns]
+            self._air.sort(key=lambda f: f.t_ns)  # stable: an ACK stays after its frame
         t_nl, reports, marks = self.nanoloc.reports(lo, hi)
         return sins + [Event(t, "nanoloc", r, marks.get(i, ()))
                        for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))] + rf
@@ -193,6 +207,14 @@ class World:
         out = self._pending[:cut]
         del self._times[:cut], self._pending[:cut]
         self._returned_ns = until_ns
+        return out
+
+    def air(self, until_ns: int) -> list[AirFrame]:
+        """The air's frames with t_ns < *until_ns* not returned before, in time order, of the
+        blocks generated so far (by ``advance``): a later block's are never earlier."""
+        until_ns = min(until_ns, self._generated_ns)
+        cut = bisect.bisect_left(self._air, until_ns, key=lambda f: f.t_ns)
+        out, self._air = self._air[:cut], self._air[cut:]
         return out
 
     # -- live faults ------------------------------------------------------------------------

@@ -8,12 +8,23 @@ Layout (``docs/emulator.md``, "Recordings")::
     DIR/<port>.csv         one line per chunk: offset,size,t_device_ns,t_wall_ns
                            (a host's, version 2: ...,read_offset,reconnects,contended)
     DIR/faults.jsonl       the fault ledger (emulator recordings): one JSON object a line
+    DIR/<stream>.bin/.csv  a stream that is not a port (the emulator's ``air``), as a port's
 
 A chunk is one write by a device (emulator) or one read by the host. ``t_device_ns`` is the
 device clock at the chunk's first byte (emulator recordings; empty in host recordings);
 ``t_wall_ns`` is the wall time of the write (emulator, real time only) or the arrival time
 of the read (host, monotonic ns since the run started). Both are integers, so a replay
 feeds exactly the recorded chunks at exactly the recorded times.
+
+Streams. Besides its ports a recording may hold streams that no port carries, listed under
+``"streams"`` in recording.json, never under ``"ports"`` (so every tool that walks the ports
+is unchanged): ``{"air": {"linktype": 195, "doc": "..."}}``. A stream's files are a port's
+(one chunk = one packet of the stream, ``t_device_ns`` = when it happened in device time);
+``linktype`` is its packets' pcap link type (tcpdump.org/linktypes.html), so a capture
+(protocols.capture) can give the stream an interface without knowing what it is. The
+emulator records ``air``: each chunk one IEEE 802.15.4 PSDU with its FCS (link type 195),
+``t_device_ns`` its first bit on the air (emulator.radio). :attr:`Recording.streams` lists
+them; :meth:`Recording.chunks` reads a stream's chunks as a port's.
 
 Read columns (version 2, host recordings). Each read also says where it was in what the host
 read from the port, counted by the port's reader as it read (:class:`Read`): ``read_offset``,
@@ -137,6 +148,14 @@ class Read(NamedTuple):
     offset: int  # bytes read from the port before it
     reconnects: int  # reopens of the port before it
     contended: int  # reads before it that found the bytes taken by another reader
+
+
+class Stream(NamedTuple):
+    """A recorded stream that is not a port: its name, its packets' pcap link type, what it
+    is."""
+    name: str
+    linktype: int
+    doc: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -292,6 +311,8 @@ class RecordingWriter:
         self.replace = replace
         self.reads = reads
         self.ports: dict[str, PortWriter] = {}
+        self.streams: dict[str, PortWriter] = {}  # streams that are not ports (their meta:
+        # meta["streams"])
         self.files: dict[str, _File] = {}  # other append-only files (truth.csv)
         self.buffered = 0
         self.error: RecordingWriteError | None = None
@@ -313,6 +334,19 @@ class RecordingWriter:
             self.ports[name] = PortWriter(self, name)
             self.write_meta(complete=False)  # a crash leaves a meta that lists the port
         return self.ports[name]
+
+    def stream(self, name: str, linktype: int, doc: str) -> PortWriter:
+        """Stream *name* (not a port; the module docstring), its packets of pcap link type
+        *linktype*, described by *doc*: its writer, made on first use."""
+        if name not in self.streams:
+            if name in self.meta.get("ports", {}) or name in self.ports:
+                raise ValueError(f"stream {name!r} is also a port; give the stream another name")
+            if not 0 <= linktype <= 0xFFFF:
+                raise ValueError(f"stream {name!r}: link type {linktype} is not 0..65535")
+            self.streams[name] = PortWriter(self, name)
+            self.meta.setdefault("streams", {})[name] = {"linktype": linktype, "doc": doc}
+            self.write_meta(complete=False)  # a crash leaves a meta that lists the stream
+        return self.streams[name]
 
     def file(self, name: str) -> _File:
         """An append-only file beside the ports (flushed after them)."""
@@ -362,9 +396,10 @@ class RecordingWriter:
             raise
 
     def flush(self) -> None:
-        """Write what is buffered: each port's data, then its index, then the other files."""
+        """Write what is buffered: each port's and stream's data, then its index, then the
+        other files."""
         def everything():
-            for p in self.ports.values():
+            for p in (*self.ports.values(), *self.streams.values()):
                 p.flush()
             for f in self.files.values():
                 f.flush()
@@ -393,7 +428,7 @@ class RecordingWriter:
             raise self.error
 
     def _close_files(self) -> None:
-        for p in self.ports.values():
+        for p in (*self.ports.values(), *self.streams.values()):
             p.close()
         for f in self.files.values():
             f.close()
@@ -452,6 +487,19 @@ def _check_meta(meta, where: Path) -> None:
         api = port.get("api_mode", 1)
         if type(api) is not int or api not in (1, 2):
             fail(f"port {name!r} api_mode {api!r} is not 1 or 2")
+    streams = meta.get("streams", {})
+    if not isinstance(streams, dict):
+        fail(f"streams {streams!r} is not an object of stream objects")
+    for name, stream in streams.items():
+        if not PORT_NAME.fullmatch(name) or name in ports:
+            fail(f"stream name {name!r} is not a plain file name apart from the ports'")
+        if not isinstance(stream, dict):
+            fail(f"stream {name!r} is {type(stream).__name__}, not an object")
+        linktype = stream.get("linktype")
+        if type(linktype) is not int or not 0 <= linktype <= 0xFFFF:
+            fail(f"stream {name!r} linktype {linktype!r} is not an integer from 0 to 65535")
+        if not isinstance(stream.get("doc", ""), str):
+            fail(f"stream {name!r} doc {stream['doc']!r} is not a string")
 
 
 def _lines(path: Path) -> int:
@@ -486,6 +534,9 @@ class Recording:
             raise RecordingError(f"{meta_path}: {e.strerror}; check the directory") from None
         _check_meta(self.meta, meta_path)
         self.ports = sorted(self.meta["ports"])
+        #: streams that are not ports (the module docstring): name -> Stream
+        self.streams = {name: Stream(name, s["linktype"], s.get("doc", ""))
+                        for name, s in sorted(self.meta.get("streams", {}).items())}
         # a recording from before the "complete" field was closed normally or not at all: the
         # old writer gave no way to tell, and a normal close is the usual case
         self.complete = self.meta.get("complete", True)
@@ -494,16 +545,19 @@ class Recording:
         self._intact: dict[str, int] = {}  # port -> chunks to replay
         self.sizes: dict[str, int] = {}  # port -> bytes those chunks hold
         self.skipped: dict[str, dict] = {}  # port -> {"chunks", "bytes", "why"}
-        for port in self.ports:
+        for port in (*self.ports, *self.streams):
             self._scan(port)
 
     def path(self, port: str) -> Path:
-        if port not in self.ports:
-            raise RecordingError(f"{self.directory}: no port {port!r} (it has {', '.join(self.ports)})")
+        """The data file of port (or stream) *port*."""
+        if port not in self.ports and port not in self.streams:
+            raise RecordingError(f"{self.directory}: no port or stream {port!r} (it has "
+                                 f"{', '.join((*self.ports, *self.streams))})")
         return self.directory / f"{port}.bin"
 
     def read_bytes(self, port: str) -> bytes:
-        """The port's recorded bytes (the intact chunks), for small recordings and tests."""
+        """The port's (or stream's) recorded bytes (the intact chunks), for small recordings
+        and tests."""
         return b"".join(c.data for c in self.chunks(port))
 
     def _entries(self, port: str, data_size: int) -> Iterator[tuple]:
@@ -595,7 +649,8 @@ class Recording:
         return lines - 1 + (last != b"\n")
 
     def chunks(self, port: str) -> Iterator[Chunk]:
-        """The port's intact chunks in order, read from the data file one at a time."""
+        """The port's (or stream's) intact chunks in order, read from the data file one at a
+        time."""
         data_path = self.path(port)
         want = self._intact[port]
         if not want:

@@ -26,7 +26,7 @@ class FakeLink:
         self.answers = list(answers) or [(True, 0, 7 * MS)]
         self.calls = []
 
-    def unicast(self, t_ns, nbytes):
+    def unicast(self, t_ns, nbytes, air=None):
         self.calls.append((t_ns, nbytes))
         return self.answers[min(len(self.calls) - 1, len(self.answers) - 1)]
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from navtwin.protocols.serial import char_ns
-from navtwin.emulator.radio import ACK_NS, NS_PER_RF_BYTE, RF_OVERHEAD_BYTES, Link, Router
+from navtwin.emulator.radio import RF_OVERHEAD_BYTES, Link, Router
+from navtwin.protocols.ieee802154 import ACK_NS, BYTE_NS
 from navtwin.emulator.rng import stream
 from navtwin.emulator.faults import LinkLoss
 from navtwin.emulator.scenario import load_scenario
@@ -69,10 +70,10 @@ def test_link_timing_without_loss():
     spec = load_scenario("office").link
     link = Link(replace(spec, per_attempt_loss=0.0), [], stream(1, "t"))
     ready = np.arange(200, dtype=np.int64) * 10_000_000
-    arrival, delivered, _ = link.transmit(ready, np.full(200, 30))
+    arrival, delivered, *_ = link.transmit(ready, np.full(200, 30))
     assert delivered.all()
     delay = arrival - ready
-    air = (30 + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE
+    air = (30 + RF_OVERHEAD_BYTES) * BYTE_NS
     fixed = air + spec.latency_ms * 1e6
     assert delay.min() >= fixed and delay.max() <= fixed + spec.jitter_ms * 1e6
     assert np.mean(delay - fixed) == pytest.approx(spec.jitter_ms * 1e6 / 2, rel=0.15)  # uniform backoff
@@ -83,8 +84,8 @@ def test_link_queue_serialises_packets():
     link = Link(replace(spec, per_attempt_loss=0.0, jitter_ms=0.0), [],
                 stream(1, "t"))
     ready = np.zeros(5, dtype=np.int64)  # five packets at once: one after the other
-    arrival, _, _ = link.transmit(ready, np.full(5, 84))
-    service = (84 + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE + ACK_NS
+    arrival, *_ = link.transmit(ready, np.full(5, 84))
+    service = (84 + RF_OVERHEAD_BYTES) * BYTE_NS + ACK_NS
     assert np.array_equal(np.diff(arrival), np.full(4, service))
 
 
@@ -96,7 +97,7 @@ def test_loss_and_retry_statistics():
                 stream(7, "t"))
     n = 40_000
     ready = np.arange(n, dtype=np.int64) * 20_000_000
-    _, delivered, _ = link.transmit(ready, np.full(n, 30))
+    _, delivered, *_ = link.transmit(ready, np.full(n, 30))
     lost = 1 - delivered.mean()
     assert lost == pytest.approx(p ** (r + 1), abs=4 * math.sqrt(p ** (r + 1) / n))
     outcomes = [link.unicast(i * 20_000_000, 30) for i in range(5000)]
@@ -106,7 +107,7 @@ def test_loss_and_retry_statistics():
     failed = [o for o in outcomes if not o[0]]
     assert all(o[1] == r for o in failed)
     # giving up takes all attempts: at least (r + 1) airtimes and ACK waits
-    air = (30 + RF_OVERHEAD_BYTES) * NS_PER_RF_BYTE
+    air = (30 + RF_OVERHEAD_BYTES) * BYTE_NS
     assert min(o[2] for o in failed) >= (r + 1) * (air + spec.retry_ms * 1e6)
 
 
@@ -114,7 +115,7 @@ def test_link_loss_window_drops_everything_inside():
     spec = load_scenario("office").link
     link = Link(spec, [LinkLoss(start_s=1.0, end_s=2.0)], stream(3, "t"))
     ready = np.arange(300, dtype=np.int64) * 10_000_000
-    _, delivered, _ = link.transmit(ready, np.full(300, 30))
+    _, delivered, *_ = link.transmit(ready, np.full(300, 30))
     inside = (ready >= 1e9) & (ready < 2e9)
     assert not delivered[inside].any() and delivered[~inside].mean() > 0.99
     assert link.unicast(1_500_000_000, 10)[0] is False

@@ -1,9 +1,10 @@
 """Recordings: what is written is read back, chunk for chunk, and merged in time order."""
 import json
+import re
 
 import pytest
 
-from navtwin.protocols.recording import Read, Recording, RecordingError, RecordingWriter
+from navtwin.protocols.recording import Read, Recording, RecordingError, RecordingWriter, Stream
 
 
 def test_round_trip_and_merge(tmp_path):
@@ -97,4 +98,38 @@ def test_read_columns_in_a_version_1_recording_are_damage(tmp_path):
     (tmp_path / "recording.json").write_text(json.dumps({**meta, "version": 1}))
     with pytest.raises(RecordingError, match=r"xbee\.csv:1: the first line must be "
                                              r"'offset,size,t_device_ns,t_wall_ns';"):
+        Recording(tmp_path)
+
+
+def test_a_stream_beside_the_ports_is_read_as_a_port_is_and_listed_apart(tmp_path):
+    with RecordingWriter(tmp_path, {"ports": {"xbee": {}}}) as w:
+        w.port("xbee").write(b"ab", t_device_ns=10)
+        air = w.stream("air", 195, "the radio hop")
+        air.write(b"\x02\x00\x05\x12\x34", t_device_ns=3)
+        assert w.stream("air", 195, "the radio hop") is air
+        air.write(b"\x02\x00\x06\x56\x78", t_device_ns=9)
+        with pytest.raises(ValueError, match="also a port"):
+            w.stream("xbee", 195, "")
+    rec = Recording(tmp_path)
+    assert rec.ports == ["xbee"] and list(rec.meta["ports"]) == ["xbee"]
+    assert rec.streams == {"air": Stream("air", 195, "the radio hop")}
+    assert [(c.port, c.offset, c.t_device_ns) for c in rec.chunks("air")] == \
+           [("air", 0, 3), ("air", 5, 9)]
+    assert [c.port for c in rec.merged(clock="t_device_ns")] == ["xbee"]  # the ports only
+
+
+@pytest.mark.parametrize("streams, problem", [
+    ([], "streams [] is not an object"),
+    ({"xbee": {"linktype": 195}}, "apart from the ports'"),
+    ({"../air": {"linktype": 195}}, "not a plain file name"),
+    ({"air": {"linktype": "195"}}, "linktype '195' is not an integer"),
+    ({"air": {"linktype": 1 << 16}}, "is not an integer from 0 to 65535"),
+    ({"air": {"linktype": 195, "doc": 1}}, "doc 1 is not a string"),
+])
+def test_a_bad_stream_in_the_meta_is_a_one_line_error(tmp_path, streams, problem):
+    with RecordingWriter(tmp_path, {"ports": {"xbee": {}}}):
+        pass
+    meta = json.loads((tmp_path / "recording.json").read_text())
+    (tmp_path / "recording.json").write_text(json.dumps({**meta, "streams": streams}))
+    with pytest.raises(RecordingError, match=re.escape(problem)):
         Recording(tmp_path)
