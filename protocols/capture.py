@@ -17,6 +17,10 @@ port is one packet, in time order across the ports, on the clock asked for (devi
 default; a host recording has wall time only); the other clock and the fault ledger's entries
 that touch the chunk's bytes go in the packet's comment. A recording's port whose settings
 say ``{"of": PORT}`` (a host recording's ``xbee.tx``) is PORT's ``to_device`` direction.
+A stream of the recording that is not a port (an emulator recording's ``air``: the XBee
+hop's IEEE 802.15.4 frames, protocols.ieee802154) is an interface of its own with the
+stream's link type, so Wireshark's own wpan, ZigBee NWK and APS dissectors show the radio
+between the two wires.
 """
 from __future__ import annotations
 
@@ -24,7 +28,7 @@ import bisect
 import heapq
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO, Iterable, Iterator, NamedTuple
+from typing import BinaryIO, Iterator
 
 from . import ports
 from .pcapng import INBOUND, LINKTYPE_USER0, OUTBOUND, Writer
@@ -103,16 +107,6 @@ class CaptureError(ValueError):
     """A recording that cannot be written as asked: one line naming the setting and the fix."""
 
 
-class Packet(NamedTuple):
-    """One packet of a stream that is not a port (the air), for :func:`write_recording`."""
-    t_ns: int
-    interface: str
-    linktype: int
-    data: bytes
-    direction: str = "to_host"
-    comment: str = ""
-
-
 @dataclass
 class Written:
     """What :func:`write_recording` wrote: the clock of the timestamps, and per interface
@@ -177,42 +171,46 @@ def _port_packets(recording: Recording, clock: str) -> Iterator[tuple[int, Chunk
         yield getattr(chunk, attr) or 0, chunk
 
 
-def write_recording(recording: Recording, out: BinaryIO, *, clock: str = "device",
-                    streams: Iterable[Iterable[Packet]] = ()) -> Written:
+def _stream_packets(recording: Recording, name: str, rank: int,
+                    clock: str) -> Iterator[tuple[int, int, Chunk]]:
+    """The chunks of stream *name* (not a port: the air) on *clock*, ranked after the ports
+    and the streams before it at equal times."""
+    attr = CLOCKS[clock]
+    for chunk in recording.chunks(name):
+        yield getattr(chunk, attr) or 0, rank, chunk
+
+
+def write_recording(recording: Recording, out: BinaryIO, *, clock: str = "device") -> Written:
     """Write *recording* to *out* as a pcapng capture (the module docstring): one interface
-    per port, a packet per chunk, timestamps on *clock* (``device`` or ``wall``; ``device``
-    falls back to wall in a recording without device times). *streams*: other streams (the
-    radio's air), each its packets in time order, merged in. What was written."""
+    per port and per stream that is not a port (the air, with its own link type), a packet
+    per chunk in time order, timestamps on *clock* (``device`` or ``wall``; ``device`` falls
+    back to wall in a recording without device times). What was written."""
     used = clock_for(recording, clock)
     other = {"device": "wall", "wall": "device"}[used]
     settings = recording.meta["ports"]
     faults = _Faults(recording.faults())  # validated before a byte is written
     capture = Capture(out, {p: s for p, s in settings.items() if "of" not in s})
     written = Written(used)
-
-    def count(name: str, data: bytes) -> None:
-        written.packets[name] = written.packets.get(name, 0) + 1
-        written.bytes[name] = written.bytes.get(name, 0) + len(data)
-
     ports_ = ((t, 0, chunk) for t, chunk in _port_packets(recording, used))
-    others = (((p.t_ns, 1, p) for p in stream) for stream in streams)
-    for t, _, item in heapq.merge(ports_, *others, key=lambda x: x[:2]):
-        if isinstance(item, Packet):
-            if item.interface not in capture.interfaces:
-                capture.interface(item.interface, item.linktype)
-            capture.chunk(item.interface, t, item.data, item.direction, item.comment)
-            count(item.interface, item.data)
-            continue
-        port, direction = item.port, "to_host"
-        if "of" in settings[port]:
-            port, direction = settings[port]["of"], "to_device"
-        notes = []
-        other_t = getattr(item, CLOCKS[other])
-        if other_t is not None:
-            notes.append(f"{CLOCKS[other]}={other_t}")
-        notes += [_fault_note(e) for e in faults.touching(
-            port, direction, item.offset, item.offset + len(item.data))]
-        capture.chunk(port, t, item.data, direction, "; ".join(notes))
-        count(port, item.data)
+    streams = [_stream_packets(recording, name, rank, used)
+               for rank, name in enumerate(recording.streams, 1)]
+    for t, rank, chunk in heapq.merge(ports_, *streams, key=lambda x: x[:2]):
+        if rank:
+            stream = recording.streams[chunk.port]
+            if stream.name not in capture.interfaces:
+                capture.interface(stream.name, stream.linktype, stream.doc)
+            port, direction, touched = stream.name, "to_host", []
+        else:
+            port, direction = chunk.port, "to_host"
+            if "of" in settings[port]:
+                port, direction = settings[port]["of"], "to_device"
+            touched = faults.touching(port, direction, chunk.offset,
+                                      chunk.offset + len(chunk.data))
+        other_t = getattr(chunk, CLOCKS[other])
+        notes = [f"{CLOCKS[other]}={other_t}"] if other_t is not None else []
+        notes += [_fault_note(e) for e in touched]
+        capture.chunk(port, t, chunk.data, direction, "; ".join(notes))
+        written.packets[port] = written.packets.get(port, 0) + 1
+        written.bytes[port] = written.bytes.get(port, 0) + len(chunk.data)
     capture.flush()
     return written

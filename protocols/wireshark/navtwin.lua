@@ -15,6 +15,7 @@
 --                    dissected as the SINS stream it carries; API mode 2 (escaped) on
 --                    USER2, mode 1 on USER3 (framed by navtwin.xbee_api1, shown as navtwin.xbee)
 --   navtwin.garbage  bytes of a packet that are no complete frame
+--   the air          ZigBee APS payloads of Digi's profile 0xC105 are dissected as SINS frames
 --
 -- A packet is one chunk of a port's byte stream: every complete frame in it is dissected, the
 -- rest shows as garbage / partial frame. Frames split across packets are not reassembled.
@@ -537,3 +538,10 @@ encap:add(LINKTYPES.sins, sins)
 encap:add(LINKTYPES.nanoloc, nanoloc)
 encap:add(LINKTYPES.xbee_escaped, xbee)
 encap:add(LINKTYPES.xbee, xbee_api1)
+
+-- The air (an emulator recording's air stream, IEEE 802.15.4 frames that Wireshark's own
+-- wpan, ZigBee NWK and APS dissectors read): the APS payload of Digi's profile 0xC105 is the
+-- router's transparent data, the board's serial stream, so it is dissected as SINS frames
+-- (without this Wireshark reads it as a ZCL frame). pcall: a Wireshark without the ZigBee
+-- dissectors has no such table.
+pcall(function() DissectorTable.get("zbee.profile"):add(0xC105, sins) end)

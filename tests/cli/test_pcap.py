@@ -10,10 +10,11 @@ import pytest
 from navtwin.protocols import xbee
 from navtwin.protocols.capture import dissectors_path
 from navtwin.protocols.recording import Recording, RecordingWriter
+from navtwin.protocols.stream import Frame, sins_decoder
 
 from .. import recorded
 from ..helpers import DEADLINE_S, navtwin, one_line_error
-from ..tshark import tshark
+from ..tshark import fields, tshark
 
 PCAPNG_MAGIC = b"\x0a\x0d\x0d\x0a"
 
@@ -34,15 +35,29 @@ def test_a_recording_becomes_a_capture_tshark_decodes_with_the_printed_lua(run, 
     p = navtwin("pcap", run, "-o", out)
     assert p.returncode == 0 and p.stdout == "", p.stderr
     rec = Recording(run)
-    chunks = {port: sum(1 for _ in rec.chunks(port)) for port in ("xbee", "sins", "nanoloc")}
-    assert p.stderr == (f"navtwin pcap: {out}: {sum(chunks.values())} packets, device time: "
-                        + ", ".join(f"{port} {n} packets ({rec.sizes[port]} bytes)"
-                                    for port, n in chunks.items()) + "\n")
+    # every port and the air, each interface declared with its first packet
+    names = ("xbee", "sins", "air", "nanoloc")
+    chunks = {name: list(rec.chunks(name)) for name in names}
+    assert p.stderr == (f"navtwin pcap: {out}: {sum(map(len, chunks.values()))} packets, "
+                        "device time: " + ", ".join(
+                            f"{name} {len(c)} packets ({sum(len(x.data) for x in c)} bytes)"
+                            for name, c in chunks.items()) + "\n")
     lua = navtwin("pcap", "--dissectors").stdout.strip()
     shown = subprocess.run([tshark(), "-r", out, "-X", f"lua_script:{lua}"], capture_output=True,
                            text=True, timeout=DEADLINE_S, check=True).stdout
     assert "SINS seq 199" in shown and "XBee receive_packet (SINS seq 0)" in shown
     assert "nanoLOC anchor 1" in shown
+    # the air: Wireshark's own 802.15.4 and ZigBee dissectors, the router's transparent data
+    # (APS profile 0xC105) dissected as the board's SINS frames by ours
+    air = fields(out, "wpan.fcs_ok", "zbee_aps.profile", "navtwin.sins.seq",
+                 "navtwin.sins.crc_ok", where='frame.interface_name == "air" && zbee_aps')
+    assert air and all(r[:2] == [["1"], ["0xc105"]] and r[3] == ["1"] * len(r[2]) for r in air)
+    # every attempt is on the air: a retry repeats the packet before it
+    on_air = [int(seq) for i, r in enumerate(air) if i == 0 or r[2] != air[i - 1][2]
+              for seq in r[2]]
+    board = [e.fields["seq"] for e in sins_decoder().decode(rec.read_bytes("sins"))
+             if isinstance(e, Frame)]
+    assert on_air == board[:len(on_air)] and len(on_air) > 100  # in order, none lost
     # to stdout, for a pipe into wireshark -k -i -: the same bytes
     piped = navtwin("pcap", run, "-o", "-", text=False)
     assert piped.returncode == 0 and piped.stdout == out.read_bytes()

@@ -6,8 +6,6 @@ with its MAC sequence number; a lost attempt has no ACK; Wireshark reads it all.
 """
 from __future__ import annotations
 
-import io
-import shutil
 import subprocess
 from dataclasses import dataclass
 
@@ -15,12 +13,13 @@ import pytest
 
 from navtwin.emulator.runner import AIR, Emulation
 from navtwin.protocols import ieee802154, xbee, zigbee
-from navtwin.protocols.capture import Capture
+from navtwin.protocols.capture import write_recording
 from navtwin.protocols.pcapng import LINKTYPE_IEEE802_15_4_WITHFCS
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import XBeeDecoder
 from navtwin.protocols.xbee import FrameType
 
+from ..tshark import tshark
 from .world_helpers import variant
 
 SEED = 7
@@ -138,31 +137,31 @@ def rec_max_retries(tmp_path) -> int:
     return variant(tmp_path, "office", "", name="retries").link.max_retries
 
 
-tshark = pytest.mark.skipif(shutil.which("tshark") is None, reason="tshark not installed")
 
 
-@tshark
 def test_wireshark_decodes_the_recorded_air(tmp_path):
+    """The recording as navtwin pcap writes it: the air on an interface of its own, which
+    Wireshark's own wpan, ZigBee NWK and APS dissectors decode; its data frames carry the
+    board's SINS frames."""
     rec = recorded(tmp_path, duration_s=1.0)
-    stream = rec.streams[AIR]
-    out = io.BytesIO()
-    capture = Capture(out, {})
-    air = capture.interface(stream.name, stream.linktype, stream.doc)
-    for chunk in rec.chunks(AIR):
-        capture.writer.packet(air, chunk.t_device_ns, chunk.data)
-    path = tmp_path / "air.pcapng"
-    path.write_bytes(out.getvalue())
+    path = tmp_path / "run.pcapng"
+    with open(path, "wb") as f:
+        written = write_recording(rec, f)
+    assert written.packets[AIR] == sum(1 for _ in rec.chunks(AIR)) > 100
     fields = ["wpan.frame_type", "wpan.fcs_ok", "wpan.seq_no", "zbee_nwk.src",
-              "zbee_aps.profile"]
-    text = subprocess.run(["tshark", "-r", str(path), "-T", "fields", *[
-        a for f in fields for a in ("-e", f)]], capture_output=True, text=True, check=True).stdout
+              "zbee_aps.profile", "zbee_aps.cluster", "zbee_aps.dst", "data.data"]
+    text = subprocess.run([tshark(), "-r", str(path), "-Y", f'frame.interface_name == "{AIR}"',
+                           "-T", "fields", "-E", "occurrence=l", *[a for f in fields for a in ("-e", f)]],
+                          capture_output=True, text=True, check=True).stdout
     rows = [line.split("\t") for line in text.splitlines()]
     my = f"0x{received(rec)[0][2]:04x}"
-    assert len(rows) == sum(1 for _ in rec.chunks(AIR)) > 100
+    assert len(rows) == written.packets[AIR]
     assert all(r[1] == "1" for r in rows)  # every FCS good
     data = [r for r in rows if r[0] == "0x0001"]
-    assert data and all(r[3:] == [my, "0xc105"] for r in data)
-    assert {r[0] for r in rows} == {"0x0001", "0x0002"}
+    assert data and all(r[3:7] == [my, "0xc105", "0x0011", "232"] for r in data)
+    assert {r[0] for r in rows} == {"0x0001", "0x0002"}  # data frames and their ACKs
+    board = rec.read_bytes("sins")
+    assert all(bytes.fromhex(r[7]) in board for r in data)  # a packet of the board's bytes
 
 
 def test_the_coordinators_transmit_requests_are_on_the_air_in_time_order(tmp_path):

@@ -10,7 +10,7 @@ import re
 import pytest
 
 from navtwin.protocols import adis16350, nanoloc, sins, xbee
-from navtwin.protocols.capture import (LINKTYPES, UNDISSECTED, CaptureError, Packet,
+from navtwin.protocols.capture import (LINKTYPES, UNDISSECTED, CaptureError,
                                        dissectors_path, write_recording)
 from navtwin.protocols.decode import decode
 from navtwin.protocols.pcapng import INBOUND, LINKTYPE_USER0, OUTBOUND, Writer
@@ -291,15 +291,18 @@ def test_no_wall_times_is_an_error_naming_the_clock(office):
         write_recording(Recording(rec), io.BytesIO(), clock="wall")
 
 
-def test_other_streams_merge_in_time_order_on_their_own_interfaces(tmp_path):
-    """The air (another helper's) joins as a stream of packets on an interface of its own."""
+def test_a_recordings_streams_merge_in_time_order_on_their_own_interfaces(tmp_path):
+    """A stream that is not a port (the air) is an interface of its own with the stream's
+    link type and doc, its packets merged with the ports' in time order."""
     frame = sins.build_sample(1, [0x8000] * 11)
-    rec = _synthetic(tmp_path / "r", {"sins": {}}, [("sins", frame, 10, None),
-                                                     ("sins", frame, 30, None)])
-    air = [Packet(20, "air", UNDISSECTED, b"\x01"), Packet(40, "air", UNDISSECTED, b"\x02")]
+    with RecordingWriter(tmp_path / "r", {"ports": {"sins": {}}}) as w:
+        w.port("sins").write(frame, 10, None)
+        w.stream("air", UNDISSECTED, "the radio").write(b"\x01", 20, None)
+        w.port("sins").write(frame, 30, None)
+        w.stream("air", UNDISSECTED, "the radio").write(b"\x02", 40, None)
     capture = tmp_path / "r.pcapng"
     with open(capture, "wb") as f:
-        written = write_recording(rec, f, streams=[air])
+        written = write_recording(Recording(tmp_path / "r"), f)
     assert written.packets == {"sins": 2, "air": 2}
     assert [(r["interface"], _ns(r["time"])) for r in packets(capture)] == [
         ("sins", 10), ("air", 20), ("sins", 30), ("air", 40)]

@@ -1,7 +1,6 @@
 """The air's frames: IEEE 802.15.4 MAC, ZigBee NWK and APS headers, checked against the
 spec's check value, their construct declarations and Wireshark's own dissectors."""
 import io
-import shutil
 import subprocess
 
 import pytest
@@ -10,7 +9,8 @@ from navtwin.protocols import ieee802154, zigbee
 from navtwin.protocols.capture import Capture
 from navtwin.protocols.pcapng import LINKTYPE_IEEE802_15_4_WITHFCS
 
-tshark = pytest.mark.skipif(shutil.which("tshark") is None, reason="tshark not installed")
+from ..tshark import tshark
+
 
 PAN, ROUTER = 0x3A7C, 0x5B21
 
@@ -68,14 +68,13 @@ def dissect(frames, tmp_path) -> list[dict]:
         capture.writer.packet(air, 1_000_000 * i, psdu)
     path = tmp_path / "air.pcapng"
     path.write_bytes(out.getvalue())
-    args = ["tshark", "-r", str(path), "-T", "fields", "-E", "occurrence=l"]
+    args = [tshark(), "-r", str(path), "-T", "fields", "-E", "occurrence=l"]
     for f in FIELDS:
         args += ["-e", f]
     text = subprocess.run(args, capture_output=True, text=True, check=True).stdout
     return [dict(zip(FIELDS, line.split("\t"))) for line in text.splitlines()]
 
 
-@tshark
 def test_wiresharks_dissectors_read_the_data_frame_and_its_ack(tmp_path):
     data = bytes(range(30))
     psdu = ieee802154.data_frame(0xC8, PAN, zigbee.COORDINATOR16, ROUTER,
@@ -96,7 +95,6 @@ def test_wiresharks_dissectors_read_the_data_frame_and_its_ack(tmp_path):
             ack["wpan.fcs_ok"]) == ("wpan", "0x0002", "200", "1")
 
 
-@tshark
 def test_a_corrupted_frame_fails_wiresharks_fcs_check(tmp_path):
     psdu = bytearray(ieee802154.data_frame(1, PAN, 0, ROUTER, zigbee.data_packet(
         0, ROUTER, 0x1E, 1, 1, b"x")))
