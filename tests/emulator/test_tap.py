@@ -2,18 +2,24 @@
 what the recording keeps, and what the host writes; a client that falls behind is dropped
 without holding the lab up."""
 import os
+import select
 import socket
 import stat
 import threading
 
 import pytest
 
+from navtwin.emulator import extcap
 from navtwin.emulator.api import emulate
 from navtwin.emulator.control import Control
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import load_scenario
-from navtwin.emulator.tap import FORMAT, TapClient, TapError
+from navtwin.emulator.tap import FORMAT, TapClient, TapError, TapServer
+from navtwin.protocols.capture import UNDISSECTED
+from navtwin.protocols.pcapng import LINKTYPE_IEEE802_15_4_WITHFCS, LINKTYPE_USER0
 from navtwin.protocols.recording import Recording
+
+from ..cli.test_extcap import read_pcapng
 
 DEADLINE_S = 20.0
 #: ATMY as the host sends it (API frame 0x08, frame id 1)
@@ -106,3 +112,30 @@ def test_no_lab_is_one_line_naming_the_fix(tmp_path):
     with pytest.raises(TapError, match=r"^link_dir: .*tap: cannot connect \(no such socket\); "
                                        r"is an emulator running"):
         TapClient(tmp_path)
+
+
+def test_a_stream_that_is_not_a_port_reaches_the_capture_on_its_own_interface(tmp_path):
+    """The air (another part of the lab) declares its stream and sends packets through
+    ``tap.stream``: a reader learns its link type, and the extcap writes it as an interface."""
+    server = TapServer(tmp_path / "tap", lambda: {"ports": {"sins": {"baud": 115200}}},
+                       lambda: 42)
+    server.declare("air", LINKTYPE_IEEE802_15_4_WITHFCS, "the radio")
+    out = tmp_path / "air.pcapng"
+    result: list = []
+    capture = threading.Thread(target=lambda: result.append(extcap.capture(tmp_path, out)))
+    capture.start()
+    assert select.select([server.sock], [], [], DEADLINE_S)[0], "the capture did not connect"
+    server.serve([server.sock])
+    assert server.status()["clients"] == 1
+    server.stream("air", 1_000, b"\x41\x88frame")
+    server.chunk("sins", "to_host", 2_000, b"\xaa\x55")
+    server.declare("later", UNDISSECTED, "declared while a reader is connected")
+    server.stream("later", 3_000, b"x")
+    server.close()  # the end record: the capture ends
+    capture.join(DEADLINE_S)
+    assert result == [True]
+    interfaces, packets = read_pcapng(out.read_bytes())
+    assert interfaces == [("air", LINKTYPE_IEEE802_15_4_WITHFCS), ("sins", LINKTYPE_USER0),
+                          ("later", UNDISSECTED)]
+    assert [(i, t, d) for i, t, _, d in packets] == [(0, 1_000, b"\x41\x88frame"),
+                                                     (1, 2_000, b"\xaa\x55"), (2, 3_000, b"x")]
