@@ -51,6 +51,7 @@ FORMAT, VERSION = "navtwin-tap", 1
 RECORD = struct.Struct("<BBxxIqq")
 TO_HOST, TO_DEVICE, STREAM, DECLARE, END = range(5)
 KINDS = {"to_host": TO_HOST, "to_device": TO_DEVICE}
+DIRECTIONS = {kind: direction for direction, kind in KINDS.items()}
 MAX_BUFFER = 4 << 20  # unsent bytes a client may fall behind by before it is dropped
 MAX_CLIENTS = 8
 END_WAIT_S = 2.0  # at the end of the run: how long the last records may take to go out
@@ -58,7 +59,7 @@ MAX_HELLO = 1 << 20
 
 
 class TapError(RuntimeError):
-    """No tap to read, or a stream that is not one; the message is one line with the fix."""
+    """No tap to read, or a socket that is not a tap; the message is one line with the fix."""
 
 
 class Record(NamedTuple):
@@ -71,7 +72,7 @@ class Record(NamedTuple):
     @property
     def direction(self) -> str | None:
         """``to_host`` / ``to_device`` for a port's chunk, None for a stream's packet."""
-        return {TO_HOST: "to_host", TO_DEVICE: "to_device"}.get(self.kind)
+        return DIRECTIONS.get(self.kind)
 
 
 def encode(kind: int, name: str, t_device_ns: int, t_wall_ns: int, data: bytes) -> bytes:
