@@ -22,6 +22,7 @@ is the first port's: the pcapng's own interface blocks give each port's.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shlex
@@ -96,15 +97,29 @@ def capture(link_dir: str | os.PathLike, fifo: str | os.PathLike,
     as pcapng, flushed per packet, until the run ends; True if it ended (the tap's end
     record), False if the lab closed the tap first (this capture fell behind and was
     dropped, or the lab died). TapError if no lab runs there (before *fifo* is opened); a
-    reader that closes *fifo* raises BrokenPipeError."""
-    with TapClient(link_dir, timeout=None) as tap:
+    reader that closes *fifo* raises BrokenPipeError.
+
+    A FIFO is opened first: Wireshark's reader waits for its writer, and sees a failure only
+    once the FIFO closes (an extcap that exits without opening it hangs tshark). A file is
+    opened only once the lab answered, so a failed capture leaves none."""
+    with contextlib.ExitStack() as opened:
+        out = opened.enter_context(open(fifo, "wb")) if _is_fifo(fifo) else None
+        tap = opened.enter_context(TapClient(link_dir, timeout=None))
         hello = tap.hello
         if keep is not None and (unknown := keep - set(hello["ports"]) - set(hello["streams"])):
             raise ExtcapError(f"extcap_capture_filter: no port or stream "
                               f"{', '.join(sorted(unknown))} in this lab; name some of "
                               f"{', '.join([*hello['ports'], *hello['streams']])}")
-        with open(fifo, "wb") as out:
-            return _write(tap, Capture(out, hello["ports"]), keep)
+        if out is None:
+            out = opened.enter_context(open(fifo, "wb"))
+        return _write(tap, Capture(out, hello["ports"]), keep)
+
+
+def _is_fifo(path) -> bool:
+    try:
+        return stat.S_ISFIFO(os.stat(path).st_mode)
+    except OSError:
+        return False
 
 
 def _write(tap: TapClient, cap: Capture, keep: set[str] | None) -> bool:

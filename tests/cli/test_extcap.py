@@ -97,19 +97,20 @@ def _options(raw: bytes) -> dict[int, bytes]:
     return out
 
 
-def assert_capture_is_the_recording(data: bytes, rec: Recording) -> dict[str, int]:
-    """Each port's packets are its recorded chunks from where the capture started: the same
-    bytes, device times and direction; the packets per port."""
+def assert_capture_is_the_recording(data: bytes, rec: Recording,
+                                    to_end: bool = False) -> dict[str, int]:
+    """Each port's packets are its recorded chunks from the one the capture started at (by
+    device time), up to the recording's end if *to_end*: the same bytes, device times and
+    direction; the packets per port."""
     interfaces, packets = read_pcapng(data)
     assert sorted(interfaces) == sorted((p, linktype(p, s)) for p, s in rec.meta["ports"].items())
     counts = {}
     for i, (port, _) in enumerate(interfaces):
         mine = [p for p in packets if p[0] == i]
-        captured = b"".join(p[3] for p in mine)
-        recorded = rec.read_bytes(port)
-        start = len(recorded) - len(captured)
-        assert mine and recorded[start:] == captured
-        tail = [c for c in rec.chunks(port) if c.offset >= start]
+        assert mine, f"no packets of {port}"
+        chunks = list(rec.chunks(port))
+        first = next(n for n, c in enumerate(chunks) if c.t_device_ns == mine[0][1])
+        tail = chunks[first:] if to_end else chunks[first:first + len(mine)]
         assert [(p[1], p[3]) for p in mine] == [(c.t_device_ns, c.data) for c in tail]
         assert {p[2] for p in mine} == {INBOUND}
         counts[port] = len(mine)
@@ -118,12 +119,14 @@ def assert_capture_is_the_recording(data: bytes, rec: Recording) -> dict[str, in
 
 def test_a_capture_into_a_file_is_the_recording_and_ends_with_the_lab(tmp_path):
     out = tmp_path / "live.pcapng"
-    with emulate("office", seed=5, duration=3, record=tmp_path / "rec") as lab:
+    with emulate("office", seed=5, duration=5, record=tmp_path / "rec") as lab:
         done = navtwin("extcap", "--capture", "--extcap-interface", "navtwin", "--fifo", out,
                        "--link-dir", lab.info["link_dir"], timeout=DEADLINE_S)
         lab.wait_done(DEADLINE_S)
     assert done.returncode == 0, done.stderr
-    counts = assert_capture_is_the_recording(out.read_bytes(), Recording(tmp_path / "rec"))
+    rec = Recording(tmp_path / "rec")
+    # it ended with the run: every chunk from its first to the recording's last
+    counts = assert_capture_is_the_recording(out.read_bytes(), rec, to_end=True)
     if shutil.which("tshark"):  # Wireshark reads it: the same packets on the same interfaces
         assert _tshark_counts(out) == counts
 
@@ -196,12 +199,19 @@ def test_tshark_captures_a_running_lab_through_the_installed_extcap(tmp_path):
     listed = subprocess.run(["tshark", "-D"], env=env, capture_output=True, text=True,
                             timeout=DEADLINE_S).stdout
     assert re.search(r"^\d+\. navtwin \(", listed, re.M), listed
+    # no lab: tshark ends at once with the extcap's line (it opened Wireshark's FIFO first)
+    nolab = subprocess.run(["tshark", "-i", "navtwin", "-o",
+                            f"extcap.navtwin.linkdir:{tmp_path}", "-w", str(tmp_path / "no")],
+                           env=env, capture_output=True, text=True, timeout=DEADLINE_S)
+    assert nolab.returncode != 0 and "cannot connect (no such socket)" in nolab.stderr
     out = tmp_path / "live.pcapng"
-    with emulate("office", seed=5, duration=3, record=tmp_path / "rec") as lab:
+    with emulate("office", seed=5, duration=60, record=tmp_path / "rec") as lab:
+        # tshark stops the capture after 300 packets (it sends the extcap SIGTERM)
         cap = subprocess.run(["tshark", "-i", "navtwin", "-o",
-                              f"extcap.navtwin.linkdir:{lab.info['link_dir']}", "-w", str(out)],
+                              f"extcap.navtwin.linkdir:{lab.info['link_dir']}", "-a",
+                              "packets:300", "-w", str(out)],
                              env=env, capture_output=True, text=True, timeout=DEADLINE_S)
-        lab.wait_done(DEADLINE_S)
+        assert lab.running()
     assert cap.returncode == 0, cap.stderr
     counts = assert_capture_is_the_recording(out.read_bytes(), Recording(tmp_path / "rec"))
     assert _tshark_counts(out) == counts
