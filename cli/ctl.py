@@ -13,7 +13,8 @@ DESCRIPTION = """\
 Talk to a running `navtwin emulate` through the control socket in its link directory
 (DIR/control, mode 0600). Each command prints the emulator's JSON reply on stdout:
 
-  status                      virtual time, ports (plugged, attached), live faults
+  status                      virtual time, ports (plugged, attached), live faults, tap
+                              readers (clients, dropped)
   fault KIND:key=value,...    inject a fault now (e.g. bit_errors:port=xbee,ber=1e-4), for
                               --duration S or until cleared; its id is in the reply
   clear [ID]                  end one live fault, or all

@@ -145,8 +145,9 @@ def missing_extra(e: ModuleNotFoundError, extra: str | None) -> str | None:
 COMMANDS = Registry("navtwin.commands", "command", {
     name: f"navtwin.cli.{module}:register" for name, module in (
         ("audit", "audit"), ("bench", "bench"), ("calibrate", "calibrate"), ("ctl", "ctl"),
-        ("decode", "decode"), ("demo", "demo"), ("diff", "diff"), ("emulate", "emulate"), ("host", "host"),
-        ("host-replay", "replay"), ("lab", "lab"), ("pcap", "pcap"), ("report", "report"), ("sweep", "sweep"))})
+        ("decode", "decode"), ("demo", "demo"), ("diff", "diff"), ("emulate", "emulate"),
+        ("extcap", "extcap"), ("host", "host"), ("host-replay", "replay"), ("lab", "lab"),
+        ("pcap", "pcap"), ("report", "report"), ("sweep", "sweep"))})
 
 
 def build_parser() -> argparse.ArgumentParser:

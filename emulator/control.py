@@ -50,7 +50,7 @@ class ControlError(RuntimeError):
 # -- the requests: each op's arguments, declared once -------------------------------------
 @dataclass(frozen=True)
 class Status:
-    """the run: virtual time, ports (attached, plugged), live faults"""
+    """the run: virtual time, ports (attached, plugged), live faults, tap readers"""
 
 
 @dataclass(frozen=True)

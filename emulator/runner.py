@@ -54,6 +54,10 @@ line faults in scenario order). Every injection goes into the run's ledger
 (:attr:`Emulation.ledger`, emulator.ledger): into the recording's ``faults.jsonl`` and,
 per kind, into the summary's ``faults`` (injections, bytes touched).
 
+Tap. With ports published, ``DIR/tap`` (emulator.tap) gives its clients every chunk as it
+is delivered and what the host writes, served from the loop's wait like the control socket;
+with no client a chunk costs one check.
+
 Sink. ``sink`` (a callable) is given every chunk as it is delivered, with its device times:
 the in-memory run (``lab.run``) takes the lab's bytes from here, with no PTY and no file.
 """
@@ -80,6 +84,7 @@ from .ledger import Ledger
 from .pty import LinkDir, PtyPort
 from .radio import AirFrame
 from .rng import stream
+from .tap import SOCKET as TAP_SOCKET, TapServer
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
 from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked
 from .uart_rx import ClientView, Framing
@@ -218,6 +223,7 @@ class Emulation:
         self.views: dict[str, ClientView] = {}  # per port: what the client's UART reads
         self.links: dict[str, str] = {}
         self.control: ControlServer | None = None
+        self.tap: TapServer | None = None  # every chunk to its clients (emulator.tap)
         self.live: dict[int, tuple[Fault, LineWrapper | None]] = {}  # id -> live fault
         self._live_ids = 0
         self._now_ns = 0  # the loop's virtual time, for live control
@@ -273,6 +279,8 @@ class Emulation:
             self.views[name] = ClientView(name, Framing(self.lines[name].device.baud),
                                           notify=self.progress)
         self.control = ControlServer(self.link_dir.path / CONTROL_SOCKET, self._control)
+        self.tap = TapServer(self.link_dir.path / TAP_SOCKET, self._tap_hello,
+                             lambda: time.monotonic_ns() - self.t0_monotonic_ns)
 
     def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
         radios = self.world.radios  # the routers' MY, the network: from the seed
@@ -287,7 +295,7 @@ class Emulation:
         rec = RecordingWriter(directory, replace=True, meta={
             "source": "navtwin emulate", "scenario": self.scenario.name, "seed": self.seed,
             "speed": speed_name(self.speed), "duration_s": self.end_ns / SEC,
-            "ports": {name: dict(dev.settings) for name, dev in self.devices.items()},
+            "ports": self.port_settings(),
             "clocks": {"t_device_ns": "ns since the run started when the chunk's first byte "
                                       "leaves the device's UART",
                        "t_wall_ns": "monotonic ns since the run started when the chunk was "
@@ -320,6 +328,17 @@ class Emulation:
                 break
         self._flush_cost_ns = max(time.monotonic_ns() - t, self._flush_cost_ns * 99 // 100)
 
+    def port_settings(self) -> dict[str, dict]:
+        """Each port's settings, as a recording's meta keeps them."""
+        return {name: dict(dev.settings) for name, dev in self.devices.items()}
+
+    def _tap_hello(self) -> dict:
+        """The run, for a client of the tap that comes now (emulator.tap)."""
+        return {"scenario": self.scenario.name, "seed": self.seed,
+                "speed": speed_name(self.speed), "duration_s": self.end_ns / SEC,
+                "ports": self.port_settings(),
+                "offsets": {name: line.delivered for name, line in self.lines.items()}}
+
     def info(self) -> dict:
         """The ``ready`` line: ports (stable links), pts paths, scenario, seed, speed."""
         return {"ready": True, "ports": dict(self.links),
@@ -328,6 +347,7 @@ class Emulation:
                 "duration_s": self.end_ns / SEC,
                 "link_dir": str(self.link_dir.path) if self.link_dir else None,
                 "control": str(self.control.path) if self.control else None,
+                "tap": str(self.tap.path) if self.tap else None,
                 "pid": os.getpid()}
 
     # -- the loop ---------------------------------------------------------------------------
@@ -418,7 +438,7 @@ class Emulation:
         """Sleep until *deadline* (monotonic ns) or a client writes; spin the last SPIN_NS."""
         fds = [p.fd for p in self.ports.values() if p.attached]
         if self.control is not None:
-            fds += self.control.fds()
+            fds += self.control.fds() + self.tap.fds()
         now = time.monotonic_ns()
         sleep_until = min(deadline - SPIN_NS, check_at)
         if sleep_until > now:
@@ -436,13 +456,15 @@ class Emulation:
         (every CHECK_NS) their termios settings."""
         ports = self.ports
         attached = [p for p in ports.values() if p.attached]
-        control = self.control.fds() if self.control is not None else []
+        control = self.control.fds() + self.tap.fds() if self.control is not None else []
         readable = select.select(attached + control, [], [], 0)[0]
         for port in readable:
             if isinstance(port, PtyPort):
                 self._host_bytes(port, now)
         if control:
-            self.control.serve([s for s in readable if not isinstance(s, PtyPort)])
+            sockets = [s for s in readable if not isinstance(s, PtyPort)]
+            self.control.serve(sockets)
+            self.tap.serve(sockets)
         if check_detached:
             for port in ports.values():
                 if not port.attached:
@@ -456,6 +478,8 @@ class Emulation:
 
     def _host_bytes(self, port: PtyPort, now: int) -> None:
         data = port.read()
+        if data and self.tap.clients:
+            self.tap.chunk(port.name, "to_device", now, data)
         if data and port.name == self.inbound.name:
             self.inbound.put(now, data)
             self._to_device(now)
@@ -484,6 +508,8 @@ class Emulation:
             self.recorder.port(chunk.port).write(chunk.data, chunk.start_ns, wall_ns)
         if self.sink is not None:
             self.sink(chunk)
+        if self.tap is not None and self.tap.clients:
+            self.tap.chunk(chunk.port, "to_host", chunk.start_ns, chunk.data, wall_ns)
 
     def _on_air(self, until_ns: int, wall_ns: int | None) -> None:
         """Hand the air's frames before *until_ns* (and the run's end), the world's and the
@@ -522,7 +548,8 @@ class Emulation:
                 "t0_monotonic_ns": self.t0_monotonic_ns, "ports": {
                     n: {"plugged": p.plugged, "attached": p.attached, "pts": p.pts,
                         "link": self.links.get(n)} for n, p in self.ports.items()},
-                "faults": [self._live_entry(i) for i in self.live]}
+                "faults": [self._live_entry(i) for i in self.live],
+                "tap": self.tap.status() if self.tap else None}
 
     def _live_entry(self, n: int) -> dict:
         fault, _ = self.live[n]
@@ -663,6 +690,9 @@ class Emulation:
         if getattr(self, "control", None) is not None:
             self.control.close()
             self.control = None
+        if getattr(self, "tap", None) is not None:
+            self.tap.close()
+            self.tap = None
         for port in self.ports.values():
             port.close()
         if self.link_dir is not None:
