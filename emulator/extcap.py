@@ -130,10 +130,9 @@ def _write(tap: TapClient, cap: Capture, keep: set[str] | None) -> bool:
         if keep is not None and record.name not in keep:
             continue
         if record.kind == STREAM:
-            if record.name not in cap.interfaces:
-                stream = hello["streams"][record.name]
-                cap.interface(record.name, stream["linktype"], stream.get("doc", ""))
-            cap.writer.packet(cap.interfaces[record.name], record.t_device_ns, record.data)
+            stream = hello["streams"][record.name]
+            cap.stream(record.name, stream["linktype"], stream.get("doc", ""),
+                       record.t_device_ns, record.data)
         elif record.direction is not None:
             cap.chunk(record.name, record.t_device_ns, record.data, record.direction)
         else:

@@ -44,7 +44,8 @@ the router's packets, lost or received, and the coordinator's MAC ACKs; the coor
 ``air``: its transmit requests to the router) are handed out in time order as the loop's
 virtual time passes them (before a host write stamped later can add one), to the
 recording's ``air`` stream (one chunk a PSDU, ``t_device_ns`` its first bit on the air,
-``t_wall_ns`` when paced the loop's wake-up that handed it out) and to ``air_sink`` (a
+``t_wall_ns`` when paced the loop's wake-up that handed it out), to the tap's clients (a
+declared stream) and to ``air_sink`` (a
 callable given each emulator.radio.AirFrame); at the end the rest up to where the run got.
 
 Faults. The scenario's line faults are wrappers on their port's line (``to_host``) or on
@@ -281,6 +282,7 @@ class Emulation:
         self.control = ControlServer(self.link_dir.path / CONTROL_SOCKET, self._control)
         self.tap = TapServer(self.link_dir.path / TAP_SOCKET, self._tap_hello,
                              lambda: time.monotonic_ns() - self.t0_monotonic_ns)
+        self.tap.declare(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC)
 
     def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
         radios = self.world.radios  # the routers' MY, the network: from the seed
@@ -527,6 +529,8 @@ class Emulation:
                     frame.psdu, frame.t_ns, wall_ns)
             if self.air_sink is not None:
                 self.air_sink(frame)
+            if self.tap is not None and self.tap.clients:
+                self.tap.stream(AIR, frame.t_ns, frame.psdu)
 
     def _report(self, elapsed_ns: int) -> None:
         v = self.reached_ns / SEC

@@ -96,6 +96,15 @@ class Capture:
         self.writer.packet(self.port(port), t_ns, data, direction=DIRECTION[direction],
                            comment=comment)
 
+    def stream(self, name: str, linktype_: int, doc: str, t_ns: int, data: bytes,
+               comment: str = "") -> None:
+        """One packet of a stream that is not a port (the air) at *t_ns*, on an interface of
+        its own with the stream's link type, declared with its first packet; a stream has no
+        direction seen from the lab computer."""
+        if name not in self.interfaces:
+            self.interface(name, linktype_, doc)
+        self.writer.packet(self.interfaces[name], t_ns, data, comment=comment)
+
     def flush(self) -> None:
         self.writer.flush()
 
@@ -195,21 +204,19 @@ def write_recording(recording: Recording, out: BinaryIO, *, clock: str = "device
     streams = [_stream_packets(recording, name, rank, used)
                for rank, name in enumerate(recording.streams, 1)]
     for t, rank, chunk in heapq.merge(ports_, *streams, key=lambda x: x[:2]):
-        if rank:
-            stream = recording.streams[chunk.port]
-            if stream.name not in capture.interfaces:
-                capture.interface(stream.name, stream.linktype, stream.doc)
-            port, direction, touched = stream.name, "to_host", []
-        else:
-            port, direction = chunk.port, "to_host"
-            if "of" in settings[port]:
-                port, direction = settings[port]["of"], "to_device"
-            touched = faults.touching(port, direction, chunk.offset,
-                                      chunk.offset + len(chunk.data))
         other_t = getattr(chunk, CLOCKS[other])
         notes = [f"{CLOCKS[other]}={other_t}"] if other_t is not None else []
-        notes += [_fault_note(e) for e in touched]
-        capture.chunk(port, t, chunk.data, direction, "; ".join(notes))
+        port = chunk.port
+        if rank:
+            stream = recording.streams[port]
+            capture.stream(port, stream.linktype, stream.doc, t, chunk.data, "; ".join(notes))
+        else:
+            direction = "to_host"
+            if "of" in settings[port]:
+                port, direction = settings[port]["of"], "to_device"
+            notes += [_fault_note(e) for e in faults.touching(
+                port, direction, chunk.offset, chunk.offset + len(chunk.data))]
+            capture.chunk(port, t, chunk.data, direction, "; ".join(notes))
         written.packets[port] = written.packets.get(port, 0) + 1
         written.bytes[port] = written.bytes.get(port, 0) + len(chunk.data)
     capture.flush()

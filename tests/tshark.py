@@ -2,6 +2,7 @@
 what it decodes of a capture with navtwin's Lua dissectors, as rows of field values."""
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -24,6 +25,16 @@ def tshark() -> str:
             pytest.fail("tshark is not installed; .ci/run requires it (apt-get install tshark)")
         pytest.skip("tshark is not installed (scripts/test installs it when root)")
     return path
+
+
+def needs_tshark(test):
+    """A test that runs tshark itself: skipped where it is missing (failed in CI), as
+    :func:`tshark`."""
+    @functools.wraps(test)
+    def run(*args, **kwargs):
+        tshark()
+        return test(*args, **kwargs)
+    return run
 
 
 def _run(*args) -> str:

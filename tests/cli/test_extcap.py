@@ -3,7 +3,6 @@ of a running lab, read back as pcapng and by tshark: one interface per port, the
 chunks as packets."""
 import os
 import re
-import shutil
 import signal
 import struct
 import subprocess
@@ -19,9 +18,9 @@ from navtwin.protocols.pcapng import INBOUND
 from navtwin.protocols.recording import Recording
 
 from ..helpers import NAVTWIN, navtwin
+from ..tshark import needs_tshark, tshark
 
 DEADLINE_S = 30.0
-tshark = pytest.mark.skipif(shutil.which("tshark") is None, reason="tshark not installed")
 SENTENCE = re.compile(r"^(\w+) ((?:\{[^{}=]+=[^{}]*\})+)$")
 
 
@@ -99,11 +98,13 @@ def _options(raw: bytes) -> dict[int, bytes]:
 
 def assert_capture_is_the_recording(data: bytes, rec: Recording,
                                     to_end: bool = False) -> dict[str, int]:
-    """Each port's packets are its recorded chunks from the one the capture started at (by
-    device time), up to the recording's end if *to_end*: the same bytes, device times and
-    direction; the packets per port."""
+    """Each port's (and the air's) packets are its recorded chunks from the one the capture
+    started at (by device time), up to the recording's end if *to_end*: the same bytes,
+    device times and direction; the packets per interface."""
     interfaces, packets = read_pcapng(data)
-    assert sorted(interfaces) == sorted((p, linktype(p, s)) for p, s in rec.meta["ports"].items())
+    assert sorted(interfaces) == sorted(
+        [(p, linktype(p, s)) for p, s in rec.meta["ports"].items()]
+        + [(name, s.linktype) for name, s in rec.streams.items()])  # the air too
     counts = {}
     for i, (port, _) in enumerate(interfaces):
         mine = [p for p in packets if p[0] == i]
@@ -112,7 +113,7 @@ def assert_capture_is_the_recording(data: bytes, rec: Recording,
         first = next(n for n, c in enumerate(chunks) if c.t_device_ns == mine[0][1])
         tail = chunks[first:] if to_end else chunks[first:first + len(mine)]
         assert [(p[1], p[3]) for p in mine] == [(c.t_device_ns, c.data) for c in tail]
-        assert {p[2] for p in mine} == {INBOUND}
+        assert {p[2] for p in mine} == {0 if port in rec.streams else INBOUND}  # the air: none
         counts[port] = len(mine)
     return counts
 
@@ -127,8 +128,8 @@ def test_a_capture_into_a_file_is_the_recording_and_ends_with_the_lab(tmp_path):
     rec = Recording(tmp_path / "rec")
     # it ended with the run: every chunk from its first to the recording's last
     counts = assert_capture_is_the_recording(out.read_bytes(), rec, to_end=True)
-    if shutil.which("tshark"):  # Wireshark reads it: the same packets on the same interfaces
-        assert _tshark_counts(out) == counts
+    tshark()  # Wireshark reads it: the same packets on the same interfaces
+    assert _tshark_counts(out) == counts
 
 
 def test_the_capture_filter_keeps_the_ports_it_names(tmp_path):
@@ -154,7 +155,7 @@ def _tshark_counts(path) -> dict[str, int]:
     return {name: fields.count(name) for name in set(fields)}
 
 
-@tshark
+@needs_tshark
 def test_sigterm_ends_a_capture_cleanly(tmp_path):
     out = tmp_path / "live.pcapng"
     with emulate("office", seed=5, duration=60) as lab:
@@ -172,7 +173,7 @@ def test_sigterm_ends_a_capture_cleanly(tmp_path):
     assert sum(_tshark_counts(out).values()) > 0
 
 
-@tshark
+@needs_tshark
 def test_a_fifo_reader_that_stops_ends_the_capture(tmp_path):
     fifo = tmp_path / "fifo"
     os.mkfifo(fifo)
@@ -185,10 +186,10 @@ def test_a_fifo_reader_that_stops_ends_the_capture(tmp_path):
         names, _ = reader.communicate(timeout=DEADLINE_S)
         assert lab.running()
     assert done.returncode == 0 and done.stderr == ""
-    assert len(names.split()) == 20 and set(names.split()) <= set(ports.names())
+    assert len(names.split()) == 20 and set(names.split()) <= {*ports.names(), "air"}
 
 
-@tshark
+@needs_tshark
 def test_tshark_captures_a_running_lab_through_the_installed_extcap(tmp_path):
     env = {**os.environ, "HOME": str(tmp_path / "home")}
     env.pop("XDG_CONFIG_HOME", None)

@@ -57,7 +57,11 @@ def test_a_client_from_the_start_reads_the_recording_byte_for_byte(tmp_path):
         # one record per recorded chunk, at its device time
         assert [(r.t_device_ns, len(r.data)) for r in records] == \
             [(c.t_device_ns, len(c.data)) for c in rec.chunks(port)]
-    assert not [k for k in got if k[1] != "to_host"]  # no host wrote anything
+    # the air, a declared stream: every frame the recording keeps, at its device time
+    assert hello["streams"] == {"air": rec.meta["streams"]["air"]}
+    assert [(r.t_device_ns, r.data) for r in got[("air", None)]] == \
+        [(c.t_device_ns, c.data) for c in rec.chunks("air")]
+    assert not [k for k in got if k[1] == "to_device"]  # no host wrote anything
 
 
 def test_a_running_lab_taps_host_writes_and_the_recording_from_the_hello_offsets(tmp_path):
