@@ -117,6 +117,31 @@ def parse_request(line: bytes) -> tuple[str, object]:
         raise ControlError(f"{op}: {e}") from None
 
 
+def private_listener(path: Path, backlog: int) -> socket.socket:
+    """A non-blocking AF_UNIX listener at *path* in a lab's private link directory, mode 0600
+    from the start (no window where others could connect); a dead run's socket there is
+    replaced (the link directory's lock is ours)."""
+    path.unlink(missing_ok=True)
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_NONBLOCK
+                         | socket.SOCK_CLOEXEC)
+    old = os.umask(0o177)
+    try:
+        sock.bind(str(path))
+    finally:
+        os.umask(old)
+    sock.listen(backlog)
+    return sock
+
+
+def close_listener(sock: socket.socket, path: Path) -> None:
+    """Close a :func:`private_listener` and remove its path (gone already: fine)."""
+    sock.close()
+    try:
+        path.unlink()
+    except OSError:
+        pass
+
+
 class ControlServer:
     """The listening socket and its connections; :meth:`serve` answers what has arrived.
 
@@ -128,18 +153,7 @@ class ControlServer:
         self.path = Path(path)
         self.handle = handle
         self.idle_timeout_s = idle_timeout_s
-        try:
-            self.path.unlink()  # a dead run's socket: the link directory's lock is ours
-        except FileNotFoundError:
-            pass
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_NONBLOCK
-                                  | socket.SOCK_CLOEXEC)
-        old = os.umask(0o177)  # 0600 from the start: no window where others could connect
-        try:
-            self.sock.bind(str(self.path))
-        finally:
-            os.umask(old)
-        self.sock.listen(MAX_CLIENTS)
+        self.sock = private_listener(self.path, MAX_CLIENTS)
         self._clients: dict[socket.socket, bytearray] = {}
         self._idle_since: dict[socket.socket, float] = {}  # the last request, or the accept
         self.requests = 0
@@ -225,11 +239,7 @@ class ControlServer:
     def close(self) -> None:
         for conn in list(self._clients):
             self._drop(conn)
-        self.sock.close()
-        try:
-            self.path.unlink()
-        except OSError:
-            pass
+        close_listener(self.sock, self.path)
 
 
 class Control:

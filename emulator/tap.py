@@ -46,6 +46,8 @@ import time
 from pathlib import Path
 from typing import Callable, Iterator, NamedTuple
 
+from .control import close_listener, private_listener
+
 SOCKET = "tap"  # its name in the link directory
 FORMAT, VERSION = "navtwin-tap", 1
 RECORD = struct.Struct("<BBxxIqq")
@@ -94,18 +96,7 @@ class TapServer:
         #: connection -> its unsent bytes; empty when no client: the lab's one check
         self.clients: dict[socket.socket, bytearray] = {}
         self.dropped = 0
-        try:
-            self.path.unlink()  # a dead run's socket: the link directory's lock is ours
-        except FileNotFoundError:
-            pass
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_NONBLOCK
-                                  | socket.SOCK_CLOEXEC)
-        old = os.umask(0o177)  # 0600 from the start
-        try:
-            self.sock.bind(str(self.path))
-        finally:
-            os.umask(old)
-        self.sock.listen(MAX_CLIENTS)
+        self.sock = private_listener(self.path, MAX_CLIENTS)
 
     def fds(self) -> list:
         return [self.sock, *self.clients]
@@ -200,11 +191,7 @@ class TapServer:
                 self._push(conn, self.clients[conn])
         for conn in list(self.clients):
             self._close(conn)
-        self.sock.close()
-        try:
-            self.path.unlink()
-        except OSError:
-            pass
+        close_listener(self.sock, self.path)
 
 
 class TapClient:

@@ -100,9 +100,15 @@ def test_the_readme_python_runs_quietly(tmp_path):
     assert len(p.stderr.splitlines()) < 5, p.stderr[:3000]
 
 
-def ci_job(tmp_path, golden):
+def ci_job(tmp_path, golden_seed: int):
     """docs/examples/ci/lab-tests.sh as the CI job of docs/testing.md runs it, on the
-    tutorial's example tests (docs/examples/), with *golden* as the golden recording."""
+    tutorial's example tests (docs/examples/), with a golden recording of the job's run
+    (office, 2 s) made with seed *golden_seed*."""
+    golden = tmp_path / "golden"
+    made = subprocess.run([*NAVTWIN, "emulate", "--scenario", "office", "--seed",
+                           str(golden_seed), "--speed", "max", "--duration", "2", "--record",
+                           golden, "--quiet"], capture_output=True, text=True, timeout=120)
+    assert made.returncode == 0, made.stderr
     return subprocess.run(["bash", str(ROOT / "docs" / "examples" / "ci" / "lab-tests.sh")],
                           cwd=tmp_path, capture_output=True, text=True, timeout=300,
                           env={**os.environ, "GOLDEN": str(golden),
@@ -115,24 +121,14 @@ def ci_job(tmp_path, golden):
 def test_the_ci_job_example_runs_the_tutorial_tests_and_keeps_a_golden(tmp_path):
     """The CI job passes on a golden of the same run, and the tutorial's example tests pass
     in it (pytest with navtwin's plugin, expect and the cassette)."""
-    golden = tmp_path / "golden"
-    made = subprocess.run([*NAVTWIN, "emulate", "--scenario", "office", "--seed", "1",
-                           "--speed", "max", "--duration", "2", "--record", golden, "--quiet"],
-                          capture_output=True, text=True, timeout=120)
-    assert made.returncode == 0, made.stderr
-    job = ci_job(tmp_path, golden)
+    job = ci_job(tmp_path, 1)  # the job's own seed: the same bytes
     assert job.returncode == 0, job.stdout[-3000:] + job.stderr[-2000:]
     assert re.search(r"\b6 passed\b", job.stdout), job.stdout[-2000:]
     assert "sins (sins): equal" in (tmp_path / "lab-artifacts" / "diff.txt").read_text()
 
 
 def test_the_ci_job_example_fails_on_a_changed_golden_with_the_diff(tmp_path):
-    golden = tmp_path / "golden"
-    made = subprocess.run([*NAVTWIN, "emulate", "--scenario", "office", "--seed", "2",
-                           "--speed", "max", "--duration", "2", "--record", golden, "--quiet"],
-                          capture_output=True, text=True, timeout=120)
-    assert made.returncode == 0, made.stderr
-    job = ci_job(tmp_path, golden)
+    job = ci_job(tmp_path, 2)  # another seed: other bytes
     assert job.returncode == 1, job.stdout[-3000:] + job.stderr[-2000:]
     assert "first divergence" in job.stdout and "record the golden again" in job.stderr
     assert json.loads((tmp_path / "lab-artifacts" / "diff.json").read_text())

@@ -56,6 +56,18 @@ local function crc16(s, first, last) -- over bytes first..last (1-based) of stri
     return c
 end
 
+-- A protocol's fields (declared by name in a table) as the list Proto.fields takes
+local function field_list(fields)
+    local list = {}
+    for _, f in pairs(fields) do list[#list + 1] = f end
+    return list
+end
+
+-- The expert info of a failed integrity check (CRC, checksum): an error
+local function checksum_expert(name, text)
+    return ProtoExpert.new(name, text, expert.group.CHECKSUM, expert.severity.ERROR)
+end
+
 local function signed(v, bits)
     local half = 2 ^ (bits - 1)
     v = v % (2 * half)
@@ -166,11 +178,8 @@ for _, w in ipairs(WORDS) do
     sf[w[1]] = ProtoField.uint16("navtwin.sins." .. w[1]:lower(), w[1], base.HEX)
     sf[w[2]] = ProtoField.double("navtwin.sins." .. w[2], w[1] .. " (" .. w[3] .. ")")
 end
-local sins_fields = {}
-for _, f in pairs(sf) do sins_fields[#sins_fields + 1] = f end
-sins.fields = sins_fields
-local e_bad_crc = ProtoExpert.new("navtwin.sins.bad_crc", "Bad CRC-16", expert.group.CHECKSUM,
-    expert.severity.ERROR)
+sins.fields = field_list(sf)
+local e_bad_crc = checksum_expert("navtwin.sins.bad_crc", "Bad CRC-16")
 sins.experts = { e_bad_crc }
 sins.prefs.gyro_range = Pref.enum("Gyro range (deg/s)", 300,
     "ADIS16350 dynamic range (SENS/AVG): sets the gyro words' LSB",
@@ -254,11 +263,8 @@ local nf = {
     crc = ProtoField.uint16("navtwin.nanoloc.crc", "CRC-16", base.HEX),
     crc_ok = ProtoField.bool("navtwin.nanoloc.crc_ok", "CRC OK"),
 }
-local nanoloc_fields = {}
-for _, f in pairs(nf) do nanoloc_fields[#nanoloc_fields + 1] = f end
-nanoloc.fields = nanoloc_fields
-local e_nl_bad_crc = ProtoExpert.new("navtwin.nanoloc.bad_crc", "Bad CRC-16", expert.group.CHECKSUM,
-    expert.severity.ERROR)
+nanoloc.fields = field_list(nf)
+local e_nl_bad_crc = checksum_expert("navtwin.nanoloc.bad_crc", "Bad CRC-16")
 nanoloc.experts = { e_nl_bad_crc }
 local SPEED_OF_LIGHT = 299792458.0 -- m/s
 
@@ -369,11 +375,8 @@ local xf = {
     checksum = ProtoField.uint8("navtwin.xbee.checksum", "Checksum", base.HEX),
     checksum_ok = ProtoField.bool("navtwin.xbee.checksum_ok", "Checksum OK"),
 }
-local xbee_fields = {}
-for _, f in pairs(xf) do xbee_fields[#xbee_fields + 1] = f end
-xbee.fields = xbee_fields
-local e_bad_checksum = ProtoExpert.new("navtwin.xbee.bad_checksum", "Bad checksum",
-    expert.group.CHECKSUM, expert.severity.ERROR)
+xbee.fields = field_list(xf)
+local e_bad_checksum = checksum_expert("navtwin.xbee.bad_checksum", "Bad checksum")
 local e_malformed = ProtoExpert.new("navtwin.xbee.malformed", "Frame data do not fit the type's layout",
     expert.group.MALFORMED, expert.severity.ERROR)
 xbee.experts = { e_bad_checksum, e_malformed }
