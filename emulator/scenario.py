@@ -254,7 +254,7 @@ class Magnetometer:
         ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), "",
         "rows of the 3x3 matrix S in m = S b + h + noise (identity = no soft iron)",
         Check(lambda m: all(-2 <= v <= 2 for row in m for v in row) and _soft_iron_ok(m),
-              "must have elements from -2 to 2 and a determinant above 0.1",
+              "must be a matrix with elements from -2 to 2 and a determinant above 0.1",
               "write a near-identity matrix, e.g. [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"))
     longitude_deg: float = key(lab.LONGITUDE_DEG, "deg", "east longitude of the site: with [site] "
                                "latitude_deg it places the earth's field (IGRF-13)",

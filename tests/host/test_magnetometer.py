@@ -12,6 +12,7 @@ from navtwin.common import geomagnetic, lab
 from navtwin.emulator.imu import body_from_nav
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import Magnetometer, load_scenario
+from navtwin.host.estimator import Estimator
 from navtwin.host.magnetometer import yaw_from_field
 from navtwin.host.measurements import ImuSample, MagSample
 from navtwin.host.pipeline import Pipeline
@@ -136,3 +137,10 @@ def test_a_frame_without_its_sample_has_no_time():
     assert records[1].field == pytest.approx((100 * sins.MAG_LSB_UT, 0.0, -400 * sins.MAG_LSB_UT))
     assert (pipe.counts["magnetometer"], pipe.counts["magnetometer_untimed"],
             pipe.counts["magnetometer_overflow"]) == (1, 2, 1)
+
+
+def test_an_estimator_whose_tracks_take_no_mag_samples_counts_them():
+    est = Estimator(OFFICE.estimator_config(("sins", "kf")))
+    est.feed(ImuSample(0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 9.8)))
+    assert est.feed(MagSample(0.0, (0.0, 30.0, -40.0))) == []
+    assert est.input_rejections["MagSample_untaken"] == 1
