@@ -15,8 +15,9 @@ from +x (D the declination, east positive). So::
 
 Level (roll = pitch = 0) h = m. Errors: a noise of sigma per axis gives a yaw error of
 about sigma / B_h (B_h the horizontal field); a hard iron H (body, horizontal) one of
-up to asin(H / B_h), varying with the heading over a turn (tests/host/test_magnetometer.py
-checks both against an emulated run). The hard and soft iron are not calibrated here.
+up to asin(H / B_h), varying with the heading over a turn; a soft iron scaling x and y by
+1 +- k one of up to asin(k) at twice the heading's frequency (tests/host/test_magnetometer.py
+checks all three against emulated runs). The hard and soft iron are not calibrated here.
 """
 from __future__ import annotations
 

@@ -12,6 +12,8 @@ from navtwin.protocols import sins
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import sins_decoder
 
+from ..helpers import navtwin, one_line_error
+
 # (latitude, longitude, decimal year) -> (north, east, down) nT from ppigrf 2.1.0
 # (ppigrf.igrf(lon, lat, 0, date, coeff_fn=IGRF13.shc)), an independent implementation of
 # the same published IGRF-13 table
@@ -86,3 +88,10 @@ def test_written_back_only_when_given():
                                                          [0, 0, 1]]))
     assert "[magnetometer]" in sc.to_toml()
     assert parse_scenario(tomllib.loads(sc.to_toml())) == sc
+
+
+def test_a_bad_key_stops_navtwin_emulate_with_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('base = "office"\n[magnetometer]\nenabled = true\nsoft_iron = [[1.0, 0.0, 0.0]]\n')
+    one_line_error(navtwin("emulate", "--scenario", bad, "--link-dir", tmp_path / "l"),
+                   "bad.toml: [magnetometer] soft_iron must be a list of 3 rows of 3 numbers")

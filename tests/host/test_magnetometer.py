@@ -94,6 +94,17 @@ def test_hard_iron_gives_asin_h_over_b_over_a_turn(tmp_path):
     assert np.abs(err - predicted).std() < math.radians(0.3)
 
 
+def test_soft_iron_gives_asin_k_at_twice_the_heading_rate(tmp_path):
+    k = 0.05  # the body x axis reads 5 % high, y 5 % low: an ellipse of axes 1 +- k
+    soft = ((1 + k, 0.0, 0.0), (0.0, 1 - k, 0.0), (0.0, 0.0, 1.0))
+    yaw, err = heading_errors(run(tmp_path, 70.0, noise_ut=0.05, soft_iron=soft))
+    assert np.abs(err).max() == pytest.approx(math.asin(k), abs=math.radians(0.3))
+    rel = math.radians(lab.X_AZIMUTH_DEG - lab.DECLINATION_DEG) - yaw
+    seen = np.arctan2((1 - k) * np.sin(rel), (1 + k) * np.cos(rel))
+    predicted = np.angle(np.exp(1j * (rel - seen)))
+    assert np.abs(err - predicted).std() < math.radians(0.3)
+
+
 def test_the_host_makes_one_mag_sample_per_frame_at_its_samples_time(tmp_path):
     rec = run(tmp_path, 5.0)
     records = []
