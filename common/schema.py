@@ -9,8 +9,8 @@ understood: bool, int, float, str, dict (a table passed on as it is), a map keye
 (``dict[int, float]`` with ``key(..., ids=("anchor", (1, 254)))``: ``{1 = 0.3, 2 = 0.25}``,
 the field's checks applied to each value), ``float | None`` (optional), ``Table | None``
 (an optional table: absent from the TOML, and from the scenario written back, unless
-given), fixed and variable
-tuples of numbers, tuples of points, a nested table (dataclass) and an array of tables
+given), fixed and variable tuples of numbers, tuples of points, a matrix (a fixed tuple of
+fixed tuples), a nested table (dataclass) and an array of tables
 (``tuple[Table, ...]``; a class attribute ``KINDS``, a protocols.plugins.Registry, maps a
 ``kind`` key to one dataclass per kind). :func:`value` checks one value alike (a
 command-line number, a figure in a file).
