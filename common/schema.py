@@ -7,8 +7,10 @@ ONE line naming the key, the problem and the fix (:func:`plain` gives the dict b
 scenario exactly as run); :func:`rows` lists every key for the documentation. Field types
 understood: bool, int, float, str, dict (a table passed on as it is), a map keyed by id
 (``dict[int, float]`` with ``key(..., ids=("anchor", (1, 254)))``: ``{1 = 0.3, 2 = 0.25}``,
-the field's checks applied to each value), ``float | None`` (optional), fixed and variable
-tuples of numbers, tuples of points, a nested table (dataclass) and an array of tables
+the field's checks applied to each value), ``float | None`` (optional), ``Table | None``
+(an optional table: absent from the TOML, and from the scenario written back, unless
+given), fixed and variable tuples of numbers, tuples of points, a matrix (a fixed tuple of
+fixed tuples), a nested table (dataclass) and an array of tables
 (``tuple[Table, ...]``; a class attribute ``KINDS``, a protocols.plugins.Registry, maps a
 ``kind`` key to one dataclass per kind). :func:`value` checks one value alike (a
 command-line number, a figure in a file).
@@ -147,6 +149,10 @@ def _example(tp) -> tuple[str, str]:
         if typing.get_origin(args[0]) is tuple:
             return "a list of points", "[[0.0, 0.0], [1.0, 2.0]]"
         return "a list", "[1.0, 2.0]"
+    if origin is tuple and typing.get_origin(args[0]) is tuple:  # a matrix
+        row = "[" + ", ".join(["1.0"] * len(typing.get_args(args[0]))) + "]"
+        return (f"a list of {len(args)} rows of {len(typing.get_args(args[0]))} numbers",
+                "[" + ", ".join([row] * len(args)) + "]")
     if origin is tuple:
         return f"a list of {len(args)} numbers", "[" + ", ".join(["1.0"] * len(args)) + "]"
     raise TypeError(f"unsupported field type {tp!r}")
@@ -283,13 +289,13 @@ def build(cls, data: Any, path: KeyPath = ()):
                 raise Invalid(at, "is missing; " + _how_to_add(path, name, tp, f.metadata))
             continue
         raw = data[name]
-        if _is_table(tp):
-            values[name] = build(tp, raw, path + ((name, 0),))
-            continue
         origin, args = typing.get_origin(tp), typing.get_args(tp)
         if origin in (typing.Union, types.UnionType):  # optional: what it is when given
             tp = next(a for a in args if a is not type(None))
             origin, args = typing.get_origin(tp), typing.get_args(tp)
+        if _is_table(tp):
+            values[name] = build(tp, raw, path + ((name, 0),))
+            continue
         if origin is dict:
             values[name] = _map(raw, tp, at, f.metadata)
             continue
@@ -382,6 +388,8 @@ def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
             name = prefix + f.name
             tp = hints[f.name]
             origin, args = typing.get_origin(tp), typing.get_args(tp)
+            if origin in (typing.Union, types.UnionType) and _is_table(args[0]):
+                tp, origin, args = args[0], None, ()  # an optional table: its keys
             if _is_table(tp) or (origin is tuple and args and _is_table(args[0])):
                 if name not in shared:
                     shared[name] = []

@@ -5,6 +5,10 @@ Frame k is written from true time ``t_k = start + round(k period / (1 + ppm 1e-6
 board's crystal; an absolute schedule) with seq = k mod 65536; its registers are read over
 SPI ``spi_read_us`` earlier, so they hold the sensor's latest sample at that moment.
 
+With a magnetometer (emulator.magnetometer, ``every`` > 0) the board also reads it at the
+SPI read of every frame whose seq is a multiple of ``every`` and writes its magnetometer
+frame (same seq) right after that sample frame, so the stream interleaves the two types.
+
 Board faults (emulator.faults, ACTS_ON "board"): while one is ``off`` the board writes
 nothing; its first frame after counts from 0 again (seq = k - k0, k0 the tick it came back
 at), as after power-up, and on the same crystal schedule.
@@ -15,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.protocols.sins import FRAME_SIZE, build_sample
+from navtwin.protocols.sins import FRAME_SIZE, build_magnetometer, build_sample
 from navtwin.protocols.serial import char_ns
 
 from .clock import Clock
@@ -29,11 +33,13 @@ class BoardEffects:
 
 
 class Board:
-    def __init__(self, spec, ppm: float, imu, faults=()) -> None:
+    def __init__(self, spec, ppm: float, imu, faults=(), magnetometer=None, every: int = 0) -> None:
         self.clock = Clock(ppm, spec.period_ms * 1e6, round(spec.start_ms * 1e6))
         self.spi_read_ns = round(spec.spi_read_us * 1e3)
         self.char_ns = char_ns(spec.baud)
         self.imu = imu
+        self.magnetometer = magnetometer  # read with every ``every``-th frame (0: none)
+        self.every = every
         self.faults = tuple(faults)
         self._k0 = 0  # the tick of the last power-up: frame k counts k - k0
         self._off = False  # the last frame of the previous block was not written
@@ -71,13 +77,38 @@ class Board:
         if len(k):
             self._last_k = int(k[-1])  # the last frame written
         words = self.imu.read(t - self.spi_read_ns).tolist()
-        return t, [build_sample(s, w) for s, w in zip(seq.tolist(), words)], marks
+        frames = [build_sample(s, w) for s, w in zip(seq.tolist(), words)]
+        if not self.every:
+            return t, frames, marks
+        return self._with_magnetometer(t, seq, frames, marks)
 
-    def byte_times(self, starts: np.ndarray) -> np.ndarray:
-        """(N, 30) true times at which each byte of frames starting at *starts* has been
-        completely received at the far end of the line."""
-        ends = np.rint(np.arange(1, FRAME_SIZE + 1) * self.char_ns).astype(np.int64)
-        return starts[:, None] + ends[None, :]
+    def _with_magnetometer(self, t, seq, frames, marks):
+        """The sample frames with a magnetometer frame after each one whose seq is a
+        multiple of ``every`` (it starts as the sample frame's last stop bit ends); the
+        marks re-indexed to the sample frames' new places."""
+        picked = np.flatnonzero(seq % self.every == 0)
+        field = self.magnetometer.read(t[picked] - self.spi_read_ns).tolist()
+        after = dict(zip(picked.tolist(), (build_magnetometer(int(seq[i]), f)
+                                           for i, f in zip(picked.tolist(), field))))
+        frame_ns = round(FRAME_SIZE * self.char_ns)
+        times, out, moved = [], [], {}
+        for i, (start, frame) in enumerate(zip(t.tolist(), frames)):
+            moved[i] = len(out)
+            times.append(start)
+            out.append(frame)
+            if i in after:
+                times.append(start + frame_ns)
+                out.append(after[i])
+        return (np.array(times, dtype=np.int64), out,
+                {moved[i]: m for i, m in marks.items()})
+
+    def byte_times(self, starts: np.ndarray, sizes) -> np.ndarray:
+        """True times, in stream order, at which each byte of the frames starting at
+        *starts* (of *sizes* bytes) has been completely received at the far end of the line."""
+        sizes = np.asarray(sizes, dtype=np.int64)
+        first = np.repeat(np.cumsum(sizes) - sizes, sizes)  # each byte's frame's first byte
+        within = np.arange(int(sizes.sum())) - first + 1  # 1.. within its frame
+        return np.repeat(starts, sizes) + np.rint(within * self.char_ns).astype(np.int64)
 
     def next_start(self, after_ns: int) -> int:
         """Start of the first frame at or after *after_ns* (the schedule is known ahead)."""

@@ -26,7 +26,7 @@ from navtwin.protocols.adis16350 import (ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DP
                                           VRW_M_S_RT_HR)
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
-from navtwin.common import lab
+from navtwin.common import geomagnetic, lab
 from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
                               MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS, limit_problem)
 
@@ -228,6 +228,41 @@ class Board:
                                       f"{self.spi_read_us / 1e3:g}")
 
 
+def _soft_iron_ok(m) -> bool:
+    """A soft-iron matrix the host can still read a heading through: det > 0.1 (not
+    singular, no reflection)."""
+    (a, b, c), (d, e, f), (g, h, i) = m
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) > 0.1
+
+
+@dataclass(frozen=True)
+class Magnetometer:
+    """The vehicle's three-axis magnetometer (emulator.magnetometer), read by the DSP board
+    and sent as magnetometer frames in its SINS stream; absent or ``enabled = false``: none."""
+
+    enabled: bool = key(False, "", "the board reads a magnetometer and sends its frames")
+    rate_hz: float = key(10.0, "Hz", "frames per second, one after every Nth sample frame (N "
+                         "= the board's frame rate / rate_hz, a whole number)",
+                         positive("use a rate that divides the board's frame rate, e.g. 10", hi=1000))
+    noise_ut: float = key(0.2, "uT", "1 sigma white noise per axis (HMC5883L: 2 mG noise floor)",
+                          non_negative(hi=100))
+    hard_iron_ut: tuple[float, float, float] = key(
+        (0.0, 0.0, 0.0), "uT", "the vehicle's own field in body axes (added after soft iron)",
+        each(between(-200, 200)))
+    soft_iron: tuple[tuple[float, float, float], tuple[float, float, float],
+                     tuple[float, float, float]] = key(
+        ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), "",
+        "rows of the 3x3 matrix S in m = S b + h + noise (identity = no soft iron)",
+        Check(lambda m: all(-2 <= v <= 2 for row in m for v in row) and _soft_iron_ok(m),
+              "must be a matrix with elements from -2 to 2 and a determinant above 0.1",
+              "write a near-identity matrix, e.g. [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"))
+    longitude_deg: float = key(lab.LONGITUDE_DEG, "deg", "east longitude of the site: with [site] "
+                               "latitude_deg it places the earth's field (IGRF-13)",
+                               between(-180, 180))
+    year: float = key(lab.FIELD_EPOCH, "", "decimal year of the earth's field (IGRF-13 and its "
+                      "predicted secular variation)", between(*geomagnetic.EPOCHS))
+
+
 @dataclass(frozen=True)
 class Clocks:
     board_ppm: float = _ppm("DSP board crystal: the 10 ms frame schedule")
@@ -367,11 +402,13 @@ class Vehicle:
     imu: Imu = Imu()
     board: Board = Board()
     router: Router = Router()
+    magnetometer: Magnetometer | None = key(None, "", "")
 
 
 #: a [[vehicles]] table -> the top-level key path it stands for (vehicle 1)
 VEHICLE_KEYS = {"trajectory": ("trajectory",), "tag": ("tag",), "imu": ("imu",),
-                "board": ("board",), "router": ("xbee", "router")}
+                "board": ("board",), "router": ("xbee", "router"),
+                "magnetometer": ("magnetometer",)}
 MAX_VEHICLES = 1  # many vehicles' ports and radios come later (issue 8 point 8)
 
 
@@ -396,6 +433,7 @@ class Scenario:
     gateway: Gateway = Gateway()
     link: Link = Link()
     xbee: XBee = XBee()
+    magnetometer: Magnetometer | None = key(None, "", "")
     faults: tuple[Fault, ...] = ()
 
     def __post_init__(self):
@@ -426,6 +464,13 @@ class Scenario:
         for i, f in enumerate(self.faults):
             if (problem := self.fault_problem(f)) is not None:
                 raise Invalid(f"[[faults]] #{i + 1} {problem[0]}", problem[1])
+        mag = self.magnetometer
+        if mag is not None and mag.enabled:
+            every = 1000.0 / self.board.period_ms / mag.rate_hz
+            if every < 1 - 1e-9 or abs(every - round(every)) > 1e-9:
+                raise Invalid("[magnetometer] rate_hz", f"{mag.rate_hz:g} does not divide the board's "
+                                                        f"{1000 / self.board.period_ms:g} frames/s; use "
+                                                        "a rate that does, e.g. 10")
         if baud_rate(self.xbee.router.BD) != self.board.baud:
             raise Invalid("[xbee.router] BD", f"{baud_rate(self.xbee.router.BD)} bit/s differs from the "
                                               f"board's {self.board.baud}; match [board] baud")
@@ -452,7 +497,8 @@ class Scenario:
     @property
     def vehicles(self) -> tuple[Vehicle, ...]:
         """The vehicles in order, vehicle 1 first (one today: the top-level tables)."""
-        return (Vehicle(self.trajectory, self.tag, self.imu, self.board, self.xbee.router),)
+        return (Vehicle(self.trajectory, self.tag, self.imu, self.board, self.xbee.router,
+                        self.magnetometer),)
 
     @property
     def duration_ns(self) -> int:

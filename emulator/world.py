@@ -35,6 +35,7 @@ from navtwin.protocols.zigbee import COORDINATOR16
 from .board import Board
 from .faults import acting_on
 from .imu import Adis16350
+from .magnetometer import Magnetometer
 from .nanoloc import NanolocNetwork
 from .radio import OPT_ACKNOWLEDGED, AirFrame, Link, Router, Sender
 from .rng import stream
@@ -74,10 +75,11 @@ def _order(e: Event) -> tuple[int, int]:
 
 
 class Vehicle:
-    """One vehicle's devices: its trajectory, the ADIS16350 on its DSP board, and the XBee
-    router that packetises the board's stream onto its RF uplink.
+    """One vehicle's devices: its trajectory, the ADIS16350 (and a magnetometer, when the
+    scenario enables one) on its DSP board, and the XBee router that packetises the board's
+    stream onto its RF uplink.
 
-    Vehicle 1 draws from the streams "imu" and "xbee.link.router"; vehicle n > 1 from the
+    Vehicle 1 draws from the streams "imu", "magnetometer" and "xbee.link.router"; vehicle n > 1 from the
     same names under "vehicle<n>.", so adding a vehicle never changes another's draws.
     """
 
@@ -89,8 +91,13 @@ class Vehicle:
         self.trajectory = Trajectory(spec.trajectory, spec.tag.z)
         self.imu = Adis16350(spec.imu, sc.site, sc.area, self.trajectory, sc.clocks.imu_ppm,
                              self._stream(seed, "imu"))
+        mag = spec.magnetometer
+        on = mag is not None and mag.enabled
         self.board = Board(spec.board, sc.clocks.board_ppm, self.imu,
-                           acting_on(sc.faults, "board", vehicle=number))
+                           acting_on(sc.faults, "board", vehicle=number),
+                           Magnetometer(mag, sc.site, sc.area, self.trajectory,
+                                        self._stream(seed, "magnetometer")) if on else None,
+                           round(1000.0 / spec.board.period_ms / mag.rate_hz) if on else 0)
         self.router = Router(router["NP"], router["RO"], self.board.char_ns)
         self.uplink = Link(sc.link, acting_on(sc.faults, "link"),
                            self._stream(seed, "xbee.link.router"))
@@ -111,7 +118,7 @@ class Vehicle:
         t_sins, frames, marks = self.board.frames(lo, hi)
         events = [Event(t, "sins", f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
-        times = self.board.byte_times(t_sins).ravel()
+        times = self.board.byte_times(t_sins, [len(f) for f in frames])
         packets = self.router.packetise(b"".join(frames), times, next_byte)
         arrival, delivered, lost, attempts = self.uplink.transmit(
             packets.ready_ns, [len(p) for p in packets.payloads])

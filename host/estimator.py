@@ -54,7 +54,8 @@ from dataclasses import replace
 from . import tracks
 from .filters import ConstantAcceleration
 from .inertial import Inertial
-from .measurements import Exchange, Fix, FixRefused, ImuSample, Motion, Range, Restart, Tdoa
+from .measurements import (Exchange, Fix, FixRefused, ImuSample, MagSample, Motion, Range, Restart,
+                           Tdoa)
 from .ranging import Ranging
 from .settings import EstimatorConfig
 from .timebase import FilterTime
@@ -64,6 +65,8 @@ from .wsn import AnchorLayout
 __all__ = ["DEVICES", "Estimate", "Estimator"]
 
 DEVICES = ("imu", "anchors")  # what can restart (a Restart record)
+#: records a lab sends whether or not an enabled track uses them (an optional sensor)
+IGNORED_UNTAKEN = (MagSample,)
 
 
 class Estimator:
@@ -177,8 +180,12 @@ class Estimator:
             self.inertial.restart(rec.t, rec.uptime_s)
 
     def _acceptable(self, rec) -> bool:
-        """A record the estimator does not process goes straight to the tracks that take it."""
+        """A record the estimator does not process goes straight to the tracks that take it;
+        a sensor's that no enabled track takes (IGNORED_UNTAKEN) is counted and dropped."""
         if type(rec) not in self._takers:
+            if type(rec) in IGNORED_UNTAKEN:
+                self.input_rejections[f"{type(rec).__name__}_untaken"] += 1
+                return False
             raise TypeError(f"no track takes {type(rec).__name__} records; enable one that does")
         if math.isfinite(rec.t):
             return True

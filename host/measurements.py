@@ -11,6 +11,8 @@ ImuSample    one SINS sample: gyro (rad/s) and accel (m/s^2) in body axes (x for
              up (its sample counter; a host that starts late sees it late)
 Exchange     one ranging report of the anchors' gateway: ``distance`` (m) None when the
              exchange did not complete; rssi (dBm) and status as reported
+MagSample    one magnetometer frame of the SINS stream: ``field`` (uT) in body axes, at the
+             time of the sample frame it follows (same seq)
 Restart      a device's clock began a new epoch (``device``: "imu" or "anchors");
              ``uptime_s``: how long the device has been up (the IMU's sample counter)
 ===========  ===========================================================================
@@ -55,6 +57,12 @@ class Exchange:
     distance: float | None
     rssi: int = 0
     status: int = 0x0F
+
+
+@dataclass(frozen=True, slots=True)
+class MagSample:
+    t: float
+    field: Any  # 3 uT, body axes
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,7 +11,8 @@ whose frames it handles by what they carry:
 
 =========  ==========================================================================
 imu        SINS samples: on the lab's ``sins`` line, and inside the coordinator's 0x90
-           packets on ``xbee`` (:class:`navtwin.protocols.stream.XBeeSinsChain`)
+           packets on ``xbee`` (:class:`navtwin.protocols.stream.XBeeSinsChain`); the
+           stream's magnetometer frames too (``MagSample``, at their sample's time)
 ranges     the anchors' gateway (``nanoloc``): one ranging report per exchange
 radio      the coordinator's own frames: 0x88 DB answers give link quality, 0x88 AP
            answers the coordinator's API mode (a mismatch is an event); the host writes
@@ -60,7 +61,7 @@ from navtwin.protocols.stream import DecodeError, Frame
 from .clock import DeviceClock, Unwrapper
 from .config import HostConfig
 from .estimator import Estimator
-from .measurements import Exchange, ImuSample, Restart
+from .measurements import Exchange, ImuSample, MagSample, Restart
 
 DB_PERIOD_S = 5.0  # AT query period, in arrival time
 #: asked every DB_PERIOD_S: link quality, and the coordinator's API mode (another client's
@@ -89,6 +90,8 @@ class Vehicle:
         self.held: list[tuple] = []  # heap of (t, n, Exchange | Restart)
         self.arrived: deque[tuple[float, float]] = deque()  # (arrival, t) of each held record
         self.t = -math.inf  # filter time: the latest measurement time given to the estimator
+        self.sample: tuple[int, float] | None = None  # (seq, t) of its latest SINS sample
+        self.mag_seq: int | None = None  # seq of the last magnetometer frame taken
         self.estimates: Counter = Counter()
 
     def stats(self) -> dict:
@@ -269,6 +272,9 @@ class Pipeline:
         if v is None:
             self.counts["imu_other_router"] += 1
             return
+        if ev.type == sins.TYPE_MAGNETOMETER:
+            self._magnetometer(v, ev, out)
+            return
         restarts, first = v.imu_clock.restarts, v.imu_clock.counter.last is None
         t = v.imu_clock.time(ev.fields["seq"], a)
         if t is None:
@@ -286,7 +292,23 @@ class Pipeline:
         # the board counts its samples from power-up: the first one says how long it has
         # been up (a host that started late, under load, missed part of its alignment)
         uptime = ev.fields["seq"] * sins.PERIOD_S if first else None
+        v.sample = (ev.fields["seq"], t)
         self._give(v, ImuSample(t, s.gyro_rad_s, s.accel_m_s2, nd_ok, uptime), out)
+
+    def _magnetometer(self, v: Vehicle, ev: Frame, out: list) -> None:
+        """A magnetometer frame: timed by the sample frame it follows (same seq), which the
+        board wrote just before it; without that sample (lost, or a second copy of the
+        stream) it has no time and is counted."""
+        seq, field = ev.fields["seq"], sins.field_ut(ev.fields["field"])
+        if v.sample is None or v.sample[0] != seq or v.mag_seq == seq:
+            self.counts["magnetometer_untimed"] += 1
+            return
+        v.mag_seq = seq
+        if field is None:
+            self.counts["magnetometer_overflow"] += 1
+            return
+        self.counts["magnetometer"] += 1
+        self._give(v, MagSample(v.sample[1], field), out)
 
     def _vehicle_of(self, source: int | None) -> Vehicle | None:
         """The vehicle of a SINS sample from radio *source* (None: the direct line)."""

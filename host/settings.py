@@ -36,6 +36,9 @@ class Site:
 
     latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic latitude of the lab", between(*LATITUDE_DEG))
     local_gravity: float = key(lab.LOCAL_GRAVITY, "m/s^2", "local gravity", between(*GRAVITY_M_S2))
+    declination_deg: float = key(lab.DECLINATION_DEG, "deg", "magnetic declination, east of true "
+                                 "north: turns a magnetometer heading to true (IGRF-13 at the lab)",
+                                 between(-180, 180))
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Iterator
 
-from . import adis16350, formats, nanoloc, ports, xbee
+from . import adis16350, formats, nanoloc, ports, sins, xbee
 from .ports import DEFAULT_BAUD
 from .recording import Recording, RecordingError
 from .formats import hexval
@@ -36,11 +36,21 @@ def frame_record(ev: Frame, *, gyro_range: int = 300, with_hex: bool = False) ->
 
 def sins_record(frame: Frame, gyro_range: int) -> dict:
     f = frame.fields
+    if frame.type == sins.TYPE_MAGNETOMETER:
+        return magnetometer_record(frame)
     s = adis16350.words_to_sample(f["words"], gyro_range)
     return dict(seq=f["seq"], words=list(f["words"]), nd=all(s.nd), ea=s.ea,
                 gyro_dps=list(s.gyro_dps), gyro_rad_s=list(s.gyro_rad_s),
                 accel_g=list(s.accel_g), accel_m_s2=list(s.accel_m_s2),
                 temp_c=list(s.temp_c), supply_v=s.supply_v, aux_v=s.aux_v)
+
+
+def magnetometer_record(frame: Frame) -> dict:
+    """A magnetometer frame: its words and the field in uT (None on an axis overflow)."""
+    f = frame.fields
+    field = sins.field_ut(f["field"])
+    return dict(seq=f["seq"], field_words=list(f["field"]),
+                field_ut=None if field is None else list(field))
 
 
 #: (unit, the Sample attribute and index) of each register word of a SINS frame, in order
@@ -53,8 +63,13 @@ def sins_labelled(frame: Frame, gyro_range: int) -> dict:
     """A SINS frame's fields for ``navtwin diff``: ``seq``, then each register word by its
     name (ZGYRO_OUT) with its value in engineering units."""
     f = frame.fields
-    s = adis16350.words_to_sample(f["words"], gyro_range)
     out: dict = {"seq": (f["seq"], None, "")}
+    if frame.type == sins.TYPE_MAGNETOMETER:
+        for axis, word in zip("XYZ", f["field"]):
+            out[f"{axis}MAG"] = (word & 0xFFFF, None if word == sins.MAG_OVERFLOW else
+                                 word * sins.MAG_LSB_UT, "uT")
+        return out
+    s = adis16350.words_to_sample(f["words"], gyro_range)
     for name, word, (unit, attr, i) in zip(adis16350.REGISTERS, f["words"], _WORD_UNITS):
         v = getattr(s, attr)
         out[name] = (word, v if i is None else v[i], unit)
@@ -108,6 +123,7 @@ def _resolution(gyro_range: int) -> dict[str, int]:
     out["accel_m_s2"] = _decimals(adis16350.ACCEL_LSB_G * adis16350.STANDARD_GRAVITY,
                                   _significant(adis16350.ACCEL_LSB_G))
     out["distance_m"] = _decimals(nanoloc.distance(1, 0, 0, 0))
+    out["field_ut"] = _decimals(sins.MAG_LSB_UT, 4)
     return out
 
 

@@ -279,9 +279,10 @@ class _Side:
 
 
 def _decode(side: _Side, fmt: formats.Format, escaped: bool) -> None:
-    """Decode the side's bytes; each frame's key is ``(format, "seq", seq)`` where its layout
-    has a ``seq``, else ``(format, "n", its index among that format's frames without one)``
-    (a chain passes the coordinator's own frames between the SINS frames it carries)."""
+    """Decode the side's bytes; each frame's key is ``((format, type), "seq", seq)`` where its
+    layout has a ``seq`` (a SINS sample and the magnetometer frame read with it share one),
+    else ``(format, "n", its index among that format's frames without one)`` (a chain passes
+    the coordinator's own frames between the SINS frames it carries)."""
     dec = fmt.make(escaped=escaped)
     unsequenced: Counter = Counter()
     for ev in dec.feed(side.data) + dec.flush():
@@ -290,7 +291,7 @@ def _decode(side: _Side, fmt: formats.Format, escaped: bool) -> None:
             continue
         side.frames.append(ev)
         if ev.known and "seq" in ev.fields:
-            side.keys.append((ev.format, "seq", ev.fields["seq"]))
+            side.keys.append(((ev.format, ev.type), "seq", ev.fields["seq"]))
         else:
             side.keys.append((ev.format, "n", unsequenced[ev.format]))
             unsequenced[ev.format] += 1

@@ -1,4 +1,6 @@
-"""The SINS board frame: ADIS16350 register words over RS-232 (wire-formats.md section 1).
+"""The SINS board's frames over RS-232 (wire-formats.md section 1; docs/protocols.md).
+
+Sample frame (type 01): the ADIS16350 register words, one every 10 ms of the board's clock.
 
 | offset | size | field | value                                                   |
 |--------|------|-------|---------------------------------------------------------|
@@ -9,18 +11,43 @@
 | 6      | 22   | words | 11 raw register words, SUPPLY_OUT .. AUX_ADC            |
 | 28     | 2    | crc   | CRC-16/CCITT-FALSE over bytes 2..27                      |
 
-30 bytes, 2.604 ms on the wire at 115200 8N1; one frame every 10 ms of the board's clock.
+30 bytes, 2.604 ms on the wire at 115200 8N1.
+
+Magnetometer frame (type 02), interleaved when the vehicle carries a magnetometer: written
+right after the sample frame of the tick at which the DSP read the magnetometer.
+
+| offset | size | field | value                                                   |
+|--------|------|-------|---------------------------------------------------------|
+| 0      | 2    | sync  | ``A5 5A``                                               |
+| 2      | 1    | type  | ``02`` = magnetometer                                   |
+| 3      | 1    | len   | ``08``                                                  |
+| 4      | 2    | seq   | the sample counter of the sample frame it follows       |
+| 6      | 6    | field | x, y, z body axes, signed 16 bit, LSB = MAG_LSB_UT      |
+| 12     | 2    | crc   | CRC-16/CCITT-FALSE over bytes 2..11                      |
+
+14 bytes. The words are a Honeywell HMC5883L's data output registers at its default gain
+(CRB GN = 001: 1090 LSB/gauss, so 0.09174 uT/LSB; 12-bit data -2048..2047, -4096 on
+overflow; datasheet Rev. E, Table 9), which the DSP reads over I2C in the chip's X, Z, Y
+register order and writes in body order x, y, z (x forward, y left, z up).
 """
-from construct import Array, Int16ub, Struct, Terminated
+from construct import Array, Int16sb, Int16ub, Struct, Terminated
 
 from .crcframe import crc_framed, encode
 from .fast import packer_for
 
 SYNC = b"\xa5\x5a"
 TYPE_SAMPLE = 0x01
+TYPE_MAGNETOMETER = 0x02
 FRAME_SIZE = 30
+MAG_FRAME_SIZE = 14
 PERIOD_S = 0.01
 SEQ_MODULO = 1 << 16
+
+#: uT per LSB of a magnetometer word: HMC5883L gain 1090 LSB/gauss (1 gauss = 100 uT)
+MAG_LSB_UT = 100.0 / 1090.0
+#: the HMC5883L's data range and the value it reads on overflow (datasheet Rev. E, p. 15)
+MAG_WORD_RANGE = (-2048, 2047)
+MAG_OVERFLOW = -4096
 
 Sample = Struct(
     "seq" / Int16ub,
@@ -28,12 +55,34 @@ Sample = Struct(
     Terminated,
 )
 
-SinsFrame = crc_framed(SYNC, {TYPE_SAMPLE: Sample})
+Magnetometer = Struct(
+    "seq" / Int16ub,
+    "field" / Array(3, Int16sb),
+    Terminated,
+)
+
+#: the payload layout of each frame type
+LAYOUTS = {TYPE_SAMPLE: Sample, TYPE_MAGNETOMETER: Magnetometer}
+
+SinsFrame = crc_framed(SYNC, LAYOUTS)
 
 
 _pack_sample = packer_for(Sample)
+_pack_magnetometer = packer_for(Magnetometer)
 
 
 def build_sample(seq: int, words) -> bytes:
     """The 30-byte frame for one sample (fast path; equal to ``SinsFrame.build``)."""
     return encode(SYNC, TYPE_SAMPLE, _pack_sample(seq % SEQ_MODULO, *words))
+
+
+def build_magnetometer(seq: int, field) -> bytes:
+    """The 14-byte magnetometer frame: *field* the three signed words (x, y, z)."""
+    return encode(SYNC, TYPE_MAGNETOMETER, _pack_magnetometer(seq % SEQ_MODULO, *field))
+
+
+def field_ut(words) -> tuple[float, float, float] | None:
+    """The field in uT of three magnetometer words; None if any axis overflowed."""
+    if MAG_OVERFLOW in words:
+        return None
+    return tuple(w * MAG_LSB_UT for w in words)

@@ -265,7 +265,7 @@ class CrcFramedDecoder(LengthFramed):
 
 
 def sins_decoder() -> CrcFramedDecoder:
-    return CrcFramedDecoder("sins", sins.SYNC, {sins.TYPE_SAMPLE: sins.Sample})
+    return CrcFramedDecoder("sins", sins.SYNC, sins.LAYOUTS)
 
 
 def nanoloc_decoder() -> CrcFramedDecoder:

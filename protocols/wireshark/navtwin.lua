@@ -8,7 +8,8 @@
 -- Wireshark 4.0 has no XBee API dissector (`tshark -G protocols` lists none), so this file
 -- brings one. Protocols and their filter fields (docs/testing.md, "Captures in Wireshark"):
 --   navtwin.sins     seq, every register word raw (navtwin.sins.xgyro_out) and in units
---                    (navtwin.sins.xgyro_dps, _g, _c, _v), nd, ea, crc, crc_ok
+--                    (navtwin.sins.xgyro_dps, _g, _c, _v), nd, ea, crc, crc_ok; a magnetometer
+--                    frame (type 02): xmag, ymag, zmag raw and xmag_ut .. in uT, mag_overflow
 --   navtwin.nanoloc  seq, t_us, anchor, tag, status, rssi, tau1..tau4 (ps), distance_m, crc_ok
 --   navtwin.xbee     start, length, type, the frame's fields (src64, src16, options, rf_data,
 --                    command, at_status, ...), checksum, checksum_ok; 0x90 RF data is
@@ -165,7 +166,7 @@ local WORDS = {
 }
 local sf = {
     sync = ProtoField.uint16("navtwin.sins.sync", "Sync", base.HEX),
-    type = ProtoField.uint8("navtwin.sins.type", "Type", base.HEX, { [1] = "sample" }),
+    type = ProtoField.uint8("navtwin.sins.type", "Type", base.HEX, { [1] = "sample", [2] = "magnetometer" }),
     len = ProtoField.uint8("navtwin.sins.len", "Payload length", base.DEC),
     seq = ProtoField.uint16("navtwin.sins.seq", "Sample counter", base.DEC),
     nd = ProtoField.bool("navtwin.sins.nd", "New data (ND) in every word"),
@@ -178,6 +179,14 @@ for _, w in ipairs(WORDS) do
     sf[w[1]] = ProtoField.uint16("navtwin.sins." .. w[1]:lower(), w[1], base.HEX)
     sf[w[2]] = ProtoField.double("navtwin.sins." .. w[2], w[1] .. " (" .. w[3] .. ")")
 end
+-- the magnetometer frame (type 02): HMC5883L words, 1090 LSB/gauss, -4096 = overflow
+local MAG_LSB_UT, MAG_OVERFLOW = 100 / 1090, -4096
+local MAG_AXES = { "x", "y", "z" }
+for _, a in ipairs(MAG_AXES) do
+    sf[a .. "mag"] = ProtoField.int16("navtwin.sins." .. a .. "mag", a:upper() .. "MAG", base.DEC)
+    sf[a .. "mag_ut"] = ProtoField.double("navtwin.sins." .. a .. "mag_ut", a:upper() .. "MAG (uT)")
+end
+sf.mag_overflow = ProtoField.bool("navtwin.sins.mag_overflow", "Magnetometer overflow (an axis reads -4096)")
 sins.fields = field_list(sf)
 local e_bad_crc = checksum_expert("navtwin.sins.bad_crc", "Bad CRC-16")
 sins.experts = { e_bad_crc }
@@ -211,6 +220,21 @@ local function show_sins(tvb, st, size, ok, tree)
         end
         t:add(sf.nd, tvb(st + 6, 22), nd)
         t:add(sf.ea, tvb(st + 6, 22), ea)
+    elseif s:byte(3) == 2 and s:byte(4) == 8 then
+        seq = u16(s, 5)
+        t:add(sf.seq, tvb(st + 4, 2))
+        local over = false
+        for k, a in ipairs(MAG_AXES) do
+            local at = st + 6 + 2 * (k - 1)
+            local count = signed(u16(s, 7 + 2 * (k - 1)), 16)
+            t:add(sf[a .. "mag"], tvb(at, 2))
+            if count == MAG_OVERFLOW then
+                over = true
+            else
+                t:add(sf[a .. "mag_ut"], tvb(at, 2), count * MAG_LSB_UT)
+            end
+        end
+        t:add(sf.mag_overflow, tvb(st + 6, 6), over)
     elseif size > 6 then
         t:add(sf.payload, tvb(st + 4, size - 6))
     end
@@ -218,10 +242,11 @@ local function show_sins(tvb, st, size, ok, tree)
     local item = t:add(sf.crc_ok, tvb(st + size - 2, 2), ok)
     if not ok then item:add_proto_expert_info(e_bad_crc) end
     t:append_text((seq and (", seq " .. seq) or "") .. (ok and "" or " [bad CRC]"))
-    return (seq and ("seq " .. seq) or "type " .. s:byte(3)) .. (ok and "" or " bad CRC")
+    local what = seq and ((s:byte(3) == 2 and "mag seq " or "seq ") .. seq) or ("type " .. s:byte(3))
+    return what .. (ok and "" or " bad CRC")
 end
 
-local judge_sins = crc_framed_judge({ [1] = 24 })
+local judge_sins = crc_framed_judge({ [1] = 24, [2] = 8 })
 
 -- The SINS frames in tvb (a port's packet or the RF data of an XBee 0x90 frame): Info words
 local function dissect_sins(tvb, tree)
