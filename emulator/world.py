@@ -72,7 +72,8 @@ class Vehicle:
     """One vehicle's devices: its trajectory, the ADIS16350 on its DSP board, and the XBee
     router that packetises the board's stream onto its RF uplink.
 
-    Vehicle 1 draws from the streams "imu" and "xbee.link.router"; vehicle n > 1 from the
+    Vehicle 1 draws from the streams "imu" (and "imu.gyro.drift", "imu.accel.drift"
+    for a grade with a flicker bias or rate random walk) and "xbee.link.router"; vehicle n > 1 from the
     same names under "vehicle<n>.", so adding a vehicle never changes another's draws.
     """
 
@@ -83,7 +84,7 @@ class Vehicle:
         self.src16 = router["MY"]
         self.trajectory = Trajectory(spec.trajectory, spec.tag.z)
         self.imu = Adis16350(spec.imu, sc.site, sc.area, self.trajectory, sc.clocks.imu_ppm,
-                             self._stream(seed, "imu"))
+                             lambda name: self._stream(seed, name))
         self.board = Board(spec.board, sc.clocks.board_ppm, self.imu,
                            acting_on(sc.faults, "board", vehicle=number))
         self.router = Router(router["NP"], router["RO"], self.board.char_ns)

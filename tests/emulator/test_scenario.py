@@ -68,11 +68,11 @@ def test_to_toml_round_trip(name, tmp_path):
 
 
 def test_base_overrides_merge(tmp_path):
-    sc = variant(tmp_path, "office", "[trajectory]\nspeed_m_s = 0.45\n[imu]\narw_deg_rt_hr = 1.0\n")
+    sc = variant(tmp_path, "office", "[trajectory]\nspeed_m_s = 0.45\n[imu]\ngyro_arw_deg_rt_h = 1.0\n")
     office = load_scenario("office")
-    assert sc.trajectory.speed_m_s == 0.45 and sc.imu.arw_deg_rt_hr == 1.0
+    assert sc.trajectory.speed_m_s == 0.45 and sc.imu.errors.gyro_arw_deg_rt_h == 1.0
     assert sc.trajectory.waypoints == office.trajectory.waypoints  # merged key by key
-    assert sc.imu.vrw_m_s_rt_hr == office.imu.vrw_m_s_rt_hr
+    assert sc.imu.errors.accel_vrw_m_s_rt_h == office.imu.errors.accel_vrw_m_s_rt_h
     assert sc.name == "variant"
 
 
