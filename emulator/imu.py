@@ -218,11 +218,22 @@ class Adis16350:
                           ("_supply", supply), ("_temp", temp), ("_alarm", alarm)):
             setattr(self, name, np.concatenate((getattr(self, name)[keep], new)))
 
-    def read(self, t_read_ns: np.ndarray) -> np.ndarray:
-        """(M, 11) uint16 register words SUPPLY_OUT..AUX_ADC read at increasing true times."""
+    def _latest(self, t_read_ns: np.ndarray) -> np.ndarray:
+        """Index of the latest internal sample at each read time."""
         i = np.searchsorted(self._t, t_read_ns, side="right") - 1
         if len(i) and i[0] < 0:
             raise ValueError("read before the first internal sample")
+        return i
+
+    def outputs(self, t_read_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The gyro (rad/s) and accelerometer (m/s^2) registers a read at each time returns,
+        before the words' quantisation (for evaluation: a grade finer than an LSB)."""
+        i = self._latest(t_read_ns)
+        return self._gyro[i], self._accel[i]
+
+    def read(self, t_read_ns: np.ndarray) -> np.ndarray:
+        """(M, 11) uint16 register words SUPPLY_OUT..AUX_ADC read at increasing true times."""
+        i = self._latest(t_read_ns)
         j = self._j[i]
         nd = np.diff(np.concatenate(([self._last_read_j], j))) > 0
         if len(j):
