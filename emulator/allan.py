@@ -72,7 +72,8 @@ def sins_rates(sc: Scenario, seed: int) -> tuple[np.ndarray, np.ndarray]:
 def sensor_rates(sc: Scenario, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """As :func:`sins_rates` (the same sensor: the same streams of *seed*), the registers
     before quantisation, read every READ_S: for a grade finer than the words' LSB, which the
-    bytes cannot carry (``paper003``: 0.04 deg/h against 0.018 deg/s = 66 deg/h an LSB)."""
+    bytes cannot carry (``paper003``: 0.04 deg/h against 0.018 deg/s = 66 deg/h an LSB, and
+    read noise of 0.0008 deg/s, too little to dither it)."""
     imu = Adis16350(sc.imu, sc.site, sc.area, Trajectory(sc.trajectory, sc.tag.z),
                     sc.clocks.imu_ppm, lambda name: stream(seed, name))
     gyro, accel = [], []
@@ -136,19 +137,26 @@ def _rel(measured: float, want: float) -> float:
     return measured / want - 1.0 if want else math.nan
 
 
+def dithered(imu: Imu) -> bool:
+    """Whether the words of the ``[imu]`` table *imu* carry its grade: the white noise of a
+    read spans a gyro LSB (rounding then adds white noise; below it, the words stick)."""
+    taps = bartlett_taps(imu.filter_taps)
+    sigma = math.radians(imu.errors.gyro_arw_deg_rt_h) / 60 * math.sqrt(np.sum(taps ** 2) / imu.sample_period_s)
+    return sigma > math.radians(adis.GYRO_LSB_DPS[imu.gyro_range_dps])
+
+
 def round_trip(grade: str, seconds: float, seed: int, imu: dict | None = None) -> dict:
     """One grade's Allan round trip: its white noise and floors, the grade's beside the
     measured (the sensor's own: SENSOR registers from the bytes, or the registers before
     quantisation for a grade finer than an LSB), with the Allan deviation at 1 .. 1000 s."""
-    e = parked(seconds, {"grade": grade, **(imu or {})}).imu.errors
-    fine = deg_h(e.gyro_bias_instability_deg_h) < math.radians(adis.GYRO_LSB_DPS[75])
+    fine = not dithered(parked(seconds, {"grade": grade, **SENSOR, **(imu or {})}).imu)
     # a grade the words carry: SENSOR registers, from 0.5 s; a finer one: the default 4 taps,
     # whose reads are independent (the filter spans 8.5 ms), from 20 ms
     sc = parked(seconds, {"grade": grade, **({} if fine else SENSOR), **(imu or {})})
     gyro, accel = (sensor_rates if fine else sins_rates)(sc, seed)
     taus = np.logspace(math.log10(0.02 if fine else 0.5), math.log10(seconds / 10), 20)
     g, a = fit(gyro, 1 / READ_S, taus), fit(accel, 1 / READ_S, taus)
-    alias = read_white_factor(sc.imu.filter_taps, 1 / sc.imu.sample_period_s)
+    e, alias = sc.imu.errors, read_white_factor(sc.imu.filter_taps, 1 / sc.imu.sample_period_s)
     rows = {
         "arw_deg_rt_h": (e.gyro_arw_deg_rt_h * alias, math.degrees(g["white"]) * 60),
         "vrw_m_s_rt_h": (e.accel_vrw_m_s_rt_h * alias, a["white"] * 60),
