@@ -18,14 +18,15 @@ the Allan deviation within 1.3 % of the floor from 1 s to 3000 s (0.04 % ripple 
 Rate random walk: b_j = b_j-1 + K sqrt(Ts) w_j from 0; its Allan deviation is K sqrt(T / 3).
 
 Each process draws from the Generator it is given (its sensor's own stream), all terms of a
-block at once; each term is a first-order recursion run by scipy's lfilter with its state.
+block at once. The recursions run as a prefix scan in numpy (no scipy on the emulator's path
+to its ready line): after the steps s = 1, 2, 4, ... each y_j holds
+sum_{i=0}^{2s-1} phi^i x_{j-i}, every factor phi^s <= 1, so no step grows the rounding.
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 #: correlation times of the flicker bias's Gauss-Markov terms: two a decade over 0.03 .. 30 000 s
 FLICKER_TAUS_S = np.logspace(math.log10(0.03), math.log10(30_000.0), 13)
@@ -65,13 +66,22 @@ class FlickerBias:
 
     def next(self, n: int) -> np.ndarray:
         """The bias (n, 3) at the next *n* samples."""
-        w = self.rng.standard_normal((len(self.phi), n, 3))
-        out = np.zeros((n, 3))
-        for k, (phi, drive) in enumerate(zip(self.phi, self.drive)):
-            b, zf = lfilter([drive], [1.0, -phi], w[k], axis=0, zi=(phi * self.state[k])[None, :])
-            self.state[k] = b[-1]
-            out += b
-        return out
+        b = first_order(self.phi, self.drive[:, None, None] * self.rng.standard_normal((len(self.phi), n, 3)),
+                        self.state)
+        self.state = b[:, -1]
+        return b.sum(axis=0)
+
+
+def first_order(phi: np.ndarray, x: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """y_j = phi y_j-1 + x_j along axis 1 of *x* (K, n, 3), one phi per term k, from
+    y_-1 = *before* (K, 3): a prefix scan of log2(n) numpy steps."""
+    y = x.copy()
+    step, power = 1, phi.copy()
+    while step < y.shape[1]:
+        y[:, step:] += power[:, None, None] * y[:, :-step]
+        step, power = 2 * step, power * power
+    decay = phi[:, None] ** np.arange(1, y.shape[1] + 1)  # phi^(j+1)
+    return y + decay[:, :, None] * before[:, None, :]
 
 
 class RateRandomWalk:

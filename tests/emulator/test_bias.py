@@ -42,3 +42,19 @@ def test_simulated_flicker_and_rate_random_walk_give_back_their_allan_curves():
     rrw = RateRandomWalk(0.5, ts, np.random.default_rng(2)).next(n)
     got_taus, adev, *_ = allantools.oadev(rrw[:, 0], rate=1 / ts, data_type="freq", taus=taus)
     assert adev == pytest.approx(0.5 * np.sqrt(got_taus / 3), rel=0.1)
+
+
+def test_the_prefix_scan_is_the_recursion():
+    """first_order's log2(n) numpy steps give y_j = phi y_j-1 + x_j from y_-1, per term, as
+    scipy's lfilter does (to rounding), over slow and fast terms and a block of odd length."""
+    from scipy.signal import lfilter
+
+    from navtwin.emulator.bias import first_order
+
+    rng = np.random.default_rng(3)
+    phi = np.exp(-1 / 819.2 / FLICKER_TAUS_S)
+    x, before = rng.standard_normal((len(phi), 819, 3)), rng.standard_normal((len(phi), 3))
+    got = first_order(phi, x, before)
+    for k, p in enumerate(phi):
+        want, _ = lfilter([1.0], [1.0, -p], x[k], axis=0, zi=(p * before[k])[None, :])
+        assert np.allclose(got[k], want, rtol=0, atol=1e-11)
