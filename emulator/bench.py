@@ -19,6 +19,12 @@
     times digi-xbee's ``RemoteZigBeeDevice.read_device_info()`` on the router, through the
     coordinator (remote AT, then the ZDO node descriptor that gives its role).
 
+``navtwin bench imu-allan [--seconds 7200] [--seed 1]``
+    each IMU grade parked for the run, decoded from its SINS bytes (or, for a grade finer
+    than an LSB, its registers before quantisation): ARW, VRW and the bias-instability
+    floors fitted to allantools' overlapping Allan deviation beside the grade's; and the
+    ADIS16350 datasheet's noise table beside the emulator's (docs/emulator-models.md 3.2).
+
 ``navtwin bench uart-rx``
     bytes per second the client-UART model (emulator.uart_rx) turns into what a client at
     other settings reads, on 30-byte chunks every 10 ms (the SINS board's frames) for
@@ -37,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from navtwin.common.limits import SEEDS
 from navtwin.common.schema import between, key, takes
 
 from navtwin.protocols.recording import Recording
@@ -217,6 +224,25 @@ def uart_rx(chunks: int = 3000, seed: int = 1) -> dict:
 
 
 @dataclass(frozen=True)
+class AllanRuns:
+    """imu-allan's settings."""
+    seconds: float | None = key(None, "s", "device time of each parked run; none = 7200 (1200 quick)",
+                                between(120, 86_400))
+    seed: int = key(1, "", "seed of the runs", between(*SEEDS))
+
+
+def imu_allan(seconds: float, seed: int) -> dict:
+    """Each IMU grade's Allan round trip (parked, decoded) and the ADIS16350 datasheet table."""
+    from .allan import datasheet_table, markdown, round_trip
+    from .imu_errors import GRADES
+
+    grades = [round_trip(g, seconds, seed) for g in GRADES]
+    table = datasheet_table(seconds, seed)
+    return {"benchmark": "imu-allan", "seconds": seconds, "seed": seed, "grades": grades,
+            "datasheet": table, "markdown": markdown(table)}
+
+
+@dataclass(frozen=True)
 class ScenarioRuns:
     """emulator-speed's settings."""
     scenario: str = key("office", "", "the scenario generated (a name or a .toml path)")
@@ -261,10 +287,15 @@ def benchmarks() -> dict:
         """emulator: digi-xbee read_device_info() on the router, Role.ROUTER (goal < 2 s)"""
         return digi_router(s.repeat or (3 if quick else 10))
 
+    @takes(AllanRuns)
+    def imu_allan_round_trip(quick: bool, s: AllanRuns) -> dict:
+        """emulator: IMU grades' Allan round trip from parked bytes, datasheet table (goal within 10 %)"""
+        return imu_allan(s.seconds or (1200.0 if quick else 7200.0), s.seed)
+
     def uart_rx_model(quick: bool = False) -> dict:
         """emulator: client-UART model throughput vs the 11.5 kB/s line (goal >= 5x)"""
         return uart_rx(500 if quick else 3000)
 
     return {"emulator-speed": emulator_speed, "emulator-jitter": emulator_jitter,
             "digi-open": digi_xbee_open, "digi-router": digi_xbee_router,
-            "uart-rx": uart_rx_model}
+            "uart-rx": uart_rx_model, "imu-allan": imu_allan_round_trip}

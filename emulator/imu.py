@@ -9,13 +9,16 @@ Physics (navigation frame n: x, y of the area, z up; body b: x forward, y left, 
 Each internal sample j (every SMPL_PRD period of the sensor's own clock, 819.2 SPS by
 default) is measured as::
 
-    y_j = M x_j + b_on + b_gm,j + n_j           then clipped to the selected range
+    y_j = M x_j + b_on + b_j + n_j           then clipped to the selected range
 
+with the errors of the scenario's IMU grade (emulator.imu_errors; ``[imu] grade``):
 M = I + diag(scale-factor errors) + off-diagonal misalignment (drawn at power-on);
-b_on the turn-on bias (drawn at power-on); b_gm a first-order Gauss-Markov process
-b_{j+1} = phi b_j + sigma sqrt(1 - phi^2) w_j, phi = exp(-Ts / tau), started stationary
-(sigma = the datasheet's in-run bias stability); n_j white with sigma = ARW sqrt(fs) (gyro,
-ARW in rad/sqrt(s)) or VRW sqrt(fs) (accelerometer). Temperature and supply are
+b_on the constant bias (drawn at power-on); b_j the in-run bias: a first-order Gauss-Markov
+process b_{j+1} = phi b_j + sigma sqrt(1 - phi^2) w_j, phi = exp(-Ts / tau), started
+stationary (a grade with a bias correlation time tau: sigma = its bias instability), or a
+flicker bias with a flat Allan floor (tau = 0; emulator.bias), plus a rate random walk if the
+grade has one; n_j white with sigma = ARW sqrt(fs) (gyro, ARW in rad/sqrt(s)) or
+VRW sqrt(fs) (accelerometer). Temperature and supply are
 measured with the sample (scenario value plus white noise). The output registers hold the
 Bartlett-window FIR of the last samples: two cascaded N-tap averages (datasheet p. 17,
 H(f) = [sin(pi N f ts) / (N sin(pi f ts))]^2, N = 2^SENS/AVG[2:0]). A read returns the
@@ -33,10 +36,21 @@ import numpy as np
 from navtwin.common.earth import EARTH_RATE
 from navtwin.protocols import adis16350 as adis
 
+from .bias import FlickerBias, RateRandomWalk
 from .clock import Clock
 
 MG = 1e-3 * adis.STANDARD_GRAVITY  # m/s^2 per mg
 SUPPLY_LIMITS_V = (4.75, 5.25)  # STATUS bits 0 and 1
+
+
+def deg_h(v: float) -> float:
+    """deg/h -> rad/s (radians first: the figures of the golden recordings to the bit)."""
+    return math.radians(v) / 3600.0
+
+
+def ug(v: float) -> float:
+    """micro-g -> m/s^2, through mg (the golden recordings' figures to the bit)."""
+    return v / 1000.0 * MG
 
 
 def bartlett_taps(n: int) -> np.ndarray:
@@ -85,14 +99,15 @@ def body_from_nav(roll, pitch, yaw) -> np.ndarray:
 
 
 class _Sensor:
-    """One triad (gyros or accelerometers): power-on errors, bias process, filter state."""
+    """One triad (gyros or accelerometers): power-on errors, bias processes, filter state.
+    Power-on errors, white noise and a Gauss-Markov bias draw from the IMU's stream *rng*; a
+    flicker bias and a rate random walk from the triad's own stream *drift_rng*, so a grade
+    with them leaves every other draw where it was."""
 
-    def __init__(self, rng: np.random.Generator, *, noise: float, bias_sigma: float, corr_s: float,
-                 turn_on: float, scale_ppm: float, misalign_rad: float, full_scale: float,
-                 ts: float, taps: np.ndarray) -> None:
+    def __init__(self, rng: np.random.Generator, drift_rng: np.random.Generator, *, noise: float, bias: float,
+                 corr_s: float, rrw: float, turn_on: float, scale_ppm: float, misalign_rad: float,
+                 full_scale: float, ts: float, taps: np.ndarray) -> None:
         self.noise = noise
-        self.phi = math.exp(-ts / corr_s)
-        self.drive = bias_sigma * math.sqrt(1.0 - self.phi ** 2)
         self.full_scale = full_scale
         self.taps = taps
         self.turn_on = rng.normal(0.0, turn_on, 3)
@@ -100,14 +115,25 @@ class _Sensor:
         off = ~np.eye(3, dtype=bool)
         m[off] = rng.normal(0.0, misalign_rad, 6)
         self.matrix = m
-        self.gm_state = self.phi * rng.normal(0.0, bias_sigma, 3)  # phi b_{-1}
+        gm_sigma = bias if corr_s > 0 else 0.0  # corr_s = 0: the bias is flicker, no GM term
+        self.phi = math.exp(-ts / corr_s) if corr_s > 0 else 0.0
+        self.drive = gm_sigma * math.sqrt(1.0 - self.phi ** 2)
+        self.gm_state = self.phi * rng.normal(0.0, gm_sigma, 3)  # phi b_{-1}
+        self.slow = [process for process in (
+            FlickerBias(bias, ts, drift_rng) if corr_s == 0 and bias > 0 else None,
+            RateRandomWalk(rrw, ts, drift_rng) if rrw > 0 else None) if process is not None]
         self.fir_state = None
 
     def measure(self, true: np.ndarray, white: np.ndarray, drive: np.ndarray):
         """Filtered outputs and per-sample overrange flags for true values (N, 3)."""
-        gm = gauss_markov(self.phi, self.gm_state, self.drive * drive)
-        self.gm_state = self.phi * gm[-1]
-        raw = true @ self.matrix.T + self.turn_on + gm + self.noise * white
+        raw = true @ self.matrix.T + self.turn_on
+        if self.drive:
+            gm = gauss_markov(self.phi, self.gm_state, self.drive * drive)
+            self.gm_state = self.phi * gm[-1]
+            raw += gm
+        for process in self.slow:
+            raw += process.next(len(true))
+        raw += self.noise * white
         over = np.abs(raw) > self.full_scale
         raw = np.clip(raw, -self.full_scale, self.full_scale)
         if self.fir_state is None:  # the sensor ran before t = 0: start from steady state,
@@ -124,27 +150,33 @@ class Adis16350:
     """The sensor on the vehicle. ``generate(lo, hi)`` runs the internal samples of a block of
     true time in order; ``read(t_read)`` returns the register words the DSP reads."""
 
-    def __init__(self, spec, site, area, trajectory, ppm: float, rng: np.random.Generator) -> None:
+    def __init__(self, spec, site, area, trajectory, ppm: float, streams) -> None:
+        """*spec* an ``[imu]`` table; *streams(name)* the Generator named *name* of the run:
+        "imu" for the power-on errors and the sample noise, "imu.gyro.drift" and
+        "imu.accel.drift" for each triad's flicker bias and rate random walk."""
         self.spec = spec
         self.trajectory = trajectory
-        self.rng = rng
+        self.rng = rng = streams("imu")
+        e = spec.errors
         ts = spec.sample_period_s
         self.clock = Clock(ppm, ts * 1e9)
         fs = 1.0 / ts
         taps = bartlett_taps(spec.filter_taps)
         self.gyro_range = spec.gyro_range_dps
         self.gyro = _Sensor(
-            rng, noise=math.radians(spec.arw_deg_rt_hr) / 60.0 * math.sqrt(fs),
-            bias_sigma=math.radians(spec.gyro_bias_instability_dps), corr_s=spec.gyro_bias_corr_s,
-            turn_on=math.radians(spec.gyro_turn_on_bias_dps), scale_ppm=spec.gyro_scale_factor_ppm,
-            misalign_rad=math.radians(spec.gyro_misalignment_deg),
+            rng, streams("imu.gyro.drift"),
+            noise=math.radians(e.gyro_arw_deg_rt_h) / 60.0 * math.sqrt(fs),
+            bias=deg_h(e.gyro_bias_instability_deg_h), corr_s=e.gyro_bias_corr_s,
+            rrw=deg_h(e.gyro_rrw_deg_h_rt_h) / 60.0, turn_on=deg_h(e.gyro_bias_deg_h),
+            scale_ppm=e.gyro_scale_factor_ppm, misalign_rad=e.gyro_misalignment_mrad / 1e3,
             full_scale=math.radians(spec.gyro_range_dps), ts=ts, taps=taps)
         self.accel = _Sensor(
-            rng, noise=spec.vrw_m_s_rt_hr / 60.0 * math.sqrt(fs),
-            bias_sigma=spec.accel_bias_instability_mg * MG, corr_s=spec.accel_bias_corr_s,
-            turn_on=spec.accel_turn_on_bias_mg * MG, scale_ppm=spec.accel_scale_factor_ppm,
-            misalign_rad=math.radians(spec.accel_misalignment_deg),
-            full_scale=spec.accel_range_g * adis.STANDARD_GRAVITY, ts=ts, taps=taps)
+            rng, streams("imu.accel.drift"),
+            noise=e.accel_vrw_m_s_rt_h / 60.0 * math.sqrt(fs),
+            bias=ug(e.accel_bias_instability_ug), corr_s=e.accel_bias_corr_s,
+            rrw=ug(e.accel_rrw_ug_rt_h) / 60.0, turn_on=ug(e.accel_bias_ug),
+            scale_ppm=e.accel_scale_factor_ppm, misalign_rad=e.accel_misalignment_mrad / 1e3,
+            full_scale=e.accel_range_g * adis.STANDARD_GRAVITY, ts=ts, taps=taps)
         lat = math.radians(site.latitude_deg)
         north = math.radians(area.x_azimuth_deg)  # north, counter-clockwise from +x
         self.earth_rate_n = EARTH_RATE * np.array(
@@ -186,11 +218,22 @@ class Adis16350:
                           ("_supply", supply), ("_temp", temp), ("_alarm", alarm)):
             setattr(self, name, np.concatenate((getattr(self, name)[keep], new)))
 
-    def read(self, t_read_ns: np.ndarray) -> np.ndarray:
-        """(M, 11) uint16 register words SUPPLY_OUT..AUX_ADC read at increasing true times."""
+    def _latest(self, t_read_ns: np.ndarray) -> np.ndarray:
+        """Index of the latest internal sample at each read time."""
         i = np.searchsorted(self._t, t_read_ns, side="right") - 1
         if len(i) and i[0] < 0:
             raise ValueError("read before the first internal sample")
+        return i
+
+    def outputs(self, t_read_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The gyro (rad/s) and accelerometer (m/s^2) registers a read at each time returns,
+        before the words' quantisation (for evaluation: a grade finer than an LSB)."""
+        i = self._latest(t_read_ns)
+        return self._gyro[i], self._accel[i]
+
+    def read(self, t_read_ns: np.ndarray) -> np.ndarray:
+        """(M, 11) uint16 register words SUPPLY_OUT..AUX_ADC read at increasing true times."""
+        i = self._latest(t_read_ns)
         j = self._j[i]
         nd = np.diff(np.concatenate(([self._last_read_j], j))) > 0
         if len(j):

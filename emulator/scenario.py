@@ -22,8 +22,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from navtwin.protocols.adis16350 import (ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS, GYRO_LSB_DPS,
-                                          VRW_M_S_RT_HR)
+from navtwin.protocols.adis16350 import GYRO_LSB_DPS
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common import geomagnetic, lab
@@ -32,6 +31,7 @@ from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_C
 
 from . import trajectory as geometry
 from .faults import Fault
+from .imu_errors import GRADES, ImuErrors, override_keys, profile
 from .rng import stream
 from navtwin.common import tomlfile
 from navtwin.common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
@@ -148,39 +148,22 @@ class Trajectory:
                                   path.length * self.loops)
 
 
+#: ``[imu] grade`` and every field of the grade's error profile, settable one by one
+#: (emulator.imu_errors: the profile's fields, units and checks are declared there once)
+ImuGrade = dataclasses.make_dataclass("ImuGrade", [
+    ("grade", str, key("adis16350", "", "IMU error profile by name (emulator.imu_errors.GRADES); the keys "
+                       "below override its fields", one_of(*GRADES))),
+    *((name, float | None, f) for name, f in override_keys().items())], frozen=True)
+
+
 @dataclass(frozen=True)
-class Imu:
+class Imu(ImuGrade):
     gyro_range_dps: int = key(lab.GYRO_RANGE_DPS, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range",
                                 one_of(*sorted(GYRO_LSB_DPS)))
     filter_taps: int = key(4, "", "SENS/AVG bits 2:0 = log2(N): Bartlett window taps N",
                            one_of(1, 2, 4, 8, 16, 32, 64))
     smpl_prd: int = key(1, "", "SMPL_PRD: internal sample period 0.61035 ms x (NS+1) (bit 7 = 18.921 ms "
                         "time base); 1 = 819.2 SPS", between(1, 255))
-    arw_deg_rt_hr: float = key(ARW_DEG_RT_HR, "deg/sqrt(h)", "gyro angle random walk", non_negative(hi=1000))
-    gyro_bias_instability_dps: float = key(GYRO_BIAS_INSTABILITY_DPS, "deg/s", "gyro in-run bias (1 sigma of a Gauss-Markov "
-                                           "process)", non_negative(hi=100))
-    gyro_bias_corr_s: float = key(100.0, "s", "correlation time of the gyro bias process",
-                              positive(hi=1_000_000))
-    gyro_turn_on_bias_dps: float = key(0.1, "deg/s", "1 sigma of the constant bias drawn at power-on",
-                                       non_negative(hi=100))
-    gyro_scale_factor_ppm: float = key(1000.0, "ppm", "1 sigma of each gyro's scale-factor error",
-                                       non_negative(hi=100_000))
-    gyro_misalignment_deg: float = key(0.05, "deg", "1 sigma of each gyro axis' misalignment (per "
-                                       "off-diagonal term)", non_negative(hi=10))
-    vrw_m_s_rt_hr: float = key(VRW_M_S_RT_HR, "m/s/sqrt(h)", "accelerometer velocity random walk",
-                                   non_negative(hi=1000))
-    accel_bias_instability_mg: float = key(0.7, "mg", "accelerometer in-run bias (1 sigma, Gauss-Markov)",
-                                           non_negative(hi=1000))
-    accel_bias_corr_s: float = key(100.0, "s", "correlation time of the accelerometer bias process",
-                                   positive(hi=1_000_000))
-    accel_turn_on_bias_mg: float = key(2.0, "mg", "1 sigma of the constant bias drawn at power-on",
-                                       non_negative(hi=1000))
-    accel_scale_factor_ppm: float = key(1000.0, "ppm", "1 sigma of each accelerometer's scale-factor error",
-                                        non_negative(hi=100_000))
-    accel_misalignment_deg: float = key(0.25, "deg", "1 sigma of each accelerometer axis' misalignment",
-                                        non_negative(hi=10))
-    accel_range_g: float = key(10.0, "g", "accelerometer measurement range (beyond: saturation, EA)",
-                               between(1, 20))
     temperature_c: float = key(25.0, "degC", "sensor temperature (X/Y/ZTEMP_OUT)", between(-40, 85))
     temperature_noise_c: float = key(0.15, "degC", "1 sigma noise of each temperature word",
                                      non_negative(hi=100))
@@ -200,6 +183,11 @@ class Imu:
                                       f"{self.sample_period_s:g} s, longer than the emulator's "
                                       f"{BLOCK_S:g} s generation block; use smpl_prd <= "
                                       f"{_slowest_smpl_prd()}")
+
+    @property
+    def errors(self) -> ImuErrors:
+        """The grade's error profile with the fields this table sets."""
+        return profile(self.grade, {f.name: getattr(self, f.name) for f in dataclasses.fields(ImuErrors)})
 
     @property
     def sample_period_s(self) -> float:

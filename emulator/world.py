@@ -79,7 +79,9 @@ class Vehicle:
     scenario enables one) on its DSP board, and the XBee router that packetises the board's
     stream onto its RF uplink.
 
-    Vehicle 1 draws from the streams "imu", "magnetometer" and "xbee.link.router"; vehicle n > 1 from the
+    Vehicle 1 draws from the streams "imu" (and "imu.gyro.drift", "imu.accel.drift" for a
+    grade with a flicker bias or rate random walk), "magnetometer" and "xbee.link.router";
+    vehicle n > 1 from the
     same names under "vehicle<n>.", so adding a vehicle never changes another's draws.
     """
 
@@ -90,7 +92,7 @@ class Vehicle:
         self.src16 = router["MY"]
         self.trajectory = Trajectory(spec.trajectory, spec.tag.z)
         self.imu = Adis16350(spec.imu, sc.site, sc.area, self.trajectory, sc.clocks.imu_ppm,
-                             self._stream(seed, "imu"))
+                             lambda name: self._stream(seed, name))
         mag = spec.magnetometer
         on = mag is not None and mag.enabled
         self.board = Board(spec.board, sc.clocks.board_ppm, self.imu,

@@ -1,12 +1,14 @@
 """ADIS16350 model, checked on the decoded SINS bytes: the datasheet's filter, the physics
 at rest and in motion, the error budget of the integrated z gyro, and the register flags."""
+import functools
 import math
 
 import numpy as np
 import pytest
 
 from navtwin.common.earth import EARTH_RATE
-from navtwin.emulator.imu import Adis16350, bartlett_taps, fir, fir_steady_state, gauss_markov
+from navtwin.emulator.imu import Adis16350, bartlett_taps, deg_h, fir, fir_steady_state, gauss_markov, ug
+from navtwin.emulator.rng import stream
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.trajectory import Trajectory
 from navtwin.protocols import adis16350 as adis
@@ -16,16 +18,16 @@ from .world_helpers import port_bytes, run, sins, variant
 
 NOISE_FREE = """
 [imu]
-arw_deg_rt_hr = 0.0
-gyro_bias_instability_dps = 0.0
-gyro_turn_on_bias_dps = 0.0
+gyro_arw_deg_rt_h = 0.0
+gyro_bias_instability_deg_h = 0.0
+gyro_bias_deg_h = 0.0
 gyro_scale_factor_ppm = 0.0
-gyro_misalignment_deg = 0.0
-vrw_m_s_rt_hr = 0.0
-accel_bias_instability_mg = 0.0
-accel_turn_on_bias_mg = 0.0
+gyro_misalignment_mrad = 0.0
+accel_vrw_m_s_rt_h = 0.0
+accel_bias_instability_ug = 0.0
+accel_bias_ug = 0.0
 accel_scale_factor_ppm = 0.0
-accel_misalignment_deg = 0.0
+accel_misalignment_mrad = 0.0
 temperature_noise_c = 0.0
 supply_noise_v = 0.0
 """
@@ -77,7 +79,7 @@ def test_bias_process_is_scipys_lfilter_to_the_bit():
 
 def _imu(sc):
     return Adis16350(sc.imu, sc.site, sc.area, Trajectory(sc.trajectory, sc.tag.z), 0.0,
-                     np.random.default_rng(0))
+                     functools.partial(stream, 0))
 
 
 def test_physics_at_rest_and_on_a_straight_leg():
@@ -147,39 +149,38 @@ def office():
 def read_sigma(sc, gyro: bool) -> float:
     """Model noise of one register read: white noise through the Bartlett filter plus
     rounding (reads 10 ms apart see disjoint filter windows, so they are independent)."""
-    imu = sc.imu
+    imu, e = sc.imu, sc.imu.errors
     fs = 1 / imu.sample_period_s
     taps = bartlett_taps(imu.filter_taps)
     if gyro:
-        white = math.radians(imu.arw_deg_rt_hr) / 60 * math.sqrt(fs)
+        white = math.radians(e.gyro_arw_deg_rt_h) / 60 * math.sqrt(fs)
         lsb = math.radians(adis.GYRO_LSB_DPS[imu.gyro_range_dps])
     else:
-        white = imu.vrw_m_s_rt_hr / 60 * math.sqrt(fs)
+        white = e.accel_vrw_m_s_rt_h / 60 * math.sqrt(fs)
         lsb = adis.ACCEL_LSB_G * adis.STANDARD_GRAVITY
     return math.sqrt(white ** 2 * np.sum(taps ** 2) + lsb ** 2 / 12)
 
 
 def test_stationary_start_reads_local_g_and_no_rotation(office):
     sc, _, _, s = office
-    imu, g = sc.imu, sc.site.local_gravity
+    e, g = sc.imu.errors, sc.site.local_gravity
     still = (s["t_ns"] > 0.2e9) & (s["t_ns"] < sc.trajectory.alignment_s * 1e9)
     n = still.sum()
     acc, gyr = s["accel_m_s2"][still], s["gyro_rad_s"][still]
     # the read noise is the modelled one
     assert acc.std(axis=0) == pytest.approx([read_sigma(sc, False)] * 3, rel=0.1)
     assert gyr.std(axis=0) == pytest.approx([read_sigma(sc, True)] * 3, rel=0.1)
-    mg = 1e-3 * adis.STANDARD_GRAVITY
     mean_noise = read_sigma(sc, False) / math.sqrt(n)
-    bias = math.hypot(imu.accel_turn_on_bias_mg * mg, imu.accel_bias_instability_mg * mg)
-    tilt = g * math.radians(imu.accel_misalignment_deg)
+    bias = math.hypot(ug(e.accel_bias_ug), ug(e.accel_bias_instability_ug))
+    tilt = g * e.accel_misalignment_mrad * 1e-3
     sigma_xy = math.sqrt(mean_noise ** 2 + bias ** 2 + tilt ** 2)
-    sigma_z = math.sqrt(mean_noise ** 2 + bias ** 2 + (g * imu.accel_scale_factor_ppm * 1e-6) ** 2)
+    sigma_z = math.sqrt(mean_noise ** 2 + bias ** 2 + (g * e.accel_scale_factor_ppm * 1e-6) ** 2)
     mean = acc.mean(axis=0)
     assert abs(mean[0]) < 4 * sigma_xy and abs(mean[1]) < 4 * sigma_xy
     assert abs(mean[2] - g) < 4 * sigma_z
     gyro_sigma = math.sqrt((read_sigma(sc, True) / math.sqrt(n)) ** 2
-                           + math.radians(imu.gyro_turn_on_bias_dps) ** 2
-                           + math.radians(imu.gyro_bias_instability_dps) ** 2)
+                           + deg_h(e.gyro_bias_deg_h) ** 2
+                           + deg_h(e.gyro_bias_instability_deg_h) ** 2)
     assert np.all(np.abs(gyr.mean(axis=0)) < 4 * gyro_sigma)  # near zero: 0.4 deg/s at most
 
 
@@ -200,7 +201,7 @@ def test_integrated_z_gyro_matches_truth_heading_change(seed):
     sc = load_scenario("office")
     w, events = run(sc, seed)
     s = sins(events)
-    imu = sc.imu
+    e = sc.imu.errors
     dt = sc.board.period_ms * 1e-3 / (1 + sc.clocks.board_ppm * 1e-6)
     t = s["t_ns"] / 1e9
     align = (t > 0.2) & (t < sc.trajectory.alignment_s)
@@ -215,9 +216,9 @@ def test_integrated_z_gyro_matches_truth_heading_change(seed):
     sr = read_sigma(sc, True)
     weights = np.where(move, dt, 0.0) + np.where(align, -n_m * dt / n_a, 0.0)
     var = (np.sum(weights ** 2) * sr ** 2
-           + gauss_markov_integral_var(math.radians(imu.gyro_bias_instability_dps), imu.gyro_bias_corr_s,
+           + gauss_markov_integral_var(deg_h(e.gyro_bias_instability_deg_h), e.gyro_bias_corr_s,
                                        t, weights)
-           + (imu.gyro_scale_factor_ppm * 1e-6 * change) ** 2)
+           + (e.gyro_scale_factor_ppm * 1e-6 * change) ** 2)
     sigma = math.sqrt(var)
     assert 0.005 < sigma < 0.1  # about 1.9 deg: a meaningful check
     assert abs(heading - change) < 4 * sigma

@@ -68,12 +68,22 @@ def test_to_toml_round_trip(name, tmp_path):
 
 
 def test_base_overrides_merge(tmp_path):
-    sc = variant(tmp_path, "office", "[trajectory]\nspeed_m_s = 0.45\n[imu]\narw_deg_rt_hr = 1.0\n")
+    sc = variant(tmp_path, "office", "[trajectory]\nspeed_m_s = 0.45\n[imu]\ngyro_arw_deg_rt_h = 1.0\n")
     office = load_scenario("office")
-    assert sc.trajectory.speed_m_s == 0.45 and sc.imu.arw_deg_rt_hr == 1.0
+    assert sc.trajectory.speed_m_s == 0.45 and sc.imu.errors.gyro_arw_deg_rt_h == 1.0
     assert sc.trajectory.waypoints == office.trajectory.waypoints  # merged key by key
-    assert sc.imu.vrw_m_s_rt_hr == office.imu.vrw_m_s_rt_hr
+    assert sc.imu.errors.accel_vrw_m_s_rt_h == office.imu.errors.accel_vrw_m_s_rt_h
     assert sc.name == "variant"
+
+
+def test_a_grade_is_picked_by_name_and_overridden_key_by_key(tmp_path):
+    """[imu] grade picks the profile; a key set in [imu] replaces that field only."""
+    from navtwin.emulator.imu_errors import GRADES
+
+    sc = variant(tmp_path, "office", '[imu]\ngrade = "paper003"\naccel_bias_ug = 20.0\n')
+    assert sc.imu.errors.accel_bias_ug == 20.0
+    assert sc.imu.errors.gyro_bias_instability_deg_h == GRADES["paper003"].gyro_bias_instability_deg_h == 0.04
+    assert load_scenario("office").imu.errors == GRADES["adis16350"]
 
 
 BAD = [
@@ -88,6 +98,9 @@ BAD = [
     ('[[faults]]\nkind = "link_loss"\nanchor = 1\nstart_s = 3.0\nend_s = 4.0\n', "unknown key 'anchor'"),
     ("[imu]\ngyro_range_dps = 75\n", "[imu] filter_taps must be >= 16 at gyro_range_dps = 75"),
     ("[imu]\ngyro_range_dps = 200\n", "[imu] gyro_range_dps must be one of 75, 150, 300"),
+    ('[imu]\ngrade = "tactical"\n', "[imu] grade must be one of 'adis16350', 'paper003' (got 'tactical'); "
+                                    "use one of 'adis16350', 'paper003'"),
+    ("[imu]\ngyro_bias_corr_s = -1.0\n", "[imu] gyro_bias_corr_s must be in [0, 1000000] (got -1 s)"),
     ("[trajectory]\nturn_radius_m = 3.0\n", "[trajectory] turn_radius_m 3 m (with transition_m 0.4 m) does not fit"),
     ("[trajectory]\nwaypoints = [[6.0, 1.8], [9.8, 1.8], [10.0, 5.0], [2.0, 2.5]]\n",
      "[trajectory] waypoints of a closed loop must pass straight through the first waypoint"),
