@@ -20,7 +20,8 @@ that the fuzzy system spans the ranges the lab sees::
     R_0 = EQ^2                                       (range_sigma_m := EQ)
 
 so a range at the span's middle gets R_0 (S(EQ) = 1 with the default output sets) and the
-ends sigma^2 as with the defaults below.
+ends sigma^2 as with the defaults below. Without a calibration the settings' sets and
+range_sigma_m stand, as sigma_poly_m stands for sigma(d).
 
 Defaults: input peaks 0.1, 0.4, 0.7 m (0.4 = range_sigma_m's default); output peaks 0.05,
 0.7, 2.25, whose sets' centroids are 0.27, 1.0 and 1.73: with b = 2 a range of sigma 0.1,
@@ -63,15 +64,13 @@ class FatciSettings(TcSettings):
                                           Check(lambda v: len(v) >= 1, "needs a coefficient",
                                                 "give e.g. [0.3, 0.02]"))
     sets_from: str = key("settings", "", "input sets and R_0: settings (sigma_sets_m, "
-                         "range_sigma_m) or calibration (from its sigma(d): docs/filters.md)",
+                         "range_sigma_m) or calibration (from its sigma(d) where the host has "
+                         "one, else the settings: docs/filters.md)",
                          one_of("settings", "calibration"))
 
     def check_config(self, cfg) -> None:
-        """What spans sections: sets from the calibration need one, and a sigma(d) not flat."""
-        if self.sets_from == "calibration":
-            if cfg.calibration is None:
-                raise ValueError("fatci sets_from = 'calibration' needs a calibration; add a "
-                                 "[calibration] file or set sets_from = 'settings'")
+        """What spans sections: sets from a calibration need its sigma(d) not flat."""
+        if self.sets_from == "calibration" and cfg.calibration is not None:
             calibrated_sets(cfg.calibration)
 
 
@@ -97,7 +96,7 @@ class FatciTrack(TcTrack):
         s = self.settings
         calibration = ctx.calibration
         peaks = s.sigma_sets_m
-        if s.sets_from == "calibration":  # the config has one (FatciSettings.check_config)
+        if s.sets_from == "calibration" and calibration is not None:  # else the settings'
             peaks = calibrated_sets(calibration)
             self._sigma2 = peaks[1] ** 2
         fis = FuzzySystem(peaks, s.s_sets)

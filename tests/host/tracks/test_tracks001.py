@@ -108,8 +108,11 @@ def test_fatci_sets_and_r0_from_the_calibrations_sigma_of_d():
 
 
 def test_fatci_sets_from_a_calibration_need_one_that_rises():
-    with pytest.raises(ValueError, match="needs a calibration"):
-        office_config(filters=("fatci",), settings={"fatci": FatciSettings(sets_from="calibration")})
+    # without a calibration the settings' sets and range_sigma_m stand, as sigma_poly_m does
+    settings = {"fatci": FatciSettings(sets_from="calibration")}
+    plain = FatciTrack(Estimator(office_config(filters=("fatci",))).context)
+    track = Estimator(office_config(filters=("fatci",), settings=settings)).tracks[0]
+    assert track.range_variance(0, 7.0) == plain.range_variance(0, 7.0)
     flat = Calibration(scale=1.0, bias={}, sigma_coefficients=(0.2,), sigma_span_m=(1.0, 21.0))
     with pytest.raises(ValueError, match="not increasing"):
         office_config(filters=("fatci",), calibration=flat,
