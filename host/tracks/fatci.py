@@ -27,7 +27,8 @@ Defaults: input peaks 0.1, 0.4, 0.7 m (0.4 = range_sigma_m's default); output pe
 0.7, 2.25, whose sets' centroids are 0.27, 1.0 and 1.73: with b = 2 a range of sigma 0.1,
 0.4 or 0.7 m gets R = sigma^2 (0.107^2, 0.4^2, 0.69^2 m^2), and in between the fuzzy
 system's plateau around EQ. sigma_poly_m = (0.3, 0.02): the emulator's office ranging
-(sigma0_m + sigma_per_m d, docs/emulator-models.md); the corridor config sets its own.
+(sigma0_m + sigma_per_m d, docs/emulator-models.md); the corridor config has its calibration
+(sets_from = "calibration").
 """
 from __future__ import annotations
 
