@@ -111,7 +111,6 @@ def _over_seeds(args, steps, config) -> int:
     """The table of --seeds: each figure's mean over the seeds, ± its 95 % t half-width,
     before and after, and the paired per-seed after - before."""
     from navtwin.lab import calibration as lab
-    from navtwin.lab.evaluate import mean_ci
 
     seeds = list(args.seeds)
     per = [lab.seed_figures(args.scenario, s, steps, config, args.sigma_degree, args.evaluate)

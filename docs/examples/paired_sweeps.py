@@ -12,7 +12,8 @@ came from the calibration).
 import sys
 from pathlib import Path
 
-from navtwin.lab.sweep import mean_ci, read_out
+from navtwin.lab.evaluate import mean_ci
+from navtwin.lab.sweep import read_out
 
 FIGURES = ("mean", "max", "rms", "nees_mean")
 
