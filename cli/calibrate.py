@@ -125,9 +125,9 @@ def _over_seeds(args, steps, config) -> int:
                  ("eval_variance", f"{ev} wsn error variance, moving (m^2)", PAPER["wsn_variance"],
                   ".4f"),
                  ("eval_mean", f"{ev} wsn mean error, moving (m)", None, ".3f")]
+    then = f", then {ev} with each seed's fit" if ev else ""
     print(f"{len(seeds)} seeds {seeds[0]}..{seeds[-1]} of scenario {args.scenario}, steps "
-          f"{args.steps}, config {args.config}" + (f", then {ev} with each seed's fit" if ev else "")
-          + "; mean over seeds ± 95 % t half-width")
+          f"{args.steps}, config {args.config}{then}; mean over seeds ± 95 % t half-width")
     print(f"{'':<50}{'before':>18}{'after':>18}{'after - before':>20}   paper 001")
     for key, name, paper, fmt in rows:
         before = [f[key][0] for f in per]
