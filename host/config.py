@@ -171,7 +171,18 @@ def with_calibration(config: HostConfig, calibration: Calibration) -> HostConfig
         raise ConfigError(f"{calibration.source} calibrates anchor {unknown[0]}, which is not in "
                           f"the config's [[anchors]]; use the calibration of this lab")
     tuning = dataclasses.replace(config.tuning, range_scale=1.0)
-    return dataclasses.replace(config, tuning=tuning, range_bias_m={}, calibration=calibration)
+    return _checked(dataclasses.replace(config, tuning=tuning, range_bias_m={},
+                                        calibration=calibration))
+
+
+def _checked(config: HostConfig) -> HostConfig:
+    """*config*, once the estimator's own checks have judged what spans sections (3 anchors
+    at least, a track's keys that need the calibration)."""
+    try:
+        config.estimator_config()
+    except (ValueError, TypeError) as e:
+        raise ConfigError(f"[filters] {e}") from None
+    return config
 
 
 #: [filters] keys of the first recorded layout that now live in a track's own section.
@@ -322,12 +333,8 @@ def _config(doc: dict, name: str, directory: Path | None = None) -> HostConfig:
     config = HostConfig(name=name, lab=lab, tuning=tuning, settings=settings,
                         **{k: v for k, v in kw.items() if k != "calibration"})
     if "calibration" in kw:
-        config = with_calibration(config, kw["calibration"])
-    try:  # the estimator's own checks judge what spans sections (3 anchors at least)
-        config.estimator_config()
-    except (ValueError, TypeError) as e:
-        raise ConfigError(f"[filters] {e}") from None
-    return config
+        return with_calibration(config, kw["calibration"])
+    return _checked(config)
 
 
 def _anchors(items) -> tuple[Anchor, ...]:

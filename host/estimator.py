@@ -82,10 +82,8 @@ class Estimator:
         self.inertial = Inertial(cfg, need_sins=any(cls.uses_strapdown for cls in classes))
         self.ranging = Ranging(cfg, self.layout)
         self.time = FilterTime(cfg.output_period_s, cfg.extrapolated_after_s)
-        # calibration None: the tracks were always built before the estimator held it, so
-        # fatci has used sigma_poly_m even with one (a bug kept while issue 18 keeps the
-        # estimates bit-identical; passing self.calibration fixes it)
-        self.context = TrackContext(cfg, ConstantAcceleration(cfg.jerk_psd), self.layout, None,
+        self.context = TrackContext(cfg, ConstantAcceleration(cfg.jerk_psd), self.layout,
+                                    self.calibration,
                                     time=self.time, inertial=self.inertial, ranging=self.ranging,
                                     estimator=self)
         self.tracks: list[Track] = [cls(self.context, cfg.settings.get(n))

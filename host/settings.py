@@ -151,6 +151,8 @@ class EstimatorConfig(Tuning, Vehicle, Site):
             build(table, plain(self, table))
         for name, own in self.settings.items():  # and each track's own, its [filters.<name>]
             build(type(own), plain(own), (("filters", 0), (name, 0)))
+            if hasattr(own, "check_config"):  # a track's keys that need other sections
+                own.check_config(self)
         if len(self.anchors) < 3:
             raise ValueError(f"anchors: {len(self.anchors)} given; a 2-D fix needs at least 3, list them all")
 

@@ -4,11 +4,13 @@ table, and the corridor's WSN-only error with and without the result.
 The host side (host.calibration) fits from the gateway's bytes and a step table; here the
 emulator supplies both: the bytes of a scenario run in memory (or a recording's), and the
 step table a lab user would survey, read off the scenario's stepped trajectory
-(:func:`step_table`; shipped as host/calibrations/corridor-steps.toml).
+(:func:`step_table`; shipped as host/calibrations/corridor-steps.toml). :func:`seed_figures`
+is one seed's figures of ``navtwin calibrate --seeds``'s table.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -97,3 +99,18 @@ def wsn_errors(scenario, seed: int | None, config: HostConfig,
                 {k: v[keep] for k, v in e.items()})
     return {"max": float(err.max()), "variance": float(err.var()), "mean": float(err.mean()),
             "n": len(err)}
+
+
+def seed_figures(scenario, seed: int | None, steps: cal.StepTable, config: HostConfig,
+                 sigma_degree: int = 2, evaluate=None) -> dict[str, tuple[float, float]]:
+    """One seed's (before, after) figures: of the walk of *scenario* fitted (``scale`` f, NaN
+    before; ``range`` the mean range error; ``wsn_max``, ``wsn_variance`` at the points) and,
+    with *evaluate* (a moving scenario), of its wsn track uncorrected and with this seed's
+    calibration (``eval_max``, ``eval_variance``, ``eval_mean``: :func:`wsn_errors`)."""
+    result = calibrate(gateway_bytes(scenario, seed), steps, config, sigma_degree)
+    figures = {"scale": (math.nan, result.calibration.scale), "range": result.range_error_m,
+               "wsn_max": result.wsn_max_m, "wsn_variance": result.wsn_variance_m2}
+    if evaluate is not None:
+        runs = [wsn_errors(evaluate, seed, config, k) for k in (None, result.calibration)]
+        figures.update({f"eval_{k}": (runs[0][k], runs[1][k]) for k in ("max", "variance", "mean")})
+    return figures

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
+from scipy.stats import t as student_t
 
 #: Paper 000, section 3.3 and 4.3: mean position error (m) on the office run.
 PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
@@ -193,3 +194,14 @@ def plot(truth: dict, estimates: dict, path: str | Path, offset_s: float = 0.0,
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def mean_ci(values) -> tuple[float, float]:
+    """Mean and the half-width of its two-sided 95 % Student-t interval (NaN below 2 values)."""
+    v = np.asarray(values, dtype=float)
+    if v.size == 0:
+        return math.nan, math.nan
+    if v.size < 2:
+        return float(v.mean()), math.nan
+    half = student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)
+    return float(v.mean()), float(half)

@@ -45,7 +45,6 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-from scipy.stats import t as student_t
 
 from navtwin.common import tomlfile
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
@@ -53,6 +52,7 @@ from navtwin.host.output import estimate_line
 from navtwin.host.replay import emulator_settings
 
 from . import evaluate
+from .evaluate import mean_ci
 from .provenance import code_version
 from .run import run_in_memory, truth
 
@@ -374,17 +374,6 @@ class _Watch:
 
 
 # ---------------------------------------------------------------- the table over seeds
-
-def mean_ci(values) -> tuple[float, float]:
-    """Mean and the half-width of its two-sided 95 % Student-t interval (NaN below 2 values)."""
-    v = np.asarray(values, dtype=float)
-    if v.size == 0:
-        return math.nan, math.nan
-    if v.size < 2:
-        return float(v.mean()), math.nan
-    half = student_t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)
-    return float(v.mean()), float(half)
-
 
 def summarise(rows: list[dict], filters: Iterable[str]) -> dict:
     """Per filter, over its seeds: the mean of each per-seed figure (FIGURES) with its 95 % t

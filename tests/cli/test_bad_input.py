@@ -169,6 +169,12 @@ CASES = {
     # navtwin calibrate
     "calibrate on a recording that is no calibration walk": (
         ["calibrate", GOLDEN, "--out", "c.toml"], {}, ["f = -0.05286", "no calibration walk"]),
+    "calibrate --seeds on a recording": (["calibrate", GOLDEN, "--seeds", "1..3"], {},
+                                         ["--seeds", "--scenario"]),
+    "calibrate --seeds with --out": (["calibrate", "--scenario", "calibration", "--seeds", "1..3",
+                                      "--out", "c.toml"], {}, ["--out", "--seed N"]),
+    "calibrate --seeds 3..1": (["calibrate", "--scenario", "calibration", "--seeds", "3..1"], {},
+                               ["--seeds", "A <= B"]),
     # navtwin decode
     "decode --baud 0": (["decode", "x.bin", "--format", "sins", "--baud", "0"],
                         {"x.bin": ""}, ["--baud", "[50, 4000000]"]),

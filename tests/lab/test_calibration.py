@@ -9,6 +9,7 @@ from navtwin.emulator.scenario import load_scenario
 from navtwin.host import calibration as cal
 from navtwin.host import config as host_config
 from navtwin.lab import calibration as lab
+from navtwin.lab.evaluate import mean_ci
 
 pytestmark = pytest.mark.slow  # emulated runs of 190 s and 127 s
 
@@ -81,3 +82,28 @@ def test_the_table_keeps_its_columns_apart_whatever_the_figures(monkeypatch, tmp
     assert [float(v) for v in rows["WSN-only variance (m^2)"][:2]] == pytest.approx([0.445, 1.5e6])
     assert [float(v) for v in rows["WSN-only max error (m)"][:2]] == pytest.approx([10.874, 53.125])
     assert rows["mean range error (m)"] == ["6.980", "6.430", "0.66", "->", "0.18"]
+
+
+def test_over_seeds_the_table_is_the_per_seed_runs_means_with_t_intervals(capsys):
+    """`navtwin calibrate --seeds 1..3` is the mean of the three `--seed N` runs' figures, each
+    with its 95 % t interval, and the paired after - before."""
+    per = []
+    for seed in (1, 2, 3):
+        assert main(["calibrate", "--scenario", "calibration", "--seed", str(seed), "--out",
+                     "/dev/null"]) == 0
+        rows = {line[:30].strip(): line[30:].split() for line in capsys.readouterr().out.splitlines()}
+        per.append({k: [float(v) for v in rows[k][:2]] for k in
+                    ("mean range error (m)", "WSN-only max error (m)", "WSN-only variance (m^2)")})
+    assert main(["calibrate", "--scenario", "calibration", "--seeds", "1..3"]) == 0
+    table = {line[:50].strip(): line[50:].split() for line in capsys.readouterr().out.splitlines()[2:]}
+    for one, many in (("mean range error (m)", "mean range error (m)"),
+                      ("WSN-only max error (m)", "WSN-only max error at the points, in-sample (m)"),
+                      ("WSN-only variance (m^2)", "WSN-only variance at the points, in-sample (m^2)")):
+        cells = table[many]  # before ± h, after ± h, after - before ± h
+        assert cells[1] == cells[4] == cells[7] == "±", many
+        for col, values in ((0, [p[one][0] for p in per]), (3, [p[one][1] for p in per]),
+                            (6, [p[one][1] - p[one][0] for p in per])):
+            m, h = mean_ci(values)  # of the single runs' printed (rounded) figures
+            assert float(cells[col]) == pytest.approx(m, abs=2e-3), (many, col)
+            assert float(cells[col + 2]) == pytest.approx(h, abs=5e-3), (many, col)
+    assert float(table["scale factor f"][0]) == pytest.approx(1.05, abs=0.02)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from navtwin.host.calibration import Calibration
 from navtwin.host.estimator import Estimator
 from navtwin.host.settings import EstimatorConfig
 from navtwin.host.filters.fuzzy import FuzzySystem
@@ -83,6 +84,39 @@ def test_fatci_takes_sigma_of_d_from_the_estimators_calibration():
     s = track.settings
     assert track.range_variance(2, 3.0) == pytest.approx(((s.s_sets[1] + 2 * s.s_sets[2]) / 3) ** s.b * 0.16,
                                                          rel=1e-4)
+
+
+#: sigma(d) = 0.1 + 0.01 d over 1-21 m: 0.11, 0.21, 0.31 m at the span's ends and middle
+RISING = Calibration(scale=1.0, bias={}, sigma_coefficients=(0.1, 0.01), sigma_span_m=(1.0, 21.0))
+
+
+def test_the_estimator_gives_fatci_its_calibration():
+    est = Estimator(office_config(filters=("fatci",), calibration=RISING))
+    s = est.tracks[0].settings
+    fis = FuzzySystem(s.sigma_sets_m, s.s_sets)
+    assert est.tracks[0].range_variance(0, 11.0) == pytest.approx(float(fis(0.21)) ** s.b * 0.4**2,
+                                                                  rel=1e-4)
+
+
+def test_fatci_sets_and_r0_from_the_calibrations_sigma_of_d():
+    settings = {"fatci": FatciSettings(sets_from="calibration")}
+    track = Estimator(office_config(filters=("fatci",), calibration=RISING, settings=settings)).tracks[0]
+    le, eq, mo = (sum(p) / 3 for p in ((0.05, 0.05, 0.7), (0.05, 0.7, 2.25), (0.7, 2.25, 2.25)))
+    # the span's middle is EQ (S = 1: R = R_0 = EQ^2), its ends LE and MO, beyond it clamped
+    for d, centroid in ((11.0, eq), (1.0, le), (21.0, mo), (0.2, le), (40.0, mo)):
+        assert track.range_variance(0, d) == pytest.approx(centroid**2 * 0.21**2, rel=1e-3), d
+
+
+def test_fatci_sets_from_a_calibration_need_one_that_rises():
+    # without a calibration the settings' sets and range_sigma_m stand, as sigma_poly_m does
+    settings = {"fatci": FatciSettings(sets_from="calibration")}
+    plain = FatciTrack(Estimator(office_config(filters=("fatci",))).context)
+    track = Estimator(office_config(filters=("fatci",), settings=settings)).tracks[0]
+    assert track.range_variance(0, 7.0) == plain.range_variance(0, 7.0)
+    flat = Calibration(scale=1.0, bias={}, sigma_coefficients=(0.2,), sigma_span_m=(1.0, 21.0))
+    with pytest.raises(ValueError, match="not increasing"):
+        office_config(filters=("fatci",), calibration=flat,
+                      settings={"fatci": FatciSettings(sets_from="calibration")})
 
 
 # -- consistency on data that follow the filters' model ----------------------------------
