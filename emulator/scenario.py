@@ -173,6 +173,12 @@ class Imu(ImuGrade):
                                 non_negative(hi=1))
 
     def __post_init__(self):
+        # every error field resolved from the grade: the scenario as run (to_toml, a
+        # recording's scenario.toml) states the values, so it replays the same after a
+        # grade's figures change
+        for name, value in dataclasses.asdict(GRADES[self.grade]).items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
         need = {150: 4, 75: 16}.get(self.gyro_range_dps, 1)
         if self.filter_taps < need:
             raise Invalid("filter_taps", f"must be >= {need} at gyro_range_dps = {self.gyro_range_dps} "

@@ -86,6 +86,25 @@ def test_a_grade_is_picked_by_name_and_overridden_key_by_key(tmp_path):
     assert load_scenario("office").imu.errors == GRADES["adis16350"]
 
 
+def test_the_scenario_as_run_states_every_imu_error_so_it_replays_after_a_grade_changes(
+        tmp_path, monkeypatch):
+    """to_toml (a recording's scenario.toml) writes each error field's value, not only the
+    grade's name: read back after the grade's figures change, it is the IMU that ran."""
+    import dataclasses
+
+    from navtwin.emulator import imu_errors
+
+    ran = load_scenario("office")
+    text = ran.to_toml()
+    written = tomllib.loads(text)["imu"]
+    assert {f.name: written[f.name] for f in dataclasses.fields(imu_errors.ImuErrors)} == \
+        dataclasses.asdict(imu_errors.GRADES["adis16350"])
+    changed = dataclasses.replace(imu_errors.GRADES["adis16350"], gyro_arw_deg_rt_h=2.1)
+    monkeypatch.setitem(imu_errors.GRADES, "adis16350", changed)
+    (tmp_path / "ran.toml").write_text(text)
+    assert load_scenario(str(tmp_path / "ran.toml")).imu.errors == ran.imu.errors != changed
+
+
 BAD = [
     ("[trajectory]\nspeed_m_s = -1\n", "[trajectory] speed_m_s must be in (0, 100] (got -1 m/s); set a positive speed up to 100 m/s"),
     ("[trajectory]\nsped_m_s = 1\n", "[trajectory] has an unknown key 'sped_m_s'; did you mean 'speed_m_s'?"),
