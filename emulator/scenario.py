@@ -26,8 +26,9 @@ from navtwin.protocols.adis16350 import GYRO_LSB_DPS
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common import geomagnetic, lab
-from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
-                              MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS, limit_problem)
+from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG,
+                              MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS,
+                              limit_problem)
 
 from . import trajectory as geometry
 from .faults import Fault
@@ -63,8 +64,12 @@ def _ppm(doc: str):
 
 @dataclass(frozen=True)
 class Site:
-    latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic latitude: projects the earth rate",
-                              between(*LATITUDE_DEG))
+    latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic (WGS-84) latitude of the area's local "
+                              "origin (x, y = 0, 0): projects the earth rate", between(*LATITUDE_DEG))
+    longitude_deg: float = key(lab.LONGITUDE_DEG, "deg", "east longitude of the local origin: places "
+                               "the earth's field and geodetic anchors", between(*LONGITUDE_DEG))
+    height_m: float = key(lab.HEIGHT_M, "m", "WGS-84 ellipsoid height of the local origin (the floor, "
+                          "z = 0)", between(*ELLIPSOID_HEIGHT_M))
     local_gravity: float = key(lab.LOCAL_GRAVITY, "m/s^2", "local gravity magnitude (with centrifugal part)",
                                between(*GRAVITY_M_S2, "use the local gravity, about 9.78 to 9.83"))
 
@@ -244,9 +249,6 @@ class Magnetometer:
         Check(lambda m: all(-2 <= v <= 2 for row in m for v in row) and _soft_iron_ok(m),
               "must be a matrix with elements from -2 to 2 and a determinant above 0.1",
               "write a near-identity matrix, e.g. [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"))
-    longitude_deg: float = key(lab.LONGITUDE_DEG, "deg", "east longitude of the site: with [site] "
-                               "latitude_deg it places the earth's field (IGRF-13)",
-                               between(-180, 180))
     year: float = key(lab.FIELD_EPOCH, "", "decimal year of the earth's field (IGRF-13 and its "
                       "predicted secular variation)", between(*geomagnetic.EPOCHS))
 
