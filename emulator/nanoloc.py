@@ -73,7 +73,7 @@ class Anchor:
     def __init__(self, sc, spec, slot: int, network_ppm: float, seed: int) -> None:
         r = sc.ranging
         self.id = spec.id
-        self.position = (spec.x, spec.y, sc.anchor_z(spec))
+        self.position = sc.anchor_position(spec)
         self.e = spec.ppm * 1e-6
         self.bias = spec.range_bias_m
         first = r.start_ms * 1e6 + slot * r.slot_ms * 1e6  # network time of its first exchange
