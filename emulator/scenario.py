@@ -333,6 +333,9 @@ class Ranging:
     path_loss_exponent: float = key(2.0, "", "n of 003 eq. 1", between(1, 6))
     shadowing_db: float = key(2.0, "dB", "sigma of the log-normal shadowing of 003 eq. 1",
                           non_negative(hi=100))
+    radio_range_m: float | None = key(None, "m", "the gateway reports an exchange only when the "
+                                      "tag is this close to the anchor; none = unlimited",
+                                      positive(hi=MAX_COORD_M))
     multipath: Multipath = Multipath()
 
     def __post_init__(self):
