@@ -12,7 +12,9 @@ Frames. Navigation frame n: local level, x and y are the area's coordinates (the
 points at azimuth ``area.x_azimuth_deg``, 90 = east, so by default x east, y north), z up,
 origin on the floor. Body frame b: x forward, y left, z up. Attitude: yaw, pitch, roll
 (Z-Y-X, right-handed rotations about the body axes); yaw 0 = body x along +x,
-counter-clockwise positive; a level vehicle reads +g on the z accelerometer.
+counter-clockwise positive; a level vehicle reads +g on the z accelerometer. On the earth,
+n is the tangent plane at the site (``[site]`` latitude, longitude, height: the local origin),
+so an anchor may also be given in degrees (common.geodesy converts, exactly, through ECEF).
 """
 from __future__ import annotations
 
