@@ -40,16 +40,20 @@ def vincenty(lat1, lon1, lat2, lon2):
     return s, math.degrees(az) % 360
 
 
+START_003 = (32.0, 118.0)
 NODES_003 = [(32.0, 118.01), (32.01, 118.02), (32.02, 118.01), (32.01, 118.0)]
+#: (origin, point): 003's nodes from its start, and two sites 1.4 km apart at other latitudes
+PAIRS = [(START_003, node) for node in NODES_003] + [((34.306, 108.89), (34.316, 108.9)),
+                                                      ((-60.01, -70.03), (-60.0, -70.02))]
 
 
-@pytest.mark.parametrize("lat, lon", NODES_003 + [(34.316, 108.9 + 0.01), (-60.0, -70.02)])
-def test_local_plane_matches_vincenty(lat, lon):
+@pytest.mark.parametrize("origin, point", PAIRS)
+def test_local_plane_matches_vincenty(origin, point):
     """Over ~1-2.4 km the plane's horizontal distance is the geodesic's to a millimetre
-    (they differ by s^3 / (6 R^2) ~ 0.1 mm), its bearing to 1e-5 deg (the meridians'
-    convergence makes the geodesic's azimuth at the origin the ENU bearing), and a point
-    on the ellipsoid lies s^2 / (2 R) below the plane."""
-    o_lat, o_lon = (32.0, 118.0) if lon > 100 and lat > 0 and lat < 33 else (lat - 0.01, lon - 0.01)
+    (they differ by s^3 / (6 R^2), under 0.1 mm), its bearing to 1e-5 deg (the geodesic
+    leaves the origin along the plane's direction to the point), and a point on the
+    ellipsoid lies s^2 / (2 R) below the plane."""
+    (o_lat, o_lon), (lat, lon) = origin, point
     frame = LocalFrame(o_lat, o_lon, 0.0, 90.0)
     x, y, z = frame.local(lat, lon, 0.0)
     s, az = vincenty(o_lat, o_lon, lat, lon)
