@@ -26,11 +26,10 @@ import math
 from functools import cache
 from pathlib import Path
 
+from navtwin.common.earth import WGS84_A, WGS84_E2
+
 #: m, the reference radius of the IGRF
 REFERENCE_RADIUS = 6371.2e3
-#: WGS-84 semi-major axis (m) and first eccentricity squared
-WGS84_A = 6378137.0
-WGS84_E2 = 6.69437999014e-3
 #: the epochs of the coefficient table; a date outside them is refused by the scenario keys
 EPOCHS = (2020.0, 2025.0)
 DEGREE = 13

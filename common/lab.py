@@ -14,6 +14,9 @@ LATITUDE_DEG = 34.316
 #: deg, east longitude of the site: 000 gives none; 34.316 N is Xi'an's latitude, so its
 #: longitude (it places the earth's magnetic field, common.geomagnetic)
 LONGITUDE_DEG = 108.9
+#: m, WGS-84 ellipsoid height of the site (the area's floor at its origin): 000 gives none;
+#: 0 keeps the earth's field at the ellipsoid, where the magnetometer first took it
+HEIGHT_M = 0.0
 #: decimal year of the earth's magnetic field (IGRF-13's epoch)
 FIELD_EPOCH = 2020.0
 #: deg, magnetic declination (east of true north) at the site: IGRF-13's, which the

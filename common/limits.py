@@ -16,6 +16,9 @@ MAX_COORD_M = 100_000.0
 MAX_HEIGHT_M = 1000.0
 #: The site and the range model (c_i and f of paper 001 eq. 13), as surveyed or calibrated.
 LATITUDE_DEG = (-90, 90)
+LONGITUDE_DEG = (-180, 180)
+#: m, ellipsoid heights of a site or an anchor: the Dead Sea shore to above Everest.
+ELLIPSOID_HEIGHT_M = (-500, 9000)
 GRAVITY_M_S2 = (9.7, 9.9)
 RANGE_BIAS_M = (-5, 5)
 RANGE_SCALE = (0.5, 1.5)

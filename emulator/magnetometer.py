@@ -30,7 +30,7 @@ from .imu import body_from_nav
 
 def earth_field_nav(site, area, spec) -> np.ndarray:
     """The earth's field (uT) in the navigation frame at the scenario's site."""
-    north, east, down = geomagnetic.field_ned(site.latitude_deg, spec.longitude_deg,
+    north, east, down = geomagnetic.field_ned(site.latitude_deg, site.longitude_deg, site.height_m,
                                               year=spec.year)
     a = math.radians(area.x_azimuth_deg)  # north, counter-clockwise from +x
     north_n = np.array([math.cos(a), math.sin(a), 0.0])

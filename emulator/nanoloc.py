@@ -29,7 +29,10 @@ computes the distance itself.
 
 An exchange times out (status 0x40, zero taus, RSSI -128 dBm) inside an ``anchor_outage``
 fault or at random with probability timeout_prob; the anchor reports it timeout_ms after it
-started. RSSI at the anchor: RSSI(1 m) - 10 n lg d + N(0, shadowing^2) - NLOS attenuation
+started. An exchange whose anchor is farther from the tag than ``radio_range_m`` (when set)
+at its first leg is not reported at all: the gateway writes only the exchanges the radio
+range allows (its random draws are made all the same, so the range changes no other
+exchange). RSSI at the anchor: RSSI(1 m) - 10 n lg d + N(0, shadowing^2) - NLOS attenuation
 (003 eq. 1), in whole dBm. The anchor has its result result_us after the exchange; the
 gateway receives it latency_us later and writes one 32-byte report per exchange, in order,
 on its serial line (wire-formats.md section 3).
@@ -73,7 +76,7 @@ class Anchor:
     def __init__(self, sc, spec, slot: int, network_ppm: float, seed: int) -> None:
         r = sc.ranging
         self.id = spec.id
-        self.position = (spec.x, spec.y, sc.anchor_z(spec))
+        self.position = sc.anchor_position(spec)
         self.e = spec.ppm * 1e-6
         self.bias = spec.range_bias_m
         first = r.start_ms * 1e6 + slot * r.slot_ms * 1e6  # network time of its first exchange
@@ -162,12 +165,14 @@ class NanolocNetwork:
         result = t0 + np.rint(np.where(timeout, r.timeout_ms * 1e-3, done) * 1e9).astype(np.int64)
         t_us = np.floor(np.array([a.network_us0 for a in self.anchors])[idx] + k * self.cycle_us)
         order = np.argsort(t0, kind="stable")  # slots never overlap: results come in this order
+        if r.radio_range_m is not None:  # beyond the range the tag never hears the anchor
+            order = order[d[order, 0] <= r.radio_range_m]
         marks: dict[int, tuple] = {}
         if hits:
-            rank = np.empty(m, dtype=np.int64)
-            rank[order] = np.arange(m)
+            rank = np.full(m, -1, dtype=np.int64)
+            rank[order] = np.arange(len(order))
             for f, acted in hits:
-                for j in np.flatnonzero(acted).tolist():
+                for j in np.flatnonzero(acted & (rank >= 0)).tolist():
                     marks[int(rank[j])] = marks.get(int(rank[j]), ()) + (
                         {"kind": f.KIND, "fault": f, "t_ns": int(t0[j]), "anchor": int(self.anchors[idx[j]].id)},)
         return {

@@ -12,7 +12,9 @@ Frames. Navigation frame n: local level, x and y are the area's coordinates (the
 points at azimuth ``area.x_azimuth_deg``, 90 = east, so by default x east, y north), z up,
 origin on the floor. Body frame b: x forward, y left, z up. Attitude: yaw, pitch, roll
 (Z-Y-X, right-handed rotations about the body axes); yaw 0 = body x along +x,
-counter-clockwise positive; a level vehicle reads +g on the z accelerometer.
+counter-clockwise positive; a level vehicle reads +g on the z accelerometer. On the earth,
+n is the tangent plane at the site (``[site]`` latitude, longitude, height: the local origin),
+so an anchor may also be given in degrees (common.geodesy converts, exactly, through ECEF).
 """
 from __future__ import annotations
 
@@ -26,8 +28,10 @@ from navtwin.protocols.adis16350 import GYRO_LSB_DPS
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common import geomagnetic, lab
-from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_DURATION_S,
-                              MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS, limit_problem)
+from navtwin.common.geodesy import LocalFrame
+from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG,
+                              MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS,
+                              limit_problem)
 
 from . import trajectory as geometry
 from .faults import Fault
@@ -63,8 +67,12 @@ def _ppm(doc: str):
 
 @dataclass(frozen=True)
 class Site:
-    latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic latitude: projects the earth rate",
-                              between(*LATITUDE_DEG))
+    latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic (WGS-84) latitude of the area's local "
+                              "origin (x, y = 0, 0): projects the earth rate", between(*LATITUDE_DEG))
+    longitude_deg: float = key(lab.LONGITUDE_DEG, "deg", "east longitude of the local origin: places "
+                               "the earth's field and geodetic anchors", between(*LONGITUDE_DEG))
+    height_m: float = key(lab.HEIGHT_M, "m", "WGS-84 ellipsoid height of the local origin (the floor, "
+                          "z = 0)", between(*ELLIPSOID_HEIGHT_M))
     local_gravity: float = key(lab.LOCAL_GRAVITY, "m/s^2", "local gravity magnitude (with centrifugal part)",
                                between(*GRAVITY_M_S2, "use the local gravity, about 9.78 to 9.83"))
 
@@ -85,14 +93,38 @@ class Area:
 
 @dataclass(frozen=True)
 class Anchor:
+    """An anchor placed in the area's local frame (x, y, optional z) or geodetically (lat_deg,
+    lon_deg, optional height_m; common.geodesy places it in the local frame): one or the other."""
+
     id: int = key(REQUIRED, "", "anchor id in the gateway reports", between(*ANCHOR_IDS))
-    x: float = key(REQUIRED, "m", "antenna position x")
-    y: float = key(REQUIRED, "m", "antenna position y")
+    x: float | None = key(None, "m", "antenna position x (local; or give lat_deg, lon_deg)",
+                          between(-MAX_COORD_M, MAX_COORD_M))
+    y: float | None = key(None, "m", "antenna position y (local)", between(-MAX_COORD_M, MAX_COORD_M))
     z: float | None = key(None, "m", "antenna height; none = the tag's height (a planar layout)",
                           between(-MAX_HEIGHT_M, MAX_HEIGHT_M))
+    lat_deg: float | None = key(None, "deg", "antenna latitude (WGS-84; instead of x, y)",
+                                between(*LATITUDE_DEG))
+    lon_deg: float | None = key(None, "deg", "antenna east longitude (with lat_deg)",
+                                between(*LONGITUDE_DEG))
+    height_m: float | None = key(None, "m", "antenna ellipsoid height (with lat_deg); none = the "
+                                 "tag's height (a planar layout)", between(*ELLIPSOID_HEIGHT_M))
     ppm: float = _ppm("crystal offset of this anchor's clock (times tau1, tau4)")
     range_bias_m: float = key(0.0, "m", "c_i of 001 eq. 13: this anchor's constant range bias",
                               between(*RANGE_BIAS_M))
+
+    def __post_init__(self):
+        local, geo = (self.x, self.y), (self.lat_deg, self.lon_deg)
+        if local == geo == (None, None):
+            raise Invalid("x", "and y, or lat_deg and lon_deg, must be given; place the anchor with one pair")
+        if local != (None, None) and geo != (None, None):
+            raise Invalid("lat_deg", "and lon_deg go without x and y; place the anchor with one pair")
+        for pair, names in ((local, ("x", "y")), (geo, ("lat_deg", "lon_deg"))):
+            if pair != (None, None) and None in pair:
+                raise Invalid(names[pair.index(None)], "is missing; give both coordinates of the pair")
+        if None not in local and self.height_m is not None:
+            raise Invalid("height_m", "goes with lat_deg and lon_deg; with x and y give z")
+        if None not in geo and self.z is not None:
+            raise Invalid("z", "goes with x and y; with lat_deg and lon_deg give height_m")
 
 
 @dataclass(frozen=True)
@@ -250,9 +282,6 @@ class Magnetometer:
         Check(lambda m: all(-2 <= v <= 2 for row in m for v in row) and _soft_iron_ok(m),
               "must be a matrix with elements from -2 to 2 and a determinant above 0.1",
               "write a near-identity matrix, e.g. [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"))
-    longitude_deg: float = key(lab.LONGITUDE_DEG, "deg", "east longitude of the site: with [site] "
-                               "latitude_deg it places the earth's field (IGRF-13)",
-                               between(-180, 180))
     year: float = key(lab.FIELD_EPOCH, "", "decimal year of the earth's field (IGRF-13 and its "
                       "predicted secular variation)", between(*geomagnetic.EPOCHS))
 
@@ -312,6 +341,9 @@ class Ranging:
     path_loss_exponent: float = key(2.0, "", "n of 003 eq. 1", between(1, 6))
     shadowing_db: float = key(2.0, "dB", "sigma of the log-normal shadowing of 003 eq. 1",
                           non_negative(hi=100))
+    radio_range_m: float | None = key(None, "m", "the gateway reports an exchange only when the "
+                                      "tag is this close to the anchor; none = unlimited",
+                                      positive(hi=MAX_COORD_M))
     multipath: Multipath = Multipath()
 
     def __post_init__(self):
@@ -441,8 +473,10 @@ class Scenario:
         if self.tag.id in ids:
             raise Invalid("[tag] id", f"{self.tag.id} is also an anchor id; give the tag its own id")
         for i, a in enumerate(self.anchors):
-            if not self.area.contains(a.x, a.y):
-                raise Invalid(f"[[anchors]] #{i + 1} x", f"({a.x:g}, {a.y:g}) m is outside the area; "
+            x, y, _ = self.anchor_position(a)
+            if not self.area.contains(x, y):
+                x, y = round(x, 3) + 0.0, round(y, 3) + 0.0  # as a message shows them (no -0)
+                raise Invalid(f"[[anchors]] #{i + 1} x", f"({x:g}, {y:g}) m is outside the area; "
                                                           "move the anchor or enlarge [area]")
         for i, (x, y) in enumerate(self.trajectory.waypoints):
             if not self.area.contains(x, y):
@@ -485,8 +519,19 @@ class Scenario:
     def slot_order(self) -> tuple[int, ...]:
         return self.ranging.slot_order or tuple(a.id for a in self.anchors)
 
-    def anchor_z(self, anchor: Anchor) -> float:
-        return self.tag.z if anchor.z is None else anchor.z
+    @property
+    def frame(self) -> LocalFrame:
+        """The area's local frame on the earth (common.geodesy)."""
+        return LocalFrame.of(self.site, self.area)
+
+    def anchor_position(self, anchor: Anchor) -> tuple[float, float, float]:
+        """The antenna's local (x, y, z), m: as given, or its geodetic position in the local
+        frame; no height given = the tag's height."""
+        if anchor.lat_deg is None:
+            return anchor.x, anchor.y, self.tag.z if anchor.z is None else anchor.z
+        height = self.site.height_m if anchor.height_m is None else anchor.height_m
+        x, y, z = (float(v) for v in self.frame.local(anchor.lat_deg, anchor.lon_deg, height))
+        return x, y, self.tag.z if anchor.height_m is None else z
 
     @property
     def vehicles(self) -> tuple[Vehicle, ...]:

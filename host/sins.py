@@ -45,10 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.common.earth import EARTH_RATE
-
-WGS84_A = 6378137.0  # m
-WGS84_E2 = 6.69437999014e-3
+from navtwin.common.earth import EARTH_RATE, WGS84_A, WGS84_E2
 
 
 def earth_radii(latitude_rad: float) -> tuple[float, float]:

@@ -240,4 +240,5 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
 
 
 def _anchors(scenario_toml: Path) -> dict:
-    return {a.id: (a.x, a.y) for a in load_scenario(scenario_toml).anchors}
+    sc = load_scenario(scenario_toml)
+    return {a.id: sc.anchor_position(a)[:2] for a in sc.anchors}

@@ -69,7 +69,7 @@ def position_bound(sc: Scenario, truth: dict, jerk_psd: float, p0_sigma) -> dict
     """``t`` (s, one per exchange) and ``rms``: sqrt(trace) of the bound's position block (m),
     the least RMS horizontal error the module docstring's estimator can have at t."""
     t, which = exchanges(sc, float(truth["t"][-1]))
-    anchors = np.array([(a.x, a.y, sc.anchor_z(a)) for a in sc.anchors])[which]
+    anchors = np.array([sc.anchor_position(a) for a in sc.anchors])[which]
     tag = np.column_stack((np.interp(t, truth["t"], truth["x"]), np.interp(t, truth["t"], truth["y"]),
                            np.full(len(t), sc.tag.z)))
     diff = tag - anchors

@@ -95,3 +95,17 @@ def test_a_bad_key_stops_navtwin_emulate_with_one_line(tmp_path):
     bad.write_text('base = "office"\n[magnetometer]\nenabled = true\nsoft_iron = [[1.0, 0.0, 0.0]]\n')
     one_line_error(navtwin("emulate", "--scenario", bad, "--link-dir", tmp_path / "l"),
                    "bad.toml: [magnetometer] soft_iron must be a list of 3 rows of 3 numbers")
+
+
+def test_the_field_is_the_sites():
+    """The magnetometer takes its position from [site] (latitude, longitude, height): at 003's
+    start the navigation-frame field is ppigrf's there (x east, y north, z up); a
+    [magnetometer] longitude_deg is refused (the key moved to [site])."""
+    from navtwin.emulator.magnetometer import earth_field_nav
+    sc = load_scenario("rssi-centroid")
+    assert (sc.site.latitude_deg, sc.site.longitude_deg, sc.site.height_m) == (32.0, 118.0, 0.0)
+    north, east, down = PPIGRF[(32.0, 118.0, 2020.0)]
+    field = earth_field_nav(sc.site, sc.area, sc.magnetometer)
+    assert [f * 1e3 for f in field] == pytest.approx([east, north, -down], abs=0.05)
+    with pytest.raises(ScenarioError, match=r"\[magnetometer\] has an unknown key 'longitude_deg'"):
+        parse_scenario(_office(enabled=True, longitude_deg=118.0), "x.toml")

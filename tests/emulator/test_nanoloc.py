@@ -214,3 +214,37 @@ def test_office_pure_wsn_error_is_of_000s_order(office):
         true = np.array([np.interp(t_mid, truth["t"], truth["x"]), np.interp(t_mid, truth["t"], truth["y"])])
         errors.append(np.linalg.norm(fix - true))
     assert np.mean(errors) == pytest.approx(0.64, rel=0.2)
+
+
+def test_the_gateway_reports_only_exchanges_within_the_radio_range(tmp_path):
+    """A tag driving away from anchor 1 and towards anchor 2 at 2 m/s: anchor 1's reports
+    stop, and anchor 2's start, where the tag crosses radio_range_m, to the 0.2 m it moves
+    per cycle; the reports within range are those of the same run without a range (the
+    range draws nothing and changes no other exchange); seq stays gapless."""
+    line = """
+duration_s = 30.0
+[area]
+size = [60.0, 4.0]
+[trajectory]
+waypoints = [[2.0, 1.8], [58.0, 1.8]]
+closed = false
+speed_m_s = 2.0
+accel_m_s2 = 1.0
+alignment_s = 0.5
+""" + anchors_toml([(1.0, 1.8), (59.0, 1.8)])
+    limited = variant(tmp_path, "office", line + "[ranging]\nradio_range_m = 25.0\n", "limited")
+    free = variant(tmp_path, "office", line, "free")
+    w, events = run(limited)
+    r = reports(events)
+    d = true_distances(w, limited, r)
+    step = limited.trajectory.speed_m_s * limited.ranging.cycle_ms / 1e3
+    assert d.max() <= 25.0 + 1e-3
+    one, two = r["anchor"] == 1, r["anchor"] == 2
+    assert 25.0 - step - 1e-3 < d[one][-1] and 25.0 - step - 1e-3 < d[two][0]
+    assert np.array_equal(r["seq"], np.arange(len(r["seq"])))
+    wf, ef = run(free)
+    rf = reports(ef)
+    near = true_distances(wf, free, rf) <= 25.0
+    assert near.sum() == len(r["seq"]) and 0 < near.sum() < len(near)
+    for k in ("t_us", "anchor", "status", "rssi", "tau"):
+        assert np.array_equal(r[k], rf[k][near])

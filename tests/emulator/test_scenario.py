@@ -76,6 +76,20 @@ def test_base_overrides_merge(tmp_path):
     assert sc.name == "variant"
 
 
+def test_a_geodetic_anchor_is_placed_by_the_local_frame(tmp_path):
+    """lat_deg, lon_deg (and height_m) place an anchor where common.geodesy puts that point
+    in the area's frame; without height_m it sits at the tag's height, as x, y anchors do."""
+    office = load_scenario("office")
+    lat, lon, h = (float(v) for v in office.frame.geodetic([2.0, 1.0, 2.5]))
+    sc = variant(tmp_path, "office", f"[[anchors]]\nid = 1\nlat_deg = {lat!r}\nlon_deg = {lon!r}\n"
+                                     f"[[anchors]]\nid = 2\nlat_deg = {lat!r}\nlon_deg = {lon!r}\n"
+                                     f"height_m = {h!r}\n[[anchors]]\nid = 3\nx = 2.0\ny = 1.0\n")
+    assert sc.anchor_position(sc.anchors[0]) == pytest.approx((2.0, 1.0, sc.tag.z), abs=1e-6)
+    assert sc.anchor_position(sc.anchors[1]) == pytest.approx((2.0, 1.0, 2.5), abs=1e-6)
+    assert sc.anchor_position(sc.anchors[2]) == (2.0, 1.0, sc.tag.z)
+    assert parse_scenario(tomllib.loads(sc.to_toml())) == sc  # written back as given
+
+
 def test_a_grade_is_picked_by_name_and_overridden_key_by_key(tmp_path):
     """[imu] grade picks the profile; a key set in [imu] replaces that field only."""
     from navtwin.emulator.imu_errors import GRADES
@@ -128,6 +142,16 @@ BAD = [
     ("[[anchors]]\nid = 1\nx = 2.0\ny = 1.0\n[[anchors]]\nid = 1\nx = 3.0\ny = 1.0\n",
      "[[anchors]] #2 id 1 is used by another anchor"),
     ("[tag]\nid = 1\n", "[tag] id 1 is also an anchor id"),
+    ("[[anchors]]\nid = 1\ny = 1.0\n", "[[anchors]] #1 x is missing; give both coordinates"),
+    ("[[anchors]]\nid = 1\nlat_deg = 34.316\n", "[[anchors]] #1 lon_deg is missing; give both"),
+    ("[[anchors]]\nid = 1\nx = 2.0\nlat_deg = 34.316\n", "[[anchors]] #1 lat_deg and lon_deg go without x and y"),
+    ("[[anchors]]\nid = 1\n", "[[anchors]] #1 x and y, or lat_deg and lon_deg, must be given; place"),
+    ("[[anchors]]\nid = 1\nx = 2.0\ny = 1.0\nlat_deg = 34.316\nlon_deg = 108.9\n",
+     "[[anchors]] #1 lat_deg and lon_deg go without x and y; place the anchor with one pair"),
+    ("[[anchors]]\nid = 1\nx = 2.0\ny = 1.0\nheight_m = 3.0\n", "[[anchors]] #1 height_m goes with lat_deg"),
+    ("[[anchors]]\nid = 1\nlat_deg = 34.316\nlon_deg = 108.9\nz = 3.0\n", "[[anchors]] #1 z goes with x and y"),
+    ("[[anchors]]\nid = 1\nlat_deg = 34.4\nlon_deg = 108.9\n", "[[anchors]] #1 x (0, 9318.02) m is outside the area"),
+    ("[site]\nlongitude_deg = 190\n", "[site] longitude_deg must be in [-180, 180] (got 190 deg)"),
     ("[xbee.router]\nNP = 100\n", "[xbee.router] NP must be in [1, 84] (got 100 bytes)"),
     ("[xbee.router]\nBD = 3\n", "[xbee.router] BD 9600 bit/s differs from the board's 115200"),
     ("[ranging]\nslot_ms = 5.0\n", "[ranging] slot_ms 5 ms is too short"),

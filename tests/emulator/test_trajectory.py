@@ -78,7 +78,7 @@ def test_ends_at_rest_after_the_laps(lab):
         assert np.all(np.hypot(tr["vx"][end], tr["vy"][end]) == 0)
     # the distance driven is the laps' length (numerical integration of the speed)
     driven = cumulative_trapezoid(np.hypot(tr["vx"], tr["vy"]), dx=1e-3)[-1]
-    expected = traj.path.length * sc.trajectory.loops if end.any() else traj.speed.evaluate(tr["t"][-1] / 1e9)[0]
+    expected = traj.path.length * sc.trajectory.loops if end.any() else traj.speed.evaluate(tr["t"][-1:] / 1e9)[0][0]
     assert driven == pytest.approx(expected, abs=1e-3)
 
 

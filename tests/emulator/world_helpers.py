@@ -68,6 +68,6 @@ def true_distances(world, sc, rep: dict) -> np.ndarray:
     true_ns = rep["t_us"] * 1000 / (1 + sc.clocks.network_ppm * 1e-6)
     truth = world.truth(0, world.duration_ns)
     pos = np.column_stack([np.interp(true_ns, truth["t"], truth[c]) for c in "xyz"])
-    anchors = {a.id: (a.x, a.y, sc.anchor_z(a)) for a in sc.anchors}
+    anchors = {a.id: sc.anchor_position(a) for a in sc.anchors}
     apos = np.array([anchors[a] for a in rep["anchor"]])
     return np.linalg.norm(pos - apos, axis=1)

@@ -63,7 +63,7 @@ def host_config(sc) -> EstimatorConfig:
     the heading of the tape's first leg. Not the anchors' range biases (uncalibrated)."""
     (x0, y0), (x1, y1) = sc.trajectory.waypoints[:2]
     return EstimatorConfig(
-        anchors={a.id: (a.x, a.y, sc.anchor_z(a)) for a in sc.anchors}, tag_height=sc.tag.z,
+        anchors={a.id: sc.anchor_position(a) for a in sc.anchors}, tag_height=sc.tag.z,
         latitude_deg=sc.site.latitude_deg, local_gravity=sc.site.local_gravity, x_azimuth_deg=sc.area.x_azimuth_deg,
         start=(x0, y0), heading_deg=math.degrees(math.atan2(y1 - y0, x1 - x0)), alignment_s=sc.trajectory.alignment_s)
 
