@@ -17,9 +17,10 @@ from navtwin.protocols.plugins import Registry
 
 from .base import Estimate, NoSettings, Track
 
-#: What runs when no filters are named: 000's tracks. 001's and 003's error-state tracks (lc,
-#: ..., centroid, wcl) run when named (``--filters``, ``[filters] enabled``): together they add about 0.6 of the
-#: five's replay time (docs/lab.md, "Replay with all eight tracks").
+#: What runs when no filters are named: 000's tracks. 001's error-state tracks (lc, ...) run
+#: when named (``--filters``, ``[filters] enabled``): together they add about 0.6 of the
+#: five's replay time (docs/lab.md, "Replay with all eight tracks"); 003's (centroid, wcl)
+#: likewise (not yet in that measurement).
 DEFAULT = ("sins", "wsn", "kf", "ekf", "ukf")
 GROUP = "navtwin.tracks"
 
