@@ -7,12 +7,13 @@ host.rssi.distance, with ``rssi_1m_dbm`` and ``path_loss_exponent``); the three 
 anchors' distances, made horizontal with the tag height (r_h^2 = d^2 - dz^2), give the fix:
 the centroid of 003's three circle points A, B, C (eqs. 9-10, ``centroid``) or their
 weighted centroid (eqs. 11-12, ``wcl``; host.centroid). The fix aids the SINS as 001's lc
-does (host.tracks.lc: z = p_SINS - p_fix, H = [I, lead I, 0]), R = fix_sigma_m^2 I: 003
-gives its fix no covariance. A cycle with fewer than three RSSI distances, or whose fix is
+does (host.tracks.lc: z = p_SINS - p_fix, H = [I, lead I, 0]; in place of 003 eqs. 17-20's
+range differences of both positions, their linear map), R = fix_sigma_m^2 I: 003 gives its
+fix no covariance. A cycle with fewer than three RSSI distances, or whose fix is
 refused, gives no update (counted by reason).
 
-Not here yet (issue 20 item 4's rest): 003's geodetic error state and the magnetometer
-heading (eqs. 13-24), and the adaptive parameters (eqs. 3-8, host.rssi) in the track: they
+Not here yet (issue 20 item 4's rest): 003's 15-state geodetic error state and the
+magnetometer heading (eqs. 13-16, 21-24), and the adaptive parameters (eqs. 3-8, host.rssi) in the track: they
 need the anchors' readings of each other, which the gateway does not report.
 """
 from __future__ import annotations
