@@ -1,0 +1,89 @@
+"""Paper 003's tracks (docs/filters.md, "003's tracks"): centroid and wcl take the RSSI of
+each cycle's exchanges and aid the SINS; on synthetic data with RSSI shadowing both bound
+the SINS's drift, and the weighted centroid's error is no larger than the centroid's."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import t as t_dist
+
+from navtwin.host import rssi
+from navtwin.host.estimator import Estimator
+from navtwin.host.measurements import Exchange, ImuSample
+from navtwin.host.settings import EstimatorConfig
+from navtwin.host.tracks import BUILT_IN, get
+from navtwin.host.tracks.centroid import CentroidSettings, CentroidTrack, WclTrack
+from navtwin.host.tracks.lc import LcTrack
+
+from ...helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS
+from ..navsynth import ellipse, exchanges, noisy_imu, perfect_imu
+
+ALIGN_S, DURATION_S = 5.0, 60.0
+LAMBDA, N, SHADOWING_DB = -45.0, 2.0, 2.0
+TRACKS = ("sins", "centroid", "wcl")
+
+
+def run(seed: int, tracks=TRACKS, shadowing_db=SHADOWING_DB):
+    """One run on an ellipse in the office: a perfect IMU at rest, then white noise and an
+    accelerometer bias that make the pure SINS drift; each exchange's RSSI by 003 eq. 2 with
+    shadowing N(0, shadowing_db^2), rounded to the report's whole dBm. Returns each track's
+    horizontal errors (m) once a second while moving."""
+    rng = np.random.default_rng(seed)
+    traj = lambda t: ellipse(t, omega=0.1, t_start=ALIGN_S + 1.0, ramp=4.0)  # noqa: E731
+    t = np.arange(0.0, DURATION_S, 0.01)
+    tr = traj(t)
+    gyro, accel = perfect_imu(tr)
+    moving = t >= ALIGN_S
+    ng, na = noisy_imu(gyro, accel, rng, accel_bias=(0.02, -0.015, 0.0))
+    gyro[moving], accel[moving] = ng[moving], na[moving]
+    ex = exchanges(traj, OFFICE_ANCHORS, duration=DURATION_S, sigma=0.0, rng=rng, t0=0.003)
+    settings = CentroidSettings(rssi_1m_dbm=LAMBDA, path_loss_exponent=N)
+    cfg = EstimatorConfig(anchors=OFFICE_ANCHORS, latitude_deg=LATITUDE_DEG, local_gravity=GRAVITY,
+                          start=tuple(tr.p[0]), heading_deg=0.0, alignment_s=ALIGN_S,
+                          wsn_method="toa", filters=tracks,
+                          settings={"centroid": settings, "wcl": settings})
+    est = Estimator(cfg)
+    records = [(ti, 0, ImuSample(ti, g, f)) for ti, g, f in zip(t, gyro, accel)]
+    for te, a, d in ex:
+        level = np.rint(rssi.rssi(d, LAMBDA, N) + rng.normal(0.0, shadowing_db))
+        records.append((te, 1, Exchange(te, a, 30.0, int(level))))  # the TOF distance unused
+    out = []
+    for _, _, rec in sorted(records, key=lambda r: r[:2]):
+        out += est.feed(rec)
+    errors = {name: [] for name in tracks}
+    for e in out:
+        if e.t < ALIGN_S + 1.0 or round(e.t * 10) % 10:
+            continue
+        k = int(round(e.t * 100))
+        errors[e.filter].append(np.hypot(e.x - tr.p[k, 0], e.y - tr.p[k, 1]))
+    return {name: np.array(v) for name, v in errors.items()}, est
+
+
+def test_registered_after_001s_and_share_lc():
+    assert BUILT_IN[-2:] == ("centroid", "wcl")
+    assert get("centroid") is CentroidTrack and get("wcl") is WclTrack
+    assert issubclass(CentroidTrack, LcTrack) and issubclass(WclTrack, CentroidTrack)
+
+
+def test_exact_rssi_fixes_hold_the_track_on_the_truth():
+    errors, est = run(0, ("centroid", "wcl"), shadowing_db=0.0)
+    for name in ("centroid", "wcl"):
+        track = next(tr for tr in est.tracks if tr.name == name)
+        assert track.updates["fix"] > 400  # about one per cycle, 10 Hz
+        # the whole-dBm rounding alone: a fraction of a metre
+        assert errors[name].mean() < 0.6, (name, errors[name].mean())
+
+
+@pytest.mark.slow
+def test_both_bound_the_sins_drift_and_wcl_is_no_worse_than_centroid():
+    means = {name: [] for name in TRACKS}
+    for seed in range(6):
+        errors, _ = run(seed)
+        for name in TRACKS:
+            means[name].append(errors[name].mean())
+            if name != "sins":
+                assert errors[name][-10:].max() < 4.0, (seed, name)  # bounded to the end
+        assert errors["sins"][-1] > 15.0, seed  # the pure SINS runs off
+    m = {name: np.array(v) for name, v in means.items()}
+    diff = m["wcl"] - m["centroid"]  # paired by seed: the upper end of its 95 % interval
+    assert diff.mean() + t_dist.ppf(0.975, len(diff) - 1) * diff.std(ddof=1) / np.sqrt(len(diff)) < 0.0, m
