@@ -98,6 +98,22 @@ def noisy_imu(gyro, accel, rng: np.random.Generator, *, dt=0.01, arw_deg_rt_hr=4
             accel + np.asarray(accel_bias) + rng.normal(0, a_sigma, accel.shape))
 
 
+def drive_after_rest(rng: np.random.Generator, *, align_s: float, duration_s: float, **noise):
+    """A run for a fusion track: at rest for *align_s* with a perfect IMU (so the alignment
+    is exact), then an ellipse in the office with the IMU of :func:`noisy_imu` (*noise*: its
+    keywords). Returns (trajectory function, times, truth, gyro, accel) at 100 Hz."""
+    def traj(t):
+        return ellipse(t, omega=0.1, t_start=align_s + 1.0, ramp=4.0)
+
+    t = np.arange(0.0, duration_s, 0.01)
+    tr = traj(t)
+    gyro, accel = perfect_imu(tr)
+    moving = t >= align_s
+    ng, na = noisy_imu(gyro, accel, rng, **noise)
+    gyro[moving], accel[moving] = ng[moving], na[moving]
+    return traj, t, tr, gyro, accel
+
+
 def exchanges(traj_fn, anchors, *, duration, sigma, rng: np.random.Generator, cycle=0.1, slot=0.025,
               tag_height=0.0, t0=0.0):
     """TDMA range exchanges: list of (t, anchor, distance); anchor k's slot at cycle start +

@@ -20,7 +20,7 @@ from navtwin.host.tracks.lc import LcTrack
 from navtwin.host.tracks.tc import TcSettings, TcTrack
 
 from ...helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS, office_config
-from ..navsynth import ellipse, exchanges, noisy_imu, perfect_imu
+from ..navsynth import drive_after_rest, exchanges
 
 skfuzzy = pytest.importorskip("skfuzzy")
 
@@ -139,14 +139,9 @@ def model_run(track: str, seed: int, lone_after: float | None = None,
     from ``lone_after`` s on
     anchor 1's ranges alone. Returns the estimates' (t, error of (x, y, vx, vy), cov)."""
     rng = np.random.default_rng(seed)
-    traj = lambda t: ellipse(t, omega=0.1, t_start=ALIGN_S + 1.0, ramp=4.0)  # noqa: E731
-    t = np.arange(0.0, DURATION_S, 0.01)
-    tr = traj(t)
-    gyro, accel = perfect_imu(tr)
-    moving = t >= ALIGN_S
-    ng, na = noisy_imu(gyro, accel, rng, arw_deg_rt_hr=NOISE["gyro_noise_deg_rt_hr"],
-                       vrw_m_s_rt_hr=NOISE["accel_noise_m_s_rt_hr"])
-    gyro[moving], accel[moving] = ng[moving], na[moving]
+    traj, t, tr, gyro, accel = drive_after_rest(rng, align_s=ALIGN_S, duration_s=DURATION_S,
+                                                arw_deg_rt_hr=NOISE["gyro_noise_deg_rt_hr"],
+                                                vrw_m_s_rt_hr=NOISE["accel_noise_m_s_rt_hr"])
     sp = 0.1
     start = tr.p[0] + rng.normal(0.0, sp, 2)
     ex = exchanges(traj, OFFICE_ANCHORS, duration=DURATION_S, sigma=RANGE_SIGMA, rng=rng, t0=0.003)

@@ -16,7 +16,7 @@ from navtwin.host.tracks.centroid import CentroidSettings, CentroidTrack, WclTra
 from navtwin.host.tracks.lc import LcTrack
 
 from ...helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS
-from ..navsynth import ellipse, exchanges, noisy_imu, perfect_imu
+from ..navsynth import drive_after_rest, exchanges
 
 ALIGN_S, DURATION_S = 5.0, 60.0
 LAMBDA, N, SHADOWING_DB = -45.0, 2.0, 2.0
@@ -29,13 +29,8 @@ def run(seed: int, tracks=TRACKS, shadowing_db=SHADOWING_DB):
     shadowing N(0, shadowing_db^2), rounded to the report's whole dBm. Returns each track's
     horizontal errors (m) once a second while moving."""
     rng = np.random.default_rng(seed)
-    traj = lambda t: ellipse(t, omega=0.1, t_start=ALIGN_S + 1.0, ramp=4.0)  # noqa: E731
-    t = np.arange(0.0, DURATION_S, 0.01)
-    tr = traj(t)
-    gyro, accel = perfect_imu(tr)
-    moving = t >= ALIGN_S
-    ng, na = noisy_imu(gyro, accel, rng, accel_bias=(0.02, -0.015, 0.0))
-    gyro[moving], accel[moving] = ng[moving], na[moving]
+    traj, t, tr, gyro, accel = drive_after_rest(rng, align_s=ALIGN_S, duration_s=DURATION_S,
+                                                accel_bias=(0.02, -0.015, 0.0))
     ex = exchanges(traj, OFFICE_ANCHORS, duration=DURATION_S, sigma=0.0, rng=rng, t0=0.003)
     settings = CentroidSettings(rssi_1m_dbm=LAMBDA, path_loss_exponent=N)
     cfg = EstimatorConfig(anchors=OFFICE_ANCHORS, latitude_deg=LATITUDE_DEG, local_gravity=GRAVITY,
