@@ -415,16 +415,21 @@ def _ci(v: tuple[float, float], digits: int = 3) -> str:
 
 
 def table(summary: dict) -> str:
-    """The summary as a text table: figures with 95 % half-widths, then the pairs."""
-    head = f"{'filter':<8}{'seeds':>6}{'failed':>7}" + "".join(f"{h:>19}" for h in FIGURES.values())
-    lines = [head]
-    for f, s in summary["filters"].items():
-        lines.append(f"{f:<8}{s['seeds']:>6}{s['failed']:>7}" +
-                     "".join(f"{_ci(s[m]):>19}" for m in FIGURES))
+    """The summary as a text table: figures with 95 % half-widths, then the pairs; columns as
+    wide as their widest cell, two spaces apart (a NEES in the thousands stays apart from
+    the RMSE before it)."""
+    rows = [["filter", "seeds", "failed", *FIGURES.values()]]
+    rows += [[f, str(s["seeds"]), str(s["failed"]), *(_ci(s[m]) for m in FIGURES)]
+             for f, s in summary["filters"].items()]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w)
+                       for i, (c, w) in enumerate(zip(r, widths))).rstrip() for r in rows]
     lines += ["", "paired difference of mean error (m, a - b, 95 % CI):"]
-    for p in summary["pairs"]:
-        verdict = f"{p['better']} better" if p["better"] else "not decided"
-        lines.append(f"  {p['a']:>5} - {p['b']:<5} {_ci((p['diff'], p['half']), 4):>20}  {verdict}")
+    pairs = [(f"{p['a']} - {p['b']}", _ci((p["diff"], p["half"]), 4),
+              f"{p['better']} better" if p["better"] else "not decided") for p in summary["pairs"]]
+    name_w = max((len(n) for n, _, _ in pairs), default=0)
+    ci_w = max((len(c) for _, c, _ in pairs), default=0)
+    lines += [f"  {n:<{name_w}}  {c:>{ci_w}}  {v}" for n, c, v in pairs]
     lines.append(f"ranking: {summary['ranking']}")
     return "\n".join(lines)
 

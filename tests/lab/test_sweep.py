@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -175,6 +176,21 @@ def test_the_cli_prints_json_and_writes_the_results_block(tmp_path, capsys):
                            "`office`, seeds 1..2, first 2 s")
     assert "\n| filter | seeds |" in text
     assert text.endswith("<!-- /results:office -->\n\nafter\n") and "old" not in text
+
+
+def test_the_text_table_keeps_every_column_apart_however_wide_a_figure():
+    """A NEES in the tens of thousands (a track far off its covariance) does not run into
+    the RMSE before it: every row splits into the header's columns at two spaces."""
+    rows = [{"scenario": "s", "seed": seed, "filter": f, "status": "ok", "error": "",
+             **dict.fromkeys(sweep.METRICS, 1.0), "mean": m, "max": 2 * m, "rms": m,
+             "nees_mean": 51831.6 + 2000 * seed}
+            for seed in (1, 2) for f, m in (("sins", 737.8 + seed), ("centroid", 96.4))]
+    text = sweep.table(sweep.summarise(rows, ("sins", "centroid")))
+    table = [[c.strip() for c in re.split(r"\s{2,}", line.strip())]
+             for line in text.split("\n\n")[0].splitlines()]
+    assert table[0] == ["filter", "seeds", "failed", "mean m", "max m", "RMSE m", "NEES"]
+    assert [len(r) for r in table[1:]] == [7, 7], text
+    assert table[1][6].startswith("54831.600 ± 12706") and table[1][5].startswith("739.3"), text
 
 
 def test_the_interval_is_students_t_on_the_per_seed_figures():
