@@ -151,9 +151,10 @@ def table(errors: dict[str, dict[str, float]], scenario: str | None = "office") 
     """A text table of the errors beside the paper's figures for *scenario* (PAPER_FIGURES)."""
     pub = PAPER_FIGURES.get(scenario)
     head = f"paper {pub['paper']} mean (max)" if pub else ""
-    lines = [f"{'filter':<7}{'mean m':>9}{'max m':>9}{'rms m':>9}{'n':>7}   {head}".rstrip()]
+    w = max([len("filter"), *map(len, errors)]) + 1  # the track names' column (centroid: 8)
+    lines = [f"{'filter':<{w}}{'mean m':>9}{'max m':>9}{'rms m':>9}{'n':>7}   {head}".rstrip()]
     for name, e in errors.items():
-        lines.append(f"{name:<7}{e['mean']:9.3f}{e['max']:9.3f}{e['rms']:9.3f}{e['n']:7d}   "
+        lines.append(f"{name:<{w}}{e['mean']:9.3f}{e['max']:9.3f}{e['rms']:9.3f}{e['n']:7d}   "
                      f"{paper_cell(scenario, name)}".rstrip())
     return "\n".join(lines)
 
