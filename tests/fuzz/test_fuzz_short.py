@@ -37,10 +37,13 @@ def _atheris() -> bool:
 @pytest.mark.skipif(not _atheris(), reason="atheris is not installed (pip install -e '.[fuzz]')")
 @pytest.mark.parametrize("name", TARGETS)
 def test_short_fuzz_run_finds_no_broken_contract(name, tmp_path):
-    # a fixed libFuzzer seed: the same inputs on every run, so a failure here reproduces
-    p = subprocess.run([sys.executable, "-m", "tests.fuzz", name, "--runs", str(SHORT_RUNS),
-                        "--artifacts", str(tmp_path), "-seed=1"], cwd=ROOT, capture_output=True,
-                       text=True, timeout=120)
+    # a fixed libFuzzer seed: the same inputs on every run, so a failure here reproduces.
+    # Started by a shell that forks it: a process exec'd straight from this one inherits this
+    # worker's peak RSS as its own (Linux keeps the old mm's high-water mark across exec), and
+    # libFuzzer's rss limit (2 GB) then fails a target for the memory of the tests before it
+    p = subprocess.run(["sh", "-c", '"$@"; exit $?', "sh", sys.executable, "-m", "tests.fuzz",
+                        name, "--runs", str(SHORT_RUNS), "--artifacts", str(tmp_path), "-seed=1"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=120)
     crashes = [f.read_bytes().hex() for f in sorted(tmp_path.glob(f"{name}-crash-*"))]
     assert p.returncode == 0 and not crashes, f"{p.stderr[-3000:]}\ncrash input (hex): {crashes}"
     assert f"Done {SHORT_RUNS} runs" in p.stderr
