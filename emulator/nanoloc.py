@@ -27,6 +27,15 @@ clock terms of wire-formats.md section 3: (1 + (e_A + e_T)/2) on the time of fli
 keeps c (e_A - e_T) P_T / 2. The taus are rounded to whole picoseconds. The emulator never
 computes the distance itself.
 
+Anchor-to-anchor exchanges. With ``anchor_exchange_every_cycles`` = K > 0, in cycles 0, K,
+2K, ... the anchor in slot i ranges, in place of the tag, the anchor in slot
+(i + 1 + s mod (m - 1)) mod m (s = k // K; m anchors), so m - 1 such cycles cover every
+ordered pair. The
+exchange is the same physics with the other anchor's position and crystal in the tag's
+place; its report carries that anchor's id in the tag field and its RSSI is what the ranging
+anchor hears of it: 003's eqs. 3-4 fit each anchor's path-loss parameters to these readings.
+The draws are the anchor's per-cycle ones as for the tag, so these exchanges move no other draw.
+
 An exchange times out (status 0x40, zero taus, RSSI -128 dBm) inside an ``anchor_outage``
 fault or at random with probability timeout_prob; the anchor reports it timeout_ms after it
 started. An exchange whose anchor is farther from the tag than ``radio_range_m`` (when set)
@@ -107,6 +116,8 @@ class NanolocNetwork:
         self.r = sc.ranging
         self.e_t = tag.ppm * 1e-6
         self.tag = tag.id
+        m, every = len(self.anchors), sc.ranging.anchor_exchange_every_cycles
+        self.anchor_every = every if m > 1 else 0  # a lone anchor has no one to range
         self.trajectory = trajectory
         self.cycle_us = sc.ranging.cycle_ms * 1e3
         self.latency_ns = round(sc.gateway.latency_us * 1e3)
@@ -117,7 +128,7 @@ class NanolocNetwork:
     def exchanges(self, lo_ns: int, hi_ns: int) -> dict:
         """The exchanges starting in [lo_ns, hi_ns), in start order: anchor, start, t_us,
         status, rssi, taus (ps) and when the gateway has the result."""
-        r, e_t = self.r, self.e_t
+        r = self.r
         runs = [a.draw(lo_ns, hi_ns) for a in self.anchors]
         idx = np.concatenate([np.full(len(k), i) for i, (k, _) in enumerate(runs)])
         k = np.concatenate([k for k, _ in runs])
@@ -125,6 +136,14 @@ class NanolocNetwork:
         t0 = np.concatenate([a.clock.tick(k) for a, (k, _) in zip(self.anchors, runs)])
         m = len(k)
         e_a = np.array([a.e for a in self.anchors])[idx]
+        # the far end of each exchange: the tag, or another anchor (module doc)
+        peer = np.full(m, -1)
+        if self.anchor_every:
+            n = len(self.anchors)
+            among = k % self.anchor_every == 0
+            peer[among] = (idx[among] + 1 + (k[among] // self.anchor_every) % (n - 1)) % n
+        peered = peer >= 0
+        e_t = np.where(peered, np.array([a.e for a in self.anchors])[peer], self.e_t)
         p_t = r.tag_reply_us * 1e-6 / (1 + e_t) + r.reply_jitter_ns * 1e-9 * z[:, 0]
         p_a = r.anchor_reply_us * 1e-6 / (1 + e_a) + r.reply_jitter_ns * 1e-9 * z[:, 1]
         gap = r.leg_gap_us * 1e-6 / (1 + e_t)
@@ -133,6 +152,8 @@ class NanolocNetwork:
         when = t0[:, None] + np.rint(offsets * 1e9).astype(np.int64)
         where = np.array([a.position for a in self.anchors])[idx]
         tag = self.trajectory.position(when.ravel()).reshape(m, 4, 3)
+        if peered.any():
+            tag[peered] = np.array([a.position for a in self.anchors])[peer[peered], None, :]
         d = np.linalg.norm(tag - where[:, None, :], axis=2)
         tof = d / SPEED_OF_LIGHT
         effect = ExchangeEffects(z[:, 7] < r.timeout_prob, np.zeros(m), np.zeros(m), z[:, 8],
@@ -178,6 +199,7 @@ class NanolocNetwork:
         return {
             "marks": marks,
             "anchor": np.array([a.id for a in self.anchors])[idx][order],
+            "tag": np.where(peered, np.array([a.id for a in self.anchors])[peer], self.tag)[order],
             "start_ns": t0[order],
             "t_us": t_us.astype(np.int64)[order],
             "status": np.select([timeout, value_error], [STATUS_TIMEOUT, STATUS_VALUE_ERROR],
@@ -196,9 +218,8 @@ class NanolocNetwork:
             self.busy_until = int(end[-1])
         seq = self.seq
         self.seq += len(start)
-        reports = [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=self.tag, status=st, rssi=rs,
-                                tau=tau)
-                   for n, (t_us, a, st, rs, tau) in enumerate(zip(
-                       x["t_us"].tolist(), x["anchor"].tolist(), x["status"].tolist(),
-                       x["rssi"].tolist(), x["tau"].tolist()))]
+        reports = [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=tag, status=st, rssi=rs, tau=tau)
+                   for n, (t_us, a, tag, st, rs, tau) in enumerate(zip(
+                       x["t_us"].tolist(), x["anchor"].tolist(), x["tag"].tolist(),
+                       x["status"].tolist(), x["rssi"].tolist(), x["tau"].tolist()))]
         return start, reports, x["marks"]

@@ -344,6 +344,11 @@ class Ranging:
     radio_range_m: float | None = key(None, "m", "the gateway reports an exchange only when the "
                                       "tag is this close to the anchor; none = unlimited",
                                       positive(hi=MAX_COORD_M))
+    anchor_exchange_every_cycles: int = key(0, "", "every Nth cycle (the first, N + 1st, "
+                                            "...) the anchors range one another instead of the "
+                                            "tag, each the next in slot order in turn (003 eqs. "
+                                            "3-4's readings; reported with the other anchor's id "
+                                            "as the tag); 0 = never", between(0, 1_000_000))
     multipath: Multipath = Multipath()
 
     def __post_init__(self):

@@ -54,7 +54,7 @@ from dataclasses import replace
 from . import tracks
 from .filters import ConstantAcceleration
 from .inertial import Inertial
-from .measurements import (Exchange, Fix, FixRefused, ImuSample, MagSample, Motion, Range, Restart,
+from .measurements import (AnchorExchange, Exchange, Fix, FixRefused, ImuSample, MagSample, Motion, Range, Restart,
                            Tdoa)
 from .ranging import Ranging
 from .settings import EstimatorConfig
@@ -66,7 +66,7 @@ __all__ = ["DEVICES", "Estimate", "Estimator"]
 
 DEVICES = ("imu", "anchors")  # what can restart (a Restart record)
 #: records a lab sends whether or not an enabled track uses them (an optional sensor)
-IGNORED_UNTAKEN = (MagSample,)
+IGNORED_UNTAKEN = (MagSample, AnchorExchange)
 
 
 class Estimator:

@@ -60,6 +60,19 @@ class Exchange:
 
 
 @dataclass(frozen=True, slots=True)
+class AnchorExchange:
+    """An exchange between two anchors: ``anchor`` ranged ``other`` (the report's tag field
+    holds an anchor's id) and heard it at ``rssi``; 003 eqs. 3-4 fit each anchor's path-loss
+    parameters to these readings. The network's, so every vehicle's estimator gets it."""
+    t: float
+    anchor: int
+    other: int
+    distance: float | None
+    rssi: int = 0
+    status: int = 0x0F
+
+
+@dataclass(frozen=True, slots=True)
 class MagSample:
     t: float
     field: Any  # 3 uT, body axes

@@ -61,7 +61,7 @@ from navtwin.protocols.stream import DecodeError, Frame
 from .clock import DeviceClock, Unwrapper
 from .config import HostConfig
 from .estimator import Estimator
-from .measurements import Exchange, ImuSample, MagSample, Restart
+from .measurements import AnchorExchange, Exchange, ImuSample, MagSample, Restart
 
 DB_PERIOD_S = 5.0  # AT query period, in arrival time
 #: asked every DB_PERIOD_S: link quality, and the coordinator's API mode (another client's
@@ -324,8 +324,10 @@ class Pipeline:
     def _range(self, ev: Frame, a: float, out: list) -> None:
         f = ev.fields
         self.counts["reports"] += 1
+        # an anchor's id in the tag field: two anchors ranged each other, for every vehicle
+        among = f["tag"] in self.config.anchors and f["tag"] not in self._by_tag
         v = self._by_tag.get(f["tag"], None if self._by_tag else self.vehicles[0])
-        if v is None:
+        if v is None and not among:
             self.counts["reports_other_tag"] += 1
             return
         _, step = self._report_seq.unwrap(f["seq"], a)
@@ -343,11 +345,15 @@ class Pipeline:
             self.counts["reports_unknown_anchor"] += 1
             return
         status = f["status"]
-        if nanoloc.is_complete(status):
-            distance = nanoloc.distance(*f["tau"])
+        distance = nanoloc.distance(*f["tau"]) if nanoloc.is_complete(status) else None
+        if among:
+            self.counts["anchor_exchanges"] += 1
+            for each in self.vehicles:
+                self._schedule(each, AnchorExchange(t, f["anchor"], f["tag"], distance, f["rssi"], status), out)
+            return
+        if distance is not None:
             self.counts["ranges"] += 1
         else:
-            distance = None
             self.counts["timeouts" if status & nanoloc.STATUS_TIMEOUT else "range_errors"] += 1
         self._schedule(v, Exchange(t, f["anchor"], distance, f["rssi"], status), out)
 

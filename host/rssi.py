@@ -83,3 +83,35 @@ def adaptive_parameters(lam_i, n_i, tag_rssi) -> tuple[float, float]:
                          "of at least two anchors")
     w = (1.0 - e) / (m - 1)
     return float(w.dot(lam_i)), float(w.dot(n_i))
+
+
+class AnchorReadings:
+    """What each anchor hears of the others (host.measurements.AnchorExchange), averaged per
+    ordered pair in dBm: shadowing is normal in dB, so the mean converges on eq. 2's value and
+    eqs. 3-4 fitted to it on the anchor's own (lambda_i, n_i). ``ids`` fixes the row order."""
+
+    def __init__(self, ids) -> None:
+        self.ids = tuple(ids)
+        self._row = {a: i for i, a in enumerate(self.ids)}
+        m = len(self.ids)
+        self.sum = np.zeros((m, m))
+        self.count = np.zeros((m, m), dtype=np.int64)
+
+    def add(self, anchor: int, other: int, rssi_dbm: float) -> None:
+        """One reading; a pair with an unknown anchor is ignored (not of this layout)."""
+        i, j = self._row.get(anchor), self._row.get(other)
+        if i is not None and j is not None and i != j:
+            self.sum[i, j] += rssi_dbm
+            self.count[i, j] += 1
+
+    def heard(self) -> np.ndarray:
+        """(m, m) mean readings, NaN where a pair has none."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.count > 0, self.sum / np.maximum(self.count, 1), np.nan)
+
+    def parameters(self, positions) -> tuple[np.ndarray, np.ndarray] | None:
+        """Each anchor's (lambda_i, n_i) (eqs. 3-4) from the mean readings, or None while an
+        anchor has heard fewer than two others."""
+        if np.any((self.count > 0).sum(axis=1) < 2):
+            return None
+        return anchor_parameters(positions, self.heard())

@@ -248,3 +248,36 @@ alignment_s = 0.5
     assert near.sum() == len(r["seq"]) and 0 < near.sum() < len(near)
     for k in ("t_us", "anchor", "status", "rssi", "tau"):
         assert np.array_equal(r[k], rf[k][near])
+
+
+def test_anchors_range_one_another_every_nth_cycle(tmp_path):
+    """anchor_exchange_every_cycles = K: in cycles 0, K, 2K, ... each anchor ranges the next in
+    slot order in turn (every ordered pair within m - 1 such cycles), its report naming the other
+    anchor as the tag, the distance that pair's within the modelled noise and the RSSI eq. 1's;
+    every other report is the same run's without them, byte for byte (they move no draw)."""
+    every = 3
+    peered = variant(tmp_path, "office", f"duration_s = 6.0\n[ranging]\nanchor_exchange_every_cycles = {every}\n",
+                     "peered")
+    plain = variant(tmp_path, "office", "duration_s = 6.0\n", "plain")
+    r = reports(run(peered)[1])
+    rp = reports(run(plain)[1])
+    ids = [a.id for a in peered.anchors]
+    cycle = (r["t_us"] - 5000) // 100_000
+    among = cycle % every == 0
+    assert np.array_equal(among, np.isin(r["tag"], ids))
+    assert np.all(r["tag"][~among] == peered.tag.id)
+    slot = np.array([ids.index(a) for a in r["anchor"]])
+    expected = np.array(ids)[(slot + 1 + (cycle // every) % 3) % 4]
+    assert np.array_equal(r["tag"][among], expected[among])
+    assert {(a, t) for a, t in zip(r["anchor"][among], r["tag"][among])} == \
+        {(a, b) for a in ids for b in ids if a != b}
+    pos = {a.id: np.array(peered.anchor_position(a)) for a in peered.anchors}
+    true = np.array([np.linalg.norm(pos[a] - pos[t]) for a, t in zip(r["anchor"][among], r["tag"][among])])
+    rg = peered.ranging
+    bias = np.array([{a.id: a.range_bias_m for a in peered.anchors}[a] for a in r["anchor"][among]])
+    err = r["d"][among] - (rg.scale * true + bias)
+    assert np.all(np.abs(err) < 5 * (rg.sigma0_m + rg.sigma_per_m * true))
+    model = rg.rssi_1m_dbm - 10 * rg.path_loss_exponent * np.log10(true)
+    assert np.all(np.abs(r["rssi"][among] - model) < 5 * rg.shadowing_db + 0.5)
+    for k in ("seq", "t_us", "anchor", "tag", "status", "rssi", "tau"):
+        assert np.array_equal(r[k][~among], rp[k][~among])

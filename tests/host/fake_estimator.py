@@ -7,7 +7,7 @@ mean something without the real filters; ``calls`` lets tests check times and or
 from __future__ import annotations
 
 from navtwin.host.estimator import Estimate
-from navtwin.host.measurements import Exchange, ImuSample
+from navtwin.host.measurements import AnchorExchange, Exchange, ImuSample
 
 
 class RecordingEstimator:
@@ -39,6 +39,8 @@ class RecordingEstimator:
             self.calls.append(("range", r.t, r.anchor, r.distance, r.rssi, r.status))
             if r.distance is not None:
                 self._ranges[r.anchor] = r.distance
+        elif isinstance(r, AnchorExchange):
+            self.calls.append(("anchors", r.t, r.anchor, r.other, r.distance, r.rssi, r.status))
         else:
             self.calls.append(("restart", r.t, r.device, r.uptime_s))
         return self._out(r.t)

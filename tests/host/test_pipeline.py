@@ -95,12 +95,12 @@ def _sins_chunk(seq, t_s, words=None):
     return "sins", sins.build_sample(seq, words), round(t_s * 1e9)
 
 
-def _report(seq, t_us, t_s, anchor=1, status=nanoloc.STATUS_COMPLETE):
+def _report(seq, t_us, t_s, anchor=1, status=nanoloc.STATUS_COMPLETE, tag=0x10):
     # the taus of the wire-format test vector (anchor 1, true 5.000 m, decodes to 4.99994 m)
     tau = (0x05F6634C, 0x05F5E100, 0x05F6634C, 0x05F5E100)
     if status != nanoloc.STATUS_COMPLETE:
         tau = (0, 0, 0, 0)
-    data = nanoloc.build_report(seq=seq, t_us=t_us, anchor=anchor, tag=0x10, status=status,
+    data = nanoloc.build_report(seq=seq, t_us=t_us, anchor=anchor, tag=tag, status=status,
                                 rssi=-70, tau=tau)
     return "nanoloc", data, round(t_s * 1e9)
 
@@ -189,6 +189,28 @@ def test_ranges_of_other_tags_and_unknown_anchors_are_not_used():
     pipe.feed("nanoloc", other, 51_000_000)
     assert [c[2] for c in est.calls] == [1]
     assert pipe.counts["reports_unknown_anchor"] == 1 and pipe.counts["reports_other_tag"] == 1
+
+
+@pytest.mark.parametrize("tag", [None, 0x10])
+def test_an_exchange_between_two_anchors_goes_to_every_vehicle_as_theirs(tag):
+    """A report whose tag field holds an anchor's id: the anchors ranged each other (emulator's
+    anchor_exchange_every_cycles). It is the network's, never a vehicle's range, even with no
+    tag configured (where every tag's exchanges are the one vehicle's)."""
+    est = RecordingEstimator()
+    d = OFFICE.to_dict()
+    cfg = OFFICE if tag is None else host_config.from_dict({**d, "vehicle": {**d["vehicle"], "tag": tag}})
+    pipe = Pipeline(cfg, make_estimator=lambda _: est, inputs=("nanoloc",))
+    pipe.feed(*_report(0, 0, 0.001, anchor=1, tag=2))
+    pipe.feed(*_report(1, 25_000, 0.026, anchor=2))
+    pipe.feed(*_report(2, 50_000, 0.051, anchor=3, tag=1, status=nanoloc.STATUS_TIMEOUT))
+    pipe.finish()
+    assert [c[:4] for c in est.calls if c[0] != "range"] == [("anchors", pytest.approx(0.0, abs=0.01), 1, 2),
+                                                             ("anchors", pytest.approx(0.05, abs=0.01), 3, 1)]
+    anchors = [c for c in est.calls if c[0] == "anchors"]
+    assert anchors[0][4] == pytest.approx(4.99994, abs=5e-6) and anchors[1][4] is None
+    assert [c[2] for c in est.calls if c[0] == "range"] == [2]
+    assert pipe.counts["anchor_exchanges"] == 2 and pipe.counts["ranges"] == 1
+    assert pipe.counts["reports_other_tag"] == 0 and pipe.counts["timeouts"] == 0
 
 
 def test_distance_is_the_four_timestamp_formula():

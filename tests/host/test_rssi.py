@@ -83,3 +83,39 @@ def test_an_anchor_hearing_fewer_than_two_others_is_refused():
     h[2, [0, 1]] = np.nan
     with pytest.raises(ValueError, match="anchor row 2 hears 1 other"):
         rssi.anchor_parameters(ANCHORS, h)
+
+
+def test_anchor_readings_average_each_pair_and_fit_once_every_anchor_heard_two():
+    """host.rssi.AnchorReadings: per ordered pair the mean in dBm (its fit equals eqs. 3-4 on
+    the means, by a direct solve), None until each anchor heard two others; readings of
+    anchors not in the layout are ignored; with shadowing the fit converges on (lambda, n)."""
+    ids = (1, 2, 3, 4)
+    readings = rssi.AnchorReadings(ids)
+    h = _heard()
+    for i in range(4):
+        readings.add(ids[i], ids[(i + 1) % 4], h[i, (i + 1) % 4])
+    assert readings.parameters(ANCHORS) is None
+    readings.add(9, 1, -40.0)
+    readings.add(1, 1, -40.0)
+    for i in range(4):
+        j = (i + 2) % 4
+        readings.add(ids[i], ids[j], h[i, j] + 1.0)
+        readings.add(ids[i], ids[j], h[i, j] - 3.0)
+    means = readings.heard()
+    assert means[0, 2] == pytest.approx(h[0, 2] - 1.0) and np.isnan(means[0, 3]) and readings.count.sum() == 12
+    lam_i, n_i = readings.parameters(ANCHORS)
+    for i in range(4):  # two others each: eqs. 3-4 solved directly
+        j, k = (i + 1) % 4, (i + 2) % 4
+        lg = np.log10([np.linalg.norm(ANCHORS[j] - ANCHORS[i]), np.linalg.norm(ANCHORS[k] - ANCHORS[i])])
+        sol = np.linalg.solve([[1.0, -10 * lg[0]], [1.0, -10 * lg[1]]], [means[i, j], means[i, k]])
+        assert (lam_i[i], n_i[i]) == pytest.approx(tuple(sol), abs=1e-9)
+    rng = np.random.default_rng(5)
+    many = rssi.AnchorReadings(ids)
+    for _ in range(4000):  # a mean of 0.03 dB: the intercept, 1 m away from ~10 m, to ~0.3 dB
+        noisy = _heard(rng, 2.0)
+        for i in range(4):
+            for j in range(4):
+                if i != j:
+                    many.add(ids[i], ids[j], noisy[i, j])
+    lam_i, n_i = many.parameters(ANCHORS)
+    assert np.allclose(lam_i, LAMBDA, atol=1.0) and np.allclose(n_i, N, atol=0.1)
