@@ -235,12 +235,23 @@ def paper_cell(scenario: str | None, name: str) -> str:
 def table(errors: dict[str, dict[str, float]], scenario: str | None = "office") -> str:
     """A text table of the errors beside the paper's figures for *scenario* (PAPER_FIGURES)."""
     pub = PAPER_FIGURES.get(scenario)
-    head = f"paper {pub['paper']} mean (max)" if pub else ""
+    means = pub and any({"mean", "max"} & set(v) for v in pub["figures"].values())
+    head = f"paper {pub['paper']} mean (max)" if means else ""
     w = max([len("filter"), *map(len, errors)]) + 1  # the track names' column (centroid: 8)
     lines = [f"{'filter':<{w}}{'mean m':>9}{'max m':>9}{'rms m':>9}{'n':>7}   {head}".rstrip()]
     for name, e in errors.items():
         lines.append(f"{name:<{w}}{e['mean']:9.3f}{e['max']:9.3f}{e['rms']:9.3f}{e['n']:7d}   "
                      f"{paper_cell(scenario, name)}".rstrip())
+    rows = [(label, track, key) for label, track, key in latlon_rows(scenario, errors)
+            if set(LATLON) <= set(errors[track])]
+    if rows:  # 003's Table 1: latitude/longitude figures, ours then the paper's (in parentheses)
+        lw = max(len(label) for label, _, _ in rows) + 1
+        lines += ["", f"{'paper ' + pub['paper'] + ' Table 1':<{lw}}{'track':<{w}}" +
+                  "".join(f"{h.removesuffix(' m'):>20}" for h in LATLON.values()) + "   (m)"]
+        for label, track, key in rows:
+            ours, theirs = errors[track], pub["figures"][key]
+            cells = (f"{ours[m]:.3f} ({theirs[m]:.2f})" for m in LATLON)
+            lines.append(f"{label:<{lw}}{track:<{w}}" + "".join(f"{c:>20}" for c in cells))
     return "\n".join(lines)
 
 

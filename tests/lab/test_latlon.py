@@ -138,3 +138,37 @@ def test_a_tiny_rssi_centroid_sweep_keeps_the_figures_in_its_parquet(tmp_path):
     s = sweep.summarise(result.rows, result.filters, "rssi-centroid")
     assert [r["track"] for r in s["latlon"]["rows"]] == ["sins", "centroid", "wcl"]
     assert "| 003 Table 1 | track | seeds |" in sweep.markdown(s, "rssi-centroid", result.meta)
+
+
+def test_the_report_shows_003_table_1_and_the_latitude_longitude_error_plot(tmp_path):
+    """A short rssi-centroid run directory: the report's latitude/longitude table has each of
+    003's rows with our figures recomputed from estimates.jsonl and the paper's below, and a
+    plot of both errors against time per track (003's Figures 4-6)."""
+    pytest.importorskip("matplotlib")
+    from navtwin.emulator.runner import Emulation
+    from navtwin.emulator.scenario import load_scenario
+    from navtwin.host.output import estimate_line
+    from navtwin.lab.report import write_report
+    from navtwin.lab.run import run_in_memory
+
+    sc, filters = load_scenario("rssi-centroid"), ("sins", "centroid", "wcl")
+    with Emulation(sc, 4, speed=None, duration_s=15.0, ports=False,
+                   record=tmp_path / "emulator") as emu:
+        emu.run()
+    estimates, _ = run_in_memory(sc, 4, filters=filters, duration=15.0)
+    (tmp_path / "estimates.jsonl").write_text("".join(map(estimate_line, estimates)))
+    paths = write_report(tmp_path, tmp_path / "report")
+    md, page = paths["md"].read_text(), paths["html"].read_text()
+    truth = evaluate.load_truth(tmp_path / "emulator" / "truth.csv")
+    errors = evaluate.position_errors(truth, evaluate.load_estimates(tmp_path / "estimates.jsonl"),
+                                      frame=sc.frame)
+    paper = evaluate.PAPER_FIGURES["rssi-centroid"]["figures"]
+    assert "## Latitude and longitude (paper 003 Table 1's layout)" in md
+    for label, track, key in (("Single SINS", "sins", "geosins"), ("centroid (traditional method)",
+                              "centroid", "centroid"), ("weighted centroid (003's method)", "wcl", "wcl")):
+        ours = " | ".join(f"{errors[track][m]:.4f}" for m in evaluate.LATLON)
+        theirs = " | ".join(f"{paper[key][m]:.4f}" for m in evaluate.LATLON)
+        assert f"| {label} | {track} | {ours} |" in md
+        assert f"| {label}, paper 003 |  | {theirs} |" in md
+        assert f'id="lat-{track}"' in page and f'id="lon-{track}"' in page
+    assert 'data-stat="lat_std" data-filter="wcl">' in page
