@@ -459,8 +459,8 @@ def table(summary: dict) -> str:
     ci_w = max((len(c) for _, c, _ in pairs), default=0)
     lines += [f"  {n:<{name_w}}  {c:>{ci_w}}  {v}" for n, c, v in pairs]
     lines.append(f"ranking: {summary['ranking']}")
-    for title, head, rows in _latlon_grids(summary["latlon"]) if "latlon" in summary else ():
-        lines += ["", title + ":", *_aligned([head, *rows], left=2)]
+    for title, head, rows, left in _latlon_grids(summary["latlon"]) if "latlon" in summary else ():
+        lines += ["", title + ":", *_aligned([head, *rows], left)]
     return "\n".join(lines)
 
 
@@ -472,9 +472,10 @@ def _aligned(rows: list[list[str]], left: int = 1) -> list[str]:
                       for i, (c, w) in enumerate(zip(r, widths))).rstrip() for r in rows]
 
 
-def _latlon_grids(ll: dict) -> tuple[tuple[str, list[str], list[list[str]]], ...]:
-    """003 Table 1's layout of a summary's ``latlon`` as (title, heading, rows) twice: the
-    figures, ours over seeds with the paper's in parentheses, then the paired differences."""
+def _latlon_grids(ll: dict) -> tuple[tuple[str, list[str], list[list[str]], int], ...]:
+    """003 Table 1's layout of a summary's ``latlon`` as (title, heading, rows, number of
+    columns of names, set to the left): the figures, ours over seeds with the paper's in
+    parentheses, then, where two methods or more are there, their paired differences."""
     paper, figs = ll["paper"], list(evaluate.LATLON)
     head = [f"{paper} Table 1", "track", "seeds", *evaluate.LATLON.values()]
     rows = [[r["label"], r["track"], str(r["seeds"]),
@@ -487,11 +488,11 @@ def _latlon_grids(ll: dict) -> tuple[tuple[str, list[str], list[list[str]]], ...
     grids = [(f"Paper {paper} Table 1's layout (m; average: mean absolute error, max: maximum "
               "absolute error, std: standard deviation of the signed error, along north for "
               "latitude and east for longitude): each figure the mean over seeds of that seed's "
-              f"figure, ± its 95 % half-width; ({paper}'s published figure)", head, rows)]
+              f"figure, ± its 95 % half-width; ({paper}'s published figure)", head, rows, 2)]
     if pair_rows:  # one row of the paper's present: nothing to pair
         grids.append(("Paired differences a - b over the seeds both have (m, ± the 95 % "
                       "half-width); (name): the track the CI decides for, (~): not decided",
-                      pair_head, pair_rows))
+                      pair_head, pair_rows, 1))
     return tuple(grids)
 
 
@@ -526,8 +527,7 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
                      f"| {p['better'] + ' better' if p['better'] else 'not decided'} |")
     lines += _table_1(summary, paper)
     if "latlon" in summary:
-        for title, head, rows in _latlon_grids(summary["latlon"]):
-            left = 2 if head[1] == "track" else 1
+        for title, head, rows, left in _latlon_grids(summary["latlon"]):
             lines += ["", title + ".", "", "| " + " | ".join(head) + " |",
                       "|" + "---|" * left + "---:|" * (len(head) - left)]
             lines += ["| " + " | ".join(r) + " |" for r in rows]
