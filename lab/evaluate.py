@@ -225,6 +225,13 @@ def latlon_rows(scenario: str | None, present) -> list[tuple[str, str, str]]:
     return out
 
 
+def has_paper_means(scenario: str | None) -> bool:
+    """Whether *scenario*'s paper gives a mean or max position error of some track (000's and
+    001's do; 003 gives its errors in latitude and longitude only)."""
+    figures = PAPER_FIGURES.get(scenario, {}).get("figures", {})
+    return any({"mean", "max"} & set(v) for v in figures.values())
+
+
 def paper_cell(scenario: str | None, name: str) -> str:
     """The published mean (max) of track *name* on *scenario*, as text ('' if none)."""
     fig = PAPER_FIGURES.get(scenario, {}).get("figures", {}).get(name, {})
@@ -235,8 +242,7 @@ def paper_cell(scenario: str | None, name: str) -> str:
 def table(errors: dict[str, dict[str, float]], scenario: str | None = "office") -> str:
     """A text table of the errors beside the paper's figures for *scenario* (PAPER_FIGURES)."""
     pub = PAPER_FIGURES.get(scenario)
-    means = pub and any({"mean", "max"} & set(v) for v in pub["figures"].values())
-    head = f"paper {pub['paper']} mean (max)" if means else ""
+    head = f"paper {pub['paper']} mean (max)" if has_paper_means(scenario) else ""
     w = max([len("filter"), *map(len, errors)]) + 1  # the track names' column (centroid: 8)
     lines = [f"{'filter':<{w}}{'mean m':>9}{'max m':>9}{'rms m':>9}{'n':>7}   {head}".rstrip()]
     for name, e in errors.items():

@@ -502,7 +502,7 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
     Result's) when given."""
     paper = evaluate.PAPER_FIGURES.get(scenario)
     cols = list(FIGURES.values())
-    paper_means = paper and any({"mean", "max"} & set(v) for v in paper["figures"].values())
+    paper_means = evaluate.has_paper_means(scenario)
     extra = [f"{paper['paper']} mean m", f"{paper['paper']} max m"] if paper_means else []
     lines = []
     if meta:
