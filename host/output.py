@@ -46,7 +46,8 @@ def estimate_line(e, frame: LocalFrame | None = None) -> str:
     *frame* (HostConfig.output_frame), its geodetic position too."""
     geo = {}
     if frame is not None:
-        geo = dict(zip(GEODETIC_KEYS, (float(v) for v in frame.geodetic((float(e.x), float(e.y), 0.0)))))
+        geodetic = frame.geodetic((float(e.x), float(e.y), 0.0))
+        geo = dict(zip(GEODETIC_KEYS, map(float, geodetic)))
     return json.dumps({"t": float(e.t), "vehicle": int(e.vehicle), "filter": str(e.filter), "x": float(e.x), "y": float(e.y),
                        **geo, "vx": float(e.vx), "vy": float(e.vy),
                        "yaw": None if e.yaw is None else float(e.yaw),

@@ -9,10 +9,10 @@ required; the report says what it lacks.
 
 Every number of the accuracy tables comes from ``estimates.jsonl`` through lab.evaluate
 (``position_errors`` after the run's ``time_offset_s``; the latitude/longitude figures in the
-scenario's frame, shown in 003 Table 1's layout where its paper gives that table), the NIS from ``innovations.jsonl``,
-the bound from lab.pcrb; the file hashes under "Provenance" name the files they came from.
-The HTML holds its plots as inline SVG (matplotlib's svg backend) and its style inline: no
-network, no script.
+scenario's frame, shown in 003 Table 1's layout where its paper gives that table), the NIS
+from ``innovations.jsonl``, the bound from lab.pcrb; the file hashes under "Provenance" name
+the files they came from. The HTML holds its plots as inline SVG (matplotlib's svg backend)
+and its style inline: no network, no script.
 """
 from __future__ import annotations
 
@@ -397,7 +397,7 @@ def latlon_rows(run: dict) -> list[tuple[str, ...]]:
 LATLON_NOTE = ("Latitude error: along north; longitude error: along east (m), through the "
                "scenario's site and x azimuth. Average: the mean absolute error; max: the "
                "maximum absolute error; std: the standard deviation of the signed error "
-               "(003 defines none of them; docs/report.md).")
+               "(003 defines none of them; docs/lab.md, \"Latitude and longitude\").")
 
 
 def link_rows(run: dict) -> list[tuple[str, ...]]:
@@ -495,7 +495,7 @@ def markdown(run: dict) -> str:
              _md_table(["statistic", *names], [(label, *(t for _, t in cells))
                                                for _, label, cells in accuracy_rows(run)])]
     if latlon_rows(run):
-        parts += ["", "## Latitude and longitude (paper 003 Table 1's layout)", "",
+        parts += ["", f"## Latitude and longitude (paper {run['paper']['paper']} Table 1's layout)", "",
                   _md_table(["method", "track", *evaluate.LATLON.values()], latlon_rows(run)),
                   "", LATLON_NOTE]
     if paper_note(run):
@@ -584,7 +584,7 @@ def html_page(run: dict, figs: dict[str, str]) -> str:
                          acc_attr, ["paper" if k.startswith("paper:") else "" for k, _, _ in acc])]
     if latlon_rows(run):
         rows = latlon_rows(run)
-        body += ["<h2>Latitude and longitude (paper 003 Table 1's layout)</h2>",
+        body += [f"<h2>Latitude and longitude (paper {e(run['paper']['paper'])} Table 1's layout)</h2>",
                  _html_table(["method", "track", *evaluate.LATLON.values()], rows,
                              lambda i, j: "" if j < 2 or not rows[i][1] else
                              f' data-stat="{list(evaluate.LATLON)[j - 2]}" data-filter="{rows[i][1]}"',
