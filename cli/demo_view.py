@@ -82,9 +82,11 @@ class LiveView(Watch):
 
     def _tracks(self, tracks: dict) -> Table:
         t = Table(title="tracks: position error against truth (m)", title_justify="left")
-        pub = evaluate.PAPER_FIGURES.get(self.info.get("scenario"), {})
+        scenario = self.info.get("scenario")
+        pub = evaluate.PAPER_FIGURES.get(scenario, {})
         for col in ("track", "now", "mean", "max", "estimates",
-                    f"paper {pub['paper']} mean (max)" if pub else "paper"):
+                    f"paper {pub['paper']} mean (max)" if evaluate.has_paper_means(scenario)
+                    else "paper"):
             t.add_column(col, justify="left" if col == "track" else "right")
         for name, e in sorted(tracks.items()):
             t.add_row(name, _m(e.last), _m(e.mean), _m(e.max), str(e.n),

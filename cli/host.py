@@ -23,13 +23,15 @@ def register(sub) -> None:
 
 
 def _options(p) -> None:
-    from navtwin.host.output import KEYS
+    from navtwin.host.output import GEODETIC_KEYS, KEYS
     from navtwin.protocols import ports
 
     p.description = (
         "Read the coordinator (API mode; or the SINS board's direct line) and the "
         "nanoLOC gateway, fuse IMU and ranges, and write one JSON line per estimate: "
-        "{" + ",".join(f'"{k}"' for k in KEYS) + "}. A status line goes to stderr every few "
+        "{" + ",".join(f'"{k}"' for k in KEYS) + "}; with [output] geodetic = true in the "
+        "config also " + ", ".join(f'"{k}"' for k in GEODETIC_KEYS) + " (deg, deg, m WGS-84) "
+        "after \"y\". A status line goes to stderr every few "
         "seconds; a port that disappears is reopened every 0.5 s while the filters keep their "
         "state (an emulator's link only while that emulator runs). Ports are opened "
         "exclusively (flock, as picocom does). SIGINT or SIGTERM ends the run with a summary "

@@ -17,7 +17,9 @@ def register(sub) -> None:
         "config, filters and API mode are in the recording; --config and --filters override "
         "them). An emulator recording "
         "('navtwin emulate --record') is run with arrival = the time each chunk's last byte "
-        "leaves the UART: a deterministic offline run, not equal to any live run.")
+        "leaves the UART: a deterministic offline run, not equal to any live run. The lines "
+        "are navtwin host's; with [output] geodetic = true in the config they also give lat, "
+        "lon (deg) and h (m, WGS-84).")
     r.set_defaults(func=run)
 
 
@@ -42,7 +44,8 @@ def run(args) -> int:
     cfg, filters = config_and_filters(args, default_config=False)
     try:
         rec = Recording(args.directory, salvage=args.salvage)
-        settings(rec, config=cfg, filters=filters, escaped=args.escaped)  # before --out opens
+        # before --out opens; the config's [output] says what a line gives
+        frame = settings(rec, config=cfg, filters=filters, escaped=args.escaped)["config"].output_frame
     except (RecordingError, ConfigError) as e:
         raise UsageError(str(e)) from None
     if (note := rec.skipped_line()) is not None:
@@ -52,7 +55,7 @@ def run(args) -> int:
     shown = [t0]
 
     def emit(estimates: list) -> None:
-        out.write("".join(map(estimate_line, estimates)))
+        out.write("".join(estimate_line(e, frame) for e in estimates))
 
     def progress(fraction: float) -> None:
         now = time.monotonic()

@@ -21,7 +21,9 @@ DESCRIPTION = """\
 Monte Carlo sweep: run the scenario once per seed in virtual time (the emulator into the host's
 pipeline in memory: no PTY, no file per seed), score each filter against truth, and print per
 filter the mean over seeds of its mean, max and RMS error and mean NEES, each with a 95 %
-Student-t interval, and the paired per-seed differences of mean error that decide a ranking.
+Student-t interval, and the paired per-seed differences of mean error that decide a ranking;
+for rssi-centroid also paper 003 Table 1's layout: latitude and longitude error (m) mean, max
+and standard deviation per method beside 003's figures, and their paired differences.
 Runs on dask.distributed: by default a LocalCluster of --workers processes that only this sweep
 can use (loopback, TLS on temporary credentials), else the scheduler of --scheduler (or of
 Dask's config, scheduler-address), with your Dask security config. Any number of workers
@@ -117,7 +119,7 @@ def run(args) -> int:
                                client=client, serial=args.serial, progress=progress)
     except sweep.SweepError as e:
         raise UsageError(str(e)) from None
-    summary = sweep.summarise(result.rows, result.filters)
+    summary = sweep.summarise(result.rows, result.filters, sc.name)
     if args.json:
         print(json.dumps(_finite({"summary": summary, "out": str(result.out),
                                   "computed_tasks": result.tasks, "meta": result.meta})))

@@ -91,3 +91,15 @@ class LocalFrame:
         """(latitude deg, longitude deg, height m) of local points (..., 3)."""
         origin = ecef(self.latitude_deg, self.longitude_deg, self.height_m)
         return geodetic(np.asarray(xyz, dtype=float) @ self._axes() + origin)
+
+
+def meridian_radius(latitude_rad):
+    """R_M (m), the meridian's radius of curvature at geodetic latitude phi (rad):
+    a (1 - e^2) / (1 - e^2 sin^2 phi)^(3/2); a latitude change d phi is R_M d phi metres north."""
+    return WGS84_A * (1.0 - WGS84_E2) / (1.0 - WGS84_E2 * np.sin(latitude_rad) ** 2) ** 1.5
+
+
+def transverse_radius(latitude_rad):
+    """R_N (m), the prime vertical's radius of curvature at geodetic latitude phi (rad):
+    a / sqrt(1 - e^2 sin^2 phi); a longitude change d lam is R_N cos phi d lam metres east."""
+    return WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(latitude_rad) ** 2)

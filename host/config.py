@@ -40,6 +40,9 @@ sections are declared here::
     [calibration]                  # optional: 001's f, c_i, sigma(d) (host.calibration)
     file = "corridor"              # a shipped calibration or a path (relative to this file)
 
+    [output]                       # optional: what each estimate line gives besides x, y
+    geodetic = true                # also lat, lon (deg) and h (m) of the estimate's x, y
+
 Vehicles. ``[vehicle]`` is the lab's one vehicle; a lab with several lists them as
 ``[[vehicles]]`` tables of the same keys (not both). Vehicles are numbered from 1 in that
 order (the ``vehicle`` of each estimate line); with more than one, each names its ``tag``
@@ -58,7 +61,8 @@ from pathlib import Path
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, MAX_HEIGHT_M, RANGE_BIAS_M
 from navtwin.common import tomlfile
-from navtwin.common.schema import REQUIRED, Invalid, between, build, key, plain, rows
+from navtwin.common.geodesy import LocalFrame
+from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, key, plain, rows
 
 from . import calibration as range_calibration
 from . import tracks
@@ -94,6 +98,17 @@ class Timing:
 
 
 @dataclass(frozen=True)
+class Output:
+    """[output]: what each estimate line gives besides its x, y (host.output)."""
+
+    geodetic: bool = key(False, "", "each estimate line also gives lat, lon (deg) "
+                         "and h (m, WGS-84) of its x, y on the floor (z = 0), through the area's "
+                         "frame: [site] and [filters] x_azimuth_deg (common.geodesy)",
+                         Check(lambda v: isinstance(v, bool), "must be true or false",
+                               "write geodetic = true"))
+
+
+@dataclass(frozen=True)
 class Lab:
     """The sections other than [filters]."""
 
@@ -102,6 +117,7 @@ class Lab:
     vehicles: tuple[Vehicle, ...] = key((Vehicle(),), "", "the vehicles, 1 first ([vehicle] "
                                         "for one)")
     timing: Timing = Timing()
+    output: Output = Output()
 
     def __post_init__(self):
         if len(self.vehicles) > 1:
@@ -135,6 +151,16 @@ class HostConfig:
     local_gravity = property(lambda self: self.lab.site.local_gravity)
     vehicles = property(lambda self: self.lab.vehicles)
     hold_s = property(lambda self: self.lab.timing.hold_s)
+
+    @property
+    def output_frame(self) -> LocalFrame | None:
+        """The area's frame on the earth when [output] geodetic asks for lat, lon, h in the
+        estimate lines (host.output.estimate_line), else None."""
+        if not self.lab.output.geodetic:
+            return None
+        site = self.lab.site
+        return LocalFrame(site.latitude_deg, site.longitude_deg, site.height_m,
+                          self.tuning.x_azimuth_deg)
 
     def estimator_config(self, filters: tuple[str, ...] | None = None,
                          vehicle: int = 1) -> EstimatorConfig:
@@ -305,7 +331,8 @@ def _config(doc: dict, name: str, directory: Path | None = None) -> HostConfig:
         raise ConfigError("[[anchors]] missing: give one table per anchor with id, x, y (and z)")
     lab = Lab(anchors=_anchors(doc["anchors"]), vehicles=_vehicles(doc),
               **{f.name: build(type(f.default), doc[f.name], ((f.name, 0),))
-                 for f in dataclasses.fields(Lab) if f.name in ("site", "timing") and f.name in doc})
+                 for f in dataclasses.fields(Lab) if f.name in ("site", "timing", "output")
+                 and f.name in doc})
     filt = doc.get("filters", {})
     if not isinstance(filt, dict):
         raise ConfigError("[filters] must be a table")

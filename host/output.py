@@ -12,6 +12,11 @@ the pure WSN track; ``cov`` is the estimator's covariance of (x, y, vx, vy), row
 ``extrapolated`` is true when the track had no aiding for the estimator's
 ``extrapolated_after_s`` before ``t`` (a position update for kf/ekf/ukf, a fix for wsn, an
 IMU sample for sins), or the track waits to re-initialise: the estimate is a prediction only.
+With ``[output] geodetic = true`` in the host config, ``"lat"``, ``"lon"`` (deg, WGS-84) and
+``"h"`` (m, ellipsoid height) follow ``"y"``: the estimate's x, y on the floor (z = 0) through
+the area's frame on the earth (common.geodesy.LocalFrame of [site] and [filters]
+x_azimuth_deg), so ``LocalFrame.local(lat, lon, h)`` gives back x, y, 0; off, the line is as
+above, byte for byte.
 Innovations (opt-in, ``navtwin host --innovations FILE``): one JSON line per gated update of
 a fusion track, :func:`innovation_line`; writing them changes no estimate.
 Status, progress and summary lines go to stderr as one JSON
@@ -27,13 +32,24 @@ from typing import TextIO
 
 import numpy as np
 
+from navtwin.common.geodesy import LocalFrame
+
 KEYS = ("t", "vehicle", "filter", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
 
 
-def estimate_line(e) -> str:
-    """The output line of one :class:`navtwin.host.estimator.Estimate`."""
+#: The keys ``[output] geodetic`` adds after ``"y"``.
+GEODETIC_KEYS = ("lat", "lon", "h")
+
+
+def estimate_line(e, frame: LocalFrame | None = None) -> str:
+    """The output line of one :class:`navtwin.host.estimator.Estimate`; with the area's
+    *frame* (HostConfig.output_frame), its geodetic position too."""
+    geo = {}
+    if frame is not None:
+        geodetic = frame.geodetic((float(e.x), float(e.y), 0.0))
+        geo = dict(zip(GEODETIC_KEYS, map(float, geodetic)))
     return json.dumps({"t": float(e.t), "vehicle": int(e.vehicle), "filter": str(e.filter), "x": float(e.x), "y": float(e.y),
-                       "vx": float(e.vx), "vy": float(e.vy),
+                       **geo, "vx": float(e.vx), "vy": float(e.vy),
                        "yaw": None if e.yaw is None else float(e.yaw),
                        "cov": np.asarray(e.cov, dtype=float).tolist(),
                        "extrapolated": bool(e.extrapolated)},

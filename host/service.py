@@ -261,6 +261,7 @@ class Service:
             raise ValueError(f"ports must be some of {', '.join(readable)}")
         self.ports = {p: ports[p] for p in readable if p in ports}
         self.config, self.filters = config, tuple(filters)
+        self._frame = config.output_frame  # [output] geodetic: lat, lon, h in each line
         self.out, self.status, self.status_period_s = out, status, status_period_s
         # on_lines(port, bytes of that port processed, monotonic ns) after each batch of lines
         self.on_lines = on_lines
@@ -406,7 +407,7 @@ class Service:
         if not estimates:
             return
         try:
-            self.out.write("".join(map(estimate_line, estimates)))
+            self.out.write("".join(estimate_line(e, self._frame) for e in estimates))
             self.out.flush()
         except BrokenPipeError:
             raise

@@ -4,6 +4,19 @@ Truth is the emulator's ``truth.csv`` (a header row with at least ``t,x,y``; ``t
 nanoseconds of scenario time, one row per millisecond); estimates are the host's JSON lines,
 read from its output file like any other program's. Each estimate is compared with the truth
 interpolated at its time, shifted by ``offset_s`` (scenario time = host time + offset_s).
+
+Latitude and longitude errors (paper 003's Table 1): given the scenario's local frame
+(common.geodesy.LocalFrame: its [site] and [area] x_azimuth_deg), an estimate's and the truth's
+x, y (on the floor, z = 0) become latitude and longitude, and their differences metres along
+north and east: d phi R_M(phi) and d lam R_N(phi) cos phi at the truth's latitude phi
+(:func:`north_east_errors`), right for any azimuth of the area's x. Per run, for each of the
+two: ``lat_mean`` / ``lon_mean`` the mean of |error|, ``lat_max`` / ``lon_max`` the max of
+|error|, ``lat_std`` / ``lon_std`` the standard deviation (population, ddof 0) of the signed
+error. 003 defines none of its "average deviation", "maximum deviation" and "standard
+deviation"; this reading is the one its figures fit: its Single SINS row, an error growing
+from 0, has an average (13.60 m) about half its maximum (26.93 m), which a mean of a signed
+error that changes sign would not give, and a standard deviation (6.58 m) below its average,
+as the spread of a ramp about its own mean is (27 / sqrt(12) = 7.8 m for 0..27).
 """
 from __future__ import annotations
 
@@ -15,6 +28,8 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 from scipy.stats import t as student_t
+
+from navtwin.common.geodesy import LocalFrame, meridian_radius, transverse_radius
 
 #: Paper 000, section 3.3 and 4.3: mean position error (m) on the office run.
 PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
@@ -37,6 +52,25 @@ PAPER_FIGURES = {
                              "tc": {"max": 0.2344, "mean": 0.0682, "x_var": 0.0049, "y_var": 0.0011},
                              "fatci": {"max": 0.1488, "mean": 0.0384, "x_var": 0.0017,
                                        "y_var": 0.0002}}},
+    # 003 Table 1's rows are methods: Single SINS, the traditional (centroid) and its own
+    # (weighted centroid) method; "tracks" maps each to ours, the first present in a run
+    # ("geosins", the free geodetic SINS, else the flat "sins")
+    "rssi-centroid": {"paper": "003", "note": "Table 1, latitude and longitude error of the "
+                      "SINS alone and aided by the centroid and by the weighted centroid",
+                      "experiment": "1500 s north at 1 m/s from 32 N 118 E", "duration_s": 1500.0,
+                      "layout": "latlon",
+                      "tracks": {"geosins": ("Single SINS", ("geosins", "sins")),
+                                 "centroid": ("centroid (traditional method)", ("centroid",)),
+                                 "wcl": ("weighted centroid (003's method)", ("wcl",))},
+                      "figures": {"geosins": {"lat_mean": 13.5977, "lon_mean": 9.1389,
+                                              "lat_max": 26.9316, "lon_max": 18.2245,
+                                              "lat_std": 6.5798, "lon_std": 7.2239},
+                                  "centroid": {"lat_mean": 1.6007, "lon_mean": 2.6412,
+                                               "lat_max": 10.8778, "lon_max": 16.9741,
+                                               "lat_std": 2.1908, "lon_std": 3.4389},
+                                  "wcl": {"lat_mean": 0.9511, "lon_mean": 1.3758,
+                                          "lat_max": 6.3075, "lon_max": 9.3784,
+                                          "lat_std": 1.3024, "lon_std": 1.8247}}},
     "corridor-outage": {"paper": "001", "note": "section 5.3, max error with anchor 2 silent "
                         "from 18 to 23 s and from 40 to 45 s",
                         "experiment": "the corridor with anchor 2's two outages", "duration_s": 60.0,
@@ -87,6 +121,38 @@ def axis_errors(truth: dict, e: dict, offset_s: float = 0.0) -> np.ndarray:
                             e["y"] - np.interp(t, truth["t"], truth["y"])))
 
 
+def north_east_errors(frame: LocalFrame, truth: dict, e: dict, offset_s: float = 0.0) -> np.ndarray:
+    """Signed error (m) of each estimate of one filter along north and east, N x 2: the
+    latitude and longitude error as 003 gives them, through *frame* (the scenario's)."""
+    t = e["t"] + offset_s
+    est = np.column_stack((e["x"], e["y"], np.zeros(len(t))))
+    true = np.column_stack((np.interp(t, truth["t"], truth["x"]), np.interp(t, truth["t"], truth["y"]),
+                            np.zeros(len(t))))
+    lat_e, lon_e, _ = frame.geodetic(est)
+    lat_t, lon_t, _ = frame.geodetic(true)
+    phi = np.radians(lat_t)
+    d_lon = (lon_e - lon_t + 180.0) % 360.0 - 180.0  # across the antimeridian too
+    return np.column_stack((np.radians(lat_e - lat_t) * meridian_radius(phi),
+                            np.radians(d_lon) * transverse_radius(phi) * np.cos(phi)))
+
+
+#: Per-run latitude/longitude figures (:func:`latlon_figures`), in 003 Table 1's column order,
+#: with the headings the tables give them.
+LATLON = {"lat_mean": "latitude average m", "lon_mean": "longitude average m",
+          "lat_max": "latitude max m", "lon_max": "longitude max m",
+          "lat_std": "latitude std m", "lon_std": "longitude std m"}
+
+
+def latlon_figures(ne: np.ndarray) -> dict[str, float]:
+    """003's Table 1 figures of north/east errors *ne* (N x 2): mean and max of |error|,
+    standard deviation (ddof 0) of the signed error, for latitude (north) and longitude (east)."""
+    out = {}
+    for axis, v in (("lat", ne[:, 0]), ("lon", ne[:, 1])):
+        out |= {f"{axis}_mean": float(np.abs(v).mean()), f"{axis}_max": float(np.abs(v).max()),
+                f"{axis}_std": float(v.std())}
+    return {k: out[k] for k in LATLON}
+
+
 def error(truth: dict, e: dict, offset_s: float = 0.0) -> np.ndarray:
     """Horizontal position error (m) of each estimate of one filter (arrays ``t, x, y``)
     against the truth interpolated at its scenario time ``t + offset_s``."""
@@ -110,13 +176,14 @@ def nees(err: np.ndarray, cov: np.ndarray) -> np.ndarray:
 
 
 def position_errors(truth: dict, estimates: dict, offset_s: float = 0.0,
-                    skip_s: float = 0.0) -> dict[str, dict[str, float]]:
+                    skip_s: float = 0.0, frame: LocalFrame | None = None) -> dict[str, dict[str, float]]:
     """Per filter, over estimates inside the truth's time span and after *skip_s* of scenario
     time: mean, max and RMS horizontal position error (m), the number of estimates, paper
     001's Table 1 figures (``x_min``/``x_max``, ``x_var``, ``y_min``/``y_max``, ``y_var`` of
-    the signed per-axis errors) and, where the filter reports a covariance, its mean NEES
+    the signed per-axis errors), where the filter reports a covariance, its mean NEES
     and the share of NEES inside the 95 % band (``nees_mean``, ``nees_in_band``; None
-    without one)."""
+    without one) and, given the scenario's *frame*, 003's latitude/longitude figures
+    (:data:`LATLON`, :func:`latlon_figures`)."""
     out = {}
     t_truth = truth["t"]
     for name, e in sorted(estimates.items()):
@@ -137,7 +204,32 @@ def position_errors(truth: dict, estimates: dict, offset_s: float = 0.0,
                      "y_var": float(xy[:, 1].var()),
                      "nees_mean": float(q.mean()) if q.size else None,
                      "nees_in_band": float(((q >= lo) & (q <= hi)).mean()) if q.size else None}
+        if frame is not None:
+            out[name] |= latlon_figures(north_east_errors(frame, truth, e, offset_s)[keep])
     return out
+
+
+def latlon_rows(scenario: str | None, present) -> list[tuple[str, str, str]]:
+    """(the paper's row, our track, the paper's figures' key) of each row of *scenario*'s
+    latitude/longitude Table 1 (a PAPER_FIGURES entry with ``"layout": "latlon"``), our track
+    the first of the row's candidates in *present*; rows with none are left out, and a
+    scenario without that layout has none."""
+    paper = PAPER_FIGURES.get(scenario, {})
+    if paper.get("layout") != "latlon":
+        return []
+    out = []
+    for key, (label, candidates) in paper["tracks"].items():
+        track = next((c for c in candidates if c in present), None)
+        if track is not None:
+            out.append((label, track, key))
+    return out
+
+
+def has_paper_means(scenario: str | None) -> bool:
+    """Whether *scenario*'s paper gives a mean or max position error of some track (000's and
+    001's do; 003 gives its errors in latitude and longitude only)."""
+    figures = PAPER_FIGURES.get(scenario, {}).get("figures", {})
+    return any({"mean", "max"} & set(v) for v in figures.values())
 
 
 def paper_cell(scenario: str | None, name: str) -> str:
@@ -150,12 +242,22 @@ def paper_cell(scenario: str | None, name: str) -> str:
 def table(errors: dict[str, dict[str, float]], scenario: str | None = "office") -> str:
     """A text table of the errors beside the paper's figures for *scenario* (PAPER_FIGURES)."""
     pub = PAPER_FIGURES.get(scenario)
-    head = f"paper {pub['paper']} mean (max)" if pub else ""
+    head = f"paper {pub['paper']} mean (max)" if has_paper_means(scenario) else ""
     w = max([len("filter"), *map(len, errors)]) + 1  # the track names' column (centroid: 8)
     lines = [f"{'filter':<{w}}{'mean m':>9}{'max m':>9}{'rms m':>9}{'n':>7}   {head}".rstrip()]
     for name, e in errors.items():
         lines.append(f"{name:<{w}}{e['mean']:9.3f}{e['max']:9.3f}{e['rms']:9.3f}{e['n']:7d}   "
                      f"{paper_cell(scenario, name)}".rstrip())
+    rows = [(label, track, key) for label, track, key in latlon_rows(scenario, errors)
+            if set(LATLON) <= set(errors[track])]
+    if rows:  # 003's Table 1: latitude/longitude figures, ours then the paper's (in parentheses)
+        lw = max(len(label) for label, _, _ in rows) + 1
+        lines += ["", f"{'paper ' + pub['paper'] + ' Table 1':<{lw}}{'track':<{w}}" +
+                  "".join(f"{h.removesuffix(' m'):>20}" for h in LATLON.values()) + "   (m)"]
+        for label, track, key in rows:
+            ours, theirs = errors[track], pub["figures"][key]
+            cells = (f"{ours[m]:.3f} ({theirs[m]:.2f})" for m in LATLON)
+            lines.append(f"{label:<{lw}}{track:<{w}}" + "".join(f"{c:>20}" for c in cells))
     return "\n".join(lines)
 
 

@@ -218,11 +218,13 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
         truth = evaluate.load_truth(truth_path)
         estimates = evaluate.load_estimates(d / "estimates.jsonl")
         report["time_offset_s"] = offset
-        report["errors"] = evaluate.position_errors(truth, estimates, offset)
+        sc = load_scenario(d / "emulator" / "scenario.toml")
+        # with the latitude/longitude figures in the scenario's frame (003's Table 1)
+        report["errors"] = evaluate.position_errors(truth, estimates, offset, frame=sc.frame)
         if plot:
             try:
                 report["plot"] = str(evaluate.plot(truth, estimates, d / "report.png", offset,
-                                                   _anchors(d / "emulator" / "scenario.toml")))
+                                                   _anchors(sc)))
             except ImportError:
                 report["plot"] = None  # matplotlib is in the 'plot' extra
     if (d / "emulator" / FAULTS).is_file() and (d / "emulator" / FAULTS).stat().st_size:
@@ -239,6 +241,5 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
     return report
 
 
-def _anchors(scenario_toml: Path) -> dict:
-    sc = load_scenario(scenario_toml)
+def _anchors(sc) -> dict:
     return {a.id: sc.anchor_position(a)[:2] for a in sc.anchors}

@@ -8,10 +8,11 @@ Only ``emulator/truth.csv``, ``emulator/scenario.toml`` and ``estimates.jsonl`` 
 required; the report says what it lacks.
 
 Every number of the accuracy tables comes from ``estimates.jsonl`` through lab.evaluate
-(``position_errors`` after the run's ``time_offset_s``), the NIS from ``innovations.jsonl``,
-the bound from lab.pcrb; the file hashes under "Provenance" name the files they came from.
-The HTML holds its plots as inline SVG (matplotlib's svg backend) and its style inline: no
-network, no script.
+(``position_errors`` after the run's ``time_offset_s``; the latitude/longitude figures in the
+scenario's frame, shown in 003 Table 1's layout where its paper gives that table), the NIS
+from ``innovations.jsonl``, the bound from lab.pcrb; the file hashes under "Provenance" name
+the files they came from. The HTML holds its plots as inline SVG (matplotlib's svg backend)
+and its style inline: no network, no script.
 """
 from __future__ import annotations
 
@@ -148,7 +149,8 @@ def collect(run_dir: str | Path) -> dict:
     recording = _json(d / "emulator" / "recording.json")
     cfg = _host_config(d, sc.name)
     run = {"dir": str(d), "scenario": sc, "truth": truth, "estimates": estimates,
-           "offset_s": offset, "errors": evaluate.position_errors(truth, estimates, offset),
+           "offset_s": offset,
+           "errors": evaluate.position_errors(truth, estimates, offset, frame=sc.frame),
            "innovations": _jsonl(d / "innovations.jsonl") if (d / "innovations.jsonl").is_file()
            else None,
            "host_summary": summaries[-1] if summaries else None, "recording": recording,
@@ -249,6 +251,22 @@ def figures(run: dict) -> dict[str, str]:
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     out["error"] = _svg(fig, "error")
+
+    if latlon_rows(run):  # 003's Figures 4-6: latitude and longitude error against time
+        fig, axes = _grid(len(names), (4.2, 2.6))
+        for ax, n in zip(axes, names):
+            e = run["estimates"][n]
+            ne = evaluate.north_east_errors(sc.frame, truth, e, off)
+            ax.plot(e["t"] + off, ne[:, 0], lw=1, color=colours[n], label="latitude (north)",
+                    gid=f"lat-{n}")
+            ax.plot(e["t"] + off, ne[:, 1], lw=1, color=colours[n], ls="--",
+                    label="longitude (east)", gid=f"lon-{n}")
+            ax.axhline(0.0, color="0.4", lw=0.6)
+            ax.set(title=n, xlabel="scenario time (s)", ylabel="error (m)")
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7, loc="upper left")
+        fig.tight_layout()
+        out["latlon"] = _svg(fig, "latlon")
 
     series = nees_series(run)
     if series:
@@ -361,6 +379,27 @@ def accuracy_rows(run: dict) -> list[tuple[str, str, list[tuple[str, str]]]]:
     return rows
 
 
+def latlon_rows(run: dict) -> list[tuple[str, ...]]:
+    """003 Table 1's layout, where the scenario's paper gives it (evaluate.latlon_rows): per
+    paper row its label, our track and our LATLON figures, then a row of the paper's own;
+    [] for any other scenario."""
+    rows = []
+    paper = run["paper"]
+    for label, track, key in evaluate.latlon_rows(run["scenario"].name, run["errors"]):
+        e = run["errors"][track]
+        rows.append((label, track, *(fmt(e[m]) for m in evaluate.LATLON)))
+        rows.append((f"{label}, paper {paper['paper']}", "",
+                     *(fmt(paper["figures"][key][m]) for m in evaluate.LATLON)))
+    return rows
+
+
+#: The latitude/longitude table's note: what each figure is (lab.evaluate says why).
+LATLON_NOTE = ("Latitude error: along north; longitude error: along east (m), through the "
+               "scenario's site and x azimuth. Average: the mean absolute error; max: the "
+               "maximum absolute error; std: the standard deviation of the signed error "
+               "(003 defines none of them; docs/lab.md, \"Latitude and longitude\").")
+
+
 def link_rows(run: dict) -> list[tuple[str, ...]]:
     """Per port: the emulator's frames and bytes written, the host's frames, bytes and errors."""
     s, emu = run["host_summary"] or {}, (run["emulator"] or {}).get("ports", {})
@@ -455,6 +494,10 @@ def markdown(run: dict) -> str:
              "## Accuracy (paper 001 Table 1's layout)", "",
              _md_table(["statistic", *names], [(label, *(t for _, t in cells))
                                                for _, label, cells in accuracy_rows(run)])]
+    if latlon_rows(run):
+        parts += ["", f"## Latitude and longitude (paper {run['paper']['paper']} Table 1's layout)", "",
+                  _md_table(["method", "track", *evaluate.LATLON.values()], latlon_rows(run)),
+                  "", LATLON_NOTE]
     if paper_note(run):
         parts += ["", paper_note(run)]
     if "bound" in run:
@@ -539,6 +582,17 @@ def html_page(run: dict, figs: dict[str, str]) -> str:
     body += ["<h2>Accuracy (paper 001 Table 1's layout)</h2>",
              _html_table(["statistic", *names], [(label, *(t for _, t in cells)) for _, label, cells in acc],
                          acc_attr, ["paper" if k.startswith("paper:") else "" for k, _, _ in acc])]
+    if latlon_rows(run):
+        rows = latlon_rows(run)
+        body += [f"<h2>Latitude and longitude (paper {e(run['paper']['paper'])} Table 1's layout)</h2>",
+                 _html_table(["method", "track", *evaluate.LATLON.values()], rows,
+                             lambda i, j: "" if j < 2 or not rows[i][1] else
+                             f' data-stat="{list(evaluate.LATLON)[j - 2]}" data-filter="{rows[i][1]}"',
+                             ["" if r[1] else "paper" for r in rows]),
+                 f"<p class=note>{e(LATLON_NOTE)}</p>"]
+        if "latlon" in figs:
+            body += ["<h2>Latitude and longitude error against time</h2>",
+                     f"<div class=fig id=fig-latlon>{figs['latlon']}</div>"]
     if paper_note(run):
         body.append(f"<p class=note id=paper-note>{e(paper_note(run))}</p>")
     if "nees" in figs:

@@ -9,7 +9,7 @@ number of workers, change no cell::
 
     from navtwin.lab import sweep
     result = sweep.run("office", range(1, 11), out="sweeps/office")   # a LocalCluster
-    print(sweep.table(sweep.summarise(result.rows, result.filters)))
+    print(sweep.table(sweep.summarise(result.rows, result.filters, "office")))
 
 Tasks are chunks of seeds worth at least :data:`MIN_TASK_VIRTUAL_S` of scenario time (about
 0.2 s of work here; Dask's overhead is about 1 ms a task): one seed a task for the shipped
@@ -71,7 +71,7 @@ META_KEY = b"navtwin.sweep"
 PART = re.compile(r"part-(\d+)\.parquet")
 #: Per-seed figures of position_errors kept per cell.
 METRICS = ("mean", "max", "rms", "n", "x_min", "x_max", "x_var", "y_min", "y_max", "y_var",
-           "nees_mean", "nees_in_band")
+           "nees_mean", "nees_in_band", *evaluate.LATLON)
 SCHEMA = pa.schema([("scenario", pa.string()), ("seed", pa.int64()), ("filter", pa.string()),
                     ("status", pa.string()), ("error", pa.string())] +
                    [(m, pa.int64() if m == "n" else pa.float64()) for m in METRICS])
@@ -105,10 +105,12 @@ def _scenario(text: str, name: str) -> Scenario:
 
 def seed_cells(sc: Scenario, seed: int, filters: tuple[str, ...],
                duration: float | None) -> list[dict]:
-    """The cells of one seed: one in-memory run, each filter's position_errors."""
+    """The cells of one seed: one in-memory run, each filter's position_errors (with the
+    latitude/longitude figures in the scenario's frame)."""
     estimates, _ = run_in_memory(sc, seed, filters=filters, duration=duration)
     errors = evaluate.position_errors(truth(sc, seed),
-                                      evaluate.load_estimates(map(estimate_line, estimates)))
+                                      evaluate.load_estimates(map(estimate_line, estimates)),
+                                      frame=sc.frame)
     rows = []
     for name in filters:
         e = errors.get(name)
@@ -375,12 +377,14 @@ class _Watch:
 
 # ---------------------------------------------------------------- the table over seeds
 
-def summarise(rows: list[dict], filters: Iterable[str]) -> dict:
-    """Per filter, over its seeds: the mean of each per-seed figure (FIGURES) with its 95 % t
-    half-width, the seeds and failures; and per pair of filters the per-seed difference of mean
-    error (a - b) over the seeds both have, its mean and 95 % t half-width, and which filter it
-    decides for (the CI excludes 0) or None. ``ranking``: the filters by mean error, each joined
-    to the next by "<" (decided) or "~" (not)."""
+def summarise(rows: list[dict], filters: Iterable[str], scenario: str | None = None) -> dict:
+    """Per filter, over its seeds: the mean of each per-seed figure (FIGURES, TABLE_1's, the
+    latitude/longitude ones) with its 95 % t half-width, the seeds and failures; and per pair
+    of filters the per-seed difference of mean error (a - b) over the seeds both have, its
+    mean and 95 % t half-width, and which filter it decides for (the CI excludes 0) or None.
+    ``ranking``: the filters by mean error, each joined to the next by "<" (decided) or "~"
+    (not). For a *scenario* whose paper has a latitude/longitude Table 1 (003's), ``latlon``:
+    its rows (:func:`latlon`)."""
     filters = tuple(filters)
     ok = {f: {r["seed"]: r for r in rows if r["filter"] == f and r["status"] == "ok"}
           for f in filters}
@@ -389,22 +393,48 @@ def summarise(rows: list[dict], filters: Iterable[str]) -> dict:
         cells = [ok[f][s] for s in sorted(ok[f])]
         per[f] = {"seeds": len(cells), "failed": sum(1 for r in rows if r["filter"] == f
                                                      and r["status"] != "ok")}
-        for m in {**FIGURES, **dict.fromkeys(k for ks in TABLE_1.values() for k in ks)}:
-            per[f][m] = mean_ci([r[m] for r in cells if r[m] is not None])
+        for m in {**FIGURES, **dict.fromkeys(k for ks in TABLE_1.values() for k in ks),
+                  **evaluate.LATLON}:
+            per[f][m] = mean_ci([r[m] for r in cells if r.get(m) is not None])
     pairs = []
     for i, a in enumerate(filters):
         for b in filters[i + 1:]:
-            common = sorted(set(ok[a]) & set(ok[b]))
-            d, h = mean_ci([ok[a][s]["mean"] - ok[b][s]["mean"] for s in common])
-            decided = None if not (abs(d) > h) else (a if d < 0 else b)
-            pairs.append({"a": a, "b": b, "seeds": len(common), "diff": d, "half": h,
-                          "better": decided})
+            pairs.append(_paired(ok, a, b, "mean"))
     order = sorted((f for f in filters if per[f]["seeds"]), key=lambda f: per[f]["mean"][0])
     ranking = order[:1]
     for a, b in zip(order, order[1:]):
         p = next(p for p in pairs if {p["a"], p["b"]} == {a, b})
         ranking += ["<" if p["better"] else "~", b]
-    return {"filters": per, "pairs": pairs, "ranking": " ".join(ranking)}
+    out = {"filters": per, "pairs": pairs, "ranking": " ".join(ranking)}
+    if evaluate.latlon_rows(scenario, filters):
+        out["latlon"] = latlon(ok, per, scenario)
+    return out
+
+
+def _paired(ok: dict, a: str, b: str, figure: str) -> dict:
+    """The per-seed difference a - b of *figure* over the seeds both filters have: its mean,
+    95 % t half-width and the filter it decides for (the CI excludes 0), else None."""
+    common = sorted(s for s in set(ok[a]) & set(ok[b])
+                    if ok[a][s].get(figure) is not None and ok[b][s].get(figure) is not None)
+    d, h = mean_ci([ok[a][s][figure] - ok[b][s][figure] for s in common])
+    decided = None if not (abs(d) > h) else (a if d < 0 else b)
+    return {"a": a, "b": b, "seeds": len(common), "diff": d, "half": h, "better": decided}
+
+
+def latlon(ok: dict, per: dict, scenario: str) -> dict:
+    """003 Table 1's layout of a summary: ``rows``, per paper row (evaluate.latlon_rows) its
+    label, our track, its seeds and each figure of evaluate.LATLON over seeds with the paper's
+    beside it; ``pairs``, each row's track against every row above it (the weighted centroid
+    against the centroid, each against the SINS alone), the paired difference of each figure."""
+    paper = evaluate.PAPER_FIGURES[scenario]["figures"]
+    table = evaluate.latlon_rows(scenario, tuple(per))
+    rows = [{"label": label, "track": track, "seeds": per[track]["seeds"],
+             **{m: per[track][m] for m in evaluate.LATLON},
+             "paper": {m: paper[key][m] for m in evaluate.LATLON}} for label, track, key in table]
+    pairs = [{"a": a["track"], "b": b["track"],
+              **{m: _paired(ok, a["track"], b["track"], m) for m in evaluate.LATLON}}
+             for i, a in reversed(list(enumerate(rows))) for b in reversed(rows[:i])]
+    return {"paper": evaluate.PAPER_FIGURES[scenario]["paper"], "rows": rows, "pairs": pairs}
 
 
 def _ci(v: tuple[float, float], digits: int = 3) -> str:
@@ -421,9 +451,7 @@ def table(summary: dict) -> str:
     rows = [["filter", "seeds", "failed", *FIGURES.values()]]
     rows += [[f, str(s["seeds"]), str(s["failed"]), *(_ci(s[m]) for m in FIGURES)]
              for f, s in summary["filters"].items()]
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w)
-                       for i, (c, w) in enumerate(zip(r, widths))).rstrip() for r in rows]
+    lines = _aligned(rows)
     lines += ["", "paired difference of mean error (m, a - b, 95 % CI):"]
     pairs = [(f"{p['a']} - {p['b']}", _ci((p["diff"], p["half"]), 4),
               f"{p['better']} better" if p["better"] else "not decided") for p in summary["pairs"]]
@@ -431,7 +459,41 @@ def table(summary: dict) -> str:
     ci_w = max((len(c) for _, c, _ in pairs), default=0)
     lines += [f"  {n:<{name_w}}  {c:>{ci_w}}  {v}" for n, c, v in pairs]
     lines.append(f"ranking: {summary['ranking']}")
+    for title, head, rows, left in _latlon_grids(summary["latlon"]) if "latlon" in summary else ():
+        lines += ["", title + ":", *_aligned([head, *rows], left)]
     return "\n".join(lines)
+
+
+def _aligned(rows: list[list[str]], left: int = 1) -> list[str]:
+    """Text rows in columns as wide as their widest cell, two spaces apart, the first *left*
+    columns to the left, the others to the right."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) if i < left else c.rjust(w)
+                      for i, (c, w) in enumerate(zip(r, widths))).rstrip() for r in rows]
+
+
+def _latlon_grids(ll: dict) -> tuple[tuple[str, list[str], list[list[str]], int], ...]:
+    """003 Table 1's layout of a summary's ``latlon`` as (title, heading, rows, number of
+    columns of names, set to the left): the figures, ours over seeds with the paper's in
+    parentheses, then, where two methods or more are there, their paired differences."""
+    paper, figs = ll["paper"], list(evaluate.LATLON)
+    head = [f"{paper} Table 1", "track", "seeds", *evaluate.LATLON.values()]
+    rows = [[r["label"], r["track"], str(r["seeds"]),
+             *(f"{_ci(r[m])} ({r['paper'][m]:.4f})" for m in figs)] for r in ll["rows"]]
+    pair_head = ["a - b", "seeds", *evaluate.LATLON.values()]
+    pair_rows = [[f"{p['a']} - {p['b']}", str(p[figs[0]]["seeds"]),
+                  *(f"{_ci((p[m]['diff'], p[m]['half']), 3)} "
+                    f"{'(' + p[m]['better'] + ')' if p[m]['better'] else '(~)'}" for m in figs)]
+                 for p in ll["pairs"]]
+    grids = [(f"Paper {paper} Table 1's layout (m; average: mean absolute error, max: maximum "
+              "absolute error, std: standard deviation of the signed error, along north for "
+              "latitude and east for longitude): each figure the mean over seeds of that seed's "
+              f"figure, ± its 95 % half-width; ({paper}'s published figure)", head, rows, 2)]
+    if pair_rows:  # one row of the paper's present: nothing to pair
+        grids.append(("Paired differences a - b over the seeds both have (m, ± the 95 % "
+                      "half-width); (name): the track the CI decides for, (~): not decided",
+                      pair_head, pair_rows, 1))
+    return tuple(grids)
 
 
 def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
@@ -440,7 +502,8 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
     Result's) when given."""
     paper = evaluate.PAPER_FIGURES.get(scenario)
     cols = list(FIGURES.values())
-    extra = [f"{paper['paper']} mean m", f"{paper['paper']} max m"] if paper else []
+    paper_means = evaluate.has_paper_means(scenario)
+    extra = [f"{paper['paper']} mean m", f"{paper['paper']} max m"] if paper_means else []
     lines = []
     if meta:
         a, b = meta["seeds"]
@@ -452,7 +515,7 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
              "|---|---:|" + "---:|" * (len(cols) + len(extra))]
     for f, s in summary["filters"].items():
         cells = [_ci(s[m]) for m in FIGURES]
-        if paper:
+        if paper_means:
             fig = paper["figures"].get(f, {})
             cells += [_paper(fig.get("mean")), _paper(fig.get("max"))]
         failed = f" ({s['failed']} failed)" if s["failed"] else ""
@@ -463,6 +526,11 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
         lines.append(f"| {p['a']} - {p['b']} | {p['seeds']} | {_ci((p['diff'], p['half']), 4)} "
                      f"| {p['better'] + ' better' if p['better'] else 'not decided'} |")
     lines += _table_1(summary, paper)
+    if "latlon" in summary:
+        for title, head, rows, left in _latlon_grids(summary["latlon"]):
+            lines += ["", title + ".", "", "| " + " | ".join(head) + " |",
+                      "|" + "---|" * left + "---:|" * (len(head) - left)]
+            lines += ["| " + " | ".join(r) + " |" for r in rows]
     rank = (f"Ranking by mean error (`<`: the paired 95 % CI excludes 0; `~`: it does not): "
             f"`{summary['ranking']}`")
     means = {f: v["mean"] for f, v in paper["figures"].items() if "mean" in v} if paper else {}
