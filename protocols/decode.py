@@ -152,7 +152,7 @@ def printed(rec: dict, gyro_range: int = 300) -> dict:
     resolution (0.87912, not 0.8791200000000001). The records themselves stay exact."""
     out = dict(rec)
     decimals = _DECIMALS[gyro_range]
-    if rec.get("format") == "sins" and rec.get("type") == sins.TYPE_WIDE_SAMPLE:
+    if "gyro" in rec:  # a wide sample's record (its 32-bit words): their finer resolution
         decimals = {**decimals, **_WIDE_DECIMALS}
     for key, places in decimals.items():
         v = rec.get(key)
