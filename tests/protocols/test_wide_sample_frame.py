@@ -2,15 +2,23 @@
 byte-exact vectors, the words' rounding and saturation, round trips through construct, the
 fast builder and the streaming decoders, and its JSON and diff records."""
 import binascii
+import json
+import math
 
 import pytest
 
+from navtwin.emulator.runner import Emulation
+from navtwin.emulator.scenario import load_scenario
+
 from navtwin.protocols import adis16350, adis16488, sins, xbee
-from navtwin.protocols.capture import Capture
-from navtwin.protocols.decode import frame_record, printed, sins_labelled
+from navtwin.protocols.capture import Capture, write_recording
+from navtwin.protocols.decode import decode, frame_record, printed, sins_labelled
 from navtwin.protocols.diff import diff_bytes
 from navtwin.protocols.fast import plain
+from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import Frame, XBeeSinsChain, sins_decoder
+
+from ..helpers import navtwin
 
 from ..tshark import fields, needs_tshark
 
@@ -142,3 +150,55 @@ def test_diff_names_the_changed_32_bit_word_and_its_change_in_units():
     [f] = c.fields
     assert (f.name, f.a, f.b) == ("Y_GYRO", 0x8000, 0x8001)
     assert f.text() == "Y_GYRO 0x8000 -> 0x8001 (+3.05176e-07 deg/s)"
+
+
+@pytest.fixture(scope="module")
+def wide_run(tmp_path_factory):
+    """2 s of rssi-centroid (words = "adis16488", magnetometer on) recorded, and its pcapng."""
+    out = tmp_path_factory.mktemp("wide")
+    with Emulation(load_scenario("rssi-centroid"), 3, speed=None, ports=False, duration_s=2.0,
+                   record=out / "run") as emu:
+        emu.run()
+    with open(out / "run.pcapng", "wb") as f:
+        write_recording(Recording(out / "run"), f)
+    return out
+
+
+def test_navtwin_decode_prints_the_board_line_and_the_radio_alike(wide_run):
+    """Both ports' wide frames decode to the same records, whatever --gyro-range says (the
+    frame's type says which words it carries)."""
+    rows = {}
+    for fmt, port, rng in (("sins", "sins", "300"), ("xbee-sins", "xbee", "75")):
+        p = navtwin("decode", "--format", fmt, "--port", port, "--gyro-range", rng, str(wide_run / "run"))
+        assert p.returncode == 0, p.stderr
+        recs = [json.loads(x) for x in p.stdout.splitlines()]
+        rows[port] = {r["seq"]: r for r in recs if r.get("type") == sins.TYPE_WIDE_SAMPLE}
+        assert not [r for r in recs if r.get("type") == sins.TYPE_SAMPLE]
+    assert len(rows["sins"]) == 200 and set(rows["xbee"]) <= set(rows["sins"]) and len(rows["xbee"]) >= 195
+    for seq, r in rows["xbee"].items():
+        a = rows["sins"][seq]
+        assert {k: v for k, v in r.items() if k not in ("offset", "source", "format")} == \
+               {k: v for k, v in a.items() if k not in ("offset", "format")}
+    # driving straight north, level: the up gyro reads the earth's 15.04 sin(32 deg) =
+    # 7.97 deg/h (1/8 of a 14-bit LSB at +-75 deg/s) within a deg/h over 2 s; z, gravity
+    up = [r["gyro_dps"][2] * 3600 for r in rows["sins"].values()]
+    assert sum(up) / len(up) == pytest.approx(15.041 * math.sin(math.radians(32)), abs=1.0)
+    assert rows["sins"][100]["accel_m_s2"][2] == pytest.approx(9.7948, abs=0.002)
+
+
+@needs_tshark
+def test_wireshark_shows_the_emulated_wide_frames_on_both_ports(wide_run):
+    expected = [r for r in decode(str(wide_run / "run"), "sins", port="sins")
+                if r.get("type") == sins.TYPE_WIDE_SAMPLE]
+    names = ["navtwin.sins.seq", "navtwin.sins.z_gyro", "navtwin.sins.zgyro_dps", "navtwin.sins.crc_ok"]
+    for port in ("sins", "xbee"):  # the board's line, and the RF data of the 0x90 frames
+        shown = []
+        for row in fields(wide_run / "run.pcapng", *names,
+                          where=f'frame.interface_name == "{port}" && navtwin.sins.type == 3'):
+            shown += [list(f) for f in zip(*row)]
+        by_seq = {r["seq"]: r for r in expected}
+        assert len(shown) >= 195, port
+        for seq, word, dps, ok in shown:
+            e = by_seq[int(seq)]
+            assert int(word) == e["gyro"][2] and float(dps) == pytest.approx(e["gyro_dps"][2], rel=1e-12)
+            assert ok == "1"
