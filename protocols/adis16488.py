@@ -55,20 +55,11 @@ def counts(x, lsb: float):
 def to_sample(supply: int, gyro, accel, temp, aux: int) -> adis.Sample:
     """Engineering units of a wide sample frame's fields (the host's view of one frame):
     32-bit gyro and accelerometer words, ADIS16350 housekeeping words with their flags."""
-    house = (supply, *temp, aux)
-    either = 0
-    for w in house:
-        either |= w
-    s12 = adis.signed
-    return adis.Sample(
-        supply_v=(supply & 0x0FFF) * adis.SUPPLY_LSB_V,
-        gyro_dps=tuple(w * GYRO_LSB_DPS for w in gyro),
-        accel_g=tuple(w * ACCEL_LSB_G for w in accel),
-        temp_c=tuple(s12(t, 12) * adis.TEMP_LSB_C + adis.TEMP_ZERO_C for t in temp),
-        aux_v=(aux & 0x0FFF) * adis.AUX_LSB_V,
-        nd=tuple(w >= adis.ND for w in house),
-        ea=bool(either & adis.EA),
-    )
+    supply_v, temp_c, aux_v = adis.housekeeping(supply, temp, aux)
+    nd, ea = adis.flags((supply, *temp, aux))
+    return adis.Sample(supply_v=supply_v, gyro_dps=tuple(w * GYRO_LSB_DPS for w in gyro),
+                       accel_g=tuple(w * ACCEL_LSB_G for w in accel), temp_c=temp_c, aux_v=aux_v,
+                       nd=nd, ea=ea)
 
 
 def to_arrays(gyro: np.ndarray, accel: np.ndarray) -> dict[str, np.ndarray]:
