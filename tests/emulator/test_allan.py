@@ -45,9 +45,9 @@ def test_adis16350_round_trip_from_the_bytes():
 
 
 def test_paper003_round_trip_from_the_registers():
-    """003's grade is 1650 times finer than a gyro LSB (0.04 deg/h against 66 deg/h at
-    +-75 deg/s) and its white noise far below one: the words cannot carry it, so the round
-    trip reads the registers before quantisation (the same sensor, the same draws), at the
+    """003's grade is 1650 times finer than a 14-bit gyro LSB (0.04 deg/h against 66 deg/h at
+    +-75 deg/s) and its white noise far below one: those words cannot carry it (the wide ones
+    do: below), so this round trip reads the registers before quantisation (the same sensor, the same draws), at the
     default 4 taps, whose reads alias the white noise by read_white_factor = 1.19."""
     sc = parked(1200.0, {"grade": "paper003"})
     e, alias = sc.imu.errors, read_white_factor(4, 819.2)

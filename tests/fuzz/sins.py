@@ -19,6 +19,7 @@ MAGNETOMETER = (sins.build_sample(10, [0x8000] * 11) + sins.build_magnetometer(1
                 + sins.build_sample(20, [0x8000] * 11) + sins.build_magnetometer(20, (-4096, 0, 0))
                 + crcframe.encode(sins.SYNC, sins.TYPE_MAGNETOMETER, bytes(24)))
 SEEDS = [b"".join(TAIL), fixture("golden", "office", "sins.bin", size=600),
+         fixture("golden", "rssi-centroid", "sins.bin", size=600),  # wide samples and magnetometer
          TAIL[0][:-1] + b"\x00" + TAIL[1][:9], MAGNETOMETER]
 
 
