@@ -32,7 +32,8 @@ def register(sub) -> None:
                    help="keep reading a port or a growing file until interrupted")
     p.add_argument("--port", help="which port of a recording directory (default: by format)")
     p.add_argument("--gyro-range", type=int, choices=(300, 150, 75), default=300,
-                   help="ADIS16350 gyro range in deg/s set by SENS/AVG (default 300)")
+                   help="ADIS16350 gyro range in deg/s set by SENS/AVG (default 300); "
+                        "type 01 frames only: a wide sample frame's 32-bit words need none")
     p.add_argument("--hex", action="store_true", help="add each frame's bytes")
     p.add_argument("--errors-only", action="store_true", help="print only errors and the summary")
     p.set_defaults(func=run)

@@ -40,7 +40,8 @@ def register(sub) -> None:
                    help="report matching frames whose chunk times differ by more than S "
                    "seconds (device time where both have it, else wall time; default 0.001)")
     p.add_argument("--gyro-range", type=int, choices=(300, 150, 75), default=300,
-                   help="ADIS16350 gyro range in deg/s for the SINS words' units (default 300)")
+                   help="ADIS16350 gyro range in deg/s for the SINS words' units (default 300); "
+                        "type 01 frames only: a wide sample frame's 32-bit words need none")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(func=run)
 

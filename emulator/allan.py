@@ -28,6 +28,7 @@ import numpy as np
 
 from navtwin.common.schema import build
 from navtwin.protocols import adis16350 as adis
+from navtwin.protocols import adis16488, sins
 from navtwin.protocols.ports import SINS
 from navtwin.protocols.stream import Frame, sins_decoder
 
@@ -57,15 +58,20 @@ def parked(seconds: float, imu: dict, base: str = "office") -> Scenario:
 
 
 def sins_rates(sc: Scenario, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gyro (rad/s) and accelerometer (m/s^2) readings (N, 3) of every SINS frame of a run of
-    *sc*, decoded from the bytes the board writes (protocols' streaming decoder)."""
+    """Gyro (rad/s) and accelerometer (m/s^2) readings (N, 3) of every SINS sample frame of a
+    run of *sc*, decoded from the bytes the board writes (protocols' streaming decoder; the
+    frame's type says which words: 14-bit, or 32-bit with ``[imu] words = "adis16488"``)."""
     world, dec = World(sc, seed), sins_decoder()
-    words = []
+    frames = []
     for t in np.arange(CHUNK_S, sc.duration_s + CHUNK_S, CHUNK_S):
         data = b"".join(e.data for e in world.advance(round(min(t, sc.duration_s) * 1e9))
                         if e.port == SINS.name)
-        words += [f.fields["words"] for f in dec.feed(data) if isinstance(f, Frame)]
-    out = adis.words_to_arrays(np.array(words), sc.imu.gyro_range_dps)
+        frames += [f for f in dec.feed(data) if isinstance(f, Frame) and f.type in sins.SAMPLE_TYPES]
+    if frames and frames[0].type == sins.TYPE_WIDE_SAMPLE:
+        out = adis16488.to_arrays(np.array([f.fields["gyro"] for f in frames]),
+                                  np.array([f.fields["accel"] for f in frames]))
+    else:
+        out = adis.words_to_arrays(np.array([f.fields["words"] for f in frames]), sc.imu.gyro_range_dps)
     return out["gyro_rad_s"], out["accel_m_s2"]
 
 
@@ -142,7 +148,7 @@ def dithered(imu: Imu) -> bool:
     read spans a gyro LSB (rounding then adds white noise; below it, the words stick)."""
     taps = bartlett_taps(imu.filter_taps)
     sigma = math.radians(imu.errors.gyro_arw_deg_rt_h) / 60 * math.sqrt(np.sum(taps ** 2) / imu.sample_period_s)
-    return sigma > math.radians(adis.GYRO_LSB_DPS[imu.gyro_range_dps])
+    return sigma > math.radians(imu.word_format.gyro_lsb_dps(imu))
 
 
 def round_trip(grade: str, seconds: float, seed: int, imu: dict | None = None) -> dict:

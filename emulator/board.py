@@ -1,5 +1,7 @@
 """The SINS DSP board (TMS320C6713 + MAX3111E): reads the ADIS16350 every 10 ms of its own
-clock and writes one SINS frame (wire-formats.md section 1) on its RS-232 line.
+clock and writes one SINS frame (wire-formats.md section 1) on its RS-232 line: a sample
+frame, or a wide sample frame when the IMU speaks 32-bit words (``[imu] words``,
+emulator.imu_words).
 
 Frame k is written from true time ``t_k = start + round(k period / (1 + ppm 1e-6))`` (the
 board's crystal; an absolute schedule) with seq = k mod 65536; its registers are read over
@@ -19,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.protocols.sins import FRAME_SIZE, build_magnetometer, build_sample
+from navtwin.protocols.sins import build_magnetometer
 from navtwin.protocols.serial import char_ns
 
 from .clock import Clock
@@ -77,7 +79,8 @@ class Board:
         if len(k):
             self._last_k = int(k[-1])  # the last frame written
         words = self.imu.read(t - self.spi_read_ns).tolist()
-        frames = [build_sample(s, w) for s, w in zip(seq.tolist(), words)]
+        frame = self.imu.words.frame
+        frames = [frame(s, w) for s, w in zip(seq.tolist(), words)]
         if not self.every:
             return t, frames, marks
         return self._with_magnetometer(t, seq, frames, marks)
@@ -90,7 +93,7 @@ class Board:
         field = self.magnetometer.read(t[picked] - self.spi_read_ns).tolist()
         after = dict(zip(picked.tolist(), (build_magnetometer(int(seq[i]), f)
                                            for i, f in zip(picked.tolist(), field))))
-        frame_ns = round(FRAME_SIZE * self.char_ns)
+        frame_ns = round(self.imu.words.frame_size * self.char_ns)
         times, out, moved = [], [], {}
         for i, (start, frame) in enumerate(zip(t.tolist(), frames)):
             moved[i] = len(out)

@@ -22,9 +22,9 @@ VRW sqrt(fs) (accelerometer). Temperature and supply are
 measured with the sample (scenario value plus white noise). The output registers hold the
 Bartlett-window FIR of the last samples: two cascaded N-tap averages (datasheet p. 17,
 H(f) = [sin(pi N f ts) / (N sin(pi f ts))]^2, N = 2^SENS/AVG[2:0]). A read returns the
-registers of the latest sample, quantised to 14 bits (gyro, accelerometer) or 12 bits
-(temperature, supply) with ND = 1 when a sample arrived since the previous read and EA = 1
-while a STATUS flag is set (overrange of the read sample; supply outside 4.75..5.25 V).
+registers of the latest sample, quantised to 14 bits (gyro, accelerometer; 32 bits with
+``[imu] words = "adis16488"``, emulator.imu_words) or 12 bits (temperature, supply) with
+ND = 1 when a sample arrived since the previous read and EA = 1 while a STATUS flag is set (overrange of the read sample; supply outside 4.75..5.25 V).
 Datasheet figures: shared/reference/adis16350-nanoloc-facts.md section 1.4.
 """
 from __future__ import annotations
@@ -162,14 +162,14 @@ class Adis16350:
         self.clock = Clock(ppm, ts * 1e9)
         fs = 1.0 / ts
         taps = bartlett_taps(spec.filter_taps)
-        self.gyro_range = spec.gyro_range_dps
+        self.words = spec.word_format
         self.gyro = _Sensor(
             rng, streams("imu.gyro.drift"),
             noise=math.radians(e.gyro_arw_deg_rt_h) / 60.0 * math.sqrt(fs),
             bias=deg_h(e.gyro_bias_instability_deg_h), corr_s=e.gyro_bias_corr_s,
             rrw=deg_h(e.gyro_rrw_deg_h_rt_h) / 60.0, turn_on=deg_h(e.gyro_bias_deg_h),
             scale_ppm=e.gyro_scale_factor_ppm, misalign_rad=e.gyro_misalignment_mrad / 1e3,
-            full_scale=math.radians(spec.gyro_range_dps), ts=ts, taps=taps)
+            full_scale=math.radians(self.words.gyro_range_dps(spec)), ts=ts, taps=taps)
         self.accel = _Sensor(
             rng, streams("imu.accel.drift"),
             noise=e.accel_vrw_m_s_rt_h / 60.0 * math.sqrt(fs),
@@ -232,7 +232,8 @@ class Adis16350:
         return self._gyro[i], self._accel[i]
 
     def read(self, t_read_ns: np.ndarray) -> np.ndarray:
-        """(M, 11) uint16 register words SUPPLY_OUT..AUX_ADC read at increasing true times."""
+        """(M, 11) register words SUPPLY_OUT..AUX_ADC read at increasing true times, the
+        gyro and accelerometer columns in the scenario's words (emulator.imu_words)."""
         i = self._latest(t_read_ns)
         j = self._j[i]
         nd = np.diff(np.concatenate(([self._last_read_j], j))) > 0
@@ -240,15 +241,14 @@ class Adis16350:
             self._last_read_j = int(j[-1])
         supply, temp, ea = self._supply[i], self._temp[i], self._alarm[i]
         q, p = adis.quantise, adis.pack
-        glsb = adis.GYRO_LSB_DPS[self.gyro_range]
-        words = np.empty((len(i), 11), dtype=np.uint16)
+        words = np.empty((len(i), 11), dtype=np.int64)
         words[:, 0] = p(q(supply, adis.SUPPLY_LSB_V), 12, nd=False, is_signed=False)
-        words[:, 1:4] = p(q(np.degrees(self._gyro[i]), glsb), 14, nd=False)
-        words[:, 4:7] = p(q(self._accel[i] / adis.STANDARD_GRAVITY, adis.ACCEL_LSB_G), 14, nd=False)
+        words[:, 1:7] = self.words.inertial(self._gyro[i], self._accel[i], self.spec)
         words[:, 7:10] = p(q(temp - adis.TEMP_ZERO_C, adis.TEMP_LSB_C), 12, nd=False)
         words[:, 10] = p(q(np.zeros(len(i)), adis.AUX_LSB_V), 12, nd=False, is_signed=False)
         flags = np.where(nd, adis.ND, 0) | np.where(ea, adis.EA, 0)
-        return words | flags.astype(np.uint16)[:, None]
+        words[:, self.words.flagged] |= flags[:, None]
+        return words
 
     def errors(self) -> dict:
         """The power-on draws (for evaluation; they never reach the host)."""

@@ -12,9 +12,10 @@ The bias instability is either
 * the 1 sigma of one first-order Gauss-Markov process with that correlation time
   (``*_bias_corr_s > 0``; gnss-ins-sim's ``gyro_b_stability`` with ``gyro_b_corr``).
 
-Quantisation and the gyro range are the ADIS16350 words' (protocols.adis16350, the
-``[imu] gyro_range_dps`` register setting): the board speaks ADIS16350 words whatever the
-grade, so a grade finer than the word's LSB is read through that LSB (docs/emulator-models.md).
+Quantisation and the gyro range are the words' (``[imu] words``, emulator.imu_words): the
+ADIS16350's by default (protocols.adis16350, the ``[imu] gyro_range_dps`` register setting),
+whatever the grade, so a grade finer than their LSB is read through that LSB; the 32-bit
+``adis16488`` words carry a navigation grade such as ``paper003`` (docs/emulator-models.md 3.1).
 
 A scenario picks a grade by name (``[imu] grade = "adis16350"``) and may set any field of
 it in ``[imu]`` (its own IMU); :func:`profile` merges them. A new grade is one entry in

@@ -36,6 +36,7 @@ from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2,
 from . import trajectory as geometry
 from .faults import Fault
 from .imu_errors import GRADES, ImuErrors, override_keys, profile
+from .imu_words import DEFAULT_WORDS, WORDS
 from .rng import stream
 from navtwin.common import tomlfile
 from navtwin.common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
@@ -190,8 +191,14 @@ ImuGrade = dataclasses.make_dataclass("ImuGrade", [
 
 @dataclass(frozen=True)
 class Imu(ImuGrade):
-    gyro_range_dps: int = key(lab.GYRO_RANGE_DPS, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range",
-                                one_of(*sorted(GYRO_LSB_DPS)))
+    words: str | None = key(None, "", "the gyro and accelerometer words the board reads and sends "
+                            "(emulator.imu_words): adis16350 = 14-bit, in sample frames (type 01); "
+                            "adis16488 = 32-bit X_GYRO_OUT:LOW pairs, +-450 deg/s, in wide sample "
+                            "frames (type 03), fine enough for a navigation-grade IMU; none = "
+                            f"{DEFAULT_WORDS}, the lab's", one_of(*WORDS))
+    gyro_range_dps: int = key(lab.GYRO_RANGE_DPS, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range "
+                              "of the adis16350 words (the adis16488 words' is +-450)",
+                              one_of(*sorted(GYRO_LSB_DPS)))
     filter_taps: int = key(4, "", "SENS/AVG bits 2:0 = log2(N): Bartlett window taps N",
                            one_of(1, 2, 4, 8, 16, 32, 64))
     smpl_prd: int = key(1, "", "SMPL_PRD: internal sample period 0.61035 ms x (NS+1) (bit 7 = 18.921 ms "
@@ -221,6 +228,11 @@ class Imu(ImuGrade):
                                       f"{self.sample_period_s:g} s, longer than the emulator's "
                                       f"{BLOCK_S:g} s generation block; use smpl_prd <= "
                                       f"{_slowest_smpl_prd()}")
+
+    @property
+    def word_format(self):
+        """The words' kind (emulator.imu_words): ``words``, or the lab's when none is set."""
+        return WORDS[self.words or DEFAULT_WORDS]
 
     @property
     def errors(self) -> ImuErrors:

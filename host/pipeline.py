@@ -10,7 +10,8 @@ Ports (also the names of a host recording's files): those whose declaration
 whose frames it handles by what they carry:
 
 =========  ==========================================================================
-imu        SINS samples: on the lab's ``sins`` line, and inside the coordinator's 0x90
+imu        SINS samples (type 01, or the wide type 03: the frame's type says which words,
+           no setting): on the lab's ``sins`` line, and inside the coordinator's 0x90
            packets on ``xbee`` (:class:`navtwin.protocols.stream.XBeeSinsChain`); the
            stream's magnetometer frames too (``MagSample``, at their sample's time)
 ranges     the anchors' gateway (``nanoloc``): one ranging report per exchange
@@ -55,7 +56,7 @@ from collections import Counter, deque
 from functools import partial
 from typing import Any, Callable
 
-from navtwin.protocols import adis16350, formats, nanoloc, ports, sins, xbee
+from navtwin.protocols import formats, nanoloc, ports, sins, xbee
 from navtwin.protocols.stream import DecodeError, Frame
 
 from .clock import DeviceClock, Unwrapper
@@ -279,7 +280,7 @@ class Pipeline:
         t = v.imu_clock.time(ev.fields["seq"], a)
         if t is None:
             return
-        s = adis16350.words_to_sample(ev.fields["words"], v.gyro_range_dps)
+        s = sins.to_sample(ev.type, ev.fields, v.gyro_range_dps)  # either width: by its type
         nd_ok = all(s.nd)
         self.counts["imu"] += 1
         self.counts["imu_no_new_data"] += not nd_ok

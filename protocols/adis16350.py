@@ -133,23 +133,36 @@ def _s12(w: int) -> int:
     return v - 0x1000 if v & 0x0800 else v
 
 
+def housekeeping(supply: int, temp, aux: int) -> tuple[float, tuple[float, float, float], float]:
+    """Supply (V), the three temperatures (degC) and AUX_ADC (V) of their words: the SINS
+    frames of either width carry these words as the ADIS16350 writes them."""
+    tx, ty, tz = temp
+    return ((supply & 0x0FFF) * SUPPLY_LSB_V,
+            (_s12(tx) * TEMP_LSB_C + TEMP_ZERO_C, _s12(ty) * TEMP_LSB_C + TEMP_ZERO_C,
+             _s12(tz) * TEMP_LSB_C + TEMP_ZERO_C),
+            (aux & 0x0FFF) * AUX_LSB_V)
+
+
+def flags(words) -> tuple[tuple[bool, ...], bool]:
+    """ND of each 16-bit word (bit 15 set <=> w >= 0x8000) and whether any carries EA."""
+    either = 0
+    for w in words:
+        either |= w
+    return tuple([w >= ND for w in words]), bool(either & EA)
+
+
 def words_to_sample(words, gyro_range: int = 300) -> Sample:
     """Engineering units from the 11 raw words of a SINS frame (once per frame on the host:
     plain int arithmetic, no per-word calls beyond the sign extension)."""
     glsb = GYRO_LSB_DPS[gyro_range]
     supply, gx, gy, gz, ax, ay, az, tx, ty, tz, aux = words
-    either = 0
-    for w in words:
-        either |= w
+    supply_v, temp_c, aux_v = housekeeping(supply, (tx, ty, tz), aux)
+    nd, ea = flags(words)
     return Sample(
-        supply_v=(supply & 0x0FFF) * SUPPLY_LSB_V,
+        supply_v=supply_v,
         gyro_dps=(_s14(gx) * glsb, _s14(gy) * glsb, _s14(gz) * glsb),
         accel_g=(_s14(ax) * ACCEL_LSB_G, _s14(ay) * ACCEL_LSB_G, _s14(az) * ACCEL_LSB_G),
-        temp_c=(_s12(tx) * TEMP_LSB_C + TEMP_ZERO_C, _s12(ty) * TEMP_LSB_C + TEMP_ZERO_C,
-                _s12(tz) * TEMP_LSB_C + TEMP_ZERO_C),
-        aux_v=(aux & 0x0FFF) * AUX_LSB_V,
-        nd=tuple([w >= ND for w in words]),  # 16-bit words: bit 15 set <=> w >= 0x8000
-        ea=bool(either & EA),
+        temp_c=temp_c, aux_v=aux_v, nd=nd, ea=ea,
     )
 
 

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Iterator
 
-from . import adis16350, formats, nanoloc, ports, sins, xbee
+from . import adis16350, adis16488, formats, nanoloc, ports, sins, xbee
 from .ports import DEFAULT_BAUD
 from .recording import Recording, RecordingError
 from .formats import hexval
@@ -38,8 +38,10 @@ def sins_record(frame: Frame, gyro_range: int) -> dict:
     f = frame.fields
     if frame.type == sins.TYPE_MAGNETOMETER:
         return magnetometer_record(frame)
-    s = adis16350.words_to_sample(f["words"], gyro_range)
-    return dict(seq=f["seq"], words=list(f["words"]), nd=all(s.nd), ea=s.ea,
+    s = sins.to_sample(frame.type, f, gyro_range)
+    words = ({"words": list(f["words"])} if frame.type == sins.TYPE_SAMPLE else
+             {k: f[k] if isinstance(f[k], int) else list(f[k]) for k in _WIDE_FIELDS})
+    return dict(seq=f["seq"], **words, nd=all(s.nd), ea=s.ea,
                 gyro_dps=list(s.gyro_dps), gyro_rad_s=list(s.gyro_rad_s),
                 accel_g=list(s.accel_g), accel_m_s2=list(s.accel_m_s2),
                 temp_c=list(s.temp_c), supply_v=s.supply_v, aux_v=s.aux_v)
@@ -53,10 +55,15 @@ def magnetometer_record(frame: Frame) -> dict:
                 field_ut=None if field is None else list(field))
 
 
+#: the words of a wide sample frame (type 03) in frame order, less ``seq``
+_WIDE_FIELDS = ("supply", "gyro", "accel", "temp", "aux")
+
 #: (unit, the Sample attribute and index) of each register word of a SINS frame, in order
 _WORD_UNITS = (("V", "supply_v", None), *(("deg/s", "gyro_dps", i) for i in range(3)),
                *(("g", "accel_g", i) for i in range(3)), *(("degC", "temp_c", i) for i in range(3)),
                ("V", "aux_v", None))
+#: the register (pair) names of a wide sample frame's words, in frame order
+_WIDE_NAMES = ("SUPPLY_OUT", *adis16488.WORDS, "XTEMP_OUT", "YTEMP_OUT", "ZTEMP_OUT", "AUX_ADC")
 
 
 def sins_labelled(frame: Frame, gyro_range: int) -> dict:
@@ -69,8 +76,13 @@ def sins_labelled(frame: Frame, gyro_range: int) -> dict:
             out[f"{axis}MAG"] = (word & 0xFFFF, None if word == sins.MAG_OVERFLOW else
                                  word * sins.MAG_LSB_UT, "uT")
         return out
-    s = adis16350.words_to_sample(f["words"], gyro_range)
-    for name, word, (unit, attr, i) in zip(adis16350.REGISTERS, f["words"], _WORD_UNITS):
+    s = sins.to_sample(frame.type, f, gyro_range)
+    if frame.type == sins.TYPE_SAMPLE:
+        names, words = adis16350.REGISTERS, f["words"]
+    else:  # the 32-bit words shown as unsigned, as the 16-bit ones are
+        names = _WIDE_NAMES
+        words = (f["supply"], *(w & 0xFFFFFFFF for w in (*f["gyro"], *f["accel"])), *f["temp"], f["aux"])
+    for name, word, (unit, attr, i) in zip(names, words, _WORD_UNITS):
         v = getattr(s, attr)
         out[name] = (word, v if i is None else v[i], unit)
     return out
@@ -128,13 +140,21 @@ def _resolution(gyro_range: int) -> dict[str, int]:
 
 
 _DECIMALS = {rng: _resolution(rng) for rng in adis16350.GYRO_LSB_DPS}
+#: a wide sample frame's 32-bit words to three significant digits of their LSB
+_WIDE_DECIMALS = {"gyro_dps": _decimals(adis16488.GYRO_LSB_DPS, 3),
+                  "gyro_rad_s": _decimals(math.radians(adis16488.GYRO_LSB_DPS), 3),
+                  "accel_g": _decimals(adis16488.ACCEL_LSB_G, 3),
+                  "accel_m_s2": _decimals(adis16488.ACCEL_LSB_G * adis16350.STANDARD_GRAVITY, 3)}
 
 
 def printed(rec: dict, gyro_range: int = 300) -> dict:
     """*rec* as ``navtwin decode`` prints it: engineering units rounded to the sensor's
     resolution (0.87912, not 0.8791200000000001). The records themselves stay exact."""
     out = dict(rec)
-    for key, places in _DECIMALS[gyro_range].items():
+    decimals = _DECIMALS[gyro_range]
+    if "gyro" in rec:  # a wide sample's record (its 32-bit words): their finer resolution
+        decimals = {**decimals, **_WIDE_DECIMALS}
+    for key, places in decimals.items():
         v = rec.get(key)
         if isinstance(v, float):
             out[key] = round(v, places)

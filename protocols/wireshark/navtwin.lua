@@ -9,7 +9,9 @@
 -- brings one. Protocols and their filter fields (docs/testing.md, "Captures in Wireshark"):
 --   navtwin.sins     seq, every register word raw (navtwin.sins.xgyro_out) and in units
 --                    (navtwin.sins.xgyro_dps, _g, _c, _v), nd, ea, crc, crc_ok; a magnetometer
---                    frame (type 02): xmag, ymag, zmag raw and xmag_ut .. in uT, mag_overflow
+--                    frame (type 02): xmag, ymag, zmag raw and xmag_ut .. in uT, mag_overflow;
+--                    a wide sample (type 03): x_gyro .. z_accl (32-bit words) raw, the same
+--                    unit fields (navtwin.sins.xgyro_dps ..) and the housekeeping words
 --   navtwin.nanoloc  seq, t_us, anchor, tag, status, rssi, tau1..tau4 (ps), distance_m, crc_ok
 --   navtwin.xbee     start, length, type, the frame's fields (src64, src16, options, rf_data,
 --                    command, at_status, ...), checksum, checksum_ok; 0x90 RF data is
@@ -166,7 +168,8 @@ local WORDS = {
 }
 local sf = {
     sync = ProtoField.uint16("navtwin.sins.sync", "Sync", base.HEX),
-    type = ProtoField.uint8("navtwin.sins.type", "Type", base.HEX, { [1] = "sample", [2] = "magnetometer" }),
+    type = ProtoField.uint8("navtwin.sins.type", "Type", base.HEX,
+        { [1] = "sample", [2] = "magnetometer", [3] = "wide sample" }),
     len = ProtoField.uint8("navtwin.sins.len", "Payload length", base.DEC),
     seq = ProtoField.uint16("navtwin.sins.seq", "Sample counter", base.DEC),
     nd = ProtoField.bool("navtwin.sins.nd", "New data (ND) in every word"),
@@ -187,12 +190,36 @@ for _, a in ipairs(MAG_AXES) do
     sf[a .. "mag_ut"] = ProtoField.double("navtwin.sins." .. a .. "mag_ut", a:upper() .. "MAG (uT)")
 end
 sf.mag_overflow = ProtoField.bool("navtwin.sins.mag_overflow", "Magnetometer overflow (an axis reads -4096)")
+-- the wide sample frame (type 03): 32-bit gyro and accelerometer words, each an ADIS16488A
+-- register pair X_GYRO_OUT:X_GYRO_LOW (protocols/adis16488.py), shown in the sample's unit
+-- fields; the housekeeping words are type 01's (WORDS 1 and 8..11)
+local WIDE = {
+    { "X_GYRO", "xgyro_dps", 0.02 / 65536 }, { "Y_GYRO", "ygyro_dps", 0.02 / 65536 },
+    { "Z_GYRO", "zgyro_dps", 0.02 / 65536 }, { "X_ACCL", "xaccl_g", 0.8e-3 / 65536 },
+    { "Y_ACCL", "yaccl_g", 0.8e-3 / 65536 }, { "Z_ACCL", "zaccl_g", 0.8e-3 / 65536 },
+}
+local WIDE_HOUSEKEEPING = { { 1, 6 }, { 8, 32 }, { 9, 34 }, { 10, 36 }, { 11, 38 } } -- WORDS index, frame offset
+for _, w in ipairs(WIDE) do
+    sf[w[1]] = ProtoField.int32("navtwin.sins." .. w[1]:lower(), w[1] .. "_OUT:" .. w[1] .. "_LOW", base.DEC)
+end
 sins.fields = field_list(sf)
 local e_bad_crc = checksum_expert("navtwin.sins.bad_crc", "Bad CRC-16")
 sins.experts = { e_bad_crc }
 sins.prefs.gyro_range = Pref.enum("Gyro range (deg/s)", 300,
     "ADIS16350 dynamic range (SENS/AVG): sets the gyro words' LSB",
     { { 1, "300", 300 }, { 2, "150", 150 }, { 3, "75", 75 } }, false)
+
+-- One ADIS16350 register word at offset at (0-based) of the frame s: its raw and unit
+-- fields; returns its ND and EA bits
+local function show_word(tvb, st, s, w, at, t)
+    local raw = u16(s, at + 1)
+    local count = raw % 2 ^ w[4]
+    if w[5] then count = signed(count, w[4]) end
+    local lsb = w[6] or GYRO_LSB_DPS[sins.prefs.gyro_range]
+    t:add(sf[w[1]], tvb(st + at, 2))
+    t:add(sf[w[2]], tvb(st + at, 2), count * lsb + w[7])
+    return raw >= 0x8000, bit32.btest(raw, 0x4000)
+end
 
 local function show_sins(tvb, st, size, ok, tree)
     local fr = tvb(st, size)
@@ -208,18 +235,27 @@ local function show_sins(tvb, st, size, ok, tree)
         t:add(sf.seq, tvb(st + 4, 2))
         local nd, ea = true, false
         for k, w in ipairs(WORDS) do
-            local at = st + 6 + 2 * (k - 1)
-            local raw = u16(s, 7 + 2 * (k - 1))
-            local count = raw % 2 ^ w[4]
-            if w[5] then count = signed(count, w[4]) end
-            local lsb = w[6] or GYRO_LSB_DPS[sins.prefs.gyro_range]
-            t:add(sf[w[1]], tvb(at, 2))
-            t:add(sf[w[2]], tvb(at, 2), count * lsb + w[7])
-            nd = nd and raw >= 0x8000
-            ea = ea or bit32.btest(raw, 0x4000)
+            local n, e = show_word(tvb, st, s, w, 6 + 2 * (k - 1), t)
+            nd, ea = nd and n, ea or e
         end
         t:add(sf.nd, tvb(st + 6, 22), nd)
         t:add(sf.ea, tvb(st + 6, 22), ea)
+    elseif s:byte(3) == 3 and s:byte(4) == 36 then
+        seq = u16(s, 5)
+        t:add(sf.seq, tvb(st + 4, 2))
+        local nd, ea = true, false
+        for _, h in ipairs(WIDE_HOUSEKEEPING) do
+            local n, e = show_word(tvb, st, s, WORDS[h[1]], h[2], t)
+            nd, ea = nd and n, ea or e
+        end
+        for k, w in ipairs(WIDE) do
+            local at = 8 + 4 * (k - 1)
+            local count = signed(u16(s, at + 1) * 65536 + u16(s, at + 3), 32)
+            t:add(sf[w[1]], tvb(st + at, 4))
+            t:add(sf[w[2]], tvb(st + at, 4), count * w[3])
+        end
+        t:add(sf.nd, tvb(st + 6, 34), nd)
+        t:add(sf.ea, tvb(st + 6, 34), ea)
     elseif s:byte(3) == 2 and s:byte(4) == 8 then
         seq = u16(s, 5)
         t:add(sf.seq, tvb(st + 4, 2))
@@ -246,7 +282,7 @@ local function show_sins(tvb, st, size, ok, tree)
     return what .. (ok and "" or " bad CRC")
 end
 
-local judge_sins = crc_framed_judge({ [1] = 24, [2] = 8 })
+local judge_sins = crc_framed_judge({ [1] = 24, [2] = 8, [3] = 36 })
 
 -- The SINS frames in tvb (a port's packet or the RF data of an XBee 0x90 frame): Info words
 local function dissect_sins(tvb, tree)

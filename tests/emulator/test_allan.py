@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from navtwin.emulator.allan import SENSOR, fit, parked, read_white_factor, sensor_rates, sins_rates
+from navtwin.emulator.allan import SENSOR, dithered, fit, parked, read_white_factor, sensor_rates, sins_rates
 from navtwin.emulator.imu import deg_h, ug
 
 pytest.importorskip("allantools")
@@ -45,9 +45,9 @@ def test_adis16350_round_trip_from_the_bytes():
 
 
 def test_paper003_round_trip_from_the_registers():
-    """003's grade is 1650 times finer than a gyro LSB (0.04 deg/h against 66 deg/h at
-    +-75 deg/s) and its white noise far below one: the words cannot carry it, so the round
-    trip reads the registers before quantisation (the same sensor, the same draws), at the
+    """003's grade is 1650 times finer than a 14-bit gyro LSB (0.04 deg/h against 66 deg/h at
+    +-75 deg/s) and its white noise far below one: those words cannot carry it (the wide ones
+    do: below), so this round trip reads the registers before quantisation (the same sensor, the same draws), at the
     default 4 taps, whose reads alias the white noise by read_white_factor = 1.19."""
     sc = parked(1200.0, {"grade": "paper003"})
     e, alias = sc.imu.errors, read_white_factor(4, 819.2)
@@ -58,3 +58,21 @@ def test_paper003_round_trip_from_the_registers():
     assert a["white"] == pytest.approx(alias * e.accel_vrw_m_s_rt_h / 60, rel=0.1)
     assert g["floor"] == pytest.approx(deg_h(e.gyro_bias_instability_deg_h), rel=0.25)
     assert a["floor"] == pytest.approx(ug(e.accel_bias_instability_ug), rel=0.25)
+
+
+def test_paper003_round_trip_through_the_wide_words():
+    """Read through the 32-bit words (``[imu] words = "adis16488"``: 0.0011 deg/h an LSB, 1/36
+    of 003's drift) the same grade comes back from the bytes the board writes, as the
+    ADIS16350 grade does through its own words: at 16 taps the reads carry the sensor's own
+    white noise (read_white_factor 1.0003), the floors within 25 % as above."""
+    sc = parked(1200.0, {"grade": "paper003", "words": "adis16488", **SENSOR})
+    e = sc.imu.errors
+    gyro, accel = sins_rates(sc, seed=1)
+    taus = np.logspace(math.log10(0.5), math.log10(120.0), 14)
+    g, a = fit(gyro, 100.0, taus), fit(accel, 100.0, taus)
+    assert g["white"] == pytest.approx(math.radians(e.gyro_arw_deg_rt_h) / 60, rel=0.05)
+    assert a["white"] == pytest.approx(e.accel_vrw_m_s_rt_h / 60, rel=0.05)
+    assert g["floor"] == pytest.approx(deg_h(e.gyro_bias_instability_deg_h), rel=0.25)
+    assert a["floor"] == pytest.approx(ug(e.accel_bias_instability_ug), rel=0.25)
+    narrow = parked(1200.0, {"grade": "paper003", **SENSOR}).imu
+    assert dithered(sc.imu) and not dithered(narrow)  # the 14-bit words stick; these carry it

@@ -13,6 +13,11 @@ garbage_bytes = st.lists(st.one_of(u8, st.sampled_from(SPECIAL)), min_size=0, ma
 
 @st.composite
 def sins_frames(draw):
+    if draw(st.booleans()):  # a wide sample frame (type 03): 32-bit inertial words
+        i32 = st.integers(-(1 << 31), (1 << 31) - 1)
+        return sins.build_wide_sample(draw(u16), draw(u16), draw(st.tuples(i32, i32, i32)),
+                                      draw(st.tuples(i32, i32, i32)), draw(st.tuples(u16, u16, u16)),
+                                      draw(u16))
     return sins.build_sample(draw(u16), draw(st.lists(u16, min_size=11, max_size=11)))
 
 
