@@ -1,0 +1,70 @@
+"""003's geodetic strapdown (host.geodetic) and its error-state filter (host.filters.geodetic):
+F_SINS against a numerical Jacobian of one strapdown step, the strapdown on a known geodetic
+trajectory, and the filter's estimates of injected errors."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from navtwin.host.filters.geodetic import NAV, error_model
+from navtwin.host.geodetic import GeodeticStrapdown
+from navtwin.host.sins import quat_from_euler, quat_to_dcm
+
+GRAVITY = 9.7948
+
+
+def _moving() -> GeodeticStrapdown:
+    return GeodeticStrapdown(latitude_rad=math.radians(32.0), longitude_rad=math.radians(118.0),
+                             height_m=30.0, velocity=(30.0, 40.0, 5.0), q=quat_from_euler(0.1, -0.2, 0.7),
+                             local_gravity=GRAVITY)
+
+
+def _inject(s: GeodeticStrapdown, dx) -> GeodeticStrapdown:
+    """s with the errors dx (the filter's 15 states, computed minus true) put in."""
+    d = -np.asarray(dx, float)
+    s.correct(d[0:3], d[3:6], d[6:9], d[9:12], d[12:15])
+    return s
+
+
+def _errors(a: GeodeticStrapdown, b: GeodeticStrapdown) -> np.ndarray:
+    """The 15 states of a against the truth b, read off the two strapdowns (not through F)."""
+    E = np.eye(3) - np.array(quat_to_dcm(a.q)) @ np.array(quat_to_dcm(b.q)).T  # phi x
+    phi = 0.5 * np.array([E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]])
+    return np.r_[np.subtract(a.v, b.v), phi, a.lat - b.lat, a.lon - b.lon, a.h - b.h,
+                 np.subtract(b.accel_bias, a.accel_bias), np.subtract(b.gyro_bias, a.gyro_bias)]
+
+
+def test_error_model_is_the_jacobian_of_a_strapdown_step():
+    dt = 0.01
+    # turning slowly: F takes C_b^n of the interval's start, the step its middle's (1e-4 apart)
+    gyro, accel = (0.005, -0.003, 0.02), (0.7, -0.4, 9.9)
+    # one perturbation per state: large enough to show over a step in doubles (64 m on
+    # latitude), small enough that its square stays below the tolerance
+    eps = np.r_[[1e-3] * 3, [1e-5] * 3, [1e-5] * 2, 10.0, [1e-4] * 3, [1e-6] * 3]
+    truth = _moving()
+    truth.step(0.0, gyro, accel)
+    C = quat_to_dcm(truth.q)
+    f_n = np.array(C) @ np.array(accel)
+    F = error_model(truth.lat, truth.radii(), truth.v, f_n, C)
+    ahead = truth.copy()
+    ahead.step(dt, gyro, accel)
+    J = np.empty((NAV, NAV))
+    for k in range(NAV):
+        dx = np.zeros(NAV)
+        dx[k] = eps[k]
+        s = _inject(truth.copy(), dx)
+        s.step(dt, gyro, accel)
+        J[:, k] = (_errors(s, ahead) - dx) / (eps[k] * dt)
+    # one step of Phi = exp(F dt) is (I + F dt + (F dt)^2 / 2) to second order: J's reference
+    G = F + F @ F * (dt / 2)
+    # J's rounding: an ulp of each state's value over eps_k dt; entries far above it agree
+    # within 1 % (the radii's change with latitude, which F leaves out as PSINS does, is 0.6 %
+    # of dlambda's dL entry and dL's own), the rest within 1e3 roundings of zero or G
+    size = np.r_[np.abs(truth.v), [1.0] * 3, abs(truth.lat), abs(truth.lon), abs(truth.h), [1.0] * 6]
+    noise = np.outer(np.maximum(size, 1.0) * 2.2e-16, 1.0 / (eps * dt))
+    err = np.abs(J - G)
+    big = np.abs(G) > 1e4 * noise
+    assert np.all(err[big] <= 1e-2 * np.abs(G[big])), np.argwhere(big & (err > 1e-2 * np.abs(G)))
+    assert np.all(err[~big] <= 1e3 * noise[~big] + 1e-2 * np.abs(G[~big])), np.argwhere(~big & (err > 1e3 * noise))
