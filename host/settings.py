@@ -16,7 +16,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
 from navtwin.common import lab
-from navtwin.common.limits import ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, MAX_COORD_M, MAX_HEIGHT_M, RANGE_SCALE
+from navtwin.common.limits import (ANCHOR_IDS, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG, MAX_COORD_M,
+                                   MAX_HEIGHT_M, RANGE_SCALE)
 from navtwin.common.schema import Check, between, build, each, key, one_of, plain, positive
 from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS, GYRO_LSB_DPS
 
@@ -35,6 +36,9 @@ class Site:
     """The host config's [site]: where the lab is on the earth."""
 
     latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic latitude of the lab", between(*LATITUDE_DEG))
+    longitude_deg: float = key(lab.LONGITUDE_DEG, "deg", "east longitude of the lab's local origin "
+                               "(003's geodetic tracks place the area frame by it)",
+                               between(*LONGITUDE_DEG))
     local_gravity: float = key(lab.LOCAL_GRAVITY, "m/s^2", "local gravity", between(*GRAVITY_M_S2))
     declination_deg: float = key(lab.DECLINATION_DEG, "deg", "magnetic declination, east of true "
                                  "north: turns a magnetometer heading to true (IGRF-13 at the lab)",
