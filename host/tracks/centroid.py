@@ -30,7 +30,7 @@ Heading (eqs. 22-24), with ``magnetometer``: each magnetometer sample (at most o
 the strapdown's roll and pitch and corrected by ``[site] declination_deg``; z = psi_SINS -
 psi_mag (wrapped), H = d psi / d phi (-1 on phi_U, the tilt's share on phi_E, phi_N) and -1
 on the magnetometer heading's error state dpsi_mag (a random walk, ``mag_bias_sigma_deg`` at
-the start, ``mag_bias_rw_deg_rt_hr``); R = ``heading_sigma_deg``^2.
+the start, ``mag_bias_rw_deg_rt_hr``); R = ``mag_heading_sigma_deg``^2.
 
 After a discontinuity the track starts again at its own next fix (the estimator's WSN fixes
 too, where there are any).
@@ -62,7 +62,7 @@ class CentroidSettings(GeodeticSettings):
     fix_sigma_m: float = key(1.5, "m", "the centroid's own error, 1 sigma per axis: added to the "
                              "fix's R from the ranges (003 gives none)", positive(hi=1e3))
     magnetometer: bool = key(True, "", "take the magnetometer's heading (003 eqs. 22-24)")
-    heading_sigma_deg: float = key(2.0, "deg", "magnetometer heading, 1 sigma: R of eq. 24",
+    mag_heading_sigma_deg: float = key(2.0, "deg", "magnetometer heading, 1 sigma: R of eq. 24",
                                    positive(hi=180))
     heading_period_s: float = key(1.0, "s", "at most one heading update per this",
                                   between(0, 3600))
@@ -154,7 +154,7 @@ class CentroidTrack(GeodeticTrack):
         H = np.zeros((1, 16))
         H[0, 3], H[0, 4], H[0, 5], H[0, 15] = c00 * c20 / D, c10 * c20 / D, -1.0, -1.0
         self._t_heading = rec.t
-        self._update("heading", rec.t, np.array([z]), H, np.array([[math.radians(s.heading_sigma_deg) ** 2]]), 1)
+        self._update("heading", rec.t, np.array([z]), H, np.array([[math.radians(s.mag_heading_sigma_deg) ** 2]]), 1)
 
 
 class WclTrack(CentroidTrack):
