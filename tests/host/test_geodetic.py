@@ -7,9 +7,10 @@ import math
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from navtwin.common.geodesy import meridian_radius, transverse_radius
-from navtwin.host.filters.geodetic import NAV, error_model
+from navtwin.host.filters.geodetic import NAV, GeodeticErrorFilter, error_model
 from navtwin.host.geodetic import GeodeticStrapdown
 from navtwin.host.sins import quat_from_euler, quat_to_dcm
 
@@ -99,3 +100,84 @@ def test_free_strapdown_parked_then_driving_north_stays_on_the_truth():
     roll, pitch, yaw = nav.euler
     assert abs(roll) < 1e-6 and abs(pitch) < 1e-6 and abs(yaw - math.pi / 2) < 1e-6
     assert abs(nav.h) < 0.05
+
+
+ARW, VRW = 0.5, 0.05  # deg/sqrt(h), m/s/sqrt(h): the synthetic IMU's white noise and the filter's
+#: P0 sigmas (003 eq. 16's order): dV, phi (tilt, heading), dL dlambda as 1 m, dh, nabla, eps
+SIGMA0 = np.r_[[0.02] * 3, [math.radians(0.05)] * 2, math.radians(1.0), [1.0] * 3,
+               [1e-3 * GRAVITY] * 3, [math.radians(10.0) / 3600] * 3]
+
+
+def _aided_run(seed: int, *, fixes: bool, heading: bool, duration_s: float = 300.0, heading_error=None):
+    """The filter on the geodetic run with an IMU whose noise and biases it models: the start's
+    errors and the biases drawn from P0 (or the heading error given), position fixes (1 m, 1 Hz,
+    east and north) and/or a magnetometer heading (0.5 deg, 1 Hz). Returns the final errors
+    (15, computed minus true, read off the strapdown and the truth) and P."""
+    rng = np.random.default_rng(seed)
+    dt = 0.02
+    run = geodetic_north(park_s=20.0, duration_s=duration_s, ramp_s=10.0, dt=dt)
+    r_m0, r_n0 = meridian_radius(run.lat[0]), transverse_radius(run.lat[0])
+    scale = np.r_[[1.0] * 6, 1.0 / r_m0, 1.0 / (r_n0 * math.cos(run.lat[0])), [1.0] * 7]  # m -> rad
+    sigma0 = SIGMA0 * scale
+    x0 = rng.normal(0.0, sigma0)
+    if heading_error is not None:
+        x0[:] = 0.0
+        x0[5] = heading_error
+    nav = _inject(_start_on(run), np.r_[x0[:9], [0.0] * 6])
+    gyro_w = math.radians(ARW) / 60.0 / math.sqrt(dt)
+    accel_w = VRW / 60.0 / math.sqrt(dt)
+    gyro = run.gyro + x0[12:15] + rng.normal(0.0, gyro_w, run.gyro.shape)
+    accel = run.accel + x0[9:12] + rng.normal(0.0, accel_w, run.accel.shape)
+    psd = np.r_[[(VRW / 60.0) ** 2] * 3, [(math.radians(ARW) / 60.0) ** 2] * 3, [0.0] * 10]
+    P0 = np.diag(np.r_[sigma0, math.radians(0.01)] ** 2)
+    kf = GeodeticErrorFilter(P0, psd)
+    sigma_fix, sigma_heading = 1.0, math.radians(0.5)
+    for k in range(len(run.t)):
+        step = run.t[k] - run.t[k - 1] if k else 0.0
+        nav.step(step, gyro[k], accel[k])
+        if k:
+            kf.predict(step, error_model(nav.lat, nav.radii(), nav.v, nav.f_n, nav.dcm()))
+        if k % 50 or not k:
+            continue
+        rm, rn = nav.radii()
+        if fixes:
+            z = np.array([(nav.lon - run.lon[k]) * rn * math.cos(nav.lat), (nav.lat - run.lat[k]) * rm])
+            H = np.zeros((2, 16))
+            H[0, 7], H[1, 6] = rn * math.cos(nav.lat), rm
+            kf.update(z + rng.normal(0.0, sigma_fix, 2), H, sigma_fix**2 * np.eye(2))
+        if heading:
+            C = nav.dcm()
+            D = C[0][0] ** 2 + C[1][0] ** 2
+            H = np.zeros((1, 16))
+            H[0, 3:6] = C[0][0] * C[2][0] / D, C[1][0] * C[2][0] / D, -1.0
+            H[0, 15] = -1.0
+            z = nav.euler[2] - (math.pi / 2 + rng.normal(0.0, sigma_heading))
+            kf.update(np.array([z]), H, np.array([[sigma_heading**2]]))
+        dx = kf.take_nav()
+        nav.correct(dx[0:3], dx[3:6], dx[6:9], dx[9:12], dx[12:15])
+    truth = _start_on(run, len(run.t) - 1, accel_bias=x0[9:12], gyro_bias=x0[12:15])
+    return _errors(nav, truth), kf.P[:NAV, :NAV], sigma0
+
+
+def test_position_fixes_estimate_the_gyro_drift_consistently():
+    """NEES over seeds of all 15 states (the unobservable ones too: their P must hold them),
+    and the horizontal gyro drifts (10 deg/h at the start) estimated to a fraction."""
+    seeds = range(8)
+    nees, drift = [], []
+    for seed in seeds:
+        e, P, sigma0 = _aided_run(seed, fixes=True, heading=False)
+        nees.append(e @ np.linalg.solve(P, e))
+        drift.append(e[12:14] / sigma0[12:14])
+    total = sum(nees)
+    lo, hi = chi2.ppf([0.005, 0.995], NAV * len(seeds))
+    assert lo < total < hi, (total, lo, hi, nees)
+    assert np.sqrt(np.mean(np.square(drift))) < 0.3, drift
+
+
+def test_magnetometer_heading_corrects_a_heading_error():
+    err = math.radians(2.0)
+    free, _, _ = _aided_run(0, fixes=False, heading=False, duration_s=80.0, heading_error=err)
+    aided, P, _ = _aided_run(0, fixes=False, heading=True, duration_s=80.0, heading_error=err)
+    # phi_U of +2 deg is a yaw 2 deg short; the magnetometer's 0.5 deg sigma over 79 updates
+    assert free[5] == pytest.approx(err, abs=math.radians(0.2))  # the ARW: 0.08 deg, 1 sigma
+    assert abs(aided[5]) < math.radians(0.2) and math.sqrt(P[5, 5]) < math.radians(0.2), math.degrees(aided[5])
