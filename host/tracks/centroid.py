@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.common.schema import between, key, positive
+from navtwin.common.schema import Check, between, key, positive
 from navtwin.host import centroid, rssi
 from navtwin.host.magnetometer import yaw_from_field
 from navtwin.host.measurements import Exchange, Fix, MagSample
@@ -61,7 +61,9 @@ class CentroidSettings(GeodeticSettings):
                               "range's sigma_d = d ln10 sigma / (10 n), R of the fix", positive(hi=100))
     fix_sigma_m: float = key(1.5, "m", "the centroid's own error, 1 sigma per axis: added to the "
                              "fix's R from the ranges (003 gives none)", positive(hi=1e3))
-    magnetometer: bool = key(True, "", "take the magnetometer's heading (003 eqs. 22-24)")
+    magnetometer: bool = key(True, "", "take the magnetometer's heading (003 eqs. 22-24)",
+                             Check(lambda v: isinstance(v, bool), "must be true or false",
+                                   "write true or false"))
     mag_heading_sigma_deg: float = key(2.0, "deg", "magnetometer heading, 1 sigma: R of eq. 24",
                                    positive(hi=180))
     heading_period_s: float = key(1.0, "s", "at most one heading update per this",
