@@ -156,7 +156,8 @@ class CentroidTrack(GeodeticTrack):
         H = np.zeros((1, 16))
         H[0, 3], H[0, 4], H[0, 5], H[0, 15] = c00 * c20 / D, c10 * c20 / D, -1.0, -1.0
         self._t_heading = rec.t
-        self._update("heading", rec.t, np.array([z]), H, np.array([[math.radians(s.mag_heading_sigma_deg) ** 2]]), 1)
+        R = np.array([[math.radians(s.mag_heading_sigma_deg) ** 2]])
+        self._update("heading", rec.t, np.array([z]), H, R, 1)
 
 
 class WclTrack(CentroidTrack):

@@ -42,7 +42,8 @@ from navtwin.host.filters.geodetic import (ACCEL_BIAS, GYRO_DRIFT, MAG, NAV, PHI
 from navtwin.host.geodetic import GeodeticStrapdown
 from navtwin.host.measurements import Fix, ImuSample
 from navtwin.host.sins import area_from_enu, quat_from_euler
-from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS, STANDARD_GRAVITY, VRW_M_S_RT_HR
+from navtwin.protocols.adis16350 import (ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS, STANDARD_GRAVITY,
+                                        VRW_M_S_RT_HR)
 
 from .base import estimate
 from .errorstate import ClosedLoopTrack
@@ -155,7 +156,8 @@ class GeodeticTrack(ClosedLoopTrack):
         cfg, s = self.ctx.cfg, self.settings
         if s.start_from == "configured":
             p, v = self.ctx.origin, (0.0, 0.0, 0.0)
-            roll, pitch, yaw, bias = math.radians(s.roll_deg), math.radians(s.pitch_deg), cfg.heading_rad, (0.0,) * 3
+            roll, pitch, yaw = math.radians(s.roll_deg), math.radians(s.pitch_deg), cfg.heading_rad
+            bias = (0.0, 0.0, 0.0)
         else:
             sins = self.ctx.sins
             if sins is None:  # aligning
@@ -163,8 +165,8 @@ class GeodeticTrack(ClosedLoopTrack):
             p, v = sins.p[:2], (*(self._area.T @ sins.v[:2]), 0.0)
             (roll, pitch, yaw), bias = sins.euler, sins.gyro_bias
         lat, lon, h = self.frame.geodetic((p[0], p[1], 0.0))
-        self.nav = GeodeticStrapdown(latitude_rad=math.radians(float(lat)), longitude_rad=math.radians(float(lon)),
-                                     height_m=float(h), velocity=v,
+        self.nav = GeodeticStrapdown(latitude_rad=math.radians(float(lat)),
+                                     longitude_rad=math.radians(float(lon)), height_m=float(h), velocity=v,
                                      q=quat_from_euler(roll, pitch, yaw - self._yaw_offset),
                                      local_gravity=cfg.local_gravity, gyro_bias=bias)
         self.filter = None
