@@ -1,5 +1,7 @@
 """What 001's tracks (lc, tc, fatci) share: a closed-loop error-state filter
-(host.filters.errorstate) on a strapdown of their own.
+(host.filters.errorstate) on a strapdown of their own. Its gating, late measurements,
+feedback and discontinuities (:class:`ClosedLoopTrack`) 003's geodetic tracks share too
+(host.tracks.geodetic).
 
 Strapdown. The estimator's strapdown (``ctx.sins``) is the pure SINS, which the sins track
 reports and the CA tracks measure; an error-state track corrects its strapdown after every
