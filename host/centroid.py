@@ -87,3 +87,23 @@ def weighted_centroid(centres, ranges) -> Result:
     r = np.asarray(ranges, float)
     w = np.array([1.0 / (r[i] + r[j]) for i, j, _ in PAIRS])
     return Result(w.dot(v.vertices) / w.sum(), v.vertices)
+
+
+def fix_covariance(locate, centres, ranges, sigmas, floor_m: float) -> np.ndarray:
+    """The 2 x 2 covariance of the fix ``locate(centres, ranges)`` (:func:`centroid` or
+    :func:`weighted_centroid`) when each range has the independent error sigma_i: J diag(sigma^2)
+    J^T with J the fix's Jacobian in the ranges (central differences, 1e-6 of each range:
+    the fix is piecewise smooth in them; a vertex at a midpoint does not move), plus
+    ``floor_m``^2 I: the fix's own error with exact ranges (a centroid is not the point the
+    ranges meet at), which the ranges' errors do not cover."""
+    r = np.asarray(ranges, float)
+    J = np.zeros((2, len(r)))
+    for k in range(len(r)):
+        h = 1e-6 * r[k]
+        up, down = r.copy(), r.copy()
+        up[k] += h
+        down[k] -= h
+        a, b = locate(centres, up).p, locate(centres, down).p
+        if a is not None and b is not None:
+            J[:, k] = (a - b) / (2.0 * h)
+    return (J * np.asarray(sigmas, float) ** 2) @ J.T + floor_m**2 * np.eye(2)

@@ -34,6 +34,9 @@ sections are declared here::
     tight = "toa"                  # the UKF's range measurement (the EKF's: [filters.ekf])
     alpha = 1.0
 
+    [filters.tracks]               # settings every track that declares them takes (a track's
+    gyro_arw_deg_rt_hr = 0.004     # own section wins), e.g. the IMU of 003's three tracks
+
     [timing]
     hold_s = 0.02                  # reorder hold for ranges (docs/host.md, "time order")
 
@@ -252,6 +255,34 @@ def _from_shared_tight(filt: dict) -> dict:
     return filt
 
 
+def _track_settings(filt: dict) -> dict:
+    """Each track's Settings from its own [filters.NAME] over [filters.tracks], the keys that
+    every track declaring them takes (003's three tracks share their IMU's figures); a shared
+    key no track declares is refused. Pops what it takes from *filt*."""
+    shared = filt.pop("tracks", {})
+    if not isinstance(shared, dict):
+        raise ConfigError("[filters.tracks] must be a table")
+    settings, taken = {}, set()
+    for track in tracks.names():
+        cls = tracks.get(track)
+        own = filt.pop(track, None)
+        mine = {k: v for k, v in shared.items() if k in {f.name for f in dataclasses.fields(cls.Settings)}} \
+            if dataclasses.is_dataclass(cls.Settings) else {}
+        taken |= mine.keys()
+        if own is None and not mine:
+            continue
+        if own is not None and not isinstance(own, dict):
+            mine = own  # refused by build with the track's own key path
+        else:
+            mine = {**mine, **(own or {})}
+        settings[track] = build(cls.Settings, mine, (("filters", 0), (track, 0)))
+    unknown = sorted(shared.keys() - taken)
+    if unknown:
+        raise ConfigError(f"[filters.tracks] {unknown[0]} is a setting of no track; "
+                          "write it in the section of the track that has it ([filters.NAME])")
+    return settings
+
+
 def from_dict(d: dict, source: str = "config") -> HostConfig:
     """Inverse of :meth:`HostConfig.to_dict`, checked like a TOML file; a config recorded in
     the first layout (navtwin 0.1) is read too, so older host recordings still replay."""
@@ -343,11 +374,7 @@ def _config(doc: dict, name: str, directory: Path | None = None) -> HostConfig:
         kw["filters"] = parse_filters(filt.pop("enabled"), "[filters] enabled")
     if "range_bias_m" in filt:
         kw["range_bias_m"] = _range_bias(filt.pop("range_bias_m"), anchors)
-    settings = {}
-    for track in tracks.names():
-        if track in filt:
-            cls = tracks.get(track)
-            settings[track] = build(cls.Settings, filt.pop(track), (("filters", 0), (track, 0)))
+    settings = _track_settings(filt)
     tuning = build(Tuning, filt, (("filters", 0),))
     if tuning.reference_anchor not in anchors:
         raise ConfigError(f"[filters] reference_anchor must be one of the [[anchors]] ids "

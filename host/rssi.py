@@ -41,6 +41,14 @@ def distance(rssi_dbm, rssi_1m_dbm: float, n: float):
     return 10.0 ** ((rssi_1m_dbm - np.asarray(rssi_dbm, float)) / (10.0 * n))
 
 
+def distance_sigma(d, shadowing_db: float, n: float):
+    """1 sigma (m) of the distance eq. 2 gives at distance d (m) when the RSSI has a shadowing
+    of ``shadowing_db`` (1 sigma, dB): d = 10^((lambda - RSSI) / (10 n)) moves by
+    dd/dRSSI = -d ln 10 / (10 n) per dB, so sigma_d = d ln 10 sigma_dB / (10 n) (to first
+    order: the distance's error is log-normal, its sigma grows with d)."""
+    return np.asarray(d, float) * np.log(10.0) * shadowing_db / (10.0 * n)
+
+
 def anchor_parameters(positions, heard) -> tuple[np.ndarray, np.ndarray]:
     """Each anchor's (lambda_i, n_i) from its readings of the other anchors (eqs. 3-4).
 

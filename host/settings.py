@@ -37,7 +37,8 @@ class Site:
 
     latitude_deg: float = key(lab.LATITUDE_DEG, "deg", "geodetic latitude of the lab", between(*LATITUDE_DEG))
     longitude_deg: float = key(lab.LONGITUDE_DEG, "deg", "east longitude of the area's origin "
-                               "(x, y = 0, 0): places the estimates' lat, lon", between(*LONGITUDE_DEG))
+                               "(x, y = 0, 0): places the estimates' lat, lon and 003's "
+                               "geodetic tracks' area frame", between(*LONGITUDE_DEG))
     height_m: float = key(lab.HEIGHT_M, "m", "WGS-84 ellipsoid height of the area's origin (the "
                           "floor, z = 0)", between(*ELLIPSOID_HEIGHT_M))
     local_gravity: float = key(lab.LOCAL_GRAVITY, "m/s^2", "local gravity", between(*GRAVITY_M_S2))

@@ -1,7 +1,7 @@
 """Fusion tracks, one module each, registered by name (docs/filters.md).
 
 Built in, in output order: ``sins``, ``wsn``, ``kf``, ``ekf``, ``ukf`` (000's), ``lc``,
-``tc``, ``fatci`` (001's) and ``centroid``, ``wcl`` (003's). A track of a user's
+``tc``, ``fatci`` (001's) and ``centroid``, ``wcl``, ``geosins`` (003's). A track of a user's
 package is added with :func:`register` (in process), or by an entry point in the group
 ``navtwin.tracks`` whose name is the track's name and whose object is its class::
 
@@ -19,8 +19,8 @@ from .base import Estimate, NoSettings, Track
 
 #: What runs when no filters are named: 000's tracks. 001's error-state tracks (lc, ...) run
 #: when named (``--filters``, ``[filters] enabled``): together they add about 0.6 of the
-#: five's replay time (docs/lab.md, "Replay with all eight tracks"); 003's (centroid, wcl)
-#: likewise (not yet in that measurement).
+#: five's replay time (docs/lab.md, "Replay with all eight tracks"); 003's (centroid, wcl,
+#: geosins) likewise (not yet in that measurement).
 DEFAULT = ("sins", "wsn", "kf", "ekf", "ukf")
 GROUP = "navtwin.tracks"
 
@@ -44,6 +44,7 @@ TRACKS: Registry[type[Track]] = Registry(GROUP, "track", {
     "fatci": "navtwin.host.tracks.fatci:FatciTrack",
     "centroid": "navtwin.host.tracks.centroid:CentroidTrack",
     "wcl": "navtwin.host.tracks.centroid:WclTrack",
+    "geosins": "navtwin.host.tracks.geodetic:GeoSinsTrack",
 }, check=_check)
 BUILT_IN = TRACKS.built_in
 names, get, unregister = TRACKS.names, TRACKS.get, TRACKS.unregister

@@ -1,47 +1,79 @@
-"""``centroid`` and ``wcl``: 003's RSSI centroid and weighted-centroid fixes aiding the SINS
-(003 sections 2.1-2.2 and 3; docs/filters.md, "003's tracks").
+"""``centroid`` and ``wcl``: 003's RSSI centroid and weighted-centroid fixes and the
+magnetometer heading aiding the geodetic SINS through 003's error-state filter (003 sections
+2.1-2.2 and 3, eqs. 9-24; docs/filters.md, "003's tracks").
 
-Each TDMA cycle (host.wsn.CycleGrouper, ``cycle_s``) of the gateway's reports gives, from
-each completed exchange's RSSI byte, a distance by the path-loss model inverted (003 eq. 2,
-host.rssi.distance, with ``rssi_1m_dbm`` and ``path_loss_exponent``); the three strongest
-anchors' distances, made horizontal with the tag height (r_h^2 = d^2 - dz^2), give the fix:
-the centroid of 003's three circle points A, B, C (eqs. 9-10, ``centroid``) or their
-weighted centroid (eqs. 11-12, ``wcl``; host.centroid). The fix aids the SINS as 001's lc
-does (host.tracks.lc: z = p_SINS - p_fix, H = [I, lead I, 0]; in place of 003 eqs. 17-20's
-range differences of both positions, their linear map), R = fix_sigma_m^2 I: 003 gives its
-fix no covariance. A cycle with fewer than three RSSI distances, or whose fix is
-refused, gives no update (counted by reason).
+Filter: host.tracks.geodetic (the geodetic strapdown, the 16 states of eqs. 16 and 22, the
+phi-angle F of eq. 13 and 21, closed loop).
 
-Not here yet (issue 20 item 4's rest): 003's 15-state geodetic error state and the
-magnetometer heading (eqs. 13-16, 21-24), and the adaptive parameters (eqs. 3-8, host.rssi) in the track: they
-need the anchors' readings of each other, which the gateway does not report.
+Fix. Each TDMA cycle (host.wsn.CycleGrouper, ``cycle_s``) of the gateway's reports gives,
+from each completed exchange's RSSI byte, a distance by the path-loss model inverted (003
+eq. 2, host.rssi.distance, with ``rssi_1m_dbm`` and ``path_loss_exponent``); the three
+strongest anchors' distances, made horizontal with the tag height (r_h^2 = d^2 - dz^2), give
+the fix: the centroid of 003's three circle points A, B, C (eqs. 9-10, ``centroid``) or their
+weighted centroid (eqs. 11-12, ``wcl``; host.centroid). A cycle with fewer than three RSSI
+distances, or whose fix is refused, gives no update (counted by reason).
+
+Position measurement (eqs. 17-20, in their linear map): z = p_SINS - p_fix (area x, y),
+H = [lead I on dV_E, dV_N; d(x, y)/d(dL, dlambda) on dL, dlambda] (host.tracks.geodetic).
+003 writes the measurement as the range differences to node 0 of both positions (eqs.
+19-20) with three range-error states (eq. 17). Both positions are points: to first order
+those differences are G (p_SINS - p_fix), G the differences' gradient at the position, so
+the paper's z is this z times G; with the fix a single point, the three states of eq. 17
+(the errors of the fix's ranges) are not separable from the fix's position error, which R
+carries instead. R: from the RSSI physics, each slant range's sigma_d = d ln 10
+``shadowing_db`` / (10 n) (host.rssi.distance_sigma), through the fix's Jacobian in the
+ranges (host.centroid.fix_covariance), plus ``fix_sigma_m``^2 I for the centroid's own error
+(003 gives its fix no covariance).
+
+Heading (eqs. 22-24), with ``magnetometer``: each magnetometer sample (at most one per
+``heading_period_s``) gives psi_mag = host.magnetometer.yaw_from_field, tilt-compensated with
+the strapdown's roll and pitch and corrected by ``[site] declination_deg``; z = psi_SINS -
+psi_mag (wrapped), H = d psi / d phi (-1 on phi_U, the tilt's share on phi_E, phi_N) and -1
+on the magnetometer heading's error state dpsi_mag (a random walk, ``mag_bias_sigma_deg`` at
+the start, ``mag_bias_rw_deg_rt_hr``); R = ``mag_heading_sigma_deg``^2.
+
+After a discontinuity the track starts again at its own next fix (the estimator's WSN fixes
+too, where there are any).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.common.schema import between, key, positive
+from navtwin.common.schema import Check, between, key, positive
 from navtwin.host import centroid, rssi
-from navtwin.host.measurements import Exchange, Fix
+from navtwin.host.magnetometer import yaw_from_field
+from navtwin.host.measurements import Exchange, Fix, MagSample
 from navtwin.host.wsn import CycleGrouper
 from navtwin.protocols.nanoloc import is_complete
 
-from .errorstate import ErrorStateSettings
-from .lc import LcTrack
+from .geodetic import GeodeticSettings, GeodeticTrack
 
 
 @dataclass(frozen=True)
-class CentroidSettings(ErrorStateSettings):
+class CentroidSettings(GeodeticSettings):
     rssi_1m_dbm: float = key(-45.0, "dBm", "RSSI(1 m) of the path-loss model (003 eq. 2's "
                              "RSSI(1), eq. 8's lambda)", between(-120, 20))
     path_loss_exponent: float = key(2.0, "", "path-loss exponent n of 003 eq. 2", between(1, 6))
-    fix_sigma_m: float = key(1.5, "m", "1 sigma per axis of the RSSI fix: R = fix_sigma_m^2 I "
-                             "(003 gives none)", positive(hi=1e3))
+    shadowing_db: float = key(2.0, "dB", "RSSI shadowing, 1 sigma (003 eq. 1's sigma): each "
+                              "range's sigma_d = d ln10 sigma / (10 n), R of the fix", positive(hi=100))
+    fix_sigma_m: float = key(1.5, "m", "the centroid's own error, 1 sigma per axis: added to the "
+                             "fix's R from the ranges (003 gives none)", positive(hi=1e3))
+    magnetometer: bool = key(True, "", "take the magnetometer's heading (003 eqs. 22-24)",
+                             Check(lambda v: isinstance(v, bool), "must be true or false",
+                                   "write true or false"))
+    mag_heading_sigma_deg: float = key(2.0, "deg", "magnetometer heading, 1 sigma: R of eq. 24",
+                                   positive(hi=180))
+    heading_period_s: float = key(1.0, "s", "at most one heading update per this",
+                                  between(0, 3600))
+    mag_bias_sigma_deg: float = key(2.0, "deg", "the magnetometer heading's error at the start "
+                                    "(eq. 22's state), 1 sigma", positive(hi=180))
+    mag_bias_rw_deg_rt_hr: float = key(1.0, "deg/sqrt(h)", "its random walk", between(0, 1e4))
 
 
-class CentroidTrack(LcTrack):
+class CentroidTrack(GeodeticTrack):
     name = "centroid"
     Settings = CentroidSettings
     #: The fix of three anchors' circles (host.centroid): eqs. 9-10.
@@ -50,10 +82,18 @@ class CentroidTrack(LcTrack):
     def __init__(self, ctx, settings=None) -> None:
         super().__init__(ctx, settings)
         self.grouper = CycleGrouper(len(ctx.layout.ids), ctx.cfg.cycle_s)
+        self._t_heading: float | None = None
+
+    def magnetometer_psd(self) -> float:
+        return (math.radians(self.settings.mag_bias_rw_deg_rt_hr) / 60.0) ** 2
+
+    def magnetometer_p0(self) -> float:
+        return math.radians(self.settings.mag_bias_sigma_deg)
 
     def handlers(self) -> dict:
         taken = {**super().handlers(), Exchange: self.exchange}
-        del taken[Fix]  # its own fixes, from the RSSI, not the WSN's
+        if self.settings.magnetometer:
+            taken[MagSample] = self.heading
         return taken
 
     def restart(self, device: str, t: float) -> None:
@@ -73,16 +113,51 @@ class CentroidTrack(LcTrack):
         if len(cycle.distances) < 3:
             self.rejections["few_anchors"] += 1
             return
+        s = self.settings
         nearest = np.argsort(cycle.distances, kind="stable")[:3]
         anchors = tuple(cycle.valid_anchors[k] for k in nearest)
         layout = self.ctx.layout
         idx = layout.index(anchors)
         slant = np.asarray(cycle.distances)[nearest]
-        res = self.locate(layout.xy[idx], np.sqrt(np.maximum(slant**2 - layout.dz[idx] ** 2, 0.0)))
+        horizontal = np.sqrt(np.maximum(slant**2 - layout.dz[idx] ** 2, 0.0))
+        res = self.locate(layout.xy[idx], horizontal)
         if res.p is None:
             self.rejections[res.reason] += 1
             return
-        self.fix(Fix(cycle.t, res.p, self.settings.fix_sigma_m**2 * np.eye(2), anchors, 0.0))
+        # a slant range's sigma, made horizontal: dr_h = d / r_h dd
+        sigma = (rssi.distance_sigma(slant, s.shadowing_db, s.path_loss_exponent)
+                 * slant / np.maximum(horizontal, 1e-3))
+        cov = centroid.fix_covariance(self.locate, layout.xy[idx], horizontal, sigma, s.fix_sigma_m)
+        self.fix(Fix(cycle.t, res.p, cov, anchors, 0.0))
+
+    def fix(self, fix: Fix) -> None:
+        if self.pending:  # start again at this fix, if it is not older than the discontinuity
+            self.offer_fix(fix)
+            return
+        if fix is self.reinit_fix or not self.ready(fix.t):
+            return
+        p, lead = self.position_at(fix.t)
+        self._update("fix", fix.t, p - fix.p, self.position_rows(lead), fix.cov, 2)
+
+    def heading(self, rec: MagSample) -> None:
+        """003 eqs. 23-24: the strapdown's yaw against the magnetometer's (module docstring)."""
+        s, cfg = self.settings, self.ctx.cfg
+        if not self.ready(rec.t) or (self._t_heading is not None
+                                     and rec.t - self._t_heading < s.heading_period_s):
+            return
+        roll, pitch, _ = self.nav.euler
+        psi_mag = yaw_from_field(rec.field, cfg.declination_deg, cfg.x_azimuth_deg, roll, pitch)
+        z = self.area_yaw() - psi_mag
+        z = math.atan2(math.sin(z), math.cos(z))
+        # yaw = atan2(C_10, C_00) with C -> (I - phi x) C: d yaw = -phi_U + (C_00 phi_E + C_10 phi_N) C_20 / D
+        C = self.nav.dcm()
+        c00, c10, c20 = C[0][0], C[1][0], C[2][0]
+        D = c00 * c00 + c10 * c10
+        H = np.zeros((1, 16))
+        H[0, 3], H[0, 4], H[0, 5], H[0, 15] = c00 * c20 / D, c10 * c20 / D, -1.0, -1.0
+        self._t_heading = rec.t
+        R = np.array([[math.radians(s.mag_heading_sigma_deg) ** 2]])
+        self._update("heading", rec.t, np.array([z]), H, R, 1)
 
 
 class WclTrack(CentroidTrack):

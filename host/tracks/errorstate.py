@@ -1,5 +1,7 @@
 """What 001's tracks (lc, tc, fatci) share: a closed-loop error-state filter
-(host.filters.errorstate) on a strapdown of their own.
+(host.filters.errorstate) on a strapdown of their own. Its gating, late measurements,
+feedback and discontinuities (:class:`ClosedLoopTrack`) 003's geodetic tracks share too
+(host.tracks.geodetic).
 
 Strapdown. The estimator's strapdown (``ctx.sins``) is the pure SINS, which the sins track
 reports and the CA tracks measure; an error-state track corrects its strapdown after every
@@ -49,9 +51,72 @@ class ErrorStateSettings:
                                     positive(hi=180))
 
 
-class ErrorStateTrack(Track):
-    Settings = ErrorStateSettings
+class ClosedLoopTrack(Track):
+    """What every closed-loop error-state track shares (001's here, 003's in
+    host.tracks.geodetic): its strapdown ``nav`` at ``t_nav`` and its ``filter``; when a
+    measurement is late; the gated update, the feedback it gives (:meth:`feed_back`) and
+    when gating turns the track off; the discontinuities of a restart or a gap. A subclass
+    gives :meth:`_reset` (a fresh filter at its strapdown) and :meth:`feed_back`."""
+
     uses_strapdown = True
+
+    def __init__(self, ctx, settings=None) -> None:
+        super().__init__(ctx, settings)
+        self.nav = None  # the track's strapdown
+        self.filter = None
+        self.t_nav: float | None = None
+        self._aided: float | None = None
+        self._gated_since: float | None = None
+
+    def _reset(self) -> None:
+        raise NotImplementedError
+
+    def feed_back(self) -> None:
+        """Move the filter's estimated errors into the strapdown (and zero them in x)."""
+        raise NotImplementedError
+
+    def restart(self, device: str, t: float) -> None:
+        self.discontinuity("restart", t)
+        if device == "imu":
+            self.nav = self.filter = None  # a new alignment gives the attitude
+
+    def gap(self, t: float) -> None:
+        self.discontinuity("gap", t)
+
+    # -- updates ----------------------------------------------------------------------------
+    def ready(self, t: float) -> bool:
+        """Whether a measurement at t can update the track (else counted ``late``)."""
+        if self.nav is None or self.pending:
+            return False
+        if self.t_nav - t > self.ctx.cfg.max_lag_s:
+            self.rejections["late"] += 1
+            return False
+        return True
+
+    def _update(self, kind: str, t: float, z, H, R, dof: int) -> bool:
+        """One gated update and its feedback into the strapdown; counts the outcome."""
+        cfg = self.ctx.cfg
+        try:
+            inn = self.filter.update(z, H, R, chi2_gate(dof, cfg.gate_probability))
+        except np.linalg.LinAlgError:
+            self._reset()
+            return False
+        if not inn.accepted:
+            self.rejections["gate"] += 1
+            if self._gated_since is None:
+                self._gated_since = t
+            elif t - self._gated_since > cfg.gate_reopen_s:
+                self.discontinuity("gated", t)  # every update gated out so long: the track is off
+            return False
+        self.feed_back()
+        self._gated_since = None
+        self._aided = t
+        self.updates[kind] += 1
+        return True
+
+
+class ErrorStateTrack(ClosedLoopTrack):
+    Settings = ErrorStateSettings
     extra = 0  # random-walk states after the nav part
 
     def __init__(self, ctx, settings=None) -> None:
@@ -59,11 +124,6 @@ class ErrorStateTrack(Track):
         s = self.settings
         self._gyro_psd = (math.radians(s.gyro_noise_deg_rt_hr) / 60.0) ** 2
         self._accel_psd = (s.accel_noise_m_s_rt_hr / 60.0) ** 2
-        self.nav = None  # the track's strapdown (host.sins.Strapdown)
-        self.filter: ErrorStateFilter | None = None
-        self.t_nav: float | None = None
-        self._aided: float | None = None
-        self._gated_since: float | None = None
 
     def extra_psd(self) -> float:
         return 0.0
@@ -121,14 +181,6 @@ class ErrorStateTrack(Track):
         sp, sv, _ = self.ctx.cfg.p0_sigma
         self._new_filter(sp**2 * np.eye(2), sv**2)
 
-    def restart(self, device: str, t: float) -> None:
-        self.discontinuity("restart", t)
-        if device == "imu":
-            self.nav = self.filter = None  # a new alignment gives the attitude
-
-    def gap(self, t: float) -> None:
-        self.discontinuity("gap", t)
-
     def reinit_at(self, fix: Fix) -> bool:
         """Start again at ``fix``, at rest with ``reinit_sigma`` on velocity, the attitude
         kept; before the strapdown realigned after an IMU restart, wait for it."""
@@ -141,41 +193,14 @@ class ErrorStateTrack(Track):
         return True
 
     # -- updates ----------------------------------------------------------------------------
-    def ready(self, t: float) -> bool:
-        """Whether a measurement at t can update the track (else counted ``late``)."""
-        if self.nav is None or self.pending:
-            return False
-        if self.t_nav - t > self.ctx.cfg.max_lag_s:
-            self.rejections["late"] += 1
-            return False
-        return True
-
     def position_at(self, t: float) -> tuple[np.ndarray, float]:
         """The strapdown's horizontal position extrapolated to t, and t - t_nav."""
         lead = t - self.t_nav
         return self.nav.p[:2] + lead * self.nav.v[:2], lead
 
-    def _update(self, kind: str, t: float, z, H, R, dof: int) -> bool:
-        """One gated update and its feedback into the strapdown; counts the outcome."""
-        cfg = self.ctx.cfg
-        try:
-            inn = self.filter.update(z, H, R, chi2_gate(dof, cfg.gate_probability))
-        except np.linalg.LinAlgError:
-            self._reset()
-            return False
-        if not inn.accepted:
-            self.rejections["gate"] += 1
-            if self._gated_since is None:
-                self._gated_since = t
-            elif t - self._gated_since > cfg.gate_reopen_s:
-                self.discontinuity("gated", t)  # every update gated out so long: the track is off
-            return False
+    def feed_back(self) -> None:
         dx = self.filter.take_nav()
         self.nav.correct(dx[0:2], dx[2:4], dx[4:7])
-        self._gated_since = None
-        self._aided = t
-        self.updates[kind] += 1
-        return True
 
     # -- output -----------------------------------------------------------------------------
     def estimate(self, b: float, yaw: float):

@@ -99,6 +99,23 @@ def test_config_round_trips_through_its_dict():
     assert host_config.from_dict(with_extras.to_dict()) == with_extras
 
 
+def test_filters_tracks_gives_its_keys_to_every_track_that_declares_them():
+    """[filters.tracks]: each track that has the key takes it, a track's own section wins, the
+    tracks without it are untouched; the rssi-centroid config's three tracks share their IMU's."""
+    d = host_config.load("office").to_dict()
+    cfg = host_config.from_dict({**d, "filters": {"tracks": {"gyro_drift_deg_h": 0.5, "alpha": 0.5},
+                                                  "wcl": {"gyro_drift_deg_h": 0.7}}})
+    assert cfg.settings["geosins"].gyro_drift_deg_h == cfg.settings["centroid"].gyro_drift_deg_h == 0.5
+    assert cfg.settings["wcl"].gyro_drift_deg_h == 0.7 and cfg.settings["ukf"].alpha == 0.5
+    assert "sins" not in cfg.settings and "kf" not in cfg.settings
+    assert host_config.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(host_config.ConfigError, match=r"\[filters.tracks\] nonsense is a setting of no track"):
+        host_config.from_dict({**d, "filters": {"tracks": {"nonsense": 1}}})
+    shipped = host_config.load("rssi-centroid")
+    for key in ("gyro_drift_deg_h", "accel_bias_ug", "start_from"):
+        assert len({getattr(shipped.settings[t], key) for t in ("geosins", "centroid", "wcl")}) == 1
+
+
 def test_estimator_config_carries_the_host_config():
     cfg = host_config.load("office")
     ec = cfg.estimator_config(("wsn", "ukf"))

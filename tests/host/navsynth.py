@@ -114,6 +114,47 @@ def drive_after_rest(rng: np.random.Generator, *, align_s: float, duration_s: fl
     return traj, t, tr, gyro, accel
 
 
+@dataclass
+class GeodeticRun:
+    t: np.ndarray
+    lat: np.ndarray  # rad
+    lon: np.ndarray  # rad (constant: along the meridian)
+    v_north: np.ndarray  # m/s
+    gyro: np.ndarray  # (N, 3) rad/s, body x forward (north), y left (west), z up
+    accel: np.ndarray  # (N, 3) m/s^2
+
+
+def geodetic_north(*, lat0_deg=32.0, lon0_deg=118.0, park_s=60.0, duration_s=300.0, speed=1.0,
+                   ramp_s=2.0, gravity=9.7948, dt=0.01) -> GeodeticRun:
+    """A level vehicle at height 0 parked at ``lat0_deg`` for ``park_s``, then driving due north
+    along its meridian, its speed rising to ``speed`` over ``ramp_s`` (smoothstep), at a
+    constant speed after, with the perfect IMU it implies on the curved earth (written from
+    the physics, not from host.geodetic): with v = (0, v_N, 0) ENU, w_en = (-v_N / R_M, 0, 0),
+    the body (x north, y west, z up) turns at w_ie(L) + w_en, so the gyros read
+    (W cos L, v_N / R_M, W sin L); the specific force f^n = dv/dt + (2 w_ie + w_en) x v - g^n
+    = (-2 W sin L v_N, a_N, g - v_N^2 / R_M) reads (a_N, 2 W sin L v_N, g - v_N^2 / R_M).
+    The latitude is L' = v_N / R_M(L), integrated to 1e-13 rad (scipy's solve_ivp)."""
+    from scipy.integrate import solve_ivp
+
+    t = np.arange(0.0, duration_s, dt)
+    u = np.clip((t - park_s) / ramp_s, 0.0, 1.0)
+    v = speed * (3 * u**2 - 2 * u**3)
+    a = np.where((u > 0) & (u < 1), speed * (6 * u - 6 * u**2) / ramp_s, 0.0)
+
+    def speed_at(tt):
+        uu = min(max((tt - park_s) / ramp_s, 0.0), 1.0)
+        return speed * (3 * uu**2 - 2 * uu**3)
+
+    sol = solve_ivp(lambda tt, y: [speed_at(tt) / _radii(y[0])[0]], (0.0, duration_s),
+                    [math.radians(lat0_deg)], t_eval=t, rtol=1e-13, atol=1e-15, max_step=1.0)
+    lat = sol.y[0]
+    r_m = np.array([_radii(x)[0] for x in lat])
+    sl, cl = np.sin(lat), np.cos(lat)
+    gyro = np.column_stack([OMEGA_E * cl, v / r_m, OMEGA_E * sl])
+    accel = np.column_stack([a, 2 * OMEGA_E * sl * v, gravity - v**2 / r_m])
+    return GeodeticRun(t, lat, np.full_like(t, math.radians(lon0_deg)), v, gyro, accel)
+
+
 def exchanges(traj_fn, anchors, *, duration, sigma, rng: np.random.Generator, cycle=0.1, slot=0.025,
               tag_height=0.0, t0=0.0):
     """TDMA range exchanges: list of (t, anchor, distance); anchor k's slot at cycle start +

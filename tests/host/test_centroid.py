@@ -100,3 +100,18 @@ def test_vertices_agree_with_a_brute_force_search_on_random_geometries():
 def test_degenerate_input_gives_no_fix_and_a_reason(fn, centres, ranges, reason):
     res = fn(centres, ranges)
     assert res.p is None and res.reason == reason
+
+
+@pytest.mark.parametrize("fn", [cen.centroid, cen.weighted_centroid])
+def test_fix_covariance_is_the_spread_of_the_fix_under_small_range_errors(fn):
+    """J diag(sigma^2) J^T against the fix's sample covariance over range errors drawn with
+    those sigmas (small: the fix stays in one piece of its piecewise-smooth map)."""
+    rng = np.random.default_rng(5)
+    p = np.array([4.5, 3.0])
+    r = _ranges(TRIANGLE, p)
+    sigma = np.array([0.01, 0.02, 0.015])
+    draws = np.array([fn(TRIANGLE, r + rng.normal(0.0, sigma)).p for _ in range(20_000)])
+    cov = cen.fix_covariance(fn, TRIANGLE, r, sigma, 0.0)
+    assert np.allclose(cov, np.cov(draws.T), rtol=0.05, atol=0.03 * np.abs(cov).max())
+    floor = cen.fix_covariance(fn, TRIANGLE, r, sigma, 2.0) - cov
+    assert np.allclose(floor, 4.0 * np.eye(2))

@@ -119,3 +119,12 @@ def test_anchor_readings_average_each_pair_and_fit_once_every_anchor_heard_two()
                     many.add(ids[i], ids[j], noisy[i, j])
     lam_i, n_i = many.parameters(ANCHORS)
     assert np.allclose(lam_i, LAMBDA, atol=1.0) and np.allclose(n_i, N, atol=0.1)
+
+
+def test_distance_sigma_is_the_spread_of_the_inverted_model_under_small_shadowing():
+    # 0.5 dB: the log-normal distance is near-normal, its spread the first-order sigma
+    rng = np.random.default_rng(4)
+    for d, n in ((10.0, 2.0), (1500.0, 2.0), (300.0, 3.5)):
+        readings = rssi.rssi(d, -45.0, n) + rng.normal(0.0, 0.5, 200_000)
+        spread = rssi.distance(readings, -45.0, n).std()
+        assert rssi.distance_sigma(d, 0.5, n) == pytest.approx(spread, rel=0.01), d

@@ -1,5 +1,5 @@
 """Paper 003's tracks (docs/filters.md, "003's tracks"): centroid and wcl take the RSSI of
-each cycle's exchanges and aid the SINS; on synthetic data with RSSI shadowing both bound
+each cycle's exchanges and aid the geodetic SINS (host.tracks.geodetic); on synthetic data with RSSI shadowing both bound
 the SINS's drift, and the weighted centroid's error is no larger than the centroid's."""
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from navtwin.host.measurements import Exchange, ImuSample
 from navtwin.host.settings import EstimatorConfig
 from navtwin.host.tracks import BUILT_IN, get
 from navtwin.host.tracks.centroid import CentroidSettings, CentroidTrack, WclTrack
-from navtwin.host.tracks.lc import LcTrack
+from navtwin.host.tracks.geodetic import GeodeticTrack, GeoSinsTrack
 
 from ...helpers import GRAVITY, LATITUDE_DEG, OFFICE_ANCHORS
 from ..navsynth import drive_after_rest, exchanges
@@ -54,10 +54,10 @@ def run(seed: int, tracks=TRACKS, shadowing_db=SHADOWING_DB):
     return {name: np.array(v) for name, v in errors.items()}, est
 
 
-def test_registered_after_001s_and_share_lc():
-    assert BUILT_IN[-2:] == ("centroid", "wcl")
-    assert get("centroid") is CentroidTrack and get("wcl") is WclTrack
-    assert issubclass(CentroidTrack, LcTrack) and issubclass(WclTrack, CentroidTrack)
+def test_registered_after_001s_on_the_geodetic_filter():
+    assert BUILT_IN[-3:] == ("centroid", "wcl", "geosins")
+    assert get("centroid") is CentroidTrack and get("wcl") is WclTrack and get("geosins") is GeoSinsTrack
+    assert issubclass(CentroidTrack, GeodeticTrack) and issubclass(WclTrack, CentroidTrack)
 
 
 def test_exact_rssi_fixes_hold_the_track_on_the_truth():
