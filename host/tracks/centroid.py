@@ -13,6 +13,13 @@ the fix: the centroid of 003's three circle points A, B, C (eqs. 9-10, ``centroi
 weighted centroid (eqs. 11-12, ``wcl``; host.centroid). A cycle with fewer than three RSSI
 distances, or whose fix is refused, gives no update (counted by reason).
 
+Path loss. With ``adaptive_path_loss`` the cycle's distances use 003's adaptive parameters:
+each anchor's (lambda_i, n_i) fitted to its mean readings of the other anchors (eqs. 3-4;
+host.rssi.AnchorReadings, from the AnchorExchanges of the scenario's anchor exchanges), weighed
+by the tag's readings of this cycle (eqs. 5-7), the distance by eq. 8. Until every anchor has
+heard two others (or without anchor exchanges at all) the configured ``rssi_1m_dbm`` and
+``path_loss_exponent`` stand in, counted ``path_loss_unfitted``.
+
 Position measurement (eqs. 17-20, in their linear map): z = p_SINS - p_fix (area x, y),
 H = [lead I on dV_E, dV_N; d(x, y)/d(dL, dlambda) on dL, dlambda] (host.tracks.geodetic).
 003 writes the measurement as the range differences to node 0 of both positions (eqs.
@@ -45,7 +52,7 @@ import numpy as np
 from navtwin.common.schema import Check, between, key, positive
 from navtwin.host import centroid, rssi
 from navtwin.host.magnetometer import yaw_from_field
-from navtwin.host.measurements import Exchange, Fix, MagSample
+from navtwin.host.measurements import AnchorExchange, Exchange, Fix, MagSample
 from navtwin.host.wsn import CycleGrouper
 from navtwin.protocols.nanoloc import is_complete
 
@@ -61,6 +68,12 @@ class CentroidSettings(GeodeticSettings):
                               "range's sigma_d = d ln10 sigma / (10 n), R of the fix", positive(hi=100))
     fix_sigma_m: float = key(1.5, "m", "the centroid's own error, 1 sigma per axis: added to the "
                              "fix's R from the ranges (003 gives none)", positive(hi=1e3))
+    adaptive_path_loss: bool = key(False, "", "003 eqs. 3-8: each anchor's path loss fitted to "
+                                   "its readings of the others (the scenario's anchor exchanges), "
+                                   "weighed per cycle by the tag's readings; until every anchor "
+                                   "heard two others, rssi_1m_dbm and path_loss_exponent",
+                                   Check(lambda v: isinstance(v, bool), "must be true or false",
+                                         "write true or false"))
     magnetometer: bool = key(True, "", "take the magnetometer's heading (003 eqs. 22-24)",
                              Check(lambda v: isinstance(v, bool), "must be true or false",
                                    "write true or false"))
@@ -83,6 +96,8 @@ class CentroidTrack(GeodeticTrack):
         super().__init__(ctx, settings)
         self.grouper = CycleGrouper(len(ctx.layout.ids), ctx.cfg.cycle_s)
         self._t_heading: float | None = None
+        self.heard = rssi.AnchorReadings(ctx.layout.ids)  # the anchors' readings of each other
+        self._fitted: tuple | None = None  # (lambda_i, n_i) of eqs. 3-4, None: refit
 
     def magnetometer_psd(self) -> float:
         return (math.radians(self.settings.mag_bias_rw_deg_rt_hr) / 60.0) ** 2
@@ -92,6 +107,8 @@ class CentroidTrack(GeodeticTrack):
 
     def handlers(self) -> dict:
         taken = {**super().handlers(), Exchange: self.exchange}
+        if self.settings.adaptive_path_loss:
+            taken[AnchorExchange] = self.anchor_exchange
         if self.settings.magnetometer:
             taken[MagSample] = self.heading
         return taken
@@ -101,12 +118,32 @@ class CentroidTrack(GeodeticTrack):
         if device == "anchors":  # no cycle spans a restart
             self.grouper = CycleGrouper(len(self.ctx.layout.ids), self.ctx.cfg.cycle_s)
 
+    def anchor_exchange(self, rec: AnchorExchange) -> None:
+        if is_complete(rec.status):
+            self.heard.add(rec.anchor, rec.other, rec.rssi)
+            self._fitted = None
+
     def exchange(self, rec: Exchange) -> None:
-        s = self.settings
-        # a timed-out or incomplete exchange's RSSI byte measured no reply
-        d = rssi.distance(rec.rssi, s.rssi_1m_dbm, s.path_loss_exponent) if is_complete(rec.status) else None
-        for cycle in self.grouper.add(rec.t, rec.anchor, None if d is None else float(d)):
+        # the cycle keeps the RSSI (the grouper's "distances"): with adaptive parameters the
+        # distances depend on the whole cycle's readings (eqs. 5-7); a timed-out or incomplete
+        # exchange's RSSI byte measured no reply
+        for cycle in self.grouper.add(rec.t, rec.anchor, float(rec.rssi) if is_complete(rec.status) else None):
             self.cycle(cycle)
+
+    def path_loss(self, anchors, readings) -> tuple[float, float]:
+        """(lambda, n) of this cycle: eqs. 5-7 over the anchors' fitted parameters
+        (adaptive_path_loss, once every anchor heard two others) or the configured ones."""
+        s = self.settings
+        if s.adaptive_path_loss:
+            layout = self.ctx.layout
+            if self._fitted is None:
+                xyz = np.column_stack((layout.xy, layout.z))
+                self._fitted = self.heard.parameters(xyz) or ()
+            if self._fitted:
+                idx = layout.index(anchors)
+                return rssi.adaptive_parameters(self._fitted[0][idx], self._fitted[1][idx], readings)
+            self.rejections["path_loss_unfitted"] += 1
+        return s.rssi_1m_dbm, s.path_loss_exponent
 
     def cycle(self, cycle) -> None:
         """A closed cycle's fix of its three strongest anchors, and the update it gives."""
@@ -114,18 +151,21 @@ class CentroidTrack(GeodeticTrack):
             self.rejections["few_anchors"] += 1
             return
         s = self.settings
-        nearest = np.argsort(cycle.distances, kind="stable")[:3]
+        readings = np.asarray(cycle.distances)  # dBm (exchange)
+        lam, n = self.path_loss(cycle.valid_anchors, readings)
+        distances = rssi.distance(readings, lam, n)  # eq. 8 (eq. 2 inverted)
+        nearest = np.argsort(distances, kind="stable")[:3]
         anchors = tuple(cycle.valid_anchors[k] for k in nearest)
         layout = self.ctx.layout
         idx = layout.index(anchors)
-        slant = np.asarray(cycle.distances)[nearest]
+        slant = distances[nearest]
         horizontal = np.sqrt(np.maximum(slant**2 - layout.dz[idx] ** 2, 0.0))
         res = self.locate(layout.xy[idx], horizontal)
         if res.p is None:
             self.rejections[res.reason] += 1
             return
         # a slant range's sigma, made horizontal: dr_h = d / r_h dd
-        sigma = (rssi.distance_sigma(slant, s.shadowing_db, s.path_loss_exponent)
+        sigma = (rssi.distance_sigma(slant, s.shadowing_db, n)
                  * slant / np.maximum(horizontal, 1e-3))
         cov = centroid.fix_covariance(self.locate, layout.xy[idx], horizontal, sigma, s.fix_sigma_m)
         self.fix(Fix(cycle.t, res.p, cov, anchors, 0.0))

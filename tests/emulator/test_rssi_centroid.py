@@ -49,12 +49,15 @@ def test_a_short_stretch_runs_and_rssi_has_the_configured_slope(short_run):
     sc = load_scenario("rssi-centroid")
     frames = nanoloc_decoder().decode((short_run / "nanoloc.bin").read_bytes())
     assert frames and all(isinstance(f, Frame) for f in frames)
-    f = [x.fields for x in frames]
+    every = sc.ranging.anchor_exchange_every_cycles
+    among = [x.fields for x in frames if x.fields["tag"] != sc.tag.id]  # the nodes' of each other
+    assert len(among) == pytest.approx(len(frames) / every, abs=8)
+    f = [x.fields for x in frames if x.fields["tag"] == sc.tag.id]
     anchor = np.array([x["anchor"] for x in f])
     rssi = np.array([x["rssi"] for x in f], dtype=float)
     t_ns = np.array([x["t_us"] for x in f], dtype=np.int64) * 1000  # the network clock is ideal
     assert set(anchor.tolist()) == {1, 2, 3, 4}
-    assert len(f) == pytest.approx(30 * 4 * 1000 / sc.ranging.cycle_ms, abs=8)
+    assert len(f) == pytest.approx(30 * 4 * 1000 / sc.ranging.cycle_ms * (1 - 1 / every), abs=8)
     truth = np.genfromtxt(short_run / "truth.csv", delimiter=",", names=True)
     assert truth["x"][-1] == pytest.approx(0.0, abs=1e-6)
     assert truth["y"][-1] == pytest.approx(30.0 - 0.75, abs=0.01)  # 1 m/s after a 1.5 s ramp

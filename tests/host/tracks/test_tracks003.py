@@ -9,7 +9,7 @@ from scipy.stats import t as t_dist
 
 from navtwin.host import rssi
 from navtwin.host.estimator import Estimator
-from navtwin.host.measurements import Exchange, ImuSample
+from navtwin.host.measurements import AnchorExchange, Exchange, ImuSample
 from navtwin.host.settings import EstimatorConfig
 from navtwin.host.tracks import BUILT_IN, get
 from navtwin.host.tracks.centroid import CentroidSettings, CentroidTrack, WclTrack
@@ -23,16 +23,17 @@ LAMBDA, N, SHADOWING_DB = -45.0, 2.0, 2.0
 TRACKS = ("sins", "centroid", "wcl")
 
 
-def run(seed: int, tracks=TRACKS, shadowing_db=SHADOWING_DB):
+def run(seed: int, tracks=TRACKS, shadowing_db=SHADOWING_DB, settings=None, anchor_rounds=0):
     """One run on an ellipse in the office: a perfect IMU at rest, then white noise and an
     accelerometer bias that make the pure SINS drift; each exchange's RSSI by 003 eq. 2 with
     shadowing N(0, shadowing_db^2), rounded to the report's whole dBm. Returns each track's
-    horizontal errors (m) once a second while moving."""
+    horizontal errors (m) once a second while moving. *anchor_rounds*: each ordered pair of
+    anchors ranges itself that many times during the rest (AnchorExchange, the same model)."""
     rng = np.random.default_rng(seed)
     traj, t, tr, gyro, accel = drive_after_rest(rng, align_s=ALIGN_S, duration_s=DURATION_S,
                                                 accel_bias=(0.02, -0.015, 0.0))
     ex = exchanges(traj, OFFICE_ANCHORS, duration=DURATION_S, sigma=0.0, rng=rng, t0=0.003)
-    settings = CentroidSettings(rssi_1m_dbm=LAMBDA, path_loss_exponent=N)
+    settings = settings or CentroidSettings(rssi_1m_dbm=LAMBDA, path_loss_exponent=N)
     cfg = EstimatorConfig(anchors=OFFICE_ANCHORS, latitude_deg=LATITUDE_DEG, local_gravity=GRAVITY,
                           start=tuple(tr.p[0]), heading_deg=0.0, alignment_s=ALIGN_S,
                           wsn_method="toa", filters=tracks,
@@ -42,6 +43,14 @@ def run(seed: int, tracks=TRACKS, shadowing_db=SHADOWING_DB):
     for te, a, d in ex:
         level = np.rint(rssi.rssi(d, LAMBDA, N) + rng.normal(0.0, shadowing_db))
         records.append((te, 1, Exchange(te, a, 30.0, int(level))))  # the TOF distance unused
+    ids = sorted(OFFICE_ANCHORS)
+    pairs = [(a, b) for a in ids for b in ids if a != b]
+    for k in range(anchor_rounds * len(pairs)):
+        a, b = pairs[k % len(pairs)]
+        d = np.linalg.norm(np.subtract(OFFICE_ANCHORS[a], OFFICE_ANCHORS[b]))
+        level = np.rint(rssi.rssi(d, LAMBDA, N) + rng.normal(0.0, shadowing_db))
+        te = 0.0005 + k * ALIGN_S / 2 / (anchor_rounds * len(pairs))
+        records.append((te, 1, AnchorExchange(te, a, b, 30.0, int(level))))
     out = []
     for _, _, rec in sorted(records, key=lambda r: r[:2]):
         out += est.feed(rec)
@@ -82,3 +91,25 @@ def test_both_bound_the_sins_drift_and_wcl_is_no_worse_than_centroid():
     m = {name: np.array(v) for name, v in means.items()}
     diff = m["wcl"] - m["centroid"]  # paired by seed: the upper end of its 95 % interval
     assert diff.mean() + t_dist.ppf(0.975, len(diff) - 1) * diff.std(ddof=1) / np.sqrt(len(diff)) < 0.0, m
+
+
+def test_adaptive_path_loss_learns_the_channel_from_the_anchors_readings():
+    """003 eqs. 3-8: a host configured with the wrong channel (RSSI(1 m) -40 dBm, n = 3 against
+    -45, 2) fixes far off; with adaptive_path_loss and the anchors' readings of one another
+    (50 rounds during the rest) it fits the channel: each anchor's (lambda_i, n_i) near the
+    truth, the fixes as good as the right fixed model's; with no readings it falls back on
+    the configured model and counts every cycle."""
+    wrong = dict(rssi_1m_dbm=-40.0, path_loss_exponent=3.0)
+    right, _ = run(1, ("wcl",))
+    fixed, _ = run(1, ("wcl",), settings=CentroidSettings(**wrong))
+    adaptive, est = run(1, ("wcl",), settings=CentroidSettings(**wrong, adaptive_path_loss=True),
+                        anchor_rounds=50)
+    track = est.tracks[-1]
+    lam_i, n_i = track._fitted
+    assert np.allclose(lam_i, LAMBDA, atol=3.0) and np.allclose(n_i, N, atol=0.3), (lam_i, n_i)
+    assert fixed["wcl"].mean() > 1.5 * right["wcl"].mean()  # 1.8-2.4x over seeds 0-2
+    assert adaptive["wcl"].mean() < 1.25 * right["wcl"].mean(), (adaptive["wcl"].mean(), right["wcl"].mean())
+    assert track.rejections["path_loss_unfitted"] == 0
+    unfitted, est = run(1, ("wcl",), settings=CentroidSettings(**wrong, adaptive_path_loss=True))
+    assert np.array_equal(unfitted["wcl"], fixed["wcl"])
+    assert est.tracks[-1].rejections["path_loss_unfitted"] > 500
