@@ -150,3 +150,16 @@ def test_the_tutorial_xbee_script_reads_the_coordinator():
     assert "0x90 from 0013A20040A1B2D4 30 bytes" in lines
     first, last = map(int, re.fullmatch(r"100 SINS frames, seq (\d+) to (\d+)", lines[-1]).groups())
     assert (last - first) % 65536 == 99  # consecutive: no sample lost
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "docs" / "examples").glob("*.toml")), ids=lambda p: p.name)
+def test_every_example_scenario_loads_and_names_its_base(path):
+    """The example scenarios docs/results.md and the tutorial sweep: each loads, and changes
+    some setting of the shipped scenario it extends (not only its name)."""
+    from navtwin.emulator.scenario import load_scenario
+
+    def settings(sc):
+        return [line for line in sc.to_toml().splitlines() if not line.startswith(("name", "description"))]
+
+    base = load_scenario(re.search(r'^base = "([^"]+)"', path.read_text(), re.M).group(1))
+    assert settings(load_scenario(path)) != settings(base)
