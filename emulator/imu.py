@@ -53,12 +53,6 @@ def ug(v: float) -> float:
     return v / 1000.0 * MG
 
 
-def bartlett_taps(n: int) -> np.ndarray:
-    """Impulse response of the N-tap Bartlett window filter: two N-tap averages in cascade."""
-    box = np.full(n, 1.0 / n)
-    return np.convolve(box, box)
-
-
 def fir_steady_state(taps: np.ndarray) -> np.ndarray:
     """The FIR's delays after a constant input of 1: delay i holds the sum of taps[i + 1:]."""
     return np.cumsum(taps[:0:-1])[::-1]
@@ -161,7 +155,7 @@ class Adis16350:
         ts = spec.sample_period_s
         self.clock = Clock(ppm, ts * 1e9)
         fs = 1.0 / ts
-        taps = bartlett_taps(spec.filter_taps)
+        taps = adis.bartlett_taps(spec.filter_taps)
         self.gyro_range = spec.gyro_range_dps
         self.gyro = _Sensor(
             rng, streams("imu.gyro.drift"),

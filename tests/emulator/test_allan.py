@@ -8,8 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from navtwin.emulator.allan import SENSOR, fit, parked, read_white_factor, sensor_rates, sins_rates
+from navtwin.emulator.allan import SENSOR, fit, parked, sensor_rates, sins_rates
 from navtwin.emulator.imu import deg_h, ug
+from navtwin.host import imu_noise
+from navtwin.protocols import adis16350 as adis
+from navtwin.protocols.adis16350 import read_white_factor
 
 pytest.importorskip("allantools")
 
@@ -17,23 +20,21 @@ pytest.importorskip("allantools")
 def test_read_white_factor_is_the_aliasing_of_the_10_ms_reads():
     """Up to 4 taps the filter spans less than a read period, reads are independent and
     N_read = N sqrt(fs sum(h^2) T_read); the default 4 taps give the 4.98 / 4.2 deg/sqrt(h)
-    measured in issue 20; from 16 taps the reads carry the sensor's own N."""
-    assert read_white_factor(1, 819.2) == pytest.approx(math.sqrt(8.192), rel=1e-3)
-    assert read_white_factor(4, 819.2) == pytest.approx(math.sqrt(8.192 * 44 / 256), rel=1e-3)
-    assert read_white_factor(4, 819.2) * 4.2 == pytest.approx(4.98, abs=0.01)
-    assert read_white_factor(16, 819.2) == pytest.approx(1.0, abs=1e-3)
-
-
-#: The adis16350 grade with its flicker bias (the default grade still maps to issue 4's
-#: Gauss-Markov bias, whose Allan deviation has no floor).
-FLICKER = {"gyro_bias_corr_s": 0.0, "accel_bias_corr_s": 0.0}
+    measured in issue 20 on issue 4's model; from 16 taps the reads carry the sensor's own N.
+    The host's default noise figures are the reads' of the datasheet's per-sample densities."""
+    assert read_white_factor(1, 819.2, 0.01) == pytest.approx(math.sqrt(8.192), rel=1e-3)
+    assert read_white_factor(4, 819.2, 0.01) == pytest.approx(math.sqrt(8.192 * 44 / 256), rel=1e-3)
+    assert read_white_factor(4, 819.2, 0.01) * 4.2 == pytest.approx(4.98, abs=0.01)
+    assert read_white_factor(16, 819.2, 0.01) == pytest.approx(1.0, abs=1e-3)
+    assert (adis.SENSOR_ARW_DEG_RT_HR, adis.SENSOR_VRW_M_S_RT_HR) == pytest.approx((2.12, 0.77), abs=0.005)
+    assert (imu_noise.ARW_DEG_RT_HR, imu_noise.VRW_M_S_RT_HR) == (2.52, 0.91)
 
 
 def test_adis16350_round_trip_from_the_bytes():
     """20 min parked at +-75 deg/s and 16 taps, decoded from the SINS bytes. Over six seeds
     at this length the white noise came back within 2 % and the floors within 17 % (1 sigma
     about 8 %): white within 5 %, floors within 25 %; the 2 h benchmark holds 10 %."""
-    sc = parked(1200.0, {"grade": "adis16350", **SENSOR, **FLICKER})
+    sc = parked(1200.0, {"grade": "adis16350", **SENSOR})
     e = sc.imu.errors
     gyro, accel = sins_rates(sc, seed=1)
     taus = np.logspace(math.log10(0.5), math.log10(120.0), 14)
@@ -50,7 +51,7 @@ def test_paper003_round_trip_from_the_registers():
     trip reads the registers before quantisation (the same sensor, the same draws), at the
     default 4 taps, whose reads alias the white noise by read_white_factor = 1.19."""
     sc = parked(1200.0, {"grade": "paper003"})
-    e, alias = sc.imu.errors, read_white_factor(4, 819.2)
+    e, alias = sc.imu.errors, read_white_factor(4, 819.2, 0.01)
     gyro, accel = sensor_rates(sc, seed=1)
     taus = np.logspace(math.log10(0.02), math.log10(120.0), 16)
     g, a = fit(gyro, 100.0, taus), fit(accel, 100.0, taus)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from navtwin.common.earth import EARTH_RATE
-from navtwin.emulator.imu import Adis16350, bartlett_taps, deg_h, fir, fir_steady_state, gauss_markov, ug
+from navtwin.emulator.bias import FLICKER_TAUS_S, flicker_term_variance
+from navtwin.emulator.imu import Adis16350, deg_h, fir, fir_steady_state, gauss_markov, ug
 from navtwin.emulator.rng import stream
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.trajectory import Trajectory
@@ -36,7 +37,7 @@ supply_noise_v = 0.0
 @pytest.mark.parametrize("n", [1, 2, 4, 16, 64])
 def test_bartlett_taps_have_the_datasheet_response(n):
     """Datasheet p. 17: H(f) = [sin(pi N f ts) / (N sin(pi f ts))]^2, unity at DC."""
-    h = bartlett_taps(n)
+    h = adis.bartlett_taps(n)
     assert len(h) == 2 * n - 1 and h.sum() == pytest.approx(1.0)
     f = np.linspace(0.001, 0.499, 50)  # in units of fs
     dtft = np.abs(np.exp(-2j * np.pi * np.outer(f, np.arange(len(h)))) @ h)
@@ -51,7 +52,7 @@ def test_fir_is_scipys_lfilter_to_the_bit(n):
     the filter) and the delays carried between them. scipy is the oracle here only."""
     from scipy.signal import lfilter, lfilter_zi
 
-    taps = bartlett_taps(n)
+    taps = adis.bartlett_taps(n)
     x = np.random.default_rng(n).normal(0.0, 3.0, (3000, 3))
     want_zi = lfilter_zi(taps, [1.0]) if n > 1 else np.empty(0)  # it refuses a 1-tap filter
     assert fir_steady_state(taps).tobytes() == want_zi.tobytes()
@@ -151,7 +152,7 @@ def read_sigma(sc, gyro: bool) -> float:
     rounding (reads 10 ms apart see disjoint filter windows, so they are independent)."""
     imu, e = sc.imu, sc.imu.errors
     fs = 1 / imu.sample_period_s
-    taps = bartlett_taps(imu.filter_taps)
+    taps = adis.bartlett_taps(imu.filter_taps)
     if gyro:
         white = math.radians(e.gyro_arw_deg_rt_h) / 60 * math.sqrt(fs)
         lsb = math.radians(adis.GYRO_LSB_DPS[imu.gyro_range_dps])
@@ -184,12 +185,15 @@ def test_stationary_start_reads_local_g_and_no_rotation(office):
     assert np.all(np.abs(gyr.mean(axis=0)) < 4 * gyro_sigma)  # near zero: 0.4 deg/s at most
 
 
-def gauss_markov_integral_var(sigma, tau, times, weights, bin_s=0.5):
-    """Variance of sum(w_i b(t_i)) for a stationary Gauss-Markov b (binned)."""
+def bias_integral_var(floor, tau, times, weights, bin_s=0.5):
+    """Variance of sum(w_i b(t_i)) for the in-run bias b (binned): one stationary Gauss-Markov
+    term of sigma *floor* (tau > 0) or the flicker bias's terms (tau = 0, emulator.bias)."""
     bins = np.floor(times / bin_s).astype(int)
     w = np.bincount(bins, weights)
     centre = (np.arange(len(w)) + 0.5) * bin_s
-    cov = sigma ** 2 * np.exp(-np.abs(centre[:, None] - centre[None, :]) / tau)
+    lag = np.abs(centre[:, None] - centre[None, :])
+    terms = [(floor ** 2, tau)] if tau > 0 else [(flicker_term_variance(floor), t) for t in FLICKER_TAUS_S]
+    cov = sum(q * np.exp(-lag / t) for q, t in terms)
     return float(w @ cov @ w)
 
 
@@ -197,7 +201,7 @@ def gauss_markov_integral_var(sigma, tau, times, weights, bin_s=0.5):
 def test_integrated_z_gyro_matches_truth_heading_change(seed):
     """Remove the bias seen in the alignment period, integrate the z gyro over the run and
     compare with the truth heading change; the predicted error is computed from ARW, the
-    bias estimate's error, the bias instability (Gauss-Markov) and the scale factor."""
+    bias estimate's error, the in-run bias (flicker or Gauss-Markov) and the scale factor."""
     sc = load_scenario("office")
     w, events = run(sc, seed)
     s = sins(events)
@@ -216,11 +220,10 @@ def test_integrated_z_gyro_matches_truth_heading_change(seed):
     sr = read_sigma(sc, True)
     weights = np.where(move, dt, 0.0) + np.where(align, -n_m * dt / n_a, 0.0)
     var = (np.sum(weights ** 2) * sr ** 2
-           + gauss_markov_integral_var(deg_h(e.gyro_bias_instability_deg_h), e.gyro_bias_corr_s,
-                                       t, weights)
+           + bias_integral_var(deg_h(e.gyro_bias_instability_deg_h), e.gyro_bias_corr_s, t, weights)
            + (e.gyro_scale_factor_ppm * 1e-6 * change) ** 2)
     sigma = math.sqrt(var)
-    assert 0.005 < sigma < 0.1  # about 1.9 deg: a meaningful check
+    assert 0.005 < sigma < 0.1  # about 1.8 deg: a meaningful check
     assert abs(heading - change) < 4 * sigma
 
 
