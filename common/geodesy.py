@@ -91,3 +91,15 @@ class LocalFrame:
         """(latitude deg, longitude deg, height m) of local points (..., 3)."""
         origin = ecef(self.latitude_deg, self.longitude_deg, self.height_m)
         return geodetic(np.asarray(xyz, dtype=float) @ self._axes() + origin)
+
+
+def meridian_radius(latitude_rad: float) -> float:
+    """R_M (m): the WGS-84 meridian radius of curvature at *latitude_rad*,
+    a (1 - e^2) / (1 - e^2 sin^2 phi)^(3/2): north metres per radian of latitude."""
+    return WGS84_A * (1.0 - WGS84_E2) / (1.0 - WGS84_E2 * math.sin(latitude_rad) ** 2) ** 1.5
+
+
+def transverse_radius(latitude_rad: float) -> float:
+    """R_N (m): the WGS-84 prime-vertical (transverse) radius of curvature at *latitude_rad*,
+    a / sqrt(1 - e^2 sin^2 phi): east metres per radian of longitude are R_N cos phi."""
+    return WGS84_A / math.sqrt(1.0 - WGS84_E2 * math.sin(latitude_rad) ** 2)

@@ -1,5 +1,6 @@
 """ADIS16350 model, checked on the decoded SINS bytes: the datasheet's filter, the physics
 at rest and in motion, the error budget of the integrated z gyro, and the register flags."""
+import dataclasses
 import functools
 import math
 
@@ -7,11 +8,12 @@ import numpy as np
 import pytest
 
 from navtwin.common.earth import EARTH_RATE
+from navtwin.common.geodesy import meridian_radius, transverse_radius
 from navtwin.emulator.bias import FLICKER_TAUS_S, flicker_term_variance
 from navtwin.emulator.imu import Adis16350, deg_h, fir, fir_steady_state, gauss_markov, ug
 from navtwin.emulator.rng import stream
 from navtwin.emulator.scenario import load_scenario
-from navtwin.emulator.trajectory import Trajectory
+from navtwin.emulator.trajectory import Kinematics, Trajectory
 from navtwin.protocols import adis16350 as adis
 
 from ..protocols.vectors import SINS_LEVEL
@@ -98,8 +100,78 @@ def test_physics_at_rest_and_on_a_straight_leg():
     assert k.vel[0, 0] == pytest.approx(sc.trajectory.speed_m_s) and k.yaw[0] == pytest.approx(0)
     f, w = imu.true_outputs(np.array([t_cruise]))
     v = sc.trajectory.speed_m_s
-    expected = [0, 2 * EARTH_RATE * math.sin(lat) * v, sc.site.local_gravity - 2 * EARTH_RATE * math.cos(lat) * v]
+    r = transverse_radius(lat) + sc.tag.z  # still the origin's latitude to 1e-7 rad
+    expected = [0, (2 * EARTH_RATE * math.sin(lat) + v * math.tan(lat) / r) * v,
+                sc.site.local_gravity - (2 * EARTH_RATE * math.cos(lat) + v / r) * v]
     assert np.allclose(f[0], expected, atol=1e-12)
+
+
+class Parked:
+    """A trajectory standing at *pos* (local m) moving at *vel* (m/s), level, heading *yaw*:
+    the kinematics the IMU's physics takes (emulator.trajectory.Kinematics)."""
+
+    def __init__(self, pos, vel=(0.0, 0.0, 0.0), yaw=0.0):
+        self.pos, self.vel, self.yaw = np.array(pos, float), np.array(vel, float), yaw
+
+    def kinematics(self, t_ns):
+        n = len(t_ns)
+        t = (np.asarray(t_ns) / 1e9)[:, None]
+        zeros = np.zeros(n)
+        return Kinematics(pos=self.pos + t * self.vel, vel=np.tile(self.vel, (n, 1)), acc=np.zeros((n, 3)),
+                          roll=zeros, pitch=zeros, yaw=np.full(n, self.yaw), rate=np.zeros((n, 3)))
+
+
+def _curved(sc, trajectory):
+    return Adis16350(sc.imu, sc.site, sc.area, trajectory, 0.0, functools.partial(stream, 0))
+
+
+def test_parked_1_km_north_the_gyros_sense_the_earth_rate_at_its_own_latitude():
+    """The earth rate is projected at the vehicle's current latitude, not the origin's: 1 km
+    north (x east, y north) L is 1.57e-4 rad higher, which moves W sin L by 9.5e-9 rad/s."""
+    sc = load_scenario("office")
+    lat0 = math.radians(sc.site.latitude_deg)
+    lat = lat0 + 1000.0 / (meridian_radius(lat0) + sc.site.height_m)
+    _, w = _curved(sc, Parked([0.0, 1000.0, 0.0])).true_outputs(np.arange(0, 10**9, 10**7))
+    want = EARTH_RATE * np.array([0.0, math.cos(lat), math.sin(lat)])
+    assert np.allclose(w.mean(axis=0), want, atol=2e-12, rtol=0)
+    assert abs(w.mean(axis=0)[2] - EARTH_RATE * math.sin(lat0)) > 9e-9  # the origin's is off
+    # heading north (body x along +y, body y west): the earth rate's north part on body x
+    _, w = _curved(sc, Parked([0.0, 1000.0, 0.0], yaw=math.pi / 2)).true_outputs(np.array([0]))
+    assert np.allclose(w[0], [EARTH_RATE * math.cos(lat), 0.0, EARTH_RATE * math.sin(lat)], atol=2e-12)
+
+
+@pytest.mark.parametrize("v", [1.0, 10.0])
+def test_driving_north_the_cross_track_gyro_carries_the_transport_rate(v):
+    """Heading north at v, the local level turns about east at -v / (R_M + h): body y points
+    west, so the y gyro reads +v / (R_M + h) (1.57e-7 rad/s at 1 m/s), and the specific force
+    carries the Coriolis (2 w_ie + w_en) x v."""
+    sc = load_scenario("office")
+    lat0, h = math.radians(sc.site.latitude_deg), sc.site.height_m
+    f, w = _curved(sc, Parked([0.0, 0.0, 0.0], [0.0, v, 0.0], yaw=math.pi / 2)).true_outputs(np.array([0]))
+    r_m = meridian_radius(lat0) + h
+    assert w[0, 1] == pytest.approx(v / r_m, rel=1e-9)
+    assert w[0, 0] == pytest.approx(EARTH_RATE * math.cos(lat0), rel=1e-12)
+    assert w[0, 2] == pytest.approx(EARTH_RATE * math.sin(lat0), rel=1e-12)
+    # ENU: (2 w_ie + w_en) x (0, v, 0) = (-2 W sin L v, 0, -v^2 / R_M); body x north, y west
+    assert f[0] == pytest.approx([0.0, 2 * EARTH_RATE * math.sin(lat0) * v,
+                                  sc.site.local_gravity - v * v / r_m], rel=1e-12, abs=1e-15)
+
+
+def test_transport_rate_is_the_turn_rate_of_the_geodetic_position():
+    """w_en (ENU) = (-dL/dt, dlam/dt cos L, dlam/dt sin L): checked against the time derivative
+    of the geodetic position of a point moving north-east 2 km out, from common.geodesy, in an
+    area whose +x points 30 deg east of north."""
+    sc = load_scenario("office")
+    sc = dataclasses.replace(sc, area=dataclasses.replace(sc.area, x_azimuth_deg=30.0))
+    imu = _curved(sc, Parked([0.0, 0.0, 0.0]))
+    pos, vel, dt = np.array([1500.0, 1300.0, 2.0]), np.array([3.0, -4.0, 0.0]), 1e-3
+    _, w_en = imu.frame_rates(pos[None], vel[None])
+    lat, lon, _ = imu.frame.geodetic(np.array([pos - vel * dt, pos + vel * dt]))
+    d_lat, d_lon = np.radians(np.diff(lat))[0] / (2 * dt), np.radians(np.diff(lon))[0] / (2 * dt)
+    la = math.radians(lat.mean())
+    want_enu = np.array([-d_lat, d_lon * math.cos(la), d_lon * math.sin(la)])
+    # the plane's axes turn against the local level's by s / R (3e-4 rad here): the tolerance
+    assert w_en[0] @ imu.enu_to_n == pytest.approx(want_enu, rel=1e-3)
 
 
 def test_north_facing_area_projects_earth_rate_on_x(tmp_path):
