@@ -69,7 +69,10 @@ def test_a_live_run_with_line_faults_passes(run):
     xb, nl = result["ports"]["xbee"], result["ports"]["nanoloc"]
     assert xb["injections"] > 0 and nl["injections"] > 0 and nl["timing_injections"] > 0
     assert xb["rejected_bytes"] > 0 and nl["rejected_bytes"] > 0
-    assert xb["accepted"] == xb["intact"] > 100 and nl["accepted"] == nl["intact"] > 100
+    # a damaged frame is accepted only where its bit flips cancelled in the checksum (proven
+    # from the ledger: undetectable); the live run meets one now and then
+    assert xb["accepted"] == xb["intact"] + xb["undetectable"] and xb["intact"] > 100
+    assert nl["accepted"] == nl["intact"] + nl["undetectable"] and nl["intact"] > 100
     out = navtwin("audit", str(run / "emulator"), str(run / "host"))
     assert out.returncode == 0 and "PASS" in out.stdout and len(out.stdout.splitlines()) < 25
 
