@@ -230,6 +230,8 @@ class Adis16350:
     def generate(self, lo_ns: int, hi_ns: int) -> None:
         """Run the internal samples with lo_ns <= t < hi_ns (blocks must follow each other)."""
         j = self.clock.ticks_between(lo_ns, hi_ns)
+        if not len(j):  # a short last block with no sample in it (a slow SMPL_PRD)
+            return
         t = self.clock.tick(j)
         f_b, w_b = self.true_outputs(t)
         z = self.rng.standard_normal((len(j), 16))

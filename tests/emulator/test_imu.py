@@ -325,6 +325,17 @@ def test_slow_sampling_clears_nd_and_repeats_the_registers(tmp_path):
     assert np.array_equal(words[stale] & 0x3FFF, words[stale - 1] & 0x3FFF)
 
 
+def test_a_last_block_without_a_sample_runs(tmp_path):
+    """1.005 s at 12.8 ms a sample: the last block, 1.000 .. 1.005 s, holds no sample (the
+    next is at 1.011 s); the run ends with every frame, the last one reading the sample of
+    0.998 s, which arrived after the read before it (ND)."""
+    sc = variant(tmp_path, "office", "duration_s = 1.005\n[imu]\nsmpl_prd = 20\n")
+    _, events = run(sc)
+    s = sins(events)
+    assert len(s["t_ns"]) == 101 and s["t_ns"][-1] > 1_000_000_000
+    assert s["words"][-1, 1] & adis.ND
+
+
 def test_supply_out_of_range_sets_ea(tmp_path):
     sc = variant(tmp_path, "office", "duration_s = 2.0\n[imu]\nsupply_v = 5.3\n")
     s = sins(run(sc)[1])
