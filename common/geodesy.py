@@ -22,8 +22,9 @@ and the ECEF difference from the origin rotated into (e, n, u) at the origin's p
 Back from ECEF to geodetic: longitude atan2(Y, X), latitude by fixed-point iteration of
 phi = atan2(Z + e^2 N sin phi, p), p = hypot(X, Y) (converges to 1e-12 rad in a few steps
 off the poles), h = p / cos phi - N. The plane is tangent: a point on the ellipsoid s
-metres from the origin has z ~ -s^2 / (2 R) (0.18 m at 1.5 km), which is why the emulator's
-flat world is an approximation (docs/emulator-models.md, "The flat world").
+metres from the origin has z ~ -s^2 / (2 R) (0.18 m at 1.5 km): the emulator's positions
+stay in the plane, while its IMU senses the local level of each point (docs/emulator-models.md
+2.1, what is still flat).
 """
 from __future__ import annotations
 

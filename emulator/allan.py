@@ -13,8 +13,8 @@ grade; K the rate random walk), least squares weighted by each point's confidenc
 
 What the reads see. The host reads the registers every 10 ms, a sample of the 819.2 SPS
 filtered stream: with few taps the reads alias the white noise above 50 Hz, and their ARW is
-the sensor's times :func:`read_white_factor` (1.19 at the default 4 taps). The floor, at
-millihertz, passes unchanged. From 16 taps (-3 dB at 16 Hz, below the reads' 50 Hz) the reads
+the sensor's times ``protocols.adis16350.read_white_factor`` (1.19 at the default 4 taps).
+The floor, at millihertz, passes unchanged. From 16 taps (-3 dB at 16 Hz, below the reads' 50 Hz) the reads
 carry the sensor's own N (factor 1.0003); :data:`SENSOR` is that setting, at +-75 deg/s for
 the finest gyro LSB. (More taps smooth the reads over their span, which lowers the Allan
 deviation at 1 s by about 2 % at 64 taps.)
@@ -33,7 +33,7 @@ from navtwin.protocols.ports import SINS
 from navtwin.protocols.stream import Frame, sins_decoder
 
 from .bias import flicker_allan_variance
-from .imu import MG, Adis16350, bartlett_taps, deg_h, ug
+from .imu import MG, Adis16350, deg_h, ug
 from .rng import stream
 from .scenario import BLOCK_S, Imu, Scenario, load_scenario
 from .trajectory import Trajectory
@@ -42,7 +42,7 @@ from .world import World
 #: virtual time generated at a time (bounds memory on hours of parked data)
 CHUNK_S = 60.0
 #: the host's read period of the registers (the board's frame period)
-READ_S = 0.01
+READ_S = sins.PERIOD_S
 READ_NS, BLOCK_NS = round(READ_S * 1e9), round(BLOCK_S * 1e9)
 #: the [imu] registers under which the reads carry the sensor's own white noise
 SENSOR = {"gyro_range_dps": 75, "filter_taps": 16}
@@ -92,19 +92,6 @@ def sensor_rates(sc: Scenario, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(gyro), np.concatenate(accel)
 
 
-def read_white_factor(taps: int, fs: float, read_s: float = READ_S, reads: int = 20_000) -> float:
-    """N of the reads / N of the sensor: a read every *read_s* takes the latest of the samples
-    at *fs* after the Bartlett filter of *taps*. The sum of K reads is sum_j c_j n_j over the
-    white samples n_j (c_j: the taps that reach sample j through every read), so
-    N_read^2 = N^2 fs read_s sum(c_j^2) / K, exactly, aliasing included."""
-    h = bartlett_taps(taps)
-    latest = np.floor(np.arange(reads) * read_s * fs).astype(np.int64) + len(h)
-    c = np.zeros(latest[-1] + 1)
-    for i, tap in enumerate(h):
-        np.add.at(c, latest - i, tap)
-    return math.sqrt(fs * read_s * np.sum(c ** 2) / reads)
-
-
 def fit(x: np.ndarray, rate: float, taus: np.ndarray, rrw: bool = False) -> dict:
     """Fit AVAR = N^2/T + F^2 a(T) (+ K^2 T/3 with *rrw*) to the overlapping Allan variance of
     the columns of *x* (pooled) at *taus*; a(T) is the flicker bias's exact shape (1 within
@@ -134,9 +121,11 @@ def fit(x: np.ndarray, rate: float, taus: np.ndarray, rrw: bool = False) -> dict
 #: gyro output noise (deg/s rms) per (range, taps); accelerometer output noise unfiltered (mg)
 DATASHEET_GYRO_NOISE = {(300, 2): 0.60, (150, 8): 0.35, (75, 32): 0.17}
 DATASHEET_ACCEL_NOISE_MG = 35.0
-DATASHEET = {"gyro_density_dps_rt_hz": 0.05, "accel_density_mg_rt_hz": 1.85,
+DATASHEET = {"gyro_density_dps_rt_hz": adis.GYRO_NOISE_DENSITY_DPS_RT_HZ,
+             "accel_density_mg_rt_hz": adis.ACCEL_NOISE_DENSITY_MG_RT_HZ,
              "arw_deg_rt_h": adis.ARW_DEG_RT_HR, "vrw_m_s_rt_h": adis.VRW_M_S_RT_HR,
-             "gyro_floor_dps": adis.GYRO_BIAS_INSTABILITY_DPS, "accel_floor_mg": 0.7}
+             "gyro_floor_dps": adis.GYRO_BIAS_INSTABILITY_DPS,
+             "accel_floor_mg": adis.ACCEL_BIAS_INSTABILITY_MG}
 
 
 def _rel(measured: float, want: float) -> float:
@@ -146,7 +135,7 @@ def _rel(measured: float, want: float) -> float:
 def dithered(imu: Imu) -> bool:
     """Whether the words of the ``[imu]`` table *imu* carry its grade: the white noise of a
     read spans a gyro LSB (rounding then adds white noise; below it, the words stick)."""
-    taps = bartlett_taps(imu.filter_taps)
+    taps = adis.bartlett_taps(imu.filter_taps)
     sigma = math.radians(imu.errors.gyro_arw_deg_rt_h) / 60 * math.sqrt(np.sum(taps ** 2) / imu.sample_period_s)
     return sigma > math.radians(imu.word_format.gyro_lsb_dps(imu))
 
@@ -162,7 +151,7 @@ def round_trip(grade: str, seconds: float, seed: int, imu: dict | None = None) -
     gyro, accel = (sensor_rates if fine else sins_rates)(sc, seed)
     taus = np.logspace(math.log10(0.02 if fine else 0.5), math.log10(seconds / 10), 20)
     g, a = fit(gyro, 1 / READ_S, taus), fit(accel, 1 / READ_S, taus)
-    e, alias = sc.imu.errors, read_white_factor(sc.imu.filter_taps, 1 / sc.imu.sample_period_s)
+    e, alias = sc.imu.errors, adis.read_white_factor(sc.imu.filter_taps, 1 / sc.imu.sample_period_s, READ_S)
     rows = {
         "arw_deg_rt_h": (e.gyro_arw_deg_rt_h * alias, math.degrees(g["white"]) * 60),
         "vrw_m_s_rt_h": (e.accel_vrw_m_s_rt_h * alias, a["white"] * 60),

@@ -1,11 +1,20 @@
 """ADIS16350 model: true motion -> internal samples -> Bartlett filter -> output registers.
 
-Physics (navigation frame n: x, y of the area, z up; body b: x forward, y left, z up)::
+Physics in the local-level frame n at the vehicle's current geodetic point (x, y the area's
+axes, +x at its azimuth A, z up; body b: x forward, y left, z up)::
 
-    f_b  = C_bn (a_n + 2 W_ie x v_n - g_n),   g_n = (0, 0, -g_local)     (000 sect. 3.1)
-    w_ib = w_nb + C_bn W_ie,   W_ie = W (cos L north_n + sin L z_n),  W = 7.2916e-5 rad/s
+    f_b  = C_bn (a_n + (2 w_ie + w_en) x v_n - g_n),   g_n = (0, 0, -g_local)   (000 sect. 3.1)
+    w_ib = w_nb + C_bn (w_ie + w_en)
+    w_ie = W (0, cos L, sin L)                                      ENU, W = 7.2916e-5 rad/s
+    w_en = (-v_N / (R_M + h), v_E / (R_N + h), v_E tan L / (R_N + h))   ENU (transport rate)
 
-(the transport rate v/R ~ 1e-7 rad/s is below a thousandth of an LSB and is left out).
+with L, h the latitude and height of the vehicle's point (its place in the area's tangent
+plane through common.geodesy), R_M, R_N the WGS-84 radii there, rotated from ENU to the
+area's axes by A. The truth's roll, pitch and yaw are relative to that local level. Gravity
+is the scenario's local_gravity along the local down: its change over an area is far below
+the accelerometers' 0.7 mg floor (0.74 ug per km north at 32 deg N; 0.31 ug per m of
+height, 0.06 ug at the plane's 0.18 m above the ellipsoid 1.5 km out), so it is left out
+(docs/emulator-models.md 2.1).
 Each internal sample j (every SMPL_PRD period of the sensor's own clock, 819.2 SPS by
 default) is measured as::
 
@@ -34,6 +43,7 @@ import math
 import numpy as np
 
 from navtwin.common.earth import EARTH_RATE
+from navtwin.common.geodesy import LocalFrame, meridian_radius, transverse_radius
 from navtwin.protocols import adis16350 as adis
 
 from .bias import FlickerBias, RateRandomWalk
@@ -41,6 +51,8 @@ from .clock import Clock
 
 MG = 1e-3 * adis.STANDARD_GRAVITY  # m/s^2 per mg
 SUPPLY_LIMITS_V = (4.75, 5.25)  # STATUS bits 0 and 1
+#: samples between exact geodetic conversions of the vehicle's point (32 = 39 ms at 819.2 SPS)
+GEODETIC_EVERY = 32
 
 
 def deg_h(v: float) -> float:
@@ -51,12 +63,6 @@ def deg_h(v: float) -> float:
 def ug(v: float) -> float:
     """micro-g -> m/s^2, through mg (the golden recordings' figures to the bit)."""
     return v / 1000.0 * MG
-
-
-def bartlett_taps(n: int) -> np.ndarray:
-    """Impulse response of the N-tap Bartlett window filter: two N-tap averages in cascade."""
-    box = np.full(n, 1.0 / n)
-    return np.convolve(box, box)
 
 
 def fir_steady_state(taps: np.ndarray) -> np.ndarray:
@@ -161,7 +167,7 @@ class Adis16350:
         ts = spec.sample_period_s
         self.clock = Clock(ppm, ts * 1e9)
         fs = 1.0 / ts
-        taps = bartlett_taps(spec.filter_taps)
+        taps = adis.bartlett_taps(spec.filter_taps)
         self.words = spec.word_format
         self.gyro = _Sensor(
             rng, streams("imu.gyro.drift"),
@@ -177,10 +183,11 @@ class Adis16350:
             rrw=ug(e.accel_rrw_ug_rt_h) / 60.0, turn_on=ug(e.accel_bias_ug),
             scale_ppm=e.accel_scale_factor_ppm, misalign_rad=e.accel_misalignment_mrad / 1e3,
             full_scale=e.accel_range_g * adis.STANDARD_GRAVITY, ts=ts, taps=taps)
-        lat = math.radians(site.latitude_deg)
-        north = math.radians(area.x_azimuth_deg)  # north, counter-clockwise from +x
-        self.earth_rate_n = EARTH_RATE * np.array(
-            [math.cos(lat) * math.cos(north), math.cos(lat) * math.sin(north), math.sin(lat)])
+        self.frame = LocalFrame.of(site, area)
+        a = math.radians(area.x_azimuth_deg)  # north is at A counter-clockwise from +x
+        # rows: ENU -> the area's x, y, z (x = e sin A + n cos A, y = -e cos A + n sin A)
+        self.enu_to_n = np.array([[math.sin(a), math.cos(a), 0.0], [-math.cos(a), math.sin(a), 0.0],
+                                  [0.0, 0.0, 1.0]])
         self.gravity_n = np.array([0.0, 0.0, -site.local_gravity])
         # the samples of the previous and the current block (reads may reach back)
         self._t = np.empty(0, dtype=np.int64)
@@ -192,18 +199,39 @@ class Adis16350:
         self._alarm = np.empty(0, dtype=bool)  # some STATUS flag set at this sample
         self._last_read_j = -1
 
+    def frame_rates(self, pos: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) earth rate w_ie and transport rate w_en in the area's axes at local points
+        *pos* moving at *vel* (module docstring). Latitude and height are converted exactly at
+        every GEODETIC_EVERY-th point (and the last) and interpolated between: along a path
+        whose acceleration is at most a, that is off by a dt^2 / (8 R) = 1.5e-11 rad at 0.5
+        m/s^2 over 39 ms (the conversion is the costly part of the physics). The radii are
+        taken at the first point's latitude: over one block (1 s) they change by 1e-9."""
+        knots = np.unique(np.append(np.arange(0, len(pos), GEODETIC_EVERY), len(pos) - 1))
+        lat_deg, _, h_knots = self.frame.geodetic(pos[knots])
+        at = np.arange(len(pos))
+        lat, h = np.interp(at, knots, np.radians(lat_deg)), np.interp(at, knots, h_knots)
+        r_m, r_n = meridian_radius(lat[0]) + h, transverse_radius(lat[0]) + h
+        v_enu = vel @ self.enu_to_n  # the inverse rotation: its transpose
+        cos_l, sin_l = np.cos(lat), np.sin(lat)
+        w_ie = EARTH_RATE * np.column_stack((np.zeros_like(lat), cos_l, sin_l))
+        w_en = np.column_stack((-v_enu[:, 1] / r_m, v_enu[:, 0] / r_n, v_enu[:, 0] * sin_l / cos_l / r_n))
+        return w_ie @ self.enu_to_n.T, w_en @ self.enu_to_n.T
+
     def true_outputs(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Error-free specific force (m/s^2) and angular rate (rad/s), body axes."""
         k = self.trajectory.kinematics(t_ns)
         c_bn = body_from_nav(k.roll, k.pitch, k.yaw)
-        f_n = k.acc + 2.0 * np.cross(self.earth_rate_n, k.vel) - self.gravity_n
+        w_ie, w_en = self.frame_rates(k.pos, k.vel)
+        f_n = k.acc + np.cross(2.0 * w_ie + w_en, k.vel) - self.gravity_n
         f_b = np.einsum("nij,nj->ni", c_bn, f_n)
-        w_b = k.rate + c_bn @ self.earth_rate_n
+        w_b = k.rate + np.einsum("nij,nj->ni", c_bn, w_ie + w_en)
         return f_b, w_b
 
     def generate(self, lo_ns: int, hi_ns: int) -> None:
         """Run the internal samples with lo_ns <= t < hi_ns (blocks must follow each other)."""
         j = self.clock.ticks_between(lo_ns, hi_ns)
+        if not len(j):  # a short last block with no sample in it (a slow SMPL_PRD)
+            return
         t = self.clock.tick(j)
         f_b, w_b = self.true_outputs(t)
         z = self.rng.standard_normal((len(j), 16))

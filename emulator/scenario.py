@@ -24,7 +24,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from navtwin.protocols.adis16350 import GYRO_LSB_DPS
+from navtwin.protocols.adis16350 import GYRO_LSB_DPS, POWER_UP_FILTER_TAPS
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common import geomagnetic, lab
@@ -199,7 +199,7 @@ class Imu(ImuGrade):
     gyro_range_dps: int = key(lab.GYRO_RANGE_DPS, "deg/s", "SENS/AVG bits 10:8: gyro dynamic range "
                               "of the adis16350 words (the adis16488 words' is +-450)",
                               one_of(*sorted(GYRO_LSB_DPS)))
-    filter_taps: int = key(4, "", "SENS/AVG bits 2:0 = log2(N): Bartlett window taps N",
+    filter_taps: int = key(POWER_UP_FILTER_TAPS, "", "SENS/AVG bits 2:0 = log2(N): Bartlett window taps N",
                            one_of(1, 2, 4, 8, 16, 32, 64))
     smpl_prd: int = key(1, "", "SMPL_PRD: internal sample period 0.61035 ms x (NS+1) (bit 7 = 18.921 ms "
                         "time base); 1 = 819.2 SPS", between(1, 255))

@@ -19,9 +19,9 @@ from navtwin.common import lab
 from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG,
                                    MAX_COORD_M, MAX_HEIGHT_M, RANGE_SCALE)
 from navtwin.common.schema import Check, between, build, each, key, one_of, plain, positive
-from navtwin.protocols.adis16350 import ARW_DEG_RT_HR, GYRO_BIAS_INSTABILITY_DPS, GYRO_LSB_DPS
+from navtwin.protocols.adis16350 import GYRO_LSB_DPS
 
-from . import tracks
+from . import imu_noise, tracks
 from .calibration import Calibration
 
 __all__ = ["EstimatorConfig", "Site", "Tuning", "Vehicle"]
@@ -81,9 +81,10 @@ class Tuning:
     range_sigma_m: float = key(0.4, "m", "one exchange's distance, 1 sigma", positive(hi=100))
     range_scale: float = key(1.0, "", "f of 001: distance = (reported - c_i) / f",
                              between(*RANGE_SCALE))
-    arw_deg_rt_hr: float = key(ARW_DEG_RT_HR, "deg/sqrt(h)", "gyro angle random walk (ADIS16350)",
-                               positive(hi=1000))
-    gyro_bias_instability_dps: float = key(GYRO_BIAS_INSTABILITY_DPS, "deg/s", "gyro in-run bias stability "
+    # the noise the 10 ms reads carry (host.imu_noise), not the datasheet's stated ARW
+    arw_deg_rt_hr: float = key(imu_noise.ARW_DEG_RT_HR, "deg/sqrt(h)", "gyro angle random walk "
+                               "of the ADIS16350's 10 ms reads", positive(hi=1000))
+    gyro_bias_instability_dps: float = key(imu_noise.GYRO_BIAS_INSTABILITY_DPS, "deg/s", "gyro in-run bias stability "
                                            "(ADIS16350)", between(0, 100))
     # SINS acceleration as a measurement (docs/filters.md): sigma^2 = accel_sigma_m_s2^2 +
     # (tilt_inflation g s T)^2, s = the tilt rate the alignment leaves, T = time since it

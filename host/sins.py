@@ -30,7 +30,7 @@ room the latitude is treated as constant.
 
 Alignment (coarse, on the stationary start): the mean specific force is -g^n seen in
 body axes, so roll = atan2(f_y, f_z), pitch = atan2(-f_x, hypot(f_y, f_z)). A MEMS gyro
-(ARW 4.2 deg/sqrt(h), bias instability 0.015 deg/s = 54 deg/h) cannot sense the
+(ARW 2.5 deg/sqrt(h) as read, bias instability 0.015 deg/s = 54 deg/h) cannot sense the
 earth's 15 deg/h, so it cannot gyrocompass: the heading is the configured initial
 heading. The gyro bias is the mean rate minus the earth rate in body axes,
 b_g = mean(w_ib^b) - C_n^b w_ie^n. An accelerometer bias cannot be told apart from a

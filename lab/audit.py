@@ -16,9 +16,18 @@ host's decoder made of them. Three checks, each of which can fail:
    checksum, truncated, ...) lies in a frame or run that an injection touched, or at an edge
    of what the host saw (it attached, or a cable was pulled, mid-frame);
 3. **the ledger is accounted for**: every byte-changing ledger entry inside what the host saw
-   overlaps bytes the host rejected (a damaged frame was not accepted as good); entries of
-   kinds that only move bytes in time (latency, bandwidth, slicing) must touch accepted
-   frames only.
+   overlaps bytes the host rejected (a damaged frame was not accepted as good), or is one of
+   the bit flips of an undetectable frame (below); entries of kinds that only move bytes in
+   time (latency, bandwidth, slicing) must touch accepted frames only.
+
+Undetectable frames. An integrity check is a sum of the bytes: bit flips can cancel in it
+(an XBee checksum is an 8-bit sum, so a flip of bit k 0 -> 1 in one byte and 1 -> 0 in
+another leaves it valid; a CRC-16, one pattern in 65536). Such a frame is accepted as good by
+any decoder, the host's too; no host can reject it. The ledger names the bits each flip
+changed (``mask``), so the audit proves the collision instead of trusting it: a damaged frame
+the host accepted, touched only by bit flips, whose bytes with the flips undone are again a
+frame of the same length, is counted ``undetectable``, and its flips are accounted for. Any
+other damaged frame the host accepted still fails check 3.
 
 Wholeness. The host's recording is proven whole by its read columns (protocols.recording,
 ``Read``: the bytes its reader had read from the port before each read, counted as it read):
@@ -99,6 +108,7 @@ class PortAudit:
     frames: int = 0  # frames in the delivered stream, inside what the host saw
     intact: int = 0
     damaged: int = 0
+    undetectable: int = 0  # damaged frames whose bit flips left the integrity check valid
     accepted: int = 0
     rejected_bytes: int = 0
     injections: int = 0  # byte-changing ledger entries inside what the host saw
@@ -222,7 +232,7 @@ def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
     damage_starts = [a for a, _ in damage]
 
     # the delivered stream's frames, judged by the ledger
-    intact = {}
+    intact, damaged = {}, {}
     for ev in _decoder(port, escaped).decode(emu):
         if isinstance(ev, Frame):
             lo, hi = ev.offset, ev.offset + len(ev.raw)
@@ -231,6 +241,7 @@ def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
             r.frames += 1
             if _overlaps(damage, damage_starts, lo, hi):
                 r.damaged += 1
+                damaged[lo] = hi
             else:
                 intact[lo] = hi
     r.intact = len(intact)
@@ -253,6 +264,9 @@ def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
             rejected.append((to_emu(ev.offset), to_emu(ev.offset + ev.size - 1) + 1))
     r.accepted = len(accepted)
     r.rejected_bytes = sum(b - a for a, b in rejected)
+    undetectable = [(lo, hi) for lo, hi in damaged.items()
+                    if lo in accepted and _collision(port, escaped, emu, lo, hi, changing)]
+    r.undetectable = len(undetectable)
 
     missed = [lo for lo in intact if lo not in accepted]
     if missed:
@@ -272,7 +286,8 @@ def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
         r.injections += 1
         # a removal (a point) is accounted for by a rejected run that holds it or ends there
         point = e["start"] == e["end"]
-        if not _overlaps(rejected, rej_starts, e["start"] - point, e["end"] + point):
+        if not _overlaps(rejected, rej_starts, e["start"] - point, e["end"] + point) and not any(
+                lo <= e["start"] < hi for lo, hi in undetectable):
             r.problems.append(f"{port}: {e['kind']} at t={e['t_ns'] / 1e9:.3f} s changed bytes "
                               f"[{e['start']}, {e['end']}) but the host rejected none of them")
             break
@@ -280,6 +295,19 @@ def audit_port(port: str, emu: bytes, reads: list[bytes], entries: list[dict],
         if inside(e["start"], max(e["end"], e["start"] + 1)):
             r.timing_injections += 1
     return r
+
+
+def _collision(port: str, escaped: bool, emu: bytes, lo: int, hi: int, changing: list[dict]) -> bool:
+    """Whether the damaged frame emu[lo:hi] is an undetectable one (module docstring): every
+    entry touching it is a bit flip with its mask, and undoing them gives a frame again."""
+    flips = [e for e in changing if e["start"] < hi and e["end"] > lo]
+    if not all("mask" in e and e["end"] == e["start"] + 1 for e in flips):
+        return False
+    sent = bytearray(emu[lo:hi])
+    for e in flips:
+        sent[e["start"] - lo] ^= e["mask"]
+    frames = [ev for ev in _decoder(port, escaped).decode(bytes(sent)) if isinstance(ev, Frame)]
+    return len(frames) == 1 and frames[0].offset == 0 and len(frames[0].raw) == hi - lo
 
 
 _EDGE = 256  # a frame cut by the edge of what the host saw is at most this long (API frame)
@@ -328,8 +356,8 @@ def audit(emulator_dir: str | Path, host_dir: str | Path) -> dict:
 
 def report(result: dict) -> str:
     """One screen: a row per port, then the problems."""
-    cols = ("frames", "intact", "damaged", "accepted", "rejected_bytes", "injections",
-            "timing_injections", "unseen_bytes")
+    cols = ("frames", "intact", "damaged", "undetectable", "accepted", "rejected_bytes",
+            "injections", "timing_injections", "unseen_bytes")
     lines = [f"{'port':8} " + " ".join(f"{c:>17}" for c in cols)]
     for port, r in result["ports"].items():
         lines.append(f"{port:8} " + " ".join(f"{r[c]:>17}" for c in cols))

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from navtwin.common.schema import key, positive
-from navtwin.protocols.adis16350 import VRW_M_S_RT_HR
+from navtwin.host.imu_noise import VRW_M_S_RT_HR
 
 from .base import Track, estimate
 
@@ -19,7 +19,7 @@ from .base import Track, estimate
 @dataclass(frozen=True)
 class SinsSettings:
     vrw_m_s_rt_hr: float = key(VRW_M_S_RT_HR, "m/s/sqrt(h)", "accelerometer velocity random walk "
-                               "(ADIS16350): the track's covariance", positive(hi=1000))
+                               "of the ADIS16350's 10 ms reads: the track's covariance", positive(hi=1000))
 
 
 class SinsTrack(Track):

@@ -1,5 +1,6 @@
 """ADIS16350 model, checked on the decoded SINS bytes: the datasheet's filter, the physics
 at rest and in motion, the error budget of the integrated z gyro, and the register flags."""
+import dataclasses
 import functools
 import math
 
@@ -7,10 +8,12 @@ import numpy as np
 import pytest
 
 from navtwin.common.earth import EARTH_RATE
-from navtwin.emulator.imu import Adis16350, bartlett_taps, deg_h, fir, fir_steady_state, gauss_markov, ug
+from navtwin.common.geodesy import meridian_radius, transverse_radius
+from navtwin.emulator.bias import FLICKER_TAUS_S, flicker_term_variance
+from navtwin.emulator.imu import Adis16350, deg_h, fir, fir_steady_state, gauss_markov, ug
 from navtwin.emulator.rng import stream
 from navtwin.emulator.scenario import load_scenario
-from navtwin.emulator.trajectory import Trajectory
+from navtwin.emulator.trajectory import Kinematics, Trajectory
 from navtwin.protocols import adis16350 as adis
 
 from ..protocols.vectors import SINS_LEVEL
@@ -36,7 +39,7 @@ supply_noise_v = 0.0
 @pytest.mark.parametrize("n", [1, 2, 4, 16, 64])
 def test_bartlett_taps_have_the_datasheet_response(n):
     """Datasheet p. 17: H(f) = [sin(pi N f ts) / (N sin(pi f ts))]^2, unity at DC."""
-    h = bartlett_taps(n)
+    h = adis.bartlett_taps(n)
     assert len(h) == 2 * n - 1 and h.sum() == pytest.approx(1.0)
     f = np.linspace(0.001, 0.499, 50)  # in units of fs
     dtft = np.abs(np.exp(-2j * np.pi * np.outer(f, np.arange(len(h)))) @ h)
@@ -51,7 +54,7 @@ def test_fir_is_scipys_lfilter_to_the_bit(n):
     the filter) and the delays carried between them. scipy is the oracle here only."""
     from scipy.signal import lfilter, lfilter_zi
 
-    taps = bartlett_taps(n)
+    taps = adis.bartlett_taps(n)
     x = np.random.default_rng(n).normal(0.0, 3.0, (3000, 3))
     want_zi = lfilter_zi(taps, [1.0]) if n > 1 else np.empty(0)  # it refuses a 1-tap filter
     assert fir_steady_state(taps).tobytes() == want_zi.tobytes()
@@ -97,8 +100,78 @@ def test_physics_at_rest_and_on_a_straight_leg():
     assert k.vel[0, 0] == pytest.approx(sc.trajectory.speed_m_s) and k.yaw[0] == pytest.approx(0)
     f, w = imu.true_outputs(np.array([t_cruise]))
     v = sc.trajectory.speed_m_s
-    expected = [0, 2 * EARTH_RATE * math.sin(lat) * v, sc.site.local_gravity - 2 * EARTH_RATE * math.cos(lat) * v]
+    r = transverse_radius(lat) + sc.tag.z  # still the origin's latitude to 1e-7 rad
+    expected = [0, (2 * EARTH_RATE * math.sin(lat) + v * math.tan(lat) / r) * v,
+                sc.site.local_gravity - (2 * EARTH_RATE * math.cos(lat) + v / r) * v]
     assert np.allclose(f[0], expected, atol=1e-12)
+
+
+class Parked:
+    """A trajectory standing at *pos* (local m) moving at *vel* (m/s), level, heading *yaw*:
+    the kinematics the IMU's physics takes (emulator.trajectory.Kinematics)."""
+
+    def __init__(self, pos, vel=(0.0, 0.0, 0.0), yaw=0.0):
+        self.pos, self.vel, self.yaw = np.array(pos, float), np.array(vel, float), yaw
+
+    def kinematics(self, t_ns):
+        n = len(t_ns)
+        t = (np.asarray(t_ns) / 1e9)[:, None]
+        zeros = np.zeros(n)
+        return Kinematics(pos=self.pos + t * self.vel, vel=np.tile(self.vel, (n, 1)), acc=np.zeros((n, 3)),
+                          roll=zeros, pitch=zeros, yaw=np.full(n, self.yaw), rate=np.zeros((n, 3)))
+
+
+def _curved(sc, trajectory):
+    return Adis16350(sc.imu, sc.site, sc.area, trajectory, 0.0, functools.partial(stream, 0))
+
+
+def test_parked_1_km_north_the_gyros_sense_the_earth_rate_at_its_own_latitude():
+    """The earth rate is projected at the vehicle's current latitude, not the origin's: 1 km
+    north (x east, y north) L is 1.57e-4 rad higher, which moves W sin L by 9.5e-9 rad/s."""
+    sc = load_scenario("office")
+    lat0 = math.radians(sc.site.latitude_deg)
+    lat = lat0 + 1000.0 / (meridian_radius(lat0) + sc.site.height_m)
+    _, w = _curved(sc, Parked([0.0, 1000.0, 0.0])).true_outputs(np.arange(0, 10**9, 10**7))
+    want = EARTH_RATE * np.array([0.0, math.cos(lat), math.sin(lat)])
+    assert np.allclose(w.mean(axis=0), want, atol=2e-12, rtol=0)
+    assert abs(w.mean(axis=0)[2] - EARTH_RATE * math.sin(lat0)) > 9e-9  # the origin's is off
+    # heading north (body x along +y, body y west): the earth rate's north part on body x
+    _, w = _curved(sc, Parked([0.0, 1000.0, 0.0], yaw=math.pi / 2)).true_outputs(np.array([0]))
+    assert np.allclose(w[0], [EARTH_RATE * math.cos(lat), 0.0, EARTH_RATE * math.sin(lat)], atol=2e-12)
+
+
+@pytest.mark.parametrize("v", [1.0, 10.0])
+def test_driving_north_the_cross_track_gyro_carries_the_transport_rate(v):
+    """Heading north at v, the local level turns about east at -v / (R_M + h): body y points
+    west, so the y gyro reads +v / (R_M + h) (1.57e-7 rad/s at 1 m/s), and the specific force
+    carries the Coriolis (2 w_ie + w_en) x v."""
+    sc = load_scenario("office")
+    lat0, h = math.radians(sc.site.latitude_deg), sc.site.height_m
+    f, w = _curved(sc, Parked([0.0, 0.0, 0.0], [0.0, v, 0.0], yaw=math.pi / 2)).true_outputs(np.array([0]))
+    r_m = meridian_radius(lat0) + h
+    assert w[0, 1] == pytest.approx(v / r_m, rel=1e-9)
+    assert w[0, 0] == pytest.approx(EARTH_RATE * math.cos(lat0), rel=1e-12)
+    assert w[0, 2] == pytest.approx(EARTH_RATE * math.sin(lat0), rel=1e-12)
+    # ENU: (2 w_ie + w_en) x (0, v, 0) = (-2 W sin L v, 0, -v^2 / R_M); body x north, y west
+    assert f[0] == pytest.approx([0.0, 2 * EARTH_RATE * math.sin(lat0) * v,
+                                  sc.site.local_gravity - v * v / r_m], rel=1e-12, abs=1e-15)
+
+
+def test_transport_rate_is_the_turn_rate_of_the_geodetic_position():
+    """w_en (ENU) = (-dL/dt, dlam/dt cos L, dlam/dt sin L): checked against the time derivative
+    of the geodetic position of a point moving north-east 2 km out, from common.geodesy, in an
+    area whose +x points 30 deg east of north."""
+    sc = load_scenario("office")
+    sc = dataclasses.replace(sc, area=dataclasses.replace(sc.area, x_azimuth_deg=30.0))
+    imu = _curved(sc, Parked([0.0, 0.0, 0.0]))
+    pos, vel, dt = np.array([1500.0, 1300.0, 2.0]), np.array([3.0, -4.0, 0.0]), 1e-3
+    _, w_en = imu.frame_rates(pos[None], vel[None])
+    lat, lon, _ = imu.frame.geodetic(np.array([pos - vel * dt, pos + vel * dt]))
+    d_lat, d_lon = np.radians(np.diff(lat))[0] / (2 * dt), np.radians(np.diff(lon))[0] / (2 * dt)
+    la = math.radians(lat.mean())
+    want_enu = np.array([-d_lat, d_lon * math.cos(la), d_lon * math.sin(la)])
+    # the plane's axes turn against the local level's by s / R (3e-4 rad here): the tolerance
+    assert w_en[0] @ imu.enu_to_n == pytest.approx(want_enu, rel=1e-3)
 
 
 def test_north_facing_area_projects_earth_rate_on_x(tmp_path):
@@ -151,7 +224,7 @@ def read_sigma(sc, gyro: bool) -> float:
     rounding (reads 10 ms apart see disjoint filter windows, so they are independent)."""
     imu, e = sc.imu, sc.imu.errors
     fs = 1 / imu.sample_period_s
-    taps = bartlett_taps(imu.filter_taps)
+    taps = adis.bartlett_taps(imu.filter_taps)
     if gyro:
         white = math.radians(e.gyro_arw_deg_rt_h) / 60 * math.sqrt(fs)
         lsb = math.radians(adis.GYRO_LSB_DPS[imu.gyro_range_dps])
@@ -184,12 +257,15 @@ def test_stationary_start_reads_local_g_and_no_rotation(office):
     assert np.all(np.abs(gyr.mean(axis=0)) < 4 * gyro_sigma)  # near zero: 0.4 deg/s at most
 
 
-def gauss_markov_integral_var(sigma, tau, times, weights, bin_s=0.5):
-    """Variance of sum(w_i b(t_i)) for a stationary Gauss-Markov b (binned)."""
+def bias_integral_var(floor, tau, times, weights, bin_s=0.5):
+    """Variance of sum(w_i b(t_i)) for the in-run bias b (binned): one stationary Gauss-Markov
+    term of sigma *floor* (tau > 0) or the flicker bias's terms (tau = 0, emulator.bias)."""
     bins = np.floor(times / bin_s).astype(int)
     w = np.bincount(bins, weights)
     centre = (np.arange(len(w)) + 0.5) * bin_s
-    cov = sigma ** 2 * np.exp(-np.abs(centre[:, None] - centre[None, :]) / tau)
+    lag = np.abs(centre[:, None] - centre[None, :])
+    terms = [(floor ** 2, tau)] if tau > 0 else [(flicker_term_variance(floor), t) for t in FLICKER_TAUS_S]
+    cov = sum(q * np.exp(-lag / t) for q, t in terms)
     return float(w @ cov @ w)
 
 
@@ -197,7 +273,7 @@ def gauss_markov_integral_var(sigma, tau, times, weights, bin_s=0.5):
 def test_integrated_z_gyro_matches_truth_heading_change(seed):
     """Remove the bias seen in the alignment period, integrate the z gyro over the run and
     compare with the truth heading change; the predicted error is computed from ARW, the
-    bias estimate's error, the bias instability (Gauss-Markov) and the scale factor."""
+    bias estimate's error, the in-run bias (flicker or Gauss-Markov) and the scale factor."""
     sc = load_scenario("office")
     w, events = run(sc, seed)
     s = sins(events)
@@ -216,11 +292,10 @@ def test_integrated_z_gyro_matches_truth_heading_change(seed):
     sr = read_sigma(sc, True)
     weights = np.where(move, dt, 0.0) + np.where(align, -n_m * dt / n_a, 0.0)
     var = (np.sum(weights ** 2) * sr ** 2
-           + gauss_markov_integral_var(deg_h(e.gyro_bias_instability_deg_h), e.gyro_bias_corr_s,
-                                       t, weights)
+           + bias_integral_var(deg_h(e.gyro_bias_instability_deg_h), e.gyro_bias_corr_s, t, weights)
            + (e.gyro_scale_factor_ppm * 1e-6 * change) ** 2)
     sigma = math.sqrt(var)
-    assert 0.005 < sigma < 0.1  # about 1.9 deg: a meaningful check
+    assert 0.005 < sigma < 0.1  # about 1.8 deg: a meaningful check
     assert abs(heading - change) < 4 * sigma
 
 
@@ -248,6 +323,17 @@ def test_slow_sampling_clears_nd_and_repeats_the_registers(tmp_path):
     stale = np.flatnonzero(~nd)
     stale = stale[stale > 0]
     assert np.array_equal(words[stale] & 0x3FFF, words[stale - 1] & 0x3FFF)
+
+
+def test_a_last_block_without_a_sample_runs(tmp_path):
+    """1.005 s at 12.8 ms a sample: the last block, 1.000 .. 1.005 s, holds no sample (the
+    next is at 1.011 s); the run ends with every frame, the last one reading the sample of
+    0.998 s, which arrived after the read before it (ND)."""
+    sc = variant(tmp_path, "office", "duration_s = 1.005\n[imu]\nsmpl_prd = 20\n")
+    _, events = run(sc)
+    s = sins(events)
+    assert len(s["t_ns"]) == 101 and s["t_ns"][-1] > 1_000_000_000
+    assert s["words"][-1, 1] & adis.ND
 
 
 def test_supply_out_of_range_sets_ea(tmp_path):
