@@ -18,7 +18,9 @@ each anchor's (lambda_i, n_i) fitted to its mean readings of the other anchors (
 host.rssi.AnchorReadings, from the AnchorExchanges of the scenario's anchor exchanges), weighed
 by the tag's readings of this cycle (eqs. 5-7), the distance by eq. 8. Until every anchor has
 heard two others (or without anchor exchanges at all) the configured ``rssi_1m_dbm`` and
-``path_loss_exponent`` stand in, counted ``path_loss_unfitted``.
+``path_loss_exponent`` stand in, counted ``path_loss_unfitted``; so they do for a cycle whose
+adaptive (lambda, n) leaves the model's range (n in [1, 6]: a fit to a few noisy readings can
+give an n near 0, every distance infinite), counted ``path_loss_implausible``.
 
 Position measurement (eqs. 17-20, in their linear map): z = p_SINS - p_fix (area x, y),
 H = [lead I on dV_E, dV_N; d(x, y)/d(dL, dlambda) on dL, dlambda] (host.tracks.geodetic).
@@ -59,11 +61,15 @@ from navtwin.protocols.nanoloc import is_complete
 from .geodetic import GeodeticSettings, GeodeticTrack
 
 
+#: The path-loss model's range, for the configured model and the adaptive one alike.
+PLAUSIBLE_RSSI_1M, PLAUSIBLE_N = (-120.0, 20.0), (1.0, 6.0)
+
+
 @dataclass(frozen=True)
 class CentroidSettings(GeodeticSettings):
     rssi_1m_dbm: float = key(-45.0, "dBm", "RSSI(1 m) of the path-loss model (003 eq. 2's "
-                             "RSSI(1), eq. 8's lambda)", between(-120, 20))
-    path_loss_exponent: float = key(2.0, "", "path-loss exponent n of 003 eq. 2", between(1, 6))
+                             "RSSI(1), eq. 8's lambda)", between(*PLAUSIBLE_RSSI_1M))
+    path_loss_exponent: float = key(2.0, "", "path-loss exponent n of 003 eq. 2", between(*PLAUSIBLE_N))
     shadowing_db: float = key(2.0, "dB", "RSSI shadowing, 1 sigma (003 eq. 1's sigma): each "
                               "range's sigma_d = d ln10 sigma / (10 n), R of the fix", positive(hi=100))
     fix_sigma_m: float = key(1.5, "m", "the centroid's own error, 1 sigma per axis: added to the "
@@ -141,7 +147,13 @@ class CentroidTrack(GeodeticTrack):
                 self._fitted = self.heard.parameters(xyz) or ()
             if self._fitted:
                 idx = layout.index(anchors)
-                return rssi.adaptive_parameters(self._fitted[0][idx], self._fitted[1][idx], readings)
+                lam, n = rssi.adaptive_parameters(self._fitted[0][idx], self._fitted[1][idx], readings)
+                # a fit to few noisy readings can leave the model's range (an n near 0 sends
+                # every distance to infinity): the configured model until the means settle
+                if PLAUSIBLE_N[0] <= n <= PLAUSIBLE_N[1] and PLAUSIBLE_RSSI_1M[0] <= lam <= PLAUSIBLE_RSSI_1M[1]:
+                    return lam, n
+                self.rejections["path_loss_implausible"] += 1
+                return s.rssi_1m_dbm, s.path_loss_exponent
             self.rejections["path_loss_unfitted"] += 1
         return s.rssi_1m_dbm, s.path_loss_exponent
 

@@ -113,3 +113,18 @@ def test_adaptive_path_loss_learns_the_channel_from_the_anchors_readings():
     unfitted, est = run(1, ("wcl",), settings=CentroidSettings(**wrong, adaptive_path_loss=True))
     assert np.array_equal(unfitted["wcl"], fixed["wcl"])
     assert est.tracks[-1].rejections["path_loss_unfitted"] > 500
+
+
+def test_an_adaptive_fit_outside_the_models_range_falls_back_on_the_configured_model():
+    """Readings that do not fall with distance (every pair heard at -70 dBm) fit n = 0, every
+    distance infinite: the cycle takes the configured model and counts it."""
+    _, est = run(1, ("wcl",), settings=CentroidSettings(adaptive_path_loss=True))
+    track = est.tracks[-1]
+    ids = sorted(OFFICE_ANCHORS)
+    for a in ids:
+        for b in ids:
+            if a != b:
+                track.anchor_exchange(AnchorExchange(100.0, a, b, 5.0, -70))
+    before = track.rejections["path_loss_implausible"]
+    assert track.path_loss(ids, np.array([-60.0, -62.0, -65.0, -70.0])) == (LAMBDA, N)
+    assert abs(track._fitted[1]).max() < 1e-9 and track.rejections["path_loss_implausible"] == before + 1
