@@ -44,7 +44,8 @@ from collections.abc import Sequence
 from navtwin.common.earth import EARTH_RATE
 from navtwin.common.geodesy import meridian_radius, transverse_radius
 
-from .sins import Quat, Vec3, euler_from_quat, mat_vec, quat_from_rotvec, quat_multiply, quat_to_dcm
+from .sins import (Quat, Vec3, euler_from_quat, held, mat_vec, quat_from_rotvec, quat_multiply, quat_to_dcm,
+                   rotate)
 
 
 class GeodeticStrapdown:
@@ -107,22 +108,11 @@ class GeodeticStrapdown:
         gx, gy, gz = gyro
         fx, fy, fz = accel
         gx, gy, gz, fx, fy, fz = gx - bgx, gy - bgy, gz - bgz, fx - bax, fy - bay, fz - baz
-        if self._prev is not None:
-            (gx0, gy0, gz0), (fx0, fy0, fz0) = self._prev
-            w_ib = (0.5 * (gx + gx0), 0.5 * (gy + gy0), 0.5 * (gz + gz0))
-            f_b = (0.5 * (fx + fx0), 0.5 * (fy + fy0), 0.5 * (fz + fz0))
-        else:
-            w_ib, f_b = (gx, gy, gz), (fx, fy, fz)
+        w_ib, f_b = held((gx, gy, gz), (fx, fy, fz), self._prev)
         self._prev = ((gx, gy, gz), (fx, fy, fz))
         ie_x, ie_y, ie_z = self.earth_rate()
         en_x, en_y, en_z = self.transport_rate()
-        h = 0.5 * dt
-        nav_half = quat_from_rotvec(((ie_x + en_x) * -h, (ie_y + en_y) * -h, (ie_z + en_z) * -h))
-        body_half = quat_from_rotvec((w_ib[0] * h, w_ib[1] * h, w_ib[2] * h))
-        q_mid = quat_multiply(nav_half, quat_multiply(self._q, body_half))
-        qw, qx, qy, qz = quat_multiply(nav_half, quat_multiply(q_mid, body_half))
-        norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        self._q = (qw / norm, qx / norm, qy / norm, qz / norm)
+        self._q, q_mid = rotate(self._q, (ie_x + en_x, ie_y + en_y, ie_z + en_z), w_ib, dt)
         # dv/dt = C_b^n f^b - (2 w_ie + w_en) x v + g^n
         wx, wy, wz = 2.0 * ie_x + en_x, 2.0 * ie_y + en_y, 2.0 * ie_z + en_z
         vx, vy, vz = self._v

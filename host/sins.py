@@ -45,14 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.common.earth import EARTH_RATE, WGS84_A, WGS84_E2
-
-
-def earth_radii(latitude_rad: float) -> tuple[float, float]:
-    """(R_M, R_N): meridian and prime-vertical radii of curvature (WGS-84)."""
-    s2 = math.sin(latitude_rad) ** 2
-    w = 1.0 - WGS84_E2 * s2
-    return WGS84_A * (1.0 - WGS84_E2) / w**1.5, WGS84_A / math.sqrt(w)
+from navtwin.common.earth import EARTH_RATE
+from navtwin.common.geodesy import meridian_radius, transverse_radius
 
 
 def area_from_enu(x_azimuth_deg: float = 90.0) -> np.ndarray:
@@ -124,6 +118,32 @@ def euler_from_quat(q: Sequence[float]) -> tuple[float, float, float]:
             math.atan2(C[1][0], C[0][0]))
 
 
+def held(gyro: Vec3, accel: Vec3, prev) -> tuple[Vec3, Vec3]:
+    """The rate and specific force held over an interval: the mean of its two samples
+    (trapezoid), *prev* the interval's first ((gyro, accel), None for the first sample)."""
+    if prev is None:
+        return gyro, accel
+    (gx0, gy0, gz0), (fx0, fy0, fz0) = prev
+    gx, gy, gz = gyro
+    fx, fy, fz = accel
+    return ((0.5 * (gx + gx0), 0.5 * (gy + gy0), 0.5 * (gz + gz0)),
+            (0.5 * (fx + fx0), 0.5 * (fy + fy0), 0.5 * (fz + fz0)))
+
+
+def rotate(q: Quat, w_in: Vec3, w_ib: Vec3, dt: float) -> tuple[Quat, Quat]:
+    """The attitude C_b^n after dt and at mid-interval. The body turns by w_ib against
+    inertial space and the nav frame by w_in: q(t+dt) = exp(w_in dt)* (x) q (x) exp(w_ib dt),
+    exact for constant rates; the half step (mid-interval attitude) taken twice is the whole
+    step."""
+    h = 0.5 * dt
+    nav_half = quat_from_rotvec((w_in[0] * -h, w_in[1] * -h, w_in[2] * -h))
+    body_half = quat_from_rotvec((w_ib[0] * h, w_ib[1] * h, w_ib[2] * h))
+    q_mid = quat_multiply(nav_half, quat_multiply(q, body_half))
+    qw, qx, qy, qz = quat_multiply(nav_half, quat_multiply(q_mid, body_half))
+    norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    return (qw / norm, qx / norm, qy / norm, qz / norm), q_mid
+
+
 @dataclass(frozen=True, slots=True)
 class AlignmentResult:
     q: Quat  # initial attitude C_b^n
@@ -174,7 +194,8 @@ class Strapdown:
         self._w_ie: Vec3 = tuple(earth_rate_nav(lat, x_azimuth_deg).tolist())
         self._area_from_enu = area_from_enu(x_azimuth_deg).tolist()
         self._enu_from_area = area_from_enu(x_azimuth_deg).T.tolist()
-        r_m, r_n = earth_radii(lat)  # once: over a room the latitude is constant
+        # once: over a room the latitude is constant
+        r_m, r_n = float(meridian_radius(lat)), float(transverse_radius(lat))
         self._r_m, self._r_n = r_m + altitude_m, r_n + altitude_m
         self._tan_lat = math.tan(lat)
         self.local_gravity = float(local_gravity)  # g^n = (0, 0, -g) acts on v_U alone, which eq. 5 holds at 0
@@ -212,25 +233,11 @@ class Strapdown:
         gx, gy, gz = gyro
         gx, gy, gz = gx - bx, gy - by, gz - bz
         fx, fy, fz = accel
-        if self._prev is not None:
-            (gx0, gy0, gz0), (fx0, fy0, fz0) = self._prev
-            w_ib = (0.5 * (gx + gx0), 0.5 * (gy + gy0), 0.5 * (gz + gz0))
-            f_b = (0.5 * (fx + fx0), 0.5 * (fy + fy0), 0.5 * (fz + fz0))
-        else:
-            w_ib, f_b = (gx, gy, gz), (fx, fy, fz)
+        w_ib, f_b = held((gx, gy, gz), (fx, fy, fz), self._prev)
         self._prev = ((gx, gy, gz), (fx, fy, fz))
         ie_x, ie_y, ie_z = self._w_ie
         en_x, en_y, en_z = self.transport_rate()
-        # The body turns by w_ib against inertial space and the nav frame by w_in:
-        # q(t+dt) = exp(w_in dt)* (x) q (x) exp(w_ib dt), exact for constant rates; the
-        # half step (mid-interval attitude) taken twice is the whole step.
-        h = 0.5 * dt
-        nav_half = quat_from_rotvec(((ie_x + en_x) * -h, (ie_y + en_y) * -h, (ie_z + en_z) * -h))
-        body_half = quat_from_rotvec((w_ib[0] * h, w_ib[1] * h, w_ib[2] * h))
-        q_mid = quat_multiply(nav_half, quat_multiply(self._q, body_half))
-        qw, qx, qy, qz = quat_multiply(nav_half, quat_multiply(q_mid, body_half))
-        norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        self._q = (qw / norm, qx / norm, qy / norm, qz / norm)
+        self._q, q_mid = rotate(self._q, (ie_x + en_x, ie_y + en_y, ie_z + en_z), w_ib, dt)
         # dv/dt = C_b^n f^b - (2 w_ie + w_en) x v + g^n, horizontal: v_U = 0 on the floor (eq. 5)
         wx, wy, wz = 2.0 * ie_x + en_x, 2.0 * ie_y + en_y, 2.0 * ie_z + en_z
         vx, vy, vz = self._v

@@ -53,8 +53,30 @@ def process_noise(dt: float, gyro_psd: float, accel_psd: float, extra_psd: float
     return Q
 
 
-class ErrorStateFilter:
+class ClosedLoop:
+    """What a closed-loop error-state filter does after its predict: the Joseph update and
+    the feedback of its first ``nav`` states into the strapdown (here and host.filters.geodetic)."""
+
+    nav: int
+
+    def update(self, z, H: np.ndarray, R: np.ndarray, gate: float | None = None) -> Innovation:
+        """Correct with z = H x + v, v ~ N(0, R) (H: dim(z) x n); the state is unchanged
+        when the gate rejects it."""
+        z = np.asarray(z, float)
+        self.x, self.P, inn = joseph_correct(self.x, self.P, self._I, z - H.dot(self.x), H, R, gate)
+        return inn
+
+    def take_nav(self) -> np.ndarray:
+        """The nav part of x (to feed back into the strapdown), reset to zero."""
+        dx = self.x[:self.nav].copy()
+        self.x[:self.nav] = 0.0
+        return dx
+
+
+class ErrorStateFilter(ClosedLoop):
     """x, P of the module doc; ``extra`` random-walk states of density ``extra_psd``."""
+
+    nav = NAV
 
     def __init__(self, P0: np.ndarray, *, gyro_psd: float, accel_psd: float, extra: int = 0,
                  extra_psd: float = 0.0):
@@ -76,14 +98,3 @@ class ErrorStateFilter:
         F[2, 5], F[2, 6], F[3, 4], F[3, 6] = fz * dt, -fy * dt, -fz * dt, fx * dt
         self.P = F.dot(self.P).dot(F.T) + process_noise(dt, *self._noise)
 
-    def update(self, z: np.ndarray, H: np.ndarray, R: np.ndarray, gate: float | None = None) -> Innovation:
-        """Correct with z = H x + v, v ~ N(0, R) (H: dim(z) x n); the state is unchanged
-        when the gate rejects it."""
-        self.x, self.P, inn = joseph_correct(self.x, self.P, self._I, z - H.dot(self.x), H, R, gate)
-        return inn
-
-    def take_nav(self) -> np.ndarray:
-        """The nav part of x (to feed back into the strapdown), reset to zero."""
-        dx = self.x[:NAV].copy()
-        self.x[:NAV] = 0.0
-        return dx

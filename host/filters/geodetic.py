@@ -57,7 +57,7 @@ import numpy as np
 
 from navtwin.common.earth import EARTH_RATE
 
-from .innovation import Innovation, joseph_correct
+from .errorstate import ClosedLoop
 
 N = 16
 NAV = 15  # fed back into the strapdown
@@ -99,8 +99,10 @@ def error_model(lat: float, h_radii: tuple[float, float], v, f_n, C) -> np.ndarr
     return F
 
 
-class GeodeticErrorFilter:
+class GeodeticErrorFilter(ClosedLoop):
     """x, P of the module doc; ``psd``: the 16 white-noise densities of Q_c's diagonal."""
+
+    nav = NAV
 
     def __init__(self, P0: np.ndarray, psd) -> None:
         self.x = np.zeros(N)
@@ -118,14 +120,3 @@ class GeodeticErrorFilter:
         P[np.diag_indices(N)] += self._qc * dt
         self.P = P
 
-    def update(self, z, H: np.ndarray, R: np.ndarray, gate: float | None = None) -> Innovation:
-        """Correct with z = H x + v, v ~ N(0, R); unchanged when the gate rejects it."""
-        z = np.asarray(z, float)
-        self.x, self.P, inn = joseph_correct(self.x, self.P, self._I, z - H.dot(self.x), H, R, gate)
-        return inn
-
-    def take_nav(self) -> np.ndarray:
-        """The first 15 states (to feed back into the strapdown), reset to zero."""
-        dx = self.x[:NAV].copy()
-        self.x[:NAV] = 0.0
-        return dx

@@ -221,9 +221,7 @@ class GeodeticTrack(ClosedLoopTrack):
     def estimate(self, b: float, yaw: float):
         ctx = self.ctx
         if self.nav is None:
-            sp, sv, _ = ctx.cfg.p0_sigma
-            cov = np.diag([sp**2, sp**2, sv**2, sv**2])
-            return estimate(b, self.name, ctx.origin, (0.0, 0.0), yaw, cov, ctx.stale(b, None))
+            return self.unstarted(b, yaw)
         p, lead = self.position_at(b)
         J = np.zeros((4, 16))
         J[0:2] = self.position_rows(lead)
