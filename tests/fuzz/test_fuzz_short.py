@@ -1,6 +1,7 @@
 """Every fuzz target's contracts: on its seeds always, and for a short atheris run (CI)."""
 import importlib
 import os
+import re
 import subprocess
 import sys
 
@@ -46,4 +47,7 @@ def test_short_fuzz_run_finds_no_broken_contract(name, tmp_path):
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
     crashes = [f.read_bytes().hex() for f in sorted(tmp_path.glob(f"{name}-crash-*"))]
     assert p.returncode == 0 and not crashes, f"{p.stderr[-3000:]}\ncrash input (hex): {crashes}"
-    assert f"Done {SHORT_RUNS} runs" in p.stderr
+    # libFuzzer may run one unit past -runs (its length control follows the clock, so even a
+    # fixed seed takes a slightly different path on a loaded box: 2001 units once in CI)
+    done = re.search(r"^Done (\d+) runs", p.stderr, re.M)
+    assert done and int(done.group(1)) >= SHORT_RUNS, p.stderr[-3000:]
