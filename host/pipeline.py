@@ -133,6 +133,7 @@ class Pipeline:
                 v.estimator.on_innovation = partial(_with_vehicle, on_innovation, v.number)
         self._by_router = {v.router: v for v in self.vehicles if v.router is not None}
         self._by_tag = {v.tag: v for v in self.vehicles if v.tag is not None}
+        self._anchor_ids = frozenset(config.anchors)  # once: every report asks (a property builds the dict)
         self.inputs = tuple(p for p in readable if p in inputs)
         self.escaped = escaped
         declared = [ports.get(p) for p in self.inputs]
@@ -326,7 +327,7 @@ class Pipeline:
         f = ev.fields
         self.counts["reports"] += 1
         # an anchor's id in the tag field: two anchors ranged each other, for every vehicle
-        among = f["tag"] in self.config.anchors and f["tag"] not in self._by_tag
+        among = f["tag"] in self._anchor_ids and f["tag"] not in self._by_tag
         v = self._by_tag.get(f["tag"], None if self._by_tag else self.vehicles[0])
         if v is None and not among:
             self.counts["reports_other_tag"] += 1
@@ -342,7 +343,7 @@ class Pipeline:
         if self.range_clock.restarts != restarts:  # the anchors restarted: in order, before t
             for each in self.vehicles:
                 self._schedule(each, Restart(t, "anchors"), out)
-        if f["anchor"] not in self.config.anchors:
+        if f["anchor"] not in self._anchor_ids:
             self.counts["reports_unknown_anchor"] += 1
             return
         status = f["status"]
