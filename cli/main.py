@@ -19,6 +19,7 @@ import sys
 import threading
 from contextlib import contextmanager
 
+from navtwin.common.extras import MissingExtra, install_line
 from navtwin.common.limits import span
 from navtwin.protocols.plugins import Registry
 from navtwin.protocols import __version__
@@ -132,12 +133,15 @@ def _sigterm_as_interrupt(signum, frame):
 
 def missing_extra(e: ModuleNotFoundError, extra: str | None) -> str | None:
     """The line for *e*, a module that is not installed, when the command's *extra* installs
-    it; None for one of navtwin's own modules or a command without an extra (a broken
+    it, or the line of a :class:`MissingExtra` (a library module that names its extra, in any
+    command); None for one of navtwin's own modules or a command without an extra (a broken
     install, whose traceback is the report)."""
+    if isinstance(e, MissingExtra):  # a library module named its extra itself
+        return str(e)
     name = (e.name or "").partition(".")[0]
     if not extra or not name or name == "navtwin":
         return None
-    return f"needs {name}, which is not installed; pip install 'navtwin[{extra}]'"
+    return install_line(name, extra)
 
 
 #: The subcommands: name -> register(subparsers), which may add more than one ('navtwin --help'
