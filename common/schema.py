@@ -70,6 +70,11 @@ def one_of(*allowed, fix: str | None = None) -> Check:
     return Check(lambda v: v in allowed, f"must be one of {names}", fix or f"use one of {names}")
 
 
+def boolean(fix: str = "write true or false") -> Check:
+    """A TOML boolean (its rule stated in the docs' key tables like every other key's)."""
+    return Check(lambda v: isinstance(v, bool), "must be true or false", fix)
+
+
 def each(check: Check) -> Check:
     """Apply *check* to every element of a tuple value."""
     return Check(lambda v: all(check.ok(x) for x in v), f"elements {check.must}", check.fix)

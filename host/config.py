@@ -65,7 +65,7 @@ from pathlib import Path
 from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, MAX_HEIGHT_M, RANGE_BIAS_M
 from navtwin.common import tomlfile
 from navtwin.common.geodesy import LocalFrame
-from navtwin.common.schema import REQUIRED, Check, Invalid, between, build, key, plain, rows
+from navtwin.common.schema import REQUIRED, Invalid, between, boolean, build, key, plain, rows
 
 from . import calibration as range_calibration
 from . import tracks
@@ -107,8 +107,7 @@ class Output:
     geodetic: bool = key(False, "", "each estimate line also gives lat, lon (deg) "
                          "and h (m, WGS-84) of its x, y on the floor (z = 0), through the area's "
                          "frame: [site] and [filters] x_azimuth_deg (common.geodesy)",
-                         Check(lambda v: isinstance(v, bool), "must be true or false",
-                               "write geodetic = true"))
+                         boolean("write geodetic = true"))
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """Fusion tracks, one module each, registered by name (docs/filters.md).
 
 Built in, in output order: ``sins``, ``wsn``, ``kf``, ``ekf``, ``ukf`` (000's), ``lc``,
-``tc``, ``fatci`` (001's) and ``centroid``, ``wcl``, ``geosins`` (003's). A track of a user's
+``tc``, ``fatci`` (001's), ``centroid``, ``wcl``, ``geosins`` (003's) and ``kf-rel``,
+``hinf``, ``hinf+lssvm``, ``hinf+bp`` (004's; hinf's need the ``lmi`` extra). A track of a user's
 package is added with :func:`register` (in process), or by an entry point in the group
 ``navtwin.tracks`` whose name is the track's name and whose object is its class::
 
@@ -45,6 +46,10 @@ TRACKS: Registry[type[Track]] = Registry(GROUP, "track", {
     "centroid": "navtwin.host.tracks.centroid:CentroidTrack",
     "wcl": "navtwin.host.tracks.centroid:WclTrack",
     "geosins": "navtwin.host.tracks.geodetic:GeoSinsTrack",
+    "kf-rel": "navtwin.host.tracks.relative:KfRelTrack",
+    "hinf": "navtwin.host.tracks.hinf:HinfTrack",
+    "hinf+lssvm": "navtwin.host.tracks.bridging:HinfLssvmTrack",
+    "hinf+bp": "navtwin.host.tracks.bridging:HinfBpTrack",
 }, check=_check)
 BUILT_IN = TRACKS.built_in
 names, get, unregister = TRACKS.names, TRACKS.get, TRACKS.unregister

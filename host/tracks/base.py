@@ -203,5 +203,13 @@ class Track:
     def estimate(self, b: float, yaw: float) -> Estimate | None:
         raise NotImplementedError
 
+    def unstarted(self, b: float, yaw: float) -> Estimate:
+        """The estimate of a track on its own strapdown before it has one: at its start, at
+        rest, with P0's sigmas."""
+        ctx = self.ctx
+        sp, sv, _ = ctx.cfg.p0_sigma
+        cov = np.diag([sp**2, sp**2, sv**2, sv**2])
+        return estimate(b, self.name, ctx.origin, (0.0, 0.0), yaw, cov, ctx.stale(b, None))
+
     def count_reinit(self, cause: str) -> None:
         self.reinits[cause] += 1

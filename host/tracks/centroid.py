@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.common.schema import Check, between, key, positive
+from navtwin.common.schema import between, boolean, key, positive
 from navtwin.host import centroid, rssi
 from navtwin.host.magnetometer import yaw_from_field
 from navtwin.host.measurements import AnchorExchange, Exchange, Fix, MagSample
@@ -78,11 +78,9 @@ class CentroidSettings(GeodeticSettings):
                                    "its readings of the others (the scenario's anchor exchanges), "
                                    "weighed per cycle by the tag's readings; until every anchor "
                                    "heard two others, rssi_1m_dbm and path_loss_exponent",
-                                   Check(lambda v: isinstance(v, bool), "must be true or false",
-                                         "write true or false"))
+                                   boolean())
     magnetometer: bool = key(True, "", "take the magnetometer's heading (003 eqs. 22-24)",
-                             Check(lambda v: isinstance(v, bool), "must be true or false",
-                                   "write true or false"))
+                             boolean())
     mag_heading_sigma_deg: float = key(2.0, "deg", "magnetometer heading, 1 sigma: R of eq. 24",
                                    positive(hi=180))
     heading_period_s: float = key(1.0, "s", "at most one heading update per this",

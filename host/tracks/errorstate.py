@@ -114,13 +114,6 @@ class ClosedLoopTrack(Track):
         self.updates[kind] += 1
         return True
 
-    def unstarted(self, b: float, yaw: float):
-        """The estimate before the track has a strapdown: at its start, at rest, with P0's sigmas."""
-        ctx = self.ctx
-        sp, sv, _ = ctx.cfg.p0_sigma
-        cov = np.diag([sp**2, sp**2, sv**2, sv**2])
-        return estimate(b, self.name, ctx.origin, (0.0, 0.0), yaw, cov, ctx.stale(b, None))
-
 
 class ErrorStateTrack(ClosedLoopTrack):
     Settings = ErrorStateSettings

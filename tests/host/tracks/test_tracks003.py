@@ -64,7 +64,7 @@ def run(seed: int, tracks=TRACKS, shadowing_db=SHADOWING_DB, settings=None, anch
 
 
 def test_registered_after_001s_on_the_geodetic_filter():
-    assert BUILT_IN[-3:] == ("centroid", "wcl", "geosins")
+    assert BUILT_IN[8:11] == ("centroid", "wcl", "geosins")
     assert get("centroid") is CentroidTrack and get("wcl") is WclTrack and get("geosins") is GeoSinsTrack
     assert issubclass(CentroidTrack, GeodeticTrack) and issubclass(WclTrack, CentroidTrack)
 
