@@ -44,7 +44,8 @@ range allows (its random draws are made all the same, so the range changes no ot
 exchange). RSSI at the anchor: RSSI(1 m) - 10 n lg d + N(0, shadowing^2) - NLOS attenuation
 (003 eq. 1), in whole dBm. The anchor has its result result_us after the exchange; the
 gateway receives it latency_us later and writes one 32-byte report per exchange, in order,
-on its serial line (wire-formats.md section 3).
+on its serial line (wire-formats.md section 3); the 34-byte wide report (type 02) when some
+anchor or tag id exceeds 254.
 """
 from __future__ import annotations
 
@@ -52,8 +53,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.protocols.nanoloc import (FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT,
-                                      STATUS_VALUE_ERROR, build_report)
+from navtwin.protocols.nanoloc import (FRAME_SIZE, NARROW_IDS, SPEED_OF_LIGHT, STATUS_COMPLETE,
+                                      STATUS_TIMEOUT, STATUS_VALUE_ERROR, WIDE_FRAME_SIZE, build_report)
 from navtwin.protocols.serial import char_ns
 
 from .clock import Clock, serial_queue
@@ -121,7 +122,9 @@ class NanolocNetwork:
         self.trajectory = trajectory
         self.cycle_us = sc.ranging.cycle_ms * 1e3
         self.latency_ns = round(sc.gateway.latency_us * 1e3)
-        self.report_ns = round(FRAME_SIZE * char_ns(sc.gateway.baud))
+        # ids past type 01's byte: every report is the wide type 02 (protocols.nanoloc)
+        self.wide = max(max(by_id), tag.id) > NARROW_IDS[1]
+        self.report_ns = round((WIDE_FRAME_SIZE if self.wide else FRAME_SIZE) * char_ns(sc.gateway.baud))
         self.busy_until = 0
         self.seq = 0
 
@@ -218,7 +221,8 @@ class NanolocNetwork:
             self.busy_until = int(end[-1])
         seq = self.seq
         self.seq += len(start)
-        reports = [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=tag, status=st, rssi=rs, tau=tau)
+        reports = [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=tag, status=st, rssi=rs, tau=tau,
+                                wide=self.wide)
                    for n, (t_us, a, tag, st, rs, tau) in enumerate(zip(
                        x["t_us"].tolist(), x["anchor"].tolist(), x["tag"].tolist(),
                        x["status"].tolist(), x["rssi"].tolist(), x["tau"].tolist()))]
