@@ -111,7 +111,7 @@ class NanolocNetwork:
     """All anchors, the tag and the gateway's serial line."""
 
     def __init__(self, sc, tag, trajectory, seed: int) -> None:
-        by_id = {a.id: a for a in sc.anchors}
+        by_id = {a.id: a for a in sc.all_anchors}
         self.anchors = [Anchor(sc, by_id[a], i, sc.clocks.network_ppm, seed)
                         for i, a in enumerate(sc.slot_order)]
         self.r = sc.ranging
