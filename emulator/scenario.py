@@ -29,7 +29,7 @@ from navtwin.protocols.adis16350 import GYRO_LSB_DPS, POWER_UP_FILTER_TAPS
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common import geomagnetic, lab
-from navtwin.common.anchorgrid import AnchorGrid, expand
+from navtwin.common.anchorgrid import WIDE_ANCHOR_IDS, AnchorGrid, expand
 from navtwin.common.geodesy import LocalFrame
 from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG,
                               MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS,
@@ -40,6 +40,7 @@ from .faults import Fault
 from .imu_errors import GRADES, ImuErrors, override_keys, profile
 from .imu_words import DEFAULT_WORDS, WORDS
 from .rng import stream
+from .tdma import SCHEDULES as TDMA_SCHEDULES
 from navtwin.common import tomlfile
 from navtwin.common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
                      non_negative, one_of, positive)
@@ -132,7 +133,8 @@ class Anchor:
 
 @dataclass(frozen=True)
 class Tag:
-    id: int = key(16, "", "tag id in the gateway reports", between(*ANCHOR_IDS))
+    id: int = key(16, "", "tag id in the gateway reports (above 254: wide reports, type 02)",
+                  between(*WIDE_ANCHOR_IDS))
     z: float = key(0.3, "m", "tag antenna height above the floor; the vehicle's truth z",
                    non_negative(hi=MAX_HEIGHT_M))
     ppm: float = _ppm("crystal offset of the tag's clock (times tau2, tau3)")
@@ -363,17 +365,38 @@ class Ranging:
                                             "tag, each the next in slot order in turn (003 eqs. "
                                             "3-4's readings; reported with the other anchor's id "
                                             "as the tag); 0 = never", between(0, 1_000_000))
+    # unset, these two keys are not written by to_toml: the scenarios from before them keep their text
+    schedule: str | None = key(None, "", "TDMA schedule (emulator.tdma): slots = each anchor of "
+                               "slot_order its slot in every cycle; in-range = at each cycle start "
+                               "the anchors within radio_range_m of the tag take the cycle's slots, "
+                               "nearest first (a field of hundreds of anchors, 004); none = slots",
+                               one_of(*TDMA_SCHEDULES))
+    cycle_jitter_ms: float | None = key(None, "ms", "1 sigma of each cycle start's offset on the "
+                                        "anchors' network clock (004 eq. 2.2's sampling-time error; "
+                                        "clipped to (cycle_ms - slot_ms) / 2); none = 0",
+                                        non_negative(hi=10000))
     multipath: Multipath = Multipath()
 
     def __post_init__(self):
         if len(set(self.slot_order)) != len(self.slot_order):
             raise Invalid("slot_order", "lists an anchor twice; list each anchor id once")
+        if self.tdma == "in-range" and self.radio_range_m is None:
+            raise Invalid("radio_range_m", "is needed with schedule = \"in-range\" (the anchors in "
+                                           "range take the slots); set the radio range in m")
+        if self.tdma == "in-range" and (self.slot_order or self.anchor_exchange_every_cycles):
+            raise Invalid("schedule", "\"in-range\" gives the slots by distance, without slot_order "
+                                      "or anchor exchanges; remove them or use schedule = \"slots\"")
         exchange_us = max(self.timeout_ms * 1e3, self.tag_reply_us + self.anchor_reply_us
                           + self.leg_gap_us + self.result_us)
         if exchange_us >= self.slot_ms * 1e3:
             raise Invalid("slot_ms", f"{self.slot_ms:g} ms is too short for an exchange "
                                      f"({exchange_us / 1e3:g} ms with its timeout); lengthen the "
                                      "slots or shorten timeout_ms")
+
+    @property
+    def tdma(self) -> str:
+        """The schedule's name (emulator.tdma.SCHEDULES)."""
+        return self.schedule or "slots"
 
 
 @dataclass(frozen=True)
@@ -516,7 +539,7 @@ class Scenario:
             if a not in self.anchor_ids:
                 raise Invalid("[ranging] slot_order", f"names anchor {a}, which is not in [[anchors]] "
                                                       "or [[anchor_grids]]; list only anchor ids")
-        if self.ranging.slot_ms * len(self.slot_order) > self.ranging.cycle_ms:
+        if self.ranging.tdma == "slots" and self.ranging.slot_ms * len(self.slot_order) > self.ranging.cycle_ms:
             raise Invalid("[ranging] slot_ms", f"x {len(self.slot_order)} anchors exceeds cycle_ms "
                                                f"{self.ranging.cycle_ms:g}; shorten the slots")
         for i, f in enumerate(self.faults):
