@@ -133,6 +133,12 @@ def _is_table(tp) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
 
 
+def _is_tables(tp) -> bool:
+    """An array of tables, ``tuple[Table, ...]``."""
+    args = typing.get_args(tp)
+    return typing.get_origin(tp) is tuple and bool(args) and _is_table(args[0])
+
+
 def _example(tp) -> tuple[str, str]:
     """(what a value of type *tp* is, how one is written) for error messages."""
     if tp is float:
@@ -393,8 +399,9 @@ def rows(cls, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
             name = prefix + f.name
             tp = hints[f.name]
             origin, args = typing.get_origin(tp), typing.get_args(tp)
-            if origin in (typing.Union, types.UnionType) and _is_table(args[0]):
-                tp, origin, args = args[0], None, ()  # an optional table: its keys
+            if origin in (typing.Union, types.UnionType) and (_is_table(args[0]) or _is_tables(args[0])):
+                tp = args[0]  # an optional table or array of tables: its keys
+                origin, args = typing.get_origin(tp), typing.get_args(tp)
             if _is_table(tp) or (origin is tuple and args and _is_table(args[0])):
                 if name not in shared:
                     shared[name] = []

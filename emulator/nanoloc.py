@@ -1,9 +1,14 @@
-"""nanoLOC ranging: four anchors, one tag, the four-timestamp exchange, the gateway.
+"""nanoLOC ranging: the anchors, one tag, the four-timestamp exchange, the gateway.
 
-Schedule. The anchors share a wired network clock (ppm ``clocks.network_ppm``). Cycle c
-starts at network time start + c x cycle; the anchor in slot i starts its exchange with the
-tag at cycle start + i x slot. Each exchange is timed from the true geometry at its own
-moments, so the vehicle moves between the slots of a cycle.
+Schedule (emulator.tdma). The anchors share a wired network clock (ppm
+``clocks.network_ppm``). Cycle c starts at network time start + c x cycle (+ delta_c, 004
+eq. 2.2's sampling-time error, with ``cycle_jitter_ms``); the anchor in slot i starts its
+exchange with the tag at cycle start + i x slot. With ``schedule = "slots"`` anchor i of
+slot_order has slot i in every cycle; with ``"in-range"`` the anchors within radio_range_m
+of the tag at the cycle start take the slots, nearest first, at most floor(cycle / slot):
+a field of hundreds of anchors (``[[anchor_grids]]``) costs per cycle what its anchors in
+range cost. Each exchange is timed from the true geometry at its own moments, so the
+vehicle moves between the slots of a cycle.
 
 Exchange (true times, node clocks running fast by e_A for the anchor, e_T for the tag)::
 
@@ -44,7 +49,8 @@ range allows (its random draws are made all the same, so the range changes no ot
 exchange). RSSI at the anchor: RSSI(1 m) - 10 n lg d + N(0, shadowing^2) - NLOS attenuation
 (003 eq. 1), in whole dBm. The anchor has its result result_us after the exchange; the
 gateway receives it latency_us later and writes one 32-byte report per exchange, in order,
-on its serial line (wire-formats.md section 3).
+on its serial line (wire-formats.md section 3); the 34-byte wide report (type 02) when some
+anchor or tag id exceeds 254.
 """
 from __future__ import annotations
 
@@ -52,14 +58,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.protocols.nanoloc import (FRAME_SIZE, SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT,
-                                      STATUS_VALUE_ERROR, build_report)
+from navtwin.protocols.nanoloc import (FRAME_SIZE, NARROW_IDS, SPEED_OF_LIGHT, STATUS_COMPLETE,
+                                      STATUS_TIMEOUT, STATUS_VALUE_ERROR, WIDE_FRAME_SIZE, build_report)
 from navtwin.protocols.serial import char_ns
 
-from .clock import Clock, serial_queue
+from .clock import serial_queue
 from .rng import stream
 from .faults import acting_on
 from .multipath import Multipath
+from .tdma import SCHEDULES, CycleStarts
 
 PS_PER_S = 1e12
 RSSI_NONE = -128  # dBm reported with a timeout: nothing was received
@@ -80,48 +87,56 @@ class ExchangeEffects:
 
 
 class Anchor:
-    """One anchor: its slot schedule, crystal, range bias, faults and random stream."""
+    """One anchor: its crystal, range bias, faults and random stream (made at its first
+    exchange: a field of 1400 anchors starts without 1400 generators)."""
 
-    def __init__(self, sc, spec, slot: int, network_ppm: float, seed: int) -> None:
+    def __init__(self, sc, spec, seed: int) -> None:
         r = sc.ranging
         self.id = spec.id
         self.position = sc.anchor_position(spec)
         self.e = spec.ppm * 1e-6
         self.bias = spec.range_bias_m
-        first = r.start_ms * 1e6 + slot * r.slot_ms * 1e6  # network time of its first exchange
-        self.clock = Clock(network_ppm, r.cycle_ms * 1e6, round(first / (1 + network_ppm * 1e-6)))
-        self.network_us0 = first / 1e3
         self.faults = tuple(acting_on(sc.faults, "anchor", anchor=spec.id))
-        self.rng = stream(seed, f"nanoloc.anchor.{spec.id}")
+        self.seed = seed
+        self._rng = None
         self.multipath = Multipath(r.multipath, spec.id, seed) if r.multipath.enabled else None
 
-    def draw(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, np.ndarray]:
-        """Cycle numbers of the exchanges starting in [lo_ns, hi_ns) and their random draws
-        (m, 9): jitter T, jitter A, n1..n4, shadowing, uniform (timeout), exponential (NLOS)."""
-        k = self.clock.ticks_between(lo_ns, hi_ns)
-        draws = np.empty((len(k), 9))
-        draws[:, :7] = self.rng.standard_normal((len(k), 7))
-        draws[:, 7] = self.rng.random(len(k))
-        draws[:, 8] = self.rng.standard_exponential(len(k))
-        return k, draws
+    def draw(self, n: int) -> np.ndarray:
+        """The random draws of its next *n* exchanges (n, 9): jitter T, jitter A, n1..n4,
+        shadowing, uniform (timeout), exponential (NLOS)."""
+        if self._rng is None:
+            self._rng = stream(self.seed, f"nanoloc.anchor.{self.id}")
+        draws = np.empty((n, 9))
+        draws[:, :7] = self._rng.standard_normal((n, 7))
+        draws[:, 7] = self._rng.random(n)
+        draws[:, 8] = self._rng.standard_exponential(n)
+        return draws
 
 
 class NanolocNetwork:
     """All anchors, the tag and the gateway's serial line."""
 
     def __init__(self, sc, tag, trajectory, seed: int) -> None:
-        by_id = {a.id: a for a in sc.anchors}
-        self.anchors = [Anchor(sc, by_id[a], i, sc.clocks.network_ppm, seed)
-                        for i, a in enumerate(sc.slot_order)]
+        by_id = {a.id: a for a in sc.all_anchors}
+        order = sc.slot_order if sc.ranging.tdma == "slots" else [a.id for a in sc.all_anchors]
+        self.anchors = [Anchor(sc, by_id[a], seed) for a in order]
+        # the anchors' constants as arrays, indexed as self.anchors: a block never loops over them
+        self.ids = np.array([a.id for a in self.anchors])
+        self.positions = np.array([a.position for a in self.anchors])
+        self.e_a = np.array([a.e for a in self.anchors])
+        self.bias = np.array([a.bias for a in self.anchors])
         self.r = sc.ranging
         self.e_t = tag.ppm * 1e-6
         self.tag = tag.id
         m, every = len(self.anchors), sc.ranging.anchor_exchange_every_cycles
         self.anchor_every = every if m > 1 else 0  # a lone anchor has no one to range
         self.trajectory = trajectory
-        self.cycle_us = sc.ranging.cycle_ms * 1e3
+        self.starts = CycleStarts(sc.ranging, seed)
+        self.schedule = SCHEDULES[sc.ranging.tdma](sc, self)
         self.latency_ns = round(sc.gateway.latency_us * 1e3)
-        self.report_ns = round(FRAME_SIZE * char_ns(sc.gateway.baud))
+        # ids past type 01's byte: every report is the wide type 02 (protocols.nanoloc)
+        self.wide = max(max(by_id), tag.id) > NARROW_IDS[1]
+        self.report_ns = round((WIDE_FRAME_SIZE if self.wide else FRAME_SIZE) * char_ns(sc.gateway.baud))
         self.busy_until = 0
         self.seq = 0
 
@@ -129,13 +144,15 @@ class NanolocNetwork:
         """The exchanges starting in [lo_ns, hi_ns), in start order: anchor, start, t_us,
         status, rssi, taus (ps) and when the gateway has the result."""
         r = self.r
-        runs = [a.draw(lo_ns, hi_ns) for a in self.anchors]
-        idx = np.concatenate([np.full(len(k), i) for i, (k, _) in enumerate(runs)])
-        k = np.concatenate([k for k, _ in runs])
-        z = np.concatenate([d for _, d in runs])
-        t0 = np.concatenate([a.clock.tick(k) for a, (k, _) in zip(self.anchors, runs)])
+        idx, k, t0, network_us = self.schedule.block(lo_ns, hi_ns)
+        # each anchor's draws in its cycle order, from its own stream (emulator.tdma)
+        by_anchor = np.argsort(idx, kind="stable")
+        present, counts = np.unique(idx, return_counts=True)
+        z = np.empty((len(k), 9))
+        if len(k):
+            z[by_anchor] = np.concatenate([self.anchors[i].draw(n) for i, n in zip(present.tolist(), counts.tolist())])
         m = len(k)
-        e_a = np.array([a.e for a in self.anchors])[idx]
+        e_a = self.e_a[idx]
         # the far end of each exchange: the tag, or another anchor (module doc)
         peer = np.full(m, -1)
         if self.anchor_every:
@@ -143,31 +160,33 @@ class NanolocNetwork:
             among = k % self.anchor_every == 0
             peer[among] = (idx[among] + 1 + (k[among] // self.anchor_every) % (n - 1)) % n
         peered = peer >= 0
-        e_t = np.where(peered, np.array([a.e for a in self.anchors])[peer], self.e_t)
+        e_t = np.where(peered, self.e_a[peer], self.e_t)
         p_t = r.tag_reply_us * 1e-6 / (1 + e_t) + r.reply_jitter_ns * 1e-9 * z[:, 0]
         p_a = r.anchor_reply_us * 1e-6 / (1 + e_a) + r.reply_jitter_ns * 1e-9 * z[:, 1]
         gap = r.leg_gap_us * 1e-6 / (1 + e_t)
         # transmission moments of the four legs (the nanoseconds of flight do not matter here)
         offsets = np.column_stack((np.zeros(m), p_t, p_t + gap, p_t + gap + p_a))
         when = t0[:, None] + np.rint(offsets * 1e9).astype(np.int64)
-        where = np.array([a.position for a in self.anchors])[idx]
+        where = self.positions[idx]
         tag = self.trajectory.position(when.ravel()).reshape(m, 4, 3)
         if peered.any():
-            tag[peered] = np.array([a.position for a in self.anchors])[peer[peered], None, :]
+            tag[peered] = self.positions[peer[peered], None, :]
         d = np.linalg.norm(tag - where[:, None, :], axis=2)
         tof = d / SPEED_OF_LIGHT
         effect = ExchangeEffects(z[:, 7] < r.timeout_prob, np.zeros(m), np.zeros(m), z[:, 8],
                                  z[:, 7], np.zeros(m, dtype=bool))
         hits = []  # (fault, the exchanges it changed): the ledger's marks
-        for i, a in enumerate(self.anchors):
+        present = present.tolist()  # the anchors of the block's exchanges: no others act
+        for i in present:
             mine = idx == i
-            for f in a.faults:
+            for f in self.anchors[i].faults:
                 on = mine & f.active(t0)
                 acted = f.act(effect, on)
                 hits.append((f, on if acted is None else acted))
         timeout, attenuation = effect.timeout, effect.attenuation_db
-        bias = np.array([a.bias for a in self.anchors])[idx] + effect.bias_m
-        for i, a in enumerate(self.anchors):
+        bias = self.bias[idx] + effect.bias_m
+        for i in present:
+            a = self.anchors[i]
             if a.multipath is not None:
                 mine = idx == i  # an anchor's exchanges are in time order within its run
                 bias[mine] += a.multipath.error(t0[mine], tag[mine, 0, :2])
@@ -184,7 +203,7 @@ class NanolocNetwork:
         rssi = np.clip(np.rint(rssi), -128, 127).astype(np.int64)
         done = rt1 + gap + rt3 + r.result_us * 1e-6
         result = t0 + np.rint(np.where(timeout, r.timeout_ms * 1e-3, done) * 1e9).astype(np.int64)
-        t_us = np.floor(np.array([a.network_us0 for a in self.anchors])[idx] + k * self.cycle_us)
+        t_us = np.floor(network_us)
         order = np.argsort(t0, kind="stable")  # slots never overlap: results come in this order
         if r.radio_range_m is not None:  # beyond the range the tag never hears the anchor
             order = order[d[order, 0] <= r.radio_range_m]
@@ -195,11 +214,11 @@ class NanolocNetwork:
             for f, acted in hits:
                 for j in np.flatnonzero(acted & (rank >= 0)).tolist():
                     marks[int(rank[j])] = marks.get(int(rank[j]), ()) + (
-                        {"kind": f.KIND, "fault": f, "t_ns": int(t0[j]), "anchor": int(self.anchors[idx[j]].id)},)
+                        {"kind": f.KIND, "fault": f, "t_ns": int(t0[j]), "anchor": int(self.ids[idx[j]])},)
         return {
             "marks": marks,
-            "anchor": np.array([a.id for a in self.anchors])[idx][order],
-            "tag": np.where(peered, np.array([a.id for a in self.anchors])[peer], self.tag)[order],
+            "anchor": self.ids[idx][order],
+            "tag": np.where(peered, self.ids[peer], self.tag)[order],
             "start_ns": t0[order],
             "t_us": t_us.astype(np.int64)[order],
             "status": np.select([timeout, value_error], [STATUS_TIMEOUT, STATUS_VALUE_ERROR],
@@ -218,7 +237,8 @@ class NanolocNetwork:
             self.busy_until = int(end[-1])
         seq = self.seq
         self.seq += len(start)
-        reports = [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=tag, status=st, rssi=rs, tau=tau)
+        reports = [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=tag, status=st, rssi=rs, tau=tau,
+                                wide=self.wide)
                    for n, (t_us, a, tag, st, rs, tau) in enumerate(zip(
                        x["t_us"].tolist(), x["anchor"].tolist(), x["tag"].tolist(),
                        x["status"].tolist(), x["rssi"].tolist(), x["tau"].tolist()))]

@@ -19,6 +19,7 @@ so an anchor may also be given in degrees (common.geodesy converts, exactly, thr
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import tomllib
 from dataclasses import dataclass
@@ -28,6 +29,7 @@ from navtwin.protocols.adis16350 import GYRO_LSB_DPS, POWER_UP_FILTER_TAPS
 from navtwin.protocols.ports import NANOLOC, SINS
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common import geomagnetic, lab
+from navtwin.common.anchorgrid import WIDE_ANCHOR_IDS, AnchorGrid, expand
 from navtwin.common.geodesy import LocalFrame
 from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG,
                               MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS,
@@ -38,6 +40,7 @@ from .faults import Fault
 from .imu_errors import GRADES, ImuErrors, override_keys, profile
 from .imu_words import DEFAULT_WORDS, WORDS
 from .rng import stream
+from .tdma import SCHEDULES as TDMA_SCHEDULES
 from navtwin.common import tomlfile
 from navtwin.common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
                      non_negative, one_of, positive)
@@ -130,7 +133,8 @@ class Anchor:
 
 @dataclass(frozen=True)
 class Tag:
-    id: int = key(16, "", "tag id in the gateway reports", between(*ANCHOR_IDS))
+    id: int = key(16, "", "tag id in the gateway reports (above 254: wide reports, type 02)",
+                  between(*WIDE_ANCHOR_IDS))
     z: float = key(0.3, "m", "tag antenna height above the floor; the vehicle's truth z",
                    non_negative(hi=MAX_HEIGHT_M))
     ppm: float = _ppm("crystal offset of the tag's clock (times tau2, tau3)")
@@ -361,17 +365,38 @@ class Ranging:
                                             "tag, each the next in slot order in turn (003 eqs. "
                                             "3-4's readings; reported with the other anchor's id "
                                             "as the tag); 0 = never", between(0, 1_000_000))
+    # unset, these two keys are not written by to_toml: the scenarios from before them keep their text
+    schedule: str | None = key(None, "", "TDMA schedule (emulator.tdma): slots = each anchor of "
+                               "slot_order its slot in every cycle; in-range = at each cycle start "
+                               "the anchors within radio_range_m of the tag take the cycle's slots, "
+                               "nearest first (a field of hundreds of anchors, 004); none = slots",
+                               one_of(*TDMA_SCHEDULES))
+    cycle_jitter_ms: float | None = key(None, "ms", "1 sigma of each cycle start's offset on the "
+                                        "anchors' network clock (004 eq. 2.2's sampling-time error; "
+                                        "clipped to (cycle_ms - slot_ms) / 2); none = 0",
+                                        non_negative(hi=10000))
     multipath: Multipath = Multipath()
 
     def __post_init__(self):
         if len(set(self.slot_order)) != len(self.slot_order):
             raise Invalid("slot_order", "lists an anchor twice; list each anchor id once")
+        if self.tdma == "in-range" and self.radio_range_m is None:
+            raise Invalid("radio_range_m", "is needed with schedule = \"in-range\" (the anchors in "
+                                           "range take the slots); set the radio range in m")
+        if self.tdma == "in-range" and (self.slot_order or self.anchor_exchange_every_cycles):
+            raise Invalid("schedule", "\"in-range\" gives the slots by distance, without slot_order "
+                                      "or anchor exchanges; remove them or use schedule = \"slots\"")
         exchange_us = max(self.timeout_ms * 1e3, self.tag_reply_us + self.anchor_reply_us
                           + self.leg_gap_us + self.result_us)
         if exchange_us >= self.slot_ms * 1e3:
             raise Invalid("slot_ms", f"{self.slot_ms:g} ms is too short for an exchange "
                                      f"({exchange_us / 1e3:g} ms with its timeout); lengthen the "
                                      "slots or shorten timeout_ms")
+
+    @property
+    def tdma(self) -> str:
+        """The schedule's name (emulator.tdma.SCHEDULES)."""
+        return self.schedule or "slots"
 
 
 @dataclass(frozen=True)
@@ -466,7 +491,8 @@ class Scenario:
     seed: int = key(0, "", "default seed of the run's random streams", between(*SEEDS))
     site: Site = Site()
     area: Area = key(REQUIRED, "", "")
-    anchors: tuple[Anchor, ...] = key(REQUIRED, "", "")
+    anchors: tuple[Anchor, ...] = key((), "", "")
+    anchor_grids: tuple[AnchorGrid, ...] | None = key(None, "", "")
     tag: Tag = Tag()
     trajectory: Trajectory = key(REQUIRED, "", "")
     imu: Imu = Imu()
@@ -481,13 +507,23 @@ class Scenario:
 
     def __post_init__(self):
         ids = [a.id for a in self.anchors]
-        if not ids:
-            raise Invalid("anchors", "is empty; add at least one [[anchors]] table")
+        if not ids and not self.grids:
+            raise Invalid("anchors", "is empty; add at least one [[anchors]] or [[anchor_grids]] table")
+        seen: set[int] = set()
         for i, a in enumerate(ids):
-            if a in ids[:i]:
+            if a in seen:
                 raise Invalid(f"[[anchors]] #{i + 1} id", f"{a} is used by another anchor; give every "
                                                           "anchor its own id")
-        if self.tag.id in ids:
+            seen.add(a)
+        expand(self.grids)  # the grids' ids among themselves
+        for k, g in enumerate(self.grids):
+            if clash := seen.intersection(g.ids):
+                raise Invalid(f"[[anchor_grids]] #{k + 1} first_id", f"reuses anchor id {min(clash)} of "
+                                                                      "[[anchors]]; give the grid its own id range")
+            if not all(self.area.contains(x, y) for x, y in (g.box[:2], g.box[2:])):
+                raise Invalid(f"[[anchor_grids]] #{k + 1} count", f"the grid spans {g.box} m, beyond the "
+                                                                   "area; shrink the grid or enlarge [area]")
+        if self.tag.id in self.anchor_ids:
             raise Invalid("[tag] id", f"{self.tag.id} is also an anchor id; give the tag its own id")
         for i, a in enumerate(self.anchors):
             x, y, _ = self.anchor_position(a)
@@ -500,10 +536,10 @@ class Scenario:
                 raise Invalid("[trajectory] waypoints", f"{i + 1} ({x:g}, {y:g}) m is outside the area; "
                                                         "move it or enlarge [area]")
         for a in self.ranging.slot_order:
-            if a not in ids:
-                raise Invalid("[ranging] slot_order", f"names anchor {a}, which is not in [[anchors]]; "
-                                                      "list only anchor ids")
-        if self.ranging.slot_ms * len(self.slot_order) > self.ranging.cycle_ms:
+            if a not in self.anchor_ids:
+                raise Invalid("[ranging] slot_order", f"names anchor {a}, which is not in [[anchors]] "
+                                                      "or [[anchor_grids]]; list only anchor ids")
+        if self.ranging.tdma == "slots" and self.ranging.slot_ms * len(self.slot_order) > self.ranging.cycle_ms:
             raise Invalid("[ranging] slot_ms", f"x {len(self.slot_order)} anchors exceeds cycle_ms "
                                                f"{self.ranging.cycle_ms:g}; shorten the slots")
         for i, f in enumerate(self.faults):
@@ -523,8 +559,8 @@ class Scenario:
     def fault_problem(self, f) -> tuple[str, str] | None:
         """The part fault *f* names that this scenario lacks, as (setting, problem), or None:
         the one rule for the scenario's [[faults]], --fault and live faults."""
-        if getattr(f, "anchor", None) is not None and f.anchor not in {a.id for a in self.anchors}:
-            return "anchor", f"{f.anchor} is not in [[anchors]]; name an anchor id"
+        if getattr(f, "anchor", None) is not None and f.anchor not in self.anchor_ids:
+            return "anchor", f"{f.anchor} is not in [[anchors]] or [[anchor_grids]]; name an anchor id"
         n = len(self.vehicles)
         if getattr(f, "vehicle", None) is not None and not 1 <= f.vehicle <= n:
             has = f"vehicles 1 to {n}" if n > 1 else "vehicle 1 only"
@@ -532,9 +568,24 @@ class Scenario:
         return None
 
     # -- derived views ---------------------------------------------------------------------
+    @functools.cached_property
+    def all_anchors(self) -> tuple[Anchor, ...]:
+        """Every anchor: the [[anchors]] tables, then the nodes of each [[anchor_grids]] table
+        (common.anchorgrid), in id order within a grid."""
+        return self.anchors + tuple(Anchor(id=i, x=x, y=y, z=z) for i, x, y, z in expand(self.grids))
+
+    @property
+    def grids(self) -> tuple[AnchorGrid, ...]:
+        """The [[anchor_grids]] tables (none given: written so by to_toml, no empty array)."""
+        return self.anchor_grids or ()
+
+    @functools.cached_property
+    def anchor_ids(self) -> frozenset[int]:
+        return frozenset(a.id for a in self.all_anchors)
+
     @property
     def slot_order(self) -> tuple[int, ...]:
-        return self.ranging.slot_order or tuple(a.id for a in self.anchors)
+        return self.ranging.slot_order or tuple(a.id for a in self.all_anchors)
 
     @property
     def frame(self) -> LocalFrame:

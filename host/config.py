@@ -17,6 +17,12 @@ sections are declared here::
     y = 1.6
     z = 0.0                        # optional, default 0
 
+    [[anchor_grids]]               # and/or a field of anchors on a grid (common.anchorgrid),
+    first_id = 1001                # the scenario's own tables; ids unique across both
+    origin = [320.0, 160.0]
+    spacing_m = 5.0
+    count = [21, 21]
+
     [vehicle]                      # or [[vehicles]], one table per vehicle (below)
     start = [6.0, 1.8]             # m, where the vehicle stands at power-up
     heading_deg = 0.0              # initial heading, counter-clockwise from +x
@@ -59,11 +65,13 @@ the key and the fix (:class:`ConfigError`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, MAX_HEIGHT_M, RANGE_BIAS_M
 from navtwin.common import tomlfile
+from navtwin.common.anchorgrid import AnchorGrid, expand
 from navtwin.common.geodesy import LocalFrame
 from navtwin.common.schema import REQUIRED, Invalid, between, boolean, build, key, plain, rows
 
@@ -114,7 +122,8 @@ class Output:
 class Lab:
     """The sections other than [filters]."""
 
-    anchors: tuple[Anchor, ...] = key(REQUIRED, "", "the anchor survey")
+    anchors: tuple[Anchor, ...] = key((), "", "the anchor survey")
+    anchor_grids: tuple[AnchorGrid, ...] | None = key(None, "", "fields of anchors on a grid")
     site: Site = Site()
     vehicles: tuple[Vehicle, ...] = key((Vehicle(),), "", "the vehicles, 1 first ([vehicle] "
                                         "for one)")
@@ -145,9 +154,13 @@ class HostConfig:
     calibration: Calibration | None = None  # replaces range_scale and range_bias_m
 
     # the lab's words, as the pipeline and the service use them
-    @property
+    @functools.cached_property
     def anchors(self) -> dict[int, tuple[float, float, float]]:
-        return {a.id: (a.x, a.y, a.z) for a in self.lab.anchors}
+        """Every anchor's position by id: the [[anchors]] tables, then the [[anchor_grids]]'
+        nodes (a grid's planar z, none, is the anchors' z = 0 plane)."""
+        out = {a.id: (a.x, a.y, a.z) for a in self.lab.anchors}
+        out.update((i, (x, y, 0.0 if z is None else z)) for i, x, y, z in expand(self.lab.anchor_grids or ()))
+        return out
 
     latitude_deg = property(lambda self: self.lab.site.latitude_deg)
     local_gravity = property(lambda self: self.lab.site.local_gravity)
@@ -178,6 +191,8 @@ class HostConfig:
         """JSON-able form, the TOML file's layout (a recording's meta); :func:`from_dict`
         reads it back exactly."""
         doc = plain(self.lab)
+        if not doc["anchors"]:  # a field of grids only
+            del doc["anchors"]
         if len(self.vehicles) == 1:  # the one-vehicle layout: [vehicle]
             doc["vehicle"] = doc.pop("vehicles")[0]
         filters = {"enabled": list(self.filters), **plain(self.tuning)}
@@ -357,9 +372,11 @@ def _config(doc: dict, name: str, directory: Path | None = None) -> HostConfig:
     for section in doc:
         if section not in known:
             raise ConfigError(f"unknown section [{section}]; use {', '.join(sorted(known))}")
-    if "anchors" not in doc:
-        raise ConfigError("[[anchors]] missing: give one table per anchor with id, x, y (and z)")
-    lab = Lab(anchors=_anchors(doc["anchors"]), vehicles=_vehicles(doc),
+    if "anchors" not in doc and "anchor_grids" not in doc:
+        raise ConfigError("[[anchors]] missing: give one table per anchor with id, x, y (and z), "
+                          "or [[anchor_grids]]")
+    lab = Lab(anchors=_anchors(doc["anchors"]) if "anchors" in doc else (), anchor_grids=_grids(doc),
+              vehicles=_vehicles(doc),
               **{f.name: build(type(f.default), doc[f.name], ((f.name, 0),))
                  for f in dataclasses.fields(Lab) if f.name in ("site", "timing", "output")
                  and f.name in doc})
@@ -368,6 +385,11 @@ def _config(doc: dict, name: str, directory: Path | None = None) -> HostConfig:
         raise ConfigError("[filters] must be a table")
     filt = _from_shared_tight(filt)
     anchors = {a.id for a in lab.anchors}
+    for k, g in enumerate(lab.anchor_grids or ()):
+        if clash := anchors.intersection(g.ids):
+            raise ConfigError(f"[[anchor_grids]] #{k + 1} first_id reuses anchor id {min(clash)} of "
+                              "[[anchors]]; give the grid its own id range")
+    anchors.update(i for g in lab.anchor_grids or () for i in g.ids)
     kw: dict = {}
     if "enabled" in filt:
         kw["filters"] = parse_filters(filt.pop("enabled"), "[filters] enabled")
@@ -409,6 +431,18 @@ def _anchors(items) -> tuple[Anchor, ...]:
             raise ConfigError(f"anchor id {a.id} appears twice; ids must be unique")
         out.append(a)
     return tuple(out)
+
+
+def _grids(doc: dict) -> tuple[AnchorGrid, ...] | None:
+    """The [[anchor_grids]] tables, their ids unique among them (common.anchorgrid.expand)."""
+    if "anchor_grids" not in doc:
+        return None
+    items = doc["anchor_grids"]
+    if not isinstance(items, list) or not items or not all(isinstance(g, dict) for g in items):
+        raise ConfigError("anchor_grids must be an array of tables; write each grid as [[anchor_grids]]")
+    grids = tuple(build(AnchorGrid, item, (("anchor_grids", n),)) for n, item in enumerate(items, 1))
+    expand(grids)
+    return grids
 
 
 def _vehicles(doc: dict) -> tuple[Vehicle, ...]:

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
 from navtwin.common import lab
+from navtwin.common.anchorgrid import WIDE_ANCHOR_IDS
 from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG,
                                    MAX_COORD_M, MAX_HEIGHT_M, RANGE_SCALE)
 from navtwin.common.schema import Check, between, build, each, key, one_of, plain, positive
@@ -58,7 +59,7 @@ class Vehicle:
                              between(-360, 360))
     tag_height: float = key(0.0, "m", "tag above the anchors' z = 0 plane",
                             between(-MAX_HEIGHT_M, MAX_HEIGHT_M))
-    tag: int | None = key(None, "", "only this tag id's exchanges are used", between(*ANCHOR_IDS))
+    tag: int | None = key(None, "", "only this tag id's exchanges are used", between(*WIDE_ANCHOR_IDS))
     router: str | None = key(None, "", "only this radio's SINS stream is used (SH+SL)",
                              Check(_hex16, "must be 16 hex digits (SH+SL)",
                                    'write it like "0013A20040A1B2D4"'))

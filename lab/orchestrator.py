@@ -242,4 +242,4 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
 
 
 def _anchors(sc) -> dict:
-    return {a.id: sc.anchor_position(a)[:2] for a in sc.anchors}
+    return {a.id: sc.anchor_position(a)[:2] for a in sc.all_anchors}

@@ -53,10 +53,10 @@ def information(model: ConstantAcceleration, J0: np.ndarray,
 
 
 def exchanges(sc: Scenario, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Scenario time (s) and anchor index (in ``sc.anchors``) of every scheduled exchange
+    """Scenario time (s) and anchor index (in ``sc.all_anchors``) of every scheduled exchange
     before *duration_s*, in time order."""
     r = sc.ranging
-    index = {a.id: i for i, a in enumerate(sc.anchors)}
+    index = {a.id: i for i, a in enumerate(sc.all_anchors)}
     slots = [(s * r.slot_ms, index[a]) for s, a in enumerate(sc.slot_order)]
     cycles = np.arange(0.0, duration_s * 1e3, r.cycle_ms)
     t = np.array([(r.start_ms + c + off) / 1e3 for c in cycles for off, _ in slots])
@@ -69,7 +69,7 @@ def position_bound(sc: Scenario, truth: dict, jerk_psd: float, p0_sigma) -> dict
     """``t`` (s, one per exchange) and ``rms``: sqrt(trace) of the bound's position block (m),
     the least RMS horizontal error the module docstring's estimator can have at t."""
     t, which = exchanges(sc, float(truth["t"][-1]))
-    anchors = np.array([sc.anchor_position(a) for a in sc.anchors])[which]
+    anchors = np.array([sc.anchor_position(a) for a in sc.all_anchors])[which]
     tag = np.column_stack((np.interp(t, truth["t"], truth["x"]), np.interp(t, truth["t"], truth["y"]),
                            np.full(len(t), sc.tag.z)))
     diff = tag - anchors

@@ -216,7 +216,7 @@ def figures(run: dict) -> dict[str, str]:
     colours = {n: palette[i % len(palette)] for i, n in enumerate(names)}
     out = {}
     # the tracks, one panel each (000's and 001's trajectory figures), on the room's extent
-    anchors = np.array([sc.anchor_position(a)[:2] for a in sc.anchors])
+    anchors = np.array([sc.anchor_position(a)[:2] for a in sc.all_anchors])
     xs = np.concatenate((truth["x"], anchors[:, 0]))
     ys = np.concatenate((truth["y"], anchors[:, 1]))
     margin = 1.0

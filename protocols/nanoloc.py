@@ -3,7 +3,8 @@
 | offset | size | field          | value                                                    |
 |--------|------|----------------|----------------------------------------------------------|
 | 0      | 2    | sync           | ``4E 4C`` ("NL")                                         |
-| 2      | 1    | type           | ``01`` = ranging report (others reserved, skipped by len)|
+| 2      | 1    | type           | ``01`` = ranging report, ``02`` = wide ranging report    |
+|        |      |                | (below; others reserved, skipped by len)                 |
 | 3      | 1    | len            | ``1A`` (26) for type 01                                  |
 | 4      | 2    | seq            | gateway report counter, wraps                            |
 | 6      | 4    | t_us           | anchor-network time of the exchange, us, wraps           |
@@ -15,6 +16,12 @@
 | 30     | 2    | crc            | CRC-16/CCITT-FALSE over bytes 2..29                       |
 
 Distance, exactly as the lab computer computes it: d = c (tau1 - tau2 + tau3 - tau4) / 4.
+
+Wide ranging report (type 02, len ``1C`` = 28, 34 bytes): the same fields with ``anchor`` and
+``tag`` 16-bit big-endian (1..65534), for fields of more than 254 nodes (common.anchorgrid;
+004's training areas hold 1402). The gateway writes it exactly when some anchor or tag id of
+its network exceeds 254; a reader that knows only type 01 skips it by len, as the reserved
+types, so the extension is compatible.
 """
 from construct import Array, Int8sb, Int8ub, Int16ub, Int32ub, Struct, Terminated
 
@@ -23,7 +30,11 @@ from .fast import packer_for
 
 SYNC = b"\x4e\x4c"
 TYPE_RANGING = 0x01
+TYPE_WIDE_RANGING = 0x02
 FRAME_SIZE = 32
+WIDE_FRAME_SIZE = 34
+#: the ids a type 01 report carries; larger ones need the wide report (type 02)
+NARROW_IDS = (1, 254)
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
 PS = 1e-12
 
@@ -31,18 +42,28 @@ STATUS_COMPLETE = 0x0F  # tau1..tau4 valid
 STATUS_TIMEOUT = 0x40  # no response from the tag
 STATUS_VALUE_ERROR = 0x80
 
-Ranging = Struct(
-    "seq" / Int16ub,
-    "t_us" / Int32ub,
-    "anchor" / Int8ub,
-    "tag" / Int8ub,
-    "status" / Int8ub,
-    "rssi" / Int8sb,
-    "tau" / Array(4, Int32ub),
-    Terminated,
-)
 
-NanolocFrame = crc_framed(SYNC, {TYPE_RANGING: Ranging})
+
+def _ranging(node_id) -> Struct:
+    """The ranging report's payload with anchor and tag ids of the field type *node_id*."""
+    return Struct(
+        "seq" / Int16ub,
+        "t_us" / Int32ub,
+        "anchor" / node_id,
+        "tag" / node_id,
+        "status" / Int8ub,
+        "rssi" / Int8sb,
+        "tau" / Array(4, Int32ub),
+        Terminated,
+    )
+
+
+Ranging = _ranging(Int8ub)
+WideRanging = _ranging(Int16ub)
+#: the payload layout of each report type
+LAYOUTS = {TYPE_RANGING: Ranging, TYPE_WIDE_RANGING: WideRanging}
+
+NanolocFrame = crc_framed(SYNC, LAYOUTS)
 
 
 def distance(tau1: int, tau2: int, tau3: int, tau4: int) -> float:
@@ -59,10 +80,11 @@ def is_complete(status: int) -> bool:
     return status & 0xCF == STATUS_COMPLETE
 
 
-_pack_ranging = packer_for(Ranging)
+_PACK = {t: packer_for(st) for t, st in LAYOUTS.items()}
 
 
-def build_report(*, seq, t_us, anchor, tag, status, rssi, tau) -> bytes:
-    """The 32-byte report (fast path; equal to ``NanolocFrame.build``). Counters wrap."""
-    return encode(SYNC, TYPE_RANGING, _pack_ranging(seq & 0xFFFF, t_us & 0xFFFFFFFF, anchor, tag,
-                                                    status, rssi, *tau))
+def build_report(*, seq, t_us, anchor, tag, status, rssi, tau, wide: bool = False) -> bytes:
+    """The 32-byte report, or with *wide* the 34-byte type 02 (fast path; equal to
+    ``NanolocFrame.build``). Counters wrap."""
+    ftype = TYPE_WIDE_RANGING if wide else TYPE_RANGING
+    return encode(SYNC, ftype, _PACK[ftype](seq & 0xFFFF, t_us & 0xFFFFFFFF, anchor, tag, status, rssi, *tau))

@@ -269,7 +269,7 @@ def sins_decoder() -> CrcFramedDecoder:
 
 
 def nanoloc_decoder() -> CrcFramedDecoder:
-    return CrcFramedDecoder("nanoloc", nanoloc.SYNC, {nanoloc.TYPE_RANGING: nanoloc.Ranging})
+    return CrcFramedDecoder("nanoloc", nanoloc.SYNC, nanoloc.LAYOUTS)
 
 
 _XBEE_PARSERS = {t: parser_for(st) for t, st in xbee.FRAME_BODIES.items()}

@@ -36,7 +36,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from navtwin.common.limits import ANCHOR_IDS, MAX_DURATION_S
+from navtwin.common.anchorgrid import WIDE_ANCHOR_IDS
+from navtwin.common.limits import MAX_DURATION_S
 from navtwin.protocols.plugins import Registry
 from navtwin.common.schema import REQUIRED, Check, Invalid, between, key, non_negative, one_of
 from navtwin.protocols import ports
@@ -171,7 +172,7 @@ class AnchorFault(DeviceFault):
     """A fault on one anchor's exchanges."""
 
     ACTS_ON = "anchor"
-    anchor: int = key(REQUIRED, "", "anchor id", between(*ANCHOR_IDS))
+    anchor: int = key(REQUIRED, "", "anchor id", between(*WIDE_ANCHOR_IDS))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -12,7 +12,8 @@
 --                    frame (type 02): xmag, ymag, zmag raw and xmag_ut .. in uT, mag_overflow;
 --                    a wide sample (type 03): x_gyro .. z_accl (32-bit words) raw, the same
 --                    unit fields (navtwin.sins.xgyro_dps ..) and the housekeeping words
---   navtwin.nanoloc  seq, t_us, anchor, tag, status, rssi, tau1..tau4 (ps), distance_m, crc_ok
+--   navtwin.nanoloc  seq, t_us, anchor, tag, status, rssi, tau1..tau4 (ps), distance_m, crc_ok;
+--                    a wide ranging report (type 02) has the same fields, its ids 16-bit
 --   navtwin.xbee     start, length, type, the frame's fields (src64, src16, options, rf_data,
 --                    command, at_status, ...), checksum, checksum_ok; 0x90 RF data is
 --                    dissected as the SINS stream it carries; API mode 2 (escaped) on
@@ -300,12 +301,13 @@ local nanoloc = Proto("navtwin.nanoloc", "navtwin nanoLOC gateway ranging report
 local STATUS = { [0x0F] = "complete exchange", [0x40] = "timeout (no response)", [0x80] = "value error" }
 local nf = {
     sync = ProtoField.uint16("navtwin.nanoloc.sync", "Sync", base.HEX),
-    type = ProtoField.uint8("navtwin.nanoloc.type", "Type", base.HEX, { [1] = "ranging report" }),
+    type = ProtoField.uint8("navtwin.nanoloc.type", "Type", base.HEX, { [1] = "ranging report",
+                                                                        [2] = "wide ranging report" }),
     len = ProtoField.uint8("navtwin.nanoloc.len", "Payload length", base.DEC),
     seq = ProtoField.uint16("navtwin.nanoloc.seq", "Report counter", base.DEC),
     t_us = ProtoField.uint32("navtwin.nanoloc.t_us", "Anchor-network time (us)", base.DEC),
-    anchor = ProtoField.uint8("navtwin.nanoloc.anchor", "Anchor", base.DEC),
-    tag = ProtoField.uint8("navtwin.nanoloc.tag", "Tag", base.HEX),
+    anchor = ProtoField.uint16("navtwin.nanoloc.anchor", "Anchor", base.DEC),
+    tag = ProtoField.uint16("navtwin.nanoloc.tag", "Tag", base.HEX),
     status = ProtoField.uint8("navtwin.nanoloc.status", "Status", base.HEX, STATUS),
     tau1_valid = ProtoField.bool("navtwin.nanoloc.status.tau1_valid", "tau1 valid", 8, nil, 0x01),
     tau2_valid = ProtoField.bool("navtwin.nanoloc.status.tau2_valid", "tau2 valid", 8, nil, 0x02),
@@ -336,31 +338,35 @@ local function show_nanoloc(tvb, st, size, ok, tree)
     t:add(nf.type, tvb(st + 2, 1))
     t:add(nf.len, tvb(st + 3, 1))
     local words = ""
-    if s:byte(3) == 1 and s:byte(4) == 26 then
+    -- the id width: 1 byte in a ranging report (type 01), 2 in a wide one (type 02)
+    local w = (s:byte(3) == 1 and s:byte(4) == 26 and 1) or (s:byte(3) == 2 and s:byte(4) == 28 and 2)
+    if w then
         t:add(nf.seq, tvb(st + 4, 2))
         t:add(nf.t_us, tvb(st + 6, 4))
-        t:add(nf.anchor, tvb(st + 10, 1))
-        t:add(nf.tag, tvb(st + 11, 1))
-        local status = t:add(nf.status, tvb(st + 12, 1))
+        t:add(nf.anchor, tvb(st + 10, w))
+        t:add(nf.tag, tvb(st + 10 + w, w))
+        local at = st + 10 + 2 * w  -- status
+        local status = t:add(nf.status, tvb(at, 1))
         for _, bit in ipairs({ "tau1_valid", "tau2_valid", "tau3_valid", "tau4_valid", "timeout", "value_error" }) do
-            status:add(nf[bit], tvb(st + 12, 1))
+            status:add(nf[bit], tvb(at, 1))
         end
-        local complete = bit32.band(s:byte(13), 0xCF) == 0x0F
-        t:add(nf.complete, tvb(st + 12, 1), complete)
-        t:add(nf.rssi, tvb(st + 13, 1))
+        local code = tvb(at, 1):uint()
+        local complete = bit32.band(code, 0xCF) == 0x0F
+        t:add(nf.complete, tvb(at, 1), complete)
+        t:add(nf.rssi, tvb(at + 1, 1))
         local tau = {}
         for k = 1, 4 do
-            t:add(nf["tau" .. k], tvb(st + 10 + 4 * k, 4))
-            tau[k] = tvb(st + 10 + 4 * k, 4):uint()
+            t:add(nf["tau" .. k], tvb(at + 4 * k - 2, 4))
+            tau[k] = tvb(at + 4 * k - 2, 4):uint()
         end
-        words = "anchor " .. s:byte(11)
+        words = "anchor " .. tvb(st + 10, w):uint()
         if complete then
             -- as protocols/nanoloc.distance computes it, operation for operation
             local d = SPEED_OF_LIGHT * (tau[1] - tau[2] + tau[3] - tau[4]) * 1e-12 / 4.0
-            t:add(nf.distance_m, tvb(st + 14, 16), d)
+            t:add(nf.distance_m, tvb(at + 2, 16), d)
             words = words .. string.format(" %.3f m", d)
         else
-            words = words .. string.format(" status 0x%02X", s:byte(13))
+            words = words .. string.format(" status 0x%02X", code)
         end
     else
         if size > 6 then t:add(nf.payload, tvb(st + 4, size - 6)) end
@@ -373,7 +379,7 @@ local function show_nanoloc(tvb, st, size, ok, tree)
     return words .. (ok and "" or " bad CRC")
 end
 
-local judge_nanoloc = crc_framed_judge({ [1] = 26 })
+local judge_nanoloc = crc_framed_judge({ [1] = 26, [2] = 28 })
 
 function nanoloc.dissector(tvb, pinfo, tree)
     pinfo.cols.protocol = "nanoLOC"
