@@ -92,8 +92,8 @@ def load_truth(path: str | Path) -> dict[str, np.ndarray]:
 def load_estimates(lines, vehicle: int = 1) -> dict[str, dict[str, np.ndarray]]:
     """Vehicle *vehicle*'s estimate JSON lines (an iterable of str, or a path) grouped by
     filter (lines written before estimates named their vehicle are vehicle 1's): per filter
-    arrays ``t, x, y``, ``cov`` (N x 2 x 2, the position block of the line's covariance) and
-    ``extrapolated``."""
+    arrays ``t, x, y``, ``vx, vy``, ``cov`` (N x 2 x 2, the position block of the line's
+    covariance) and ``extrapolated``."""
     if isinstance(lines, (str, Path)):
         lines = Path(lines).read_text().splitlines()
     by_filter: dict[str, list] = {}
@@ -104,12 +104,13 @@ def load_estimates(lines, vehicle: int = 1) -> dict[str, dict[str, np.ndarray]]:
         if "filter" in e and e.get("vehicle", 1) == vehicle:
             c = e["cov"]
             by_filter.setdefault(e["filter"], []).append(
-                (e["t"], e["x"], e["y"], c[0], c[1], c[4], c[5], e.get("extrapolated", False)))
+                (e["t"], e["x"], e["y"], c[0], c[1], c[4], c[5], e.get("extrapolated", False),
+                 e["vx"], e["vy"]))
     out = {}
     for k, v in by_filter.items():
         a = np.array(v, dtype=float)
         out[k] = {"t": a[:, 0], "x": a[:, 1], "y": a[:, 2], "cov": a[:, 3:7].reshape(-1, 2, 2),
-                  "extrapolated": a[:, 7].astype(bool)}
+                  "extrapolated": a[:, 7].astype(bool), "vx": a[:, 8], "vy": a[:, 9]}
     return out
 
 
