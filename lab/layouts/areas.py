@@ -115,12 +115,55 @@ def grids(section: dict):
                         "over the seeds both have (m, ± the 95 % half-width); p: the paired t "
                         f"test's, Holm-adjusted over the {section['comparisons']} comparisons "
                         f"shown; decided where below {ALPHA:g}",
-                        ["a - b", "window", "seeds", "difference m", "Holm p", "decides"],
-                        [[f"{p['a']} - {p['b']}", _label(p["window"]), str(p["seeds"]),
-                          ci_text((p["diff"], p["half"])), _p(p["holm_p"]),
-                          f"{p['better']} better" if p["better"] else "not decided"]
-                         for p in t["pairs"]], 2))
+                        ["a - b", "window", "decides", "seeds", "difference m", "Holm p"],
+                        [[f"{p['a']} - {p['b']}", _label(p["window"]),
+                          f"{p['better']} better" if p["better"] else "not decided",
+                          str(p["seeds"]), ci_text((p["diff"], p["half"])), _p(p["holm_p"])]
+                         for p in t["pairs"]], 3))
     out.append(("The windows' durations on the truth's clock (s), mean over seeds ± its 95 % "
                 "half-width", ["window", "duration s"],
                 [[_label(w), ci_text(v, 1)] for w, v in section["durations"].items()], 1))
     return tuple(out)
+
+
+def _number(v: float | None) -> float | None:
+    return None if v is None or not math.isfinite(v) else v
+
+
+def report_tables(run: dict) -> list[dict]:
+    """004's tables of one run (lab.report): per table our figures of each row's track then
+    004's (a row without a track), then the table's comparisons a - b of the mean horizontal
+    error per window (one run: no interval); the windows' durations in the notes."""
+    sc, paper = run["scenario"], run["paper"]
+    n = len(sc.anchor_grids)
+    errors = areas.window_errors(areas.boxes(sc), run["truth"], run["estimates"], run["offset_s"])
+    out = []
+    for title, spec in paper["tables"].items():
+        windows, cols, heads = _layout(spec, n)
+        rows = []
+        for track, label in spec["rows"].items():
+            if track not in errors:
+                continue
+            rows.append((label, track, *(_number(errors[track][c]) for c in cols)))
+            if track in paper["figures"]:
+                rows.append((f"{label}, paper {paper['paper']}", "",
+                             *(paper["figures"][track].get(c) for c in cols)))
+        if not rows:
+            continue
+        spans = ", ".join(f"{_label(w)} {next(iter(errors.values()))[f'{w}_duration_s']:.1f} s"
+                          for w in windows)
+        out.append({"title": f"{spec['what'].capitalize()} (paper {paper['paper']} {title}'s layout)",
+                    "head": [f"{paper['paper']} {title}", "track", *heads], "rows": rows,
+                    "stats": cols,
+                    "note": (f"Mean absolute error in each window (lab.areas: {spans}); mean m: "
+                             f"the mean horizontal error (ours, {paper['paper']} gives none).")})
+        diffs = [(f"{a} - {b}", _label(w),
+                  _number(errors[a][f"{w}_mean"] - errors[b][f"{w}_mean"]))
+                 for a, b in spec["pairs"] if a in errors and b in errors for w in windows]
+        if diffs:
+            out.append({"title": f"{spec['what'].capitalize()}: paired differences",
+                        "head": ["a - b", "window", "mean error difference m"], "rows": diffs,
+                        "stats": None,
+                        "note": "One run: no interval; the sweep's tables give them over seeds "
+                                "(docs/sweeps.md)."})
+    return out

@@ -56,3 +56,25 @@ def grids(ll: dict) -> tuple[tuple[str, list[str], list[list[str]], int], ...]:
                       pair_head, pair_rows, 1))
     return tuple(grids)
 
+
+
+#: The report's note under the table: what each figure is (lab.evaluate says why).
+NOTE = ("Latitude error: along north; longitude error: along east (m), through the "
+        "scenario's site and x azimuth. Average: the mean absolute error; max: the "
+        "maximum absolute error; std: the standard deviation of the signed error "
+        "(003 defines none of them; docs/lab.md, \"Latitude and longitude\").")
+
+
+def report_tables(run: dict) -> list[dict]:
+    """003 Table 1's layout of one run (lab.report): per paper row (evaluate.latlon_rows) its
+    label, our track and our LATLON figures, then a row of the paper's own (no track)."""
+    paper, rows = run["paper"], []
+    for label, track, key in evaluate.latlon_rows(run["scenario"].name, run["errors"]):
+        rows.append((label, track, *(run["errors"][track][m] for m in evaluate.LATLON)))
+        rows.append((f"{label}, paper {paper['paper']}", "",
+                     *(paper["figures"][key][m] for m in evaluate.LATLON)))
+    if not rows:
+        return []
+    return [{"title": f"Latitude and longitude (paper {paper['paper']} Table 1's layout)",
+             "head": ["method", "track", *evaluate.LATLON.values()], "rows": rows,
+             "stats": list(evaluate.LATLON), "note": NOTE}]
