@@ -152,7 +152,8 @@ def report_tables(run: dict) -> list[dict]:
             continue
         spans = ", ".join(f"{_label(w)} {next(iter(errors.values()))[f'{w}_duration_s']:.1f} s"
                           for w in windows)
-        out.append({"title": f"{spec['what'].capitalize()} (paper {paper['paper']} {title}'s layout)",
+        what = spec["what"][0].upper() + spec["what"][1:]
+        out.append({"title": f"{what} (paper {paper['paper']} {title}'s layout)",
                     "head": [f"{paper['paper']} {title}", "track", *heads], "rows": rows,
                     "stats": cols,
                     "note": (f"Mean absolute error in each window (lab.areas: {spans}); mean m: "
@@ -161,7 +162,7 @@ def report_tables(run: dict) -> list[dict]:
                   _number(errors[a][f"{w}_mean"] - errors[b][f"{w}_mean"]))
                  for a, b in spec["pairs"] if a in errors and b in errors for w in windows]
         if diffs:
-            out.append({"title": f"{spec['what'].capitalize()}: paired differences",
+            out.append({"title": f"{what}: paired differences",
                         "head": ["a - b", "window", "mean error difference m"], "rows": diffs,
                         "stats": None,
                         "note": "One run: no interval; the sweep's tables give them over seeds "
