@@ -9,8 +9,8 @@ sweep, with the 95 % half-width and the paired t test's p, Holm-adjusted over ev
 shown (the family of both tables), decided for a track only when that adjusted p is below
 :data:`ALPHA` (equivalently: its CI at the Holm step's level, 1 - ALPHA / (m - i + 1) for the
 i-th smallest p, excludes 0, and every smaller p was decided). Holm rather than the plain
-95 % CIs: ten comparisons at 5 % each would decide one by chance in about 40 % of sweeps
-without any difference. In one run (the report): the differences alone.
+95 % CIs: ten comparisons at 5 % each would decide at least one by chance in two sweeps out
+of five without any difference. In one run (the report): the differences alone.
 """
 from __future__ import annotations
 
