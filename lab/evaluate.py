@@ -34,6 +34,17 @@ from navtwin.common.geodesy import LocalFrame, meridian_radius, transverse_radiu
 #: Paper 000, section 3.3 and 4.3: mean position error (m) on the office run.
 PAPER_MEAN_ERROR_M = {"sins": 0.69, "wsn": 0.64, "kf": 0.71, "ekf": 0.63, "ukf": 0.59}
 PAPER_MAX_ERROR_M = {"sins": 1.27, "wsn": 0.94}
+#: 004's per-window columns in its tables' order: x, y, vx, vy error, each in window 1 then 2.
+WINDOW_FIGURES = ("x_mean", "y_mean", "vx_mean", "vy_mean")
+
+
+def _windows(kind: str, *figures: float) -> dict[str, float]:
+    """One row of 004's Table 2 or 3 (its figures as printed, in its column order) as
+    lab.areas columns of window *kind* ("area" or "outage") 1 and 2."""
+    keys = [f"{kind}{k}_{f}" for f in WINDOW_FIGURES for k in (1, 2)]
+    return dict(zip(keys, figures, strict=True))
+
+
 #: The published figures the report and the sweep put beside ours, by scenario: per track,
 #: keys of :func:`position_errors`. Paper 001's LC, TC and FATCI are our lc, tc and fatci.
 #: From shared/specs/scenarios.md.
@@ -71,6 +82,44 @@ PAPER_FIGURES = {
                                   "wcl": {"lat_mean": 0.9511, "lon_mean": 1.3758,
                                           "lat_max": 6.3075, "lon_max": 9.3784,
                                           "lat_std": 1.3024, "lon_std": 1.8247}}},
+    # 004 Tables 2 and 3: mean absolute errors per axis in each training area (Table 2) and in
+    # the WSN outage after it (Table 3), lab.areas's windows; "tables" names each table's rows
+    # (our track: 004's row label) and the paired comparisons shown under it (a - b on the
+    # mean horizontal error of each window). Table 3 adds "hinf" without figures: the HF's
+    # INS coasting from its last fix, the baseline of what bridging adds. As printed: Table 2's
+    # INS-only area 2 has 2.0649 m/s for both vx and vy, and Table 3's caption names "KF, and
+    # HF" for its BP and LS-SVM rows.
+    "outage-bridging": {"paper": "004", "note": "Tables 2 and 3, mean absolute position and "
+                        "velocity error along x and y in the two training areas and in the WSN "
+                        "outage after each",
+                        # 004 gives no time: its path's 656 m at the 2 m/s of the scenario
+                        "experiment": "the path from (650, 0) to (130, 400) through two "
+                        "training areas", "duration_s": 328.0,
+                        "layout": "areas",
+                        "tables": {"Table 2": {"window": "area", "what": "training areas",
+                                               "rows": {"sins": "INS-only", "kf-rel": "KF",
+                                                        "hinf": "HF"},
+                                               "pairs": (("hinf", "kf-rel"), ("hinf", "sins"))},
+                                   "Table 3": {"window": "outage", "what": "WSN outages",
+                                               "rows": {"sins": "INS-only", "hinf+bp": "BP",
+                                                        "hinf+lssvm": "LS-SVM",
+                                                        "hinf": "HF coasting (ours)"},
+                                               "pairs": (("hinf+lssvm", "hinf+bp"),
+                                                         ("hinf+lssvm", "sins"),
+                                                         ("hinf+lssvm", "hinf"))}},
+                        "figures": {
+                            "sins": _windows("area", 7.8315, 40.6179, 4.7923, 36.0891, 0.6584,
+                                             2.0649, 1.5777, 2.0649) |
+                            _windows("outage", 12.1524, 72.4795, 8.7879, 70.0089, 0.8897,
+                                     3.0793, 2.0265, 6.0012),
+                            "kf-rel": _windows("area", 2.9170, 14.9663, 1.7916, 13.2591, 0.2715,
+                                               0.3155, 0.5984, 0.8856),
+                            "hinf": _windows("area", 0.3881, 0.4958, 0.5338, 0.8464, 0.1064,
+                                             0.1041, 0.1008, 0.0932),
+                            "hinf+bp": _windows("outage", 5.2628, 36.4784, 4.9441, 36.5174,
+                                                0.6502, 1.1008, 0.8096, 1.6045),
+                            "hinf+lssvm": _windows("outage", 0.5916, 5.2938, 0.4676, 4.6548,
+                                                   0.0786, 0.0092, 0.0754, 0.0567)}},
     "corridor-outage": {"paper": "001", "note": "section 5.3, max error with anchor 2 silent "
                         "from 18 to 23 s and from 40 to 45 s",
                         "experiment": "the corridor with anchor 2's two outages", "duration_s": 60.0,
@@ -92,8 +141,8 @@ def load_truth(path: str | Path) -> dict[str, np.ndarray]:
 def load_estimates(lines, vehicle: int = 1) -> dict[str, dict[str, np.ndarray]]:
     """Vehicle *vehicle*'s estimate JSON lines (an iterable of str, or a path) grouped by
     filter (lines written before estimates named their vehicle are vehicle 1's): per filter
-    arrays ``t, x, y``, ``cov`` (N x 2 x 2, the position block of the line's covariance) and
-    ``extrapolated``."""
+    arrays ``t, x, y``, ``vx, vy``, ``cov`` (N x 2 x 2, the position block of the line's
+    covariance) and ``extrapolated``."""
     if isinstance(lines, (str, Path)):
         lines = Path(lines).read_text().splitlines()
     by_filter: dict[str, list] = {}
@@ -104,12 +153,13 @@ def load_estimates(lines, vehicle: int = 1) -> dict[str, dict[str, np.ndarray]]:
         if "filter" in e and e.get("vehicle", 1) == vehicle:
             c = e["cov"]
             by_filter.setdefault(e["filter"], []).append(
-                (e["t"], e["x"], e["y"], c[0], c[1], c[4], c[5], e.get("extrapolated", False)))
+                (e["t"], e["x"], e["y"], c[0], c[1], c[4], c[5], e.get("extrapolated", False),
+                 e["vx"], e["vy"]))
     out = {}
     for k, v in by_filter.items():
         a = np.array(v, dtype=float)
         out[k] = {"t": a[:, 0], "x": a[:, 1], "y": a[:, 2], "cov": a[:, 3:7].reshape(-1, 2, 2),
-                  "extrapolated": a[:, 7].astype(bool)}
+                  "extrapolated": a[:, 7].astype(bool), "vx": a[:, 8], "vy": a[:, 9]}
     return out
 
 
@@ -297,6 +347,58 @@ def plot(truth: dict, estimates: dict, path: str | Path, offset_s: float = 0.0,
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def ci_text(v: tuple[float, float], digits: int = 3) -> str:
+    """A (mean, half-width) as the tables print it: "m ± h", "m" without a half-width, "-"
+    without a mean."""
+    m, h = v
+    if math.isnan(m):
+        return "-"
+    return f"{m:.{digits}f}" + ("" if math.isnan(h) else f" ± {h:.{digits}f}")
+
+
+def paired_differences(ok: dict, a: str, b: str, figure: str) -> list[float]:
+    """Per seed both tracks have a finite *figure* of (*ok*: track -> seed -> row), a - b."""
+    def has(r):
+        return r.get(figure) is not None and math.isfinite(r[figure])
+
+    return [ok[a][s][figure] - ok[b][s][figure]
+            for s in sorted(set(ok[a]) & set(ok[b])) if has(ok[a][s]) and has(ok[b][s])]
+
+
+def paired(ok: dict, a: str, b: str, figure: str) -> dict:
+    """The per-seed difference a - b of *figure* over the seeds both tracks have: its mean,
+    95 % t half-width and the track it decides for (the CI excludes 0), else None."""
+    diffs = paired_differences(ok, a, b, figure)
+    d, h = mean_ci(diffs)
+    decided = None if not (abs(d) > h) else (a if d < 0 else b)
+    return {"a": a, "b": b, "seeds": len(diffs), "diff": d, "half": h, "better": decided}
+
+
+def paired_p(diffs) -> float:
+    """Two-sided p of the paired t test that the mean of *diffs* is 0 (NaN below 2 seeds or
+    with every difference 0; 0 when they are all the same other value)."""
+    v = np.asarray(diffs, dtype=float)
+    if v.size < 2 or not v.any():
+        return math.nan
+    sd = v.std(ddof=1)
+    if sd == 0:
+        return 0.0
+    return float(2 * student_t.sf(abs(v.mean()) / (sd / math.sqrt(v.size)), v.size - 1))
+
+
+def holm(pvalues) -> list[float]:
+    """Holm's step-down adjusted p-values of a family of *pvalues* (NaN stays NaN and counts in
+    the family): the i-th smallest p times (m - i + 1), never below an earlier one, at most 1.
+    A comparison is decided at family-wise level alpha when its adjusted p is below alpha: the
+    same as its CI at level 1 - alpha / (m - i + 1) excluding 0, every smaller p decided first."""
+    p = np.asarray(pvalues, dtype=float)
+    m, out, running = p.size, np.full(p.size, math.nan), 0.0
+    for i, j in enumerate(sorted(np.flatnonzero(np.isfinite(p)), key=lambda j: p[j])):
+        running = max(running, min(1.0, (m - i) * p[j]))
+        out[j] = running
+    return out.tolist()
 
 
 def mean_ci(values) -> tuple[float, float]:

@@ -9,7 +9,8 @@ required; the report says what it lacks.
 
 Every number of the accuracy tables comes from ``estimates.jsonl`` through lab.evaluate
 (``position_errors`` after the run's ``time_offset_s``; the latitude/longitude figures in the
-scenario's frame, shown in 003 Table 1's layout where its paper gives that table), the NIS
+scenario's frame; the tables of the layout its paper gives, lab.layouts: 003's Table 1, 004's
+Tables 2 and 3 from lab.areas's windows), the NIS
 from ``innovations.jsonl``, the bound from lab.pcrb; the file hashes under "Provenance" name
 the files they came from. The HTML holds its plots as inline SVG (matplotlib's svg backend)
 and its style inline: no network, no script.
@@ -34,7 +35,7 @@ from navtwin.host.config import ConfigError
 from navtwin.host.replay import config_for
 from navtwin.protocols.recording import FAULTS
 
-from . import evaluate, pcrb
+from . import evaluate, layouts, pcrb
 from .provenance import code_version
 
 #: Table 1's rows (paper 001): key of lab.evaluate.position_errors -> label; ranges are two keys.
@@ -160,6 +161,7 @@ def collect(run_dir: str | Path) -> dict:
            "hashes": {n: hashlib.sha256((d / n).read_bytes()).hexdigest()
                       for n in HASHED if (d / n).is_file()},
            "code": code_version()}
+    run["tables"] = layout_tables(run)
     if cfg is not None:
         ec = cfg.estimator_config()
         run["bound"] = pcrb.position_bound(sc, truth, ec.jerk_psd, ec.p0_sigma)
@@ -252,7 +254,8 @@ def figures(run: dict) -> dict[str, str]:
     fig.tight_layout()
     out["error"] = _svg(fig, "error")
 
-    if latlon_rows(run):  # 003's Figures 4-6: latitude and longitude error against time
+    # 003's Figures 4-6: latitude and longitude error against time
+    if evaluate.latlon_rows(sc.name, run["errors"]):
         fig, axes = _grid(len(names), (4.2, 2.6))
         for ax, n in zip(axes, names):
             e = run["estimates"][n]
@@ -379,25 +382,18 @@ def accuracy_rows(run: dict) -> list[tuple[str, str, list[tuple[str, str]]]]:
     return rows
 
 
-def latlon_rows(run: dict) -> list[tuple[str, ...]]:
-    """003 Table 1's layout, where the scenario's paper gives it (evaluate.latlon_rows): per
-    paper row its label, our track and our LATLON figures, then a row of the paper's own;
-    [] for any other scenario."""
-    rows = []
-    paper = run["paper"]
-    for label, track, key in evaluate.latlon_rows(run["scenario"].name, run["errors"]):
-        e = run["errors"][track]
-        rows.append((label, track, *(fmt(e[m]) for m in evaluate.LATLON)))
-        rows.append((f"{label}, paper {paper['paper']}", "",
-                     *(fmt(paper["figures"][key][m]) for m in evaluate.LATLON)))
-    return rows
+def layout_tables(run: dict) -> list[dict]:
+    """The tables of the layout the scenario's paper gives (lab.layouts: 003's latitude and
+    longitude, 004's training areas and outages), each a dict of ``title``, ``head``, ``rows``
+    (two name columns, then numbers; a paper's own row has no track), ``stats`` (the figures'
+    keys, for the HTML's data attributes, or None) and ``note``; [] for any other scenario."""
+    layout = layouts.of(run["scenario"].name)
+    return layout[1].report_tables(run) if layout else []
 
 
-#: The latitude/longitude table's note: what each figure is (lab.evaluate says why).
-LATLON_NOTE = ("Latitude error: along north; longitude error: along east (m), through the "
-               "scenario's site and x azimuth. Average: the mean absolute error; max: the "
-               "maximum absolute error; std: the standard deviation of the signed error "
-               "(003 defines none of them; docs/lab.md, \"Latitude and longitude\").")
+def _cells(table: dict) -> list[tuple[str, ...]]:
+    """A layout table's rows as text: its two name columns, then each number through fmt."""
+    return [(*r[:2], *(fmt(v) for v in r[2:])) for r in table["rows"]]
 
 
 def link_rows(run: dict) -> list[tuple[str, ...]]:
@@ -494,10 +490,8 @@ def markdown(run: dict) -> str:
              "## Accuracy (paper 001 Table 1's layout)", "",
              _md_table(["statistic", *names], [(label, *(t for _, t in cells))
                                                for _, label, cells in accuracy_rows(run)])]
-    if latlon_rows(run):
-        parts += ["", f"## Latitude and longitude (paper {run['paper']['paper']} Table 1's layout)", "",
-                  _md_table(["method", "track", *evaluate.LATLON.values()], latlon_rows(run)),
-                  "", LATLON_NOTE]
+    for t in run["tables"]:
+        parts += ["", f"## {t['title']}", "", _md_table(t["head"], _cells(t)), "", t["note"]]
     if paper_note(run):
         parts += ["", paper_note(run)]
     if "bound" in run:
@@ -582,17 +576,19 @@ def html_page(run: dict, figs: dict[str, str]) -> str:
     body += ["<h2>Accuracy (paper 001 Table 1's layout)</h2>",
              _html_table(["statistic", *names], [(label, *(t for _, t in cells)) for _, label, cells in acc],
                          acc_attr, ["paper" if k.startswith("paper:") else "" for k, _, _ in acc])]
-    if latlon_rows(run):
-        rows = latlon_rows(run)
-        body += [f"<h2>Latitude and longitude (paper {e(run['paper']['paper'])} Table 1's layout)</h2>",
-                 _html_table(["method", "track", *evaluate.LATLON.values()], rows,
-                             lambda i, j: "" if j < 2 or not rows[i][1] else
-                             f' data-stat="{list(evaluate.LATLON)[j - 2]}" data-filter="{rows[i][1]}"',
-                             ["" if r[1] else "paper" for r in rows]),
-                 f"<p class=note>{e(LATLON_NOTE)}</p>"]
-        if "latlon" in figs:
-            body += ["<h2>Latitude and longitude error against time</h2>",
-                     f"<div class=fig id=fig-latlon>{figs['latlon']}</div>"]
+    for t in run["tables"]:
+        rows, stats = _cells(t), t["stats"]
+
+        def attrs(i, j, rows=rows, stats=stats):
+            return ("" if stats is None or j < 2 or not rows[i][1] else
+                    f' data-stat="{stats[j - 2]}" data-filter="{rows[i][1]}"')
+
+        body += [f"<h2>{e(t['title'], quote=False)}</h2>",
+                 _html_table(t["head"], rows, attrs, ["" if r[1] else "paper" for r in rows]),
+                 f"<p class=note>{e(t['note'])}</p>"]
+    if "latlon" in figs:
+        body += ["<h2>Latitude and longitude error against time</h2>",
+                 f"<div class=fig id=fig-latlon>{figs['latlon']}</div>"]
     if paper_note(run):
         body.append(f"<p class=note id=paper-note>{e(paper_note(run))}</p>")
     if "nees" in figs:

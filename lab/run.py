@@ -70,8 +70,8 @@ def run_in_memory(scenario: str | Path | Scenario, seed: int | None = None, *,
 
 
 def truth(scenario: str | Path | Scenario, seed: int | None = None) -> dict:
-    """The vehicle's true ``t`` (s), ``x``, ``y`` (m), one row per millisecond, as
+    """The vehicle's true ``t`` (s), ``x``, ``y`` (m), ``vx``, ``vy`` (m/s), one row per millisecond, as
     :func:`navtwin.lab.evaluate.load_truth` reads them from the emulator's ``truth.csv``."""
     w = World(_scenario(scenario), seed)
     tr = w.truth(0, w.duration_ns)
-    return {"t": tr["t"] / 1e9, "x": tr["x"], "y": tr["y"]}
+    return {"t": tr["t"] / 1e9, "x": tr["x"], "y": tr["y"], "vx": tr["vx"], "vy": tr["vy"]}

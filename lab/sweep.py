@@ -51,8 +51,8 @@ from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
 from navtwin.host.output import estimate_line
 from navtwin.host.replay import emulator_settings
 
-from . import evaluate
-from .evaluate import mean_ci
+from . import evaluate, layouts
+from .evaluate import ci_text, mean_ci, paired
 from .provenance import code_version
 from .run import run_in_memory, truth
 
@@ -72,9 +72,16 @@ PART = re.compile(r"part-(\d+)\.parquet")
 #: Per-seed figures of position_errors kept per cell.
 METRICS = ("mean", "max", "rms", "n", "x_min", "x_max", "x_var", "y_min", "y_max", "y_var",
            "nees_mean", "nees_in_band", *evaluate.LATLON)
+
+
+def _arrow_type(column: str) -> pa.DataType:
+    # counts ("n", a window's "area1_n") are integers, every other figure a float
+    return pa.int64() if column == "n" or column.endswith("_n") else pa.float64()
+
+
 SCHEMA = pa.schema([("scenario", pa.string()), ("seed", pa.int64()), ("filter", pa.string()),
                     ("status", pa.string()), ("error", pa.string())] +
-                   [(m, pa.int64() if m == "n" else pa.float64()) for m in METRICS])
+                   [(m, _arrow_type(m)) for m in METRICS])
 #: The figures summarised over seeds, with their table headings.
 FIGURES = {"mean": "mean m", "max": "max m", "rms": "RMSE m", "nees_mean": "NEES"}
 #: Paper 001 Table 1's rows (statistic -> the per-seed figures it is made of), for the
@@ -103,25 +110,37 @@ def _scenario(text: str, name: str) -> Scenario:
     return parse_scenario(tomlfile.parse(text, name), name)
 
 
+def schema(sc: Scenario) -> pa.Schema:
+    """The cells' schema for *sc*: SCHEMA, then the columns its paper's layout adds
+    (lab.layouts; a failed cell has them null)."""
+    layout = layouts.of(sc.name)
+    extra = layout[1].columns(sc) if layout else ()
+    return pa.schema(list(SCHEMA) + [(m, _arrow_type(m)) for m in extra])
+
+
 def seed_cells(sc: Scenario, seed: int, filters: tuple[str, ...],
                duration: float | None) -> list[dict]:
     """The cells of one seed: one in-memory run, each filter's position_errors (with the
-    latitude/longitude figures in the scenario's frame)."""
+    latitude/longitude figures in the scenario's frame) and the figures of its paper's layout
+    (lab.layouts: 004's windows)."""
     estimates, _ = run_in_memory(sc, seed, filters=filters, duration=duration)
-    errors = evaluate.position_errors(truth(sc, seed),
-                                      evaluate.load_estimates(map(estimate_line, estimates)),
-                                      frame=sc.frame)
+    tr, est = truth(sc, seed), evaluate.load_estimates(map(estimate_line, estimates))
+    errors = evaluate.position_errors(tr, est, frame=sc.frame)
+    layout = layouts.of(sc.name)
+    columns = layout[1].columns(sc) if layout else ()
+    extra = layout[1].figures(sc, tr, est) if layout else {}
     rows = []
     for name in filters:
         e = errors.get(name)
-        rows.append(_row(sc.name, seed, name, e) if e else
+        rows.append(_row(sc.name, seed, name, e | extra.get(name, {}), columns) if e else
                     _failed(sc.name, seed, name, "no estimates inside the truth's time span"))
     return rows
 
 
-def _row(scenario: str, seed: int, name: str, e: dict) -> dict:
+def _row(scenario: str, seed: int, name: str, e: dict, columns: tuple[str, ...] = ()) -> dict:
+    """An ok cell: METRICS of *e*, then the layout's *columns* of it."""
     return {"scenario": scenario, "seed": seed, "filter": name, "status": "ok", "error": None,
-            **{m: e[m] for m in METRICS}}
+            **{m: e[m] for m in (*METRICS, *columns)}}
 
 
 def _failed(scenario: str, seed: int, name: str, error: str) -> dict:
@@ -284,13 +303,13 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
     wanted = [(s, f) for s in seeds for f in filters]
     todo = [s for s in seeds if any(done.get((s, f), {}).get("status") != "ok" for f in filters)]
     tasks = chunk_seeds(todo, duration or sc.duration_s)
-    text = sc.to_toml()
+    text, cells = sc.to_toml(), schema(sc)
     writer = part = None
     if out is not None and tasks:
         n = max([int(m[1]) for p in out.iterdir() if (m := PART.fullmatch(p.name))] + [-1]) + 1
         part = out / f"part-{n:04d}.parquet"
         try:
-            writer = pq.ParquetWriter(part, SCHEMA.with_metadata({META_KEY: json.dumps(meta)}))
+            writer = pq.ParquetWriter(part, cells.with_metadata({META_KEY: json.dumps(meta)}))
         except OSError as e:
             raise SweepError(f"out: {out}: cannot write {part.name} ({e}); choose a writable "
                              "directory") from None
@@ -301,7 +320,7 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         for r in rows:
             done[(r["seed"], r["filter"])] = r
         if writer is not None:
-            writer.write_table(pa.Table.from_pylist(rows, schema=SCHEMA))
+            writer.write_table(pa.Table.from_pylist(rows, schema=cells))
         finished += len({r["seed"] for r in rows})
         if progress:
             progress(finished, len(seeds))
@@ -383,8 +402,8 @@ def summarise(rows: list[dict], filters: Iterable[str], scenario: str | None = N
     of filters the per-seed difference of mean error (a - b) over the seeds both have, its
     mean and 95 % t half-width, and which filter it decides for (the CI excludes 0) or None.
     ``ranking``: the filters by mean error, each joined to the next by "<" (decided) or "~"
-    (not). For a *scenario* whose paper has a latitude/longitude Table 1 (003's), ``latlon``:
-    its rows (:func:`latlon`)."""
+    (not). For a *scenario* whose paper has a layout of its own (lab.layouts: 003's latitude
+    and longitude, 004's areas and outages), that layout's section under its name."""
     filters = tuple(filters)
     ok = {f: {r["seed"]: r for r in rows if r["filter"] == f and r["status"] == "ok"}
           for f in filters}
@@ -399,49 +418,17 @@ def summarise(rows: list[dict], filters: Iterable[str], scenario: str | None = N
     pairs = []
     for i, a in enumerate(filters):
         for b in filters[i + 1:]:
-            pairs.append(_paired(ok, a, b, "mean"))
+            pairs.append(paired(ok, a, b, "mean"))
     order = sorted((f for f in filters if per[f]["seeds"]), key=lambda f: per[f]["mean"][0])
     ranking = order[:1]
     for a, b in zip(order, order[1:]):
         p = next(p for p in pairs if {p["a"], p["b"]} == {a, b})
         ranking += ["<" if p["better"] else "~", b]
     out = {"filters": per, "pairs": pairs, "ranking": " ".join(ranking)}
-    if evaluate.latlon_rows(scenario, filters):
-        out["latlon"] = latlon(ok, per, scenario)
+    layout = layouts.of(scenario)
+    if layout and (section := layout[1].summary(ok, per, scenario)) is not None:
+        out[layout[0]] = section
     return out
-
-
-def _paired(ok: dict, a: str, b: str, figure: str) -> dict:
-    """The per-seed difference a - b of *figure* over the seeds both filters have: its mean,
-    95 % t half-width and the filter it decides for (the CI excludes 0), else None."""
-    common = sorted(s for s in set(ok[a]) & set(ok[b])
-                    if ok[a][s].get(figure) is not None and ok[b][s].get(figure) is not None)
-    d, h = mean_ci([ok[a][s][figure] - ok[b][s][figure] for s in common])
-    decided = None if not (abs(d) > h) else (a if d < 0 else b)
-    return {"a": a, "b": b, "seeds": len(common), "diff": d, "half": h, "better": decided}
-
-
-def latlon(ok: dict, per: dict, scenario: str) -> dict:
-    """003 Table 1's layout of a summary: ``rows``, per paper row (evaluate.latlon_rows) its
-    label, our track, its seeds and each figure of evaluate.LATLON over seeds with the paper's
-    beside it; ``pairs``, each row's track against every row above it (the weighted centroid
-    against the centroid, each against the SINS alone), the paired difference of each figure."""
-    paper = evaluate.PAPER_FIGURES[scenario]["figures"]
-    table = evaluate.latlon_rows(scenario, tuple(per))
-    rows = [{"label": label, "track": track, "seeds": per[track]["seeds"],
-             **{m: per[track][m] for m in evaluate.LATLON},
-             "paper": {m: paper[key][m] for m in evaluate.LATLON}} for label, track, key in table]
-    pairs = [{"a": a["track"], "b": b["track"],
-              **{m: _paired(ok, a["track"], b["track"], m) for m in evaluate.LATLON}}
-             for i, a in reversed(list(enumerate(rows))) for b in reversed(rows[:i])]
-    return {"paper": evaluate.PAPER_FIGURES[scenario]["paper"], "rows": rows, "pairs": pairs}
-
-
-def _ci(v: tuple[float, float], digits: int = 3) -> str:
-    m, h = v
-    if math.isnan(m):
-        return "-"
-    return f"{m:.{digits}f}" + ("" if math.isnan(h) else f" ± {h:.{digits}f}")
 
 
 def table(summary: dict) -> str:
@@ -449,17 +436,17 @@ def table(summary: dict) -> str:
     wide as their widest cell, two spaces apart (a NEES in the thousands stays apart from
     the RMSE before it)."""
     rows = [["filter", "seeds", "failed", *FIGURES.values()]]
-    rows += [[f, str(s["seeds"]), str(s["failed"]), *(_ci(s[m]) for m in FIGURES)]
+    rows += [[f, str(s["seeds"]), str(s["failed"]), *(ci_text(s[m]) for m in FIGURES)]
              for f, s in summary["filters"].items()]
     lines = _aligned(rows)
     lines += ["", "paired difference of mean error (m, a - b, 95 % CI):"]
-    pairs = [(f"{p['a']} - {p['b']}", _ci((p["diff"], p["half"]), 4),
+    pairs = [(f"{p['a']} - {p['b']}", ci_text((p["diff"], p["half"]), 4),
               f"{p['better']} better" if p["better"] else "not decided") for p in summary["pairs"]]
     name_w = max((len(n) for n, _, _ in pairs), default=0)
     ci_w = max((len(c) for _, c, _ in pairs), default=0)
     lines += [f"  {n:<{name_w}}  {c:>{ci_w}}  {v}" for n, c, v in pairs]
     lines.append(f"ranking: {summary['ranking']}")
-    for title, head, rows, left in _latlon_grids(summary["latlon"]) if "latlon" in summary else ():
+    for title, head, rows, left in layouts.grids(summary):
         lines += ["", title + ":", *_aligned([head, *rows], left)]
     return "\n".join(lines)
 
@@ -470,30 +457,6 @@ def _aligned(rows: list[list[str]], left: int = 1) -> list[str]:
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return ["  ".join(c.ljust(w) if i < left else c.rjust(w)
                       for i, (c, w) in enumerate(zip(r, widths))).rstrip() for r in rows]
-
-
-def _latlon_grids(ll: dict) -> tuple[tuple[str, list[str], list[list[str]], int], ...]:
-    """003 Table 1's layout of a summary's ``latlon`` as (title, heading, rows, number of
-    columns of names, set to the left): the figures, ours over seeds with the paper's in
-    parentheses, then, where two methods or more are there, their paired differences."""
-    paper, figs = ll["paper"], list(evaluate.LATLON)
-    head = [f"{paper} Table 1", "track", "seeds", *evaluate.LATLON.values()]
-    rows = [[r["label"], r["track"], str(r["seeds"]),
-             *(f"{_ci(r[m])} ({r['paper'][m]:.4f})" for m in figs)] for r in ll["rows"]]
-    pair_head = ["a - b", "seeds", *evaluate.LATLON.values()]
-    pair_rows = [[f"{p['a']} - {p['b']}", str(p[figs[0]]["seeds"]),
-                  *(f"{_ci((p[m]['diff'], p[m]['half']), 3)} "
-                    f"{'(' + p[m]['better'] + ')' if p[m]['better'] else '(~)'}" for m in figs)]
-                 for p in ll["pairs"]]
-    grids = [(f"Paper {paper} Table 1's layout (m; average: mean absolute error, max: maximum "
-              "absolute error, std: standard deviation of the signed error, along north for "
-              "latitude and east for longitude): each figure the mean over seeds of that seed's "
-              f"figure, ± its 95 % half-width; ({paper}'s published figure)", head, rows, 2)]
-    if pair_rows:  # one row of the paper's present: nothing to pair
-        grids.append(("Paired differences a - b over the seeds both have (m, ± the 95 % "
-                      "half-width); (name): the track the CI decides for, (~): not decided",
-                      pair_head, pair_rows, 1))
-    return tuple(grids)
 
 
 def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
@@ -514,7 +477,7 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
     lines += ["| filter | seeds | " + " | ".join(cols + extra) + " |",
              "|---|---:|" + "---:|" * (len(cols) + len(extra))]
     for f, s in summary["filters"].items():
-        cells = [_ci(s[m]) for m in FIGURES]
+        cells = [ci_text(s[m]) for m in FIGURES]
         if paper_means:
             fig = paper["figures"].get(f, {})
             cells += [_paper(fig.get("mean")), _paper(fig.get("max"))]
@@ -523,14 +486,13 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
     lines += ["", "| a - b | seeds | mean error difference m (95 % CI) | decides |",
               "|---|---:|---:|---|"]
     for p in summary["pairs"]:
-        lines.append(f"| {p['a']} - {p['b']} | {p['seeds']} | {_ci((p['diff'], p['half']), 4)} "
+        lines.append(f"| {p['a']} - {p['b']} | {p['seeds']} | {ci_text((p['diff'], p['half']), 4)} "
                      f"| {p['better'] + ' better' if p['better'] else 'not decided'} |")
     lines += _table_1(summary, paper)
-    if "latlon" in summary:
-        for title, head, rows, left in _latlon_grids(summary["latlon"]):
-            lines += ["", title + ".", "", "| " + " | ".join(head) + " |",
-                      "|" + "---|" * left + "---:|" * (len(head) - left)]
-            lines += ["| " + " | ".join(r) + " |" for r in rows]
+    for title, head, rows, left in layouts.grids(summary):
+        lines += ["", title + ".", "", "| " + " | ".join(head) + " |",
+                  "|" + "---|" * left + "---:|" * (len(head) - left)]
+        lines += ["| " + " | ".join(r) + " |" for r in rows]
     rank = (f"Ranking by mean error (`<`: the paired 95 % CI excludes 0; `~`: it does not): "
             f"`{summary['ranking']}`")
     means = {f: v["mean"] for f, v in paper["figures"].items() if "mean" in v} if paper else {}
@@ -556,7 +518,7 @@ def _table_1(summary: dict, paper: dict | None) -> list[str]:
         cells = []
         for f in cols:
             s, digits = summary["filters"][f], 4
-            cell = " ... ".join(_ci(s[k], digits) for k in keys)
+            cell = " ... ".join(ci_text(s[k], digits) for k in keys)
             pub = figs[f].get({"max": "max", "mean": "mean"}.get(keys[0], keys[0]))
             cells.append(cell + ("" if pub is None else f" ({pub:.4g})"))
         out.append(f"| {label} | " + " | ".join(cells) + " |")
