@@ -1,7 +1,9 @@
 """Benchmarks of the emulator runtime (not tests: they measure, they do not assert).
 
-``navtwin bench emulator-jitter [--seconds 60] [--scenario office]``
-    starts ``navtwin emulate --speed realtime`` (as a subprocess, like a user would), reads
+``navtwin bench emulator-jitter [--seconds 60] [--scenarios office,outage-bridging]``
+    for each scenario in turn, in one invocation (one JSON: a row per scenario, and each
+    one's p99s as a ratio of the first's: what a field of 1402 anchors costs the real time
+    beside office), starts ``navtwin emulate --speed realtime`` (as a subprocess, like a user would), reads
     the ``sins`` port with pyserial and reports how regular the SINS frames arrive: p50, p99
     and max of |period - nominal| (nominal = 10 ms of the board's clock, from the scenario's
     ppm), frames lost (gaps in seq), drift (the last frame's lateness minus the first's,
@@ -97,6 +99,16 @@ def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = N
             "emulator_late_max_ms": float(late.max()),
             # the peer in the same run: a bare PTY pair with exactly timed writes
             "bare_pty": pty_floor(min(len(t), 3000), int(round(nominal_ns)))}
+
+
+def jitter_beside(seconds: float, scenarios: list[str]) -> dict:
+    """:func:`jitter` of each scenario in turn: a row each, and each row's reader and
+    emulator p99 as a ratio of the first row's."""
+    rows = [jitter(seconds, name) for name in scenarios]
+    first = rows[0]
+    ratio = {r["scenario"]: {k: r[k] / first[k] for k in ("p99_ms", "emulator_late_p99_ms")}
+             for r in rows[1:]}
+    return {"benchmark": "jitter", "seconds": seconds, "rows": rows, "p99_ratio_to_first": ratio}
 
 
 def _bare_writer(master: int, frames: int, start_ns: int, period_ns: int) -> None:
@@ -253,9 +265,10 @@ class ScenarioRuns:
 @dataclass(frozen=True)
 class RealTime:
     """emulator-jitter's settings."""
-    seconds: float | None = key(None, "s", "how long the port is read; none = 60 (10 quick)",
-                                between(1, 3600))
-    scenario: str = key("office", "", "the scenario run (a name or a .toml path)")
+    seconds: float | None = key(None, "s", "how long the port is read, per scenario; none = 60 "
+                                "(10 quick)", between(1, 3600))
+    scenarios: str = key("office", "", "the scenarios run one after another, comma-separated "
+                         "names or .toml paths (office,outage-bridging: the field beside office)")
 
 
 @dataclass(frozen=True)
@@ -275,7 +288,7 @@ def benchmarks() -> dict:
     @takes(RealTime)
     def emulator_jitter(quick: bool, s: RealTime) -> dict:
         """emulator: SINS frame-period jitter seen by a pyserial reader, real time (goal p99 <= 0.3 ms)"""
-        return jitter(s.seconds or (10.0 if quick else 60.0), s.scenario)
+        return jitter_beside(s.seconds or (10.0 if quick else 60.0), s.scenarios.split(","))
 
     @takes(Repeat)
     def digi_xbee_open(quick: bool, s: Repeat) -> dict:

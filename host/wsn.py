@@ -37,10 +37,13 @@ Outliers and plausibility
     have far branches near the lines through two anchors).
 
 TDMA cycle
-    The anchors range the tag in turn (one exchange per anchor per 0.1 s cycle). A fix
-    treats the ranges of one cycle as simultaneous, at the mean time of its exchanges:
-    the tag moves at most v * cycle/2 (2.5 cm at 0.5 m/s) in the meantime. (The
-    EKF/UKF do not need this: they apply each range at its own time.)
+    The anchors range the tag in turn (one exchange per anchor per 0.1 s cycle; in a field,
+    the 13 to 21 anchors in range per 1 s cycle). A fix treats the ranges of one cycle as
+    simultaneous, at the mean time of its exchanges: the tag moves at most v * cycle/2
+    (2.5 cm at 0.5 m/s) in the meantime. (The EKF/UKF do not need this: they apply each
+    range at its own time.) A cycle closes when every anchor has reported, on a repeat, or
+    on an exchange more than ``cycle_s`` after its first: in a field only the last two can
+    happen, so ``cycle_s`` must be shorter than the cycle by more than its start's jitter.
 """
 from __future__ import annotations
 
@@ -87,10 +90,9 @@ class AnchorLayout:
         self.dz = self.tag_height - self.z
         self._dz2 = self.dz**2
         self._row = {a: k for k, a in enumerate(self.ids)}
-        # |r_a - r_b| <= the 3-D distance of anchors a and b: a few, checked every cycle
-        self._baselines = {
-            (a, b): float(np.hypot(np.linalg.norm(self.xy[i] - self.xy[j]), self.z[i] - self.z[j]))
-            for a, i in self._row.items() for b, j in self._row.items()}
+        # |r_a - r_b| <= the 3-D distance of anchors a and b, checked every cycle: computed when
+        # a pair is first asked (a field of 1400 anchors has 2 M pairs, a cycle asks 20)
+        self._baselines: dict[tuple[int, int], float] = {}
 
     def index(self, anchors: Sequence[int]) -> np.ndarray:
         return np.array([self._row[a] for a in anchors], dtype=np.intp)
@@ -114,7 +116,12 @@ class AnchorLayout:
 
     def baseline(self, a: int, b: int) -> float:
         """3-D distance between anchors a and b (ids): the bound on |r_a - r_b|."""
-        return self._baselines[a, b]
+        d = self._baselines.get((a, b))
+        if d is None:
+            i, j = self._row[a], self._row[b]
+            d = self._baselines[a, b] = float(np.hypot(np.linalg.norm(self.xy[i] - self.xy[j]),
+                                                       self.z[i] - self.z[j]))
+        return d
 
     def hdop(self, p: np.ndarray, idx: np.ndarray | None = None) -> float:
         """sqrt(tr((G^T G)^-1)), G rows = u_i^T: RMSE >= sigma * HDOP (TOA CRLB)."""

@@ -4,8 +4,9 @@ Which bound, exactly. The PCRB of Tichavsky, Muravchik and Nehorai (1998) for th
 fusion tracks assume (host.filters.model): the constant-acceleration state
 x = [x, y, vx, vy, ax, ay] with the host config's white-jerk ``jerk_psd`` (F(dt), Q(dt)
 exact), the prior N(start, P0) of the host config's ``p0_sigma`` at scenario time 0, and as
-the only measurements the emulator's ranges: one per anchor per TDMA cycle at its slot's
-time (the scenario's ``[ranging]`` ``start_ms``, ``cycle_ms``, ``slot_ms``, ``slot_order``),
+the only measurements the emulator's ranges: one per exchange of its TDMA schedule, at its
+time (emulator.tdma: with ``slots`` one per anchor per cycle, ``in-range`` the anchors near
+the tag at each cycle start),
 3-D distance from the anchor's antenna to the tag's, noise sigma(d) = sigma0_m +
 sigma_per_m d (docs/emulator-models.md; no range bias, no NLOS, no timeout). The
 information matrix follows
@@ -28,6 +29,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from navtwin.emulator.scenario import Scenario
+from navtwin.emulator.world import World
 from navtwin.host.filters.model import DIM_X, ConstantAcceleration
 
 
@@ -54,15 +56,19 @@ def information(model: ConstantAcceleration, J0: np.ndarray,
 
 def exchanges(sc: Scenario, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Scenario time (s) and anchor index (in ``sc.all_anchors``) of every scheduled exchange
-    before *duration_s*, in time order."""
-    r = sc.ranging
+    before *duration_s*, in time order: the emulator's own TDMA schedule (emulator.tdma; the
+    in-range one picks its anchors by the tag's true position, and any cycle jitter is the
+    scenario seed's), less the exchanges beyond the radio range, which give no report."""
+    net = World(sc).nanoloc
+    idx, _, t0, _ = net.schedule.block(0, round(duration_s * 1e9))
+    order = np.argsort(t0, kind="stable")
+    idx, t0 = idx[order], t0[order]
+    if sc.ranging.radio_range_m is not None:
+        far = np.linalg.norm(net.trajectory.position(t0) - net.positions[idx], axis=1)
+        keep = far <= sc.ranging.radio_range_m
+        idx, t0 = idx[keep], t0[keep]
     index = {a.id: i for i, a in enumerate(sc.all_anchors)}
-    slots = [(s * r.slot_ms, index[a]) for s, a in enumerate(sc.slot_order)]
-    cycles = np.arange(0.0, duration_s * 1e3, r.cycle_ms)
-    t = np.array([(r.start_ms + c + off) / 1e3 for c in cycles for off, _ in slots])
-    anchor = np.array([i for _ in cycles for _, i in slots], dtype=np.intp)
-    keep = t < duration_s
-    return t[keep], anchor[keep]
+    return t0 / 1e9, np.array([index[a] for a in net.ids[idx].tolist()], dtype=np.intp)
 
 
 def position_bound(sc: Scenario, truth: dict, jerk_psd: float, p0_sigma) -> dict[str, np.ndarray]:
@@ -75,7 +81,9 @@ def position_bound(sc: Scenario, truth: dict, jerk_psd: float, p0_sigma) -> dict
     diff = tag - anchors
     d = np.linalg.norm(diff, axis=1)
     H = np.zeros((len(t), 1, DIM_X))
-    H[:, 0, :2] = diff[:, :2] / d[:, None]  # d r / d (x, y) at the true position
+    # d r / d (x, y) at the true position; none with the tag at the antenna (a grid node under
+    # outage-bridging's start): there the range says nothing of the direction
+    H[:, 0, :2] = np.divide(diff[:, :2], d[:, None], out=np.zeros((len(t), 2)), where=d[:, None] > 0)
     R = ((sc.ranging.sigma0_m + sc.ranging.sigma_per_m * d) ** 2)[:, None, None]
     sp, sv, sa = p0_sigma
     J0 = np.diag(1 / np.array([sp, sp, sv, sv, sa, sa]) ** 2)
