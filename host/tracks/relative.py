@@ -7,7 +7,7 @@ State and measurement (004 eqs. 2.1-2.6)::
     X_k+1 = A X_k + B w_k,  A = [[I, T I], [0, I]]                               (2.1, 2.4)
     Y_k = X_k + D v_k,      Y = (r_INS - r_WSN, v_INS - v_WSN)                   (2.5, 2.6)
 
-T is the WSN's period (``cycle_s``; 004's 1 s). r_WSN is the cycle's WSN fix (at the mean
+T is the WSN's period (``period_s``, else ``cycle_s``; 004's 1 s). r_WSN is the cycle's WSN fix (at the mean
 time of its exchanges); v_WSN the fixes' mean velocity over the period, (r_k - r_k-1) /
 (t_k - t_k-1), and v_INS the INS's own mean over the same interval, so that the velocity
 difference carries no lag when the vehicle accelerates. A fix older than ``outage_after_s``
@@ -68,6 +68,8 @@ class RelativeSettings:
     wsn_velocity_sigma_m_s: float = key(0.3, "m/s", "WSN velocity error, 1 sigma: two fixes a "
                                         "period apart, sqrt(2) x 0.2 m / 1 s (D of 004 eq. 2.6)",
                                         positive(hi=1e4))
+    period_s: float | None = key(None, "s", "the WSN's period T (004's 1 s); none = [filters] "
+                                 "cycle_s (a shorter grouping window needs it)", positive(hi=3600))
     outage_after_s: float = key(2.5, "s", "no fix for this long: a WSN outage (the strapdown "
                                 "coasts or is bridged); longer than the period and the fix's "
                                 "latency (a period)", positive(hi=3600))
@@ -100,7 +102,7 @@ class RelativeTrack(Track):
     def __init__(self, ctx, settings=None) -> None:
         super().__init__(ctx, settings)
         s = self.settings
-        self.T = float(ctx.cfg.cycle_s)
+        self.T = float(s.period_s or ctx.cfg.cycle_s)
         self.Q = np.diag(s.process**2)
         self.R = np.diag(s.measurement**2)
         self.nav = None
