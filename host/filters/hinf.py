@@ -106,20 +106,20 @@ class ErrorSystem:
         return ErrorSystem(self.A, self.E, self.B1 / s, self.D1 / s, self.C, self.L)
 
 
-def lmi(sys: ErrorSystem, P, Q, g) -> list[list]:
+def lmi(es: ErrorSystem, P, Q, g) -> list[list]:
     """The block rows of (2.15) for P, Q, g = gamma^2 (numpy arrays or cvxpy expressions):
     ``np.block`` or ``cvxpy.bmat`` of them is the matrix that must be negative definite."""
-    n, m, p = sys.A.shape[0], sys.B1.shape[1], sys.L.shape[0]
+    n, m, p = es.A.shape[0], es.B1.shape[1], es.L.shape[0]
     O = np.zeros
-    PAt = P @ sys.A - Q @ sys.C      # P A~
-    PBt = P @ sys.B1 - Q @ sys.D1    # P B~
-    PE = P @ sys.E
+    PAt = P @ es.A - Q @ es.C      # P A~
+    PBt = P @ es.B1 - Q @ es.D1    # P B~
+    PE = P @ es.E
     return [
-        [-P, O((n, m)), PAt.T, PAt.T, sys.L.T, PE.T],
+        [-P, O((n, m)), PAt.T, PAt.T, es.L.T, PE.T],
         [O((m, n)), -g * np.eye(m), PBt.T, O((m, n)), O((m, p)), O((m, n))],
         [PAt, PBt, -P, O((n, n)), O((n, p)), O((n, n))],
         [PAt, O((n, m)), O((n, n)), -P, O((n, p)), O((n, n))],
-        [sys.L, O((p, m)), O((p, n)), O((p, n)), -np.eye(p), O((p, n))],
+        [es.L, O((p, m)), O((p, n)), O((p, n)), -np.eye(p), O((p, n))],
         [PE, O((n, m)), O((n, n)), O((n, n)), O((n, p)), -P],
     ]
 
@@ -136,27 +136,27 @@ class HinfGain:
     seconds: float
 
 
-def _problem(sys: ErrorSystem, g: float | None, eps: float):
+def _problem(es: ErrorSystem, g: float | None, eps: float):
     """cvxpy, P, Q, g (a variable when *g* is None) and the constraints: (2.15) <= -eps I
     (symmetrised: cvxpy's PSD constraint needs a symmetric expression; (2.15) is symmetric,
     its expression's rounding need not be) and P >= eps I."""
     cp = require("cvxpy", "lmi", WHO)
     require("clarabel", "lmi", WHO)
-    n = sys.A.shape[0]
+    n = es.A.shape[0]
     P = cp.Variable((n, n), symmetric=True)
     Q = cp.Variable((n, n))
     g = cp.Variable() if g is None else g
-    M = cp.bmat(lmi(sys, P, Q, g))
+    M = cp.bmat(lmi(es, P, Q, g))
     k = M.shape[0]
     return cp, P, Q, g, [(M + M.T) / 2 << -eps * np.eye(k), P >> eps * np.eye(n)]
 
 
 def solve_gain(T: float, dt: float, process, measurement, eps: float = EPS) -> HinfGain:
     """Minimise gamma^2 subject to (2.15) (2.22, 2.23); Bf = P^-1 Q, Af = A - Bf C (2.24, 2.25)."""
-    sys = ErrorSystem.build(T, dt, process, measurement)
-    s = sys.weight
+    es = ErrorSystem.build(T, dt, process, measurement)
+    s = es.weight
     start = time.perf_counter()
-    cp, P, Q, g, constraints = _problem(sys.scaled(s), None, eps)
+    cp, P, Q, g, constraints = _problem(es.scaled(s), None, eps)
     problem = cp.Problem(cp.Minimize(g), constraints)
     problem.solve(solver=cp.CLARABEL)
     seconds = time.perf_counter() - start
@@ -164,14 +164,14 @@ def solve_gain(T: float, dt: float, process, measurement, eps: float = EPS) -> H
         raise HinfError(f"the H-infinity LMI (004 eq. 2.15) has no solution: Clarabel says "
                         f"{problem.status} (T={T}, dt={dt})")
     Bf = np.linalg.solve(P.value, Q.value)
-    return HinfGain(Af=sys.A - Bf @ sys.C, Bf=Bf, gamma=s * float(np.sqrt(g.value)), P=P.value,
-                    Q=Q.value, system=sys, seconds=seconds)
+    return HinfGain(Af=es.A - Bf @ es.C, Bf=Bf, gamma=s * float(np.sqrt(g.value)), P=P.value,
+                    Q=Q.value, system=es, seconds=seconds)
 
 
-def feasible(sys: ErrorSystem, gamma: float, eps: float = EPS) -> bool:
+def feasible(es: ErrorSystem, gamma: float, eps: float = EPS) -> bool:
     """Whether (2.15) with P >= eps I has a solution at this *gamma* (gamma^2 fixed)."""
-    s = sys.weight
-    cp, _, _, _, constraints = _problem(sys.scaled(s), (gamma / s) ** 2, eps)
+    s = es.weight
+    cp, _, _, _, constraints = _problem(es.scaled(s), (gamma / s) ** 2, eps)
     problem = cp.Problem(cp.Minimize(0), constraints)
     problem.solve(solver=cp.CLARABEL)
     return problem.status == cp.OPTIMAL
