@@ -26,7 +26,7 @@ def register(sub) -> None:
         "mean, max) beside the paper's figure, and live faults. At the end: the accuracy "
         "table and the run directory's report. Ctrl-C ends the run early and still reports.")
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
-                   help="a shipped scenario (office, corridor, corridor-outage) or a TOML file")
+                   help="a shipped scenario (office, corridor, corridor-outage, rssi-centroid, outage-bridging, calibration) or a TOML file")
     p.add_argument("--duration", type=duration, default=DEFAULT_DURATION_S, metavar="S",
                    help=f"seconds of the scenario to run (default {DEFAULT_DURATION_S:g}; "
                    "at most the scenario's length)")

@@ -79,12 +79,13 @@ def common_options(p, recorded: bool = False) -> None:
 
 
 def _filters(text: str) -> tuple[str, ...]:
+    from navtwin.common.extras import MissingExtra
     from navtwin.host import config as host_config
     from navtwin.host.config import ConfigError
 
     try:
         return host_config.parse_filters(text)
-    except ConfigError as e:
+    except (ConfigError, MissingExtra) as e:  # a track's extra: its one line
         raise argparse.ArgumentTypeError(str(e).removeprefix("filters: ")) from None
 
 

@@ -16,7 +16,7 @@ def register(sub) -> None:
         "with the emulator's truth.csv: mean and max position error per filter beside paper "
         "000's figures, and a plot. Ctrl-C ends the run early and still reports.")
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
-                   help="a shipped scenario (office, corridor, corridor-outage) or a TOML file")
+                   help="a shipped scenario (office, corridor, corridor-outage, rssi-centroid, outage-bridging, calibration) or a TOML file")
     p.add_argument("--seed", type=seed, help=SEED_HELP)
     p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
     p.add_argument("--config", metavar="NAME|FILE",

@@ -23,7 +23,9 @@ pipeline in memory: no PTY, no file per seed), score each filter against truth, 
 filter the mean over seeds of its mean, max and RMS error and mean NEES, each with a 95 %
 Student-t interval, and the paired per-seed differences of mean error that decide a ranking;
 for rssi-centroid also paper 003 Table 1's layout: latitude and longitude error (m) mean, max
-and standard deviation per method beside 003's figures, and their paired differences.
+and standard deviation per method beside 003's figures, and their paired differences; for
+outage-bridging paper 004 Tables 2 and 3's: mean x, y, vx, vy errors in each training area and
+each WSN outage beside 004's figures, and Holm-corrected paired differences.
 Runs on dask.distributed: by default a LocalCluster of --workers processes that only this sweep
 can use (loopback, TLS on temporary credentials), else the scheduler of --scheduler (or of
 Dask's config, scheduler-address), with your Dask security config. Any number of workers
@@ -66,7 +68,7 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="Monte Carlo sweep of a scenario over seeds, on "
                        "dask.distributed, with confidence intervals", description=DESCRIPTION)
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
-                   help="a shipped scenario (office, corridor, corridor-outage) or a TOML file")
+                   help="a shipped scenario (office, corridor, corridor-outage, rssi-centroid, outage-bridging, calibration) or a TOML file")
     p.add_argument("--seeds", required=True, type=seed_range, metavar="A..B",
                    help=f"the seeds, both ends included, each {span(*SEEDS)}, e.g. 1..100")
     p.add_argument("--filters", type=filter_names, metavar="LIST",

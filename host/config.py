@@ -73,6 +73,7 @@ from navtwin.common.limits import ANCHOR_IDS, MAX_COORD_M, MAX_HEIGHT_M, RANGE_B
 from navtwin.common import tomlfile
 from navtwin.common.anchorgrid import AnchorGrid, expand
 from navtwin.common.geodesy import LocalFrame
+from navtwin.common.extras import require
 from navtwin.common.schema import REQUIRED, Invalid, between, boolean, build, key, plain, rows
 
 from . import calibration as range_calibration
@@ -336,12 +337,16 @@ def parse_filters(spec, where: str = "filters") -> tuple[str, ...]:
                           f'["kf", "ukf"], not {spec!r}')
     names = [n.strip() for n in names if n.strip()]
     if names == ["all"]:
-        return known
+        names = list(known)
     bad = [n for n in names if n not in known]
     if bad or not names:
         problem = f"unknown filter {bad[0]!r}" if bad else "no filter given"
         raise ConfigError(f"{where}: {problem}; use a comma list of {', '.join(known)} or all")
-    return tuple(n for n in known if n in names)
+    chosen = tuple(n for n in known if n in names)
+    for n in chosen:  # MissingExtra's one line, before a run begins
+        for module, extra in tracks.get(n).requires:
+            require(module, extra, n)
+    return chosen
 
 
 def _parse(doc: dict, source: str, name: str, directory: Path | None = None) -> HostConfig:

@@ -146,6 +146,9 @@ class Track:
     aided: ClassVar[bool] = True
     #: Has a state on the shared motion model: :meth:`predict` is called with the others.
     predicts: ClassVar[bool] = False
+    #: (module, extra) pairs of optional packages the track imports when it starts: checked
+    #: when it is named (host.config.parse_filters), so a run without them never begins.
+    requires: ClassVar[tuple[tuple[str, str], ...]] = ()
 
     def __init__(self, ctx: TrackContext, settings=None) -> None:
         self.ctx = ctx

@@ -38,6 +38,7 @@ def _gain(T: float, dt: float, process: tuple, measurement: tuple):
 class HinfTrack(RelativeTrack):
     name = "hinf"
     Settings = HinfSettings
+    requires = (("cvxpy", "lmi"), ("clarabel", "lmi"))
 
     def __init__(self, ctx, settings=None) -> None:
         super().__init__(ctx, settings)

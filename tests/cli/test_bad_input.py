@@ -446,6 +446,9 @@ MISSING_EXTRAS = {
                             "--filters", "kf", "--out", "o"], "rich", "sweep"),
     "report without matplotlib": (["report", "run"], "matplotlib", "plot"),
     "bench without digi-xbee": (["bench", "digi-open", "--quick"], "digi", "test"),
+    "replay of hinf without cvxpy": (["replay", str(ROOT / "fixtures" / "golden" / "outage-bridging"),
+                                      "--config", "outage-bridging", "--filters", "sins,hinf", "--out",
+                                      "est.jsonl"], "cvxpy", "lmi"),
 }
 
 
