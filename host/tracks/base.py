@@ -216,3 +216,34 @@ class Track:
 
     def count_reinit(self, cause: str) -> None:
         self.reinits[cause] += 1
+
+
+class OwnStrapdown:
+    """A track that corrects a strapdown of its own (a mixin of Track): ``nav``, a copy of the
+    estimator's taken at the IMU sample that ends the alignment, then stepped with every
+    sample the estimator accepts (the same samples, the same integration); ``t_nav`` is its
+    last sample's time. A subclass gives :meth:`started` and :meth:`stepped`."""
+
+    nav = None
+    t_nav: float | None = None
+
+    def started(self, t: float) -> None:
+        """The copy was taken at t."""
+
+    def stepped(self, t: float, dt: float) -> None:
+        """The strapdown was stepped dt to t."""
+
+    def imu(self, rec) -> None:
+        sins = self.ctx.sins
+        if sins is None:
+            return
+        if self.nav is None:  # the alignment ended with this sample: start from its strapdown
+            self.nav = sins.copy()
+            self.t_nav = rec.t
+            self.started(rec.t)
+            self.reinit_since = None
+            return
+        dt = rec.t - self.t_nav
+        self.nav.step(dt, tuple(map(float, rec.gyro)), tuple(map(float, rec.accel)))
+        self.t_nav = rec.t
+        self.stepped(rec.t, dt)

@@ -32,7 +32,7 @@ from navtwin.host.measurements import ImuSample
 from navtwin.host.measurements import Fix
 from navtwin.host.wsn import chi2_gate
 
-from .base import Track, estimate
+from .base import OwnStrapdown, Track, estimate
 
 
 @dataclass(frozen=True)
@@ -115,7 +115,7 @@ class ClosedLoopTrack(Track):
         return True
 
 
-class ErrorStateTrack(ClosedLoopTrack):
+class ErrorStateTrack(OwnStrapdown, ClosedLoopTrack):
     Settings = ErrorStateSettings
     extra = 0  # random-walk states after the nav part
 
@@ -155,19 +155,10 @@ class ErrorStateTrack(ClosedLoopTrack):
             self.filter.x[NAV:] = old.x[NAV:]
         self._gated_since = None
 
-    def imu(self, rec: ImuSample) -> None:
-        sins = self.ctx.sins
-        if sins is None:
-            return
-        if self.nav is None:  # the alignment ended with this sample: start from its strapdown
-            self.nav = sins.copy()
-            self._reset()
-            self.t_nav = rec.t
-            self.reinit_since = None
-            return
-        dt = rec.t - self.t_nav
-        self.nav.step(dt, tuple(map(float, rec.gyro)), tuple(map(float, rec.accel)))
-        self.t_nav = rec.t
+    def started(self, t: float) -> None:
+        self._reset()
+
+    def stepped(self, t: float, dt: float) -> None:
         if dt > 0.0:
             self.filter.predict(dt, self.nav.f_n)
 

@@ -51,7 +51,7 @@ import numpy as np
 from navtwin.common.schema import key, positive
 from navtwin.host.measurements import Fix, ImuSample
 
-from .base import Track, estimate
+from .base import OwnStrapdown, Track, estimate
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ def transition(dt: float) -> np.ndarray:
     return A
 
 
-class RelativeTrack(Track):
+class RelativeTrack(OwnStrapdown, Track):
     """The INS, the updates and the outages that 004's tracks share (module doc); a subclass
     gives :meth:`gain` (K for an update with prior covariance P^-)."""
 
@@ -105,8 +105,6 @@ class RelativeTrack(Track):
         self.T = float(s.period_s or ctx.cfg.cycle_s)
         self.Q = np.diag(s.process**2)
         self.R = np.diag(s.measurement**2)
-        self.nav = None
-        self.t_nav: float | None = None
         self.P = np.diag(s.measurement**2)
         self.t_P: float | None = None  # the time P is for
         self._aided: float | None = None
@@ -184,24 +182,17 @@ class RelativeTrack(Track):
             pv[:2] -= cp + lag * cv
             pv[2:] -= cv
 
-    def imu(self, rec: ImuSample) -> None:
-        sins = self.ctx.sins
-        if sins is None:
-            return
-        if self.nav is None:  # the alignment ended with this sample: start from its strapdown
-            self.nav = sins.copy()
-            self.t_nav = self.t_P = rec.t
-            sp, sv, _ = self.ctx.cfg.p0_sigma
-            self.P = np.diag([sp**2, sp**2, sv**2, sv**2])
-            self.reinit_since = None
-            self._keep()
-            return
-        self.nav.step(rec.t - self.t_nav, tuple(map(float, rec.gyro)), tuple(map(float, rec.accel)))
-        self.t_nav = rec.t
+    def started(self, t: float) -> None:
+        self.t_P = t
+        sp, sv, _ = self.ctx.cfg.p0_sigma
+        self.P = np.diag([sp**2, sp**2, sv**2, sv**2])
+        self._keep()
+
+    def stepped(self, t: float, dt: float) -> None:
         self._keep()
         last = self._last_fix
-        if last is not None and rec.t - last.t > self.settings.outage_after_s and not self.pending:
-            self.coast(rec.t)
+        if last is not None and t - last.t > self.settings.outage_after_s and not self.pending:
+            self.coast(t)
 
     def coast(self, t: float) -> None:
         """In an outage at t (no fix for ``outage_after_s``): the strapdown coasts."""
