@@ -328,7 +328,8 @@ class Multipath:
 
 @dataclass(frozen=True)
 class Ranging:
-    cycle_ms: float = key(100.0, "ms", "TDMA cycle: every anchor ranges the tag once per cycle",
+    cycle_ms: float = key(100.0, "ms", "TDMA cycle: every anchor (in-range: every one in range at "
+                          "its start) ranges the tag once per cycle",
                           between(1, 10000))
     slot_ms: float = key(25.0, "ms", "slot length; anchor number i of slot_order starts at i x slot",
                          positive(hi=10000))
