@@ -88,3 +88,20 @@ def test_misuse_is_one_line():
         LsSvm(0, 1)
     with pytest.raises(ValueError, match="before fit"):
         LsSvm().predict(np.zeros((1, 4)))
+
+
+def test_standardise_is_the_fit_on_standardised_inputs():
+    """standardise centres and scales each input by its training mean and deviation: the same
+    model as a plain fit on inputs so transformed, and blind to the inputs' units."""
+    rng = np.random.default_rng(8)
+    X = rng.normal([3.0, -1.0, 0.0], [0.3, 2.0, 0.01], (60, 3))
+    Y = np.column_stack([np.sin(X[:, 0] * 3), X[:, 1] ** 2, 50 * X[:, 2]])
+    Xq = rng.normal([3.0, -1.0, 0.0], [0.3, 2.0, 0.01], (7, 3))
+    mu, sd = X.mean(axis=0), X.std(axis=0)
+    ours = LsSvm(1.5, 100.0, standardise=True).fit(X, Y).predict(Xq)
+    plain = LsSvm(1.5, 100.0).fit((X - mu) / sd, Y).predict((Xq - mu) / sd)
+    np.testing.assert_allclose(ours, plain, rtol=1e-12, atol=1e-12)
+    units = np.array([1000.0, 0.01, 1e4])  # the same inputs in other units
+    again = LsSvm(1.5, 100.0, standardise=True).fit(X * units, Y).predict(Xq * units)
+    np.testing.assert_allclose(again, ours, rtol=1e-9, atol=1e-9)
+    assert select(X, Y, standardise=True).model.standardise
