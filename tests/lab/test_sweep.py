@@ -60,9 +60,14 @@ def test_the_local_cluster_runs_no_work_for_a_client_without_its_credentials():
         port = client.address.rpartition(":")[2]
         for address, security in ((client.address, None), (f"tcp://127.0.0.1:{port}", None),
                                   (client.address, Security.temporary())):
-            with pytest.raises((OSError, TypeError)):
+            ran = False
+            try:
                 with DaskClient(address, security=security, timeout="5s") as intruder:
                     intruder.submit(print, "ran").result(timeout=5)
+                    ran = True
+            except Exception:  # refused; how depends on Dask: OSError, TypeError, or on a loaded
+                pass  # box an AssertionError of its client's event loop (seen in CI)
+            assert not ran, address
         result = sweep.run("office", [1], ("kf",), duration=2.0, client=client)
     assert [r["status"] for r in result.rows] == ["ok"]
 
