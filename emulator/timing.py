@@ -95,14 +95,16 @@ class Fifo(Slack):
 
     @contextlib.contextmanager
     def applied(self):
-        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK,
-                              os.sched_param(PRIORITY))
-        try:
-            with super().applied():
+        # the slack first: Linux 6.7+ gives a real-time thread no slack at all (and ignores
+        # PR_SET_TIMERSLACK while it is one), so the ordinary thread's slack is saved here
+        with super().applied():
+            policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK,
+                                  os.sched_param(PRIORITY))
+            try:
                 yield
-        finally:
-            os.sched_setscheduler(0, policy, param)
+            finally:
+                os.sched_setscheduler(0, policy, param)
 
 
 #: mode name -> its class, best first: the order ``auto`` tries them in
