@@ -5,6 +5,7 @@ import os
 import pytest
 
 from navtwin.emulator import timing
+from navtwin.emulator.api import emulate
 from navtwin.emulator.runner import Emulation, RunError
 from navtwin.emulator.scenario import load_scenario
 
@@ -39,6 +40,12 @@ def test_cli_forced_mode_not_permitted_exits_2(no_fifo, capsys, tmp_path):
                      "--link-dir", tmp_path / "l")
     assert "fifo" in line and "CAP_SYS_NICE" in line
     assert not (tmp_path / "l").exists()  # refused before any port was made
+
+
+def test_the_api_passes_the_mode_to_the_emulator():
+    with emulate("office", speed=50, duration=1, timing="spin") as lab:
+        assert lab.info["timing"] == "spin"
+        assert lab.wait_done(timeout=30)["timing"] == "spin"
 
 
 def test_max_speed_has_no_timing_mode():
