@@ -417,7 +417,10 @@ class Emulation:
                     self._deliver(chunk, wall - t0 if paced else None)
                     delivered = True
             if delivered and paced and self.ports:
-                os.sched_yield()  # let a client woken by these writes run before we go on
+                # let a client woken by these writes run before we go on (under SCHED_FIFO
+                # this gives way to nothing: the client runs on another core, or when the
+                # loop sleeps again)
+                os.sched_yield()
             self.reached_ns = max(self.reached_ns, min(now, self.end_ns))
             if wall >= next_progress:
                 self._report(wall - t0)
