@@ -188,8 +188,8 @@ def command(scenario: str, *, seed: int | None = None, speed: str | float = "rea
             record: str | os.PathLike | None = None, overwrite: bool = False,
             timing: str = "auto") -> list[str]:
     """The ``navtwin emulate`` command line for these settings (run with this Python)."""
-    args = [sys.executable, "-m", "navtwin", "emulate", "--scenario", str(scenario), "--speed", str(speed),
-            "--timing", timing]
+    args = [sys.executable, "-m", "navtwin", "emulate", "--scenario", str(scenario),
+            "--speed", str(speed), "--timing", timing]
     for flag, value in (("--seed", seed), ("--duration", duration), ("--link-dir", link_dir),
                         ("--record", record)):
         if value is not None:

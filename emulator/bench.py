@@ -1,16 +1,18 @@
 """Benchmarks of the emulator runtime (not tests: they measure, they do not assert).
 
-``navtwin bench emulator-jitter [--seconds 60] [--scenarios office,outage-bridging] [--timings fifo,slack,spin]``
+``navtwin bench emulator-jitter [--seconds 60] [--scenarios office,outage-bridging]
+[--timings fifo,slack,spin]``
     for each scenario in turn, and each in every timing mode of ``--timings`` (emulator.timing),
     in one invocation (one JSON: a row per scenario and mode, and each one's p99s as a ratio
     of the first's: what a field of 1402 anchors costs the real time beside office, what
-    each timing mode buys), starts ``navtwin emulate --speed realtime --timing MODE`` (as a subprocess, like a user would), reads
-    the ``sins`` port with pyserial and reports how regular the SINS frames arrive: p50, p99
-    and max of |period - nominal| (nominal = 10 ms of the board's clock, from the scenario's
-    ppm), frames lost (gaps in seq), drift (the last frame's lateness minus the first's,
-    against the absolute schedule t_first + k x nominal), and, from a recording of the same
-    run, the emulator's own lateness (write time minus scheduled end of each SINS chunk, and
-    the recording's lateness histogram of the port), which separates the emulator's jitter from the reader's wake-up latency; and, as the peer
+    each timing mode buys), starts ``navtwin emulate --speed realtime --timing MODE`` (as a
+    subprocess, like a user would), reads the ``sins`` port with pyserial and reports how
+    regular the SINS frames arrive: p50, p99 and max of |period - nominal| (nominal = 10 ms of
+    the board's clock, from the scenario's ppm), frames lost (gaps in seq), drift (the last
+    frame's lateness minus the first's, against the absolute schedule t_first + k x nominal),
+    and, from a recording of the same run, the emulator's own lateness (write time minus
+    scheduled end of each SINS chunk, and the recording's lateness histogram of the port),
+    which separates the emulator's jitter from the reader's wake-up latency; and, as the peer
     in the same run, the same reader measure on a bare PTY pair written on an exact schedule
     (``bare_pty``): the floor of the kernel's PTY path on this machine.
 ``navtwin bench emulator-speed [--scenario office] [--repeat 3]``

@@ -18,15 +18,15 @@ written at wall time t0 + t (no drift; a late write never shifts later ones). Th
 sleeps in ``select`` on the attached ports until shortly before the deadline and then spins;
 how short, and what the kernel is asked for (real-time priority, timer slack), is the run's
 timing mode (emulator.timing), chosen when the run is made and applied to the thread that
-runs it for the run only. A FACTOR runs the same schedule at FACTOR x real time; ``max`` runs it as fast
-as the world can be generated. World events are generated in blocks: when paced, a second
-ahead before the clock starts and then, up to two seconds ahead, only in idle gaps longer
-than twice the slowest recent block, so generation does not delay a write (a thread
+runs it for the run only. A FACTOR runs the same schedule at FACTOR x real time; ``max``
+runs it as fast as the world can be generated. World events are generated in blocks: when
+paced, a second ahead before the clock starts and then, up to two seconds ahead, only in idle
+gaps longer than twice the slowest recent block, so generation does not delay a write (a thread
 would: it competes for the GIL exactly when a deadline is near). After writing to the
 PTYs the loop yields the CPU once, so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
-device times, are identical in every mode and timing mode; only host commands (read from the PTYs when
-they arrive) add answers on the ``xbee`` line.
+device times, are identical in every mode and timing mode; only host commands (read from
+the PTYs when they arrive) add answers on the ``xbee`` line.
 
 Clients' settings. Every CHECK_NS the attached ports' termios are read; while a client's
 rate, data bits or parity differ from its device's line, the port writes what the client's

@@ -40,7 +40,6 @@ import errno
 import functools
 import os
 
-SEC = 1_000_000_000
 PRIORITY = 10  # SCHED_FIFO priority: above ordinary threads, below the kernel's own (50)
 PR_SET_TIMERSLACK, PR_GET_TIMERSLACK = 29, 30  # <linux/prctl.h>
 SLACK_NS = 1  # the least timer slack the kernel takes (0 would mean "the default")
