@@ -185,7 +185,7 @@ def run_emulate(args) -> int:
                         link_dir=args.link_dir, record=args.record, timing=args.timing,
                         progress=progress)
     except (LinkDirError, RunError) as e:
-        raise UsageError(str(e)) from None
+        raise UsageError(flagged(str(e))) from None  # "timing: ..." -> "--timing ..."
     # stop cleanly, links removed, on Ctrl-C, kill and a closed terminal
     if args.timeout is not None and not (args.expect or args.fail_on):
         raise UsageError("--timeout bounds --expect/--fail-on; pass one of them, or "

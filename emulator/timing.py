@@ -126,8 +126,8 @@ def choose(name: str = "auto") -> Mode:
     try:
         return _checked(MODES[name])
     except OSError as e:
-        raise TimingError(f"timing {name}: not permitted here ({e.strerror or e}); "
-                          f"{FIXES[name]}, or use --timing auto") from None
+        raise TimingError(f"timing: {name} is not permitted here ({e.strerror or e}); "
+                          f"{FIXES[name]}, or choose auto") from None
 
 
 def _checked(cls: type[Mode]) -> Mode:

@@ -31,14 +31,14 @@ def test_auto_falls_to_slack_where_real_time_is_refused(no_fifo):
 
 
 def test_a_forced_mode_not_permitted_is_one_line(no_fifo):
-    with pytest.raises(RunError, match="timing fifo: not permitted.*--timing auto"):
+    with pytest.raises(RunError, match="^timing: fifo is not permitted.*choose auto$"):
         Emulation(load_scenario("office"), speed=1.0, ports=False, timing="fifo")
 
 
 def test_cli_forced_mode_not_permitted_exits_2(no_fifo, capsys, tmp_path):
     line = cli_error(capsys, "emulate", "--scenario", "office", "--timing", "fifo",
                      "--link-dir", tmp_path / "l")
-    assert "fifo" in line and "CAP_SYS_NICE" in line
+    assert "--timing fifo is not permitted" in line and "CAP_SYS_NICE" in line
     assert not (tmp_path / "l").exists()  # refused before any port was made
 
 
