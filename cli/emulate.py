@@ -10,6 +10,7 @@ import threading
 from pathlib import Path
 
 from navtwin.common.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
+from navtwin.emulator.timing import NAMES as TIMINGS
 
 from .main import UsageError, flagged, number, stop_on_signals
 
@@ -24,8 +25,9 @@ Run the emulated lab: the SINS board, the lab computer's XBee coordinator (API m
 nanoLOC gateway, each on a pseudo-terminal with a stable link (DIR/sins, DIR/xbee,
 DIR/nanoloc). On start it prints one JSON line {"ready": true, "ports": {...}, "pts": {...},
 ...} on stdout; it runs until the duration ends or SIGINT/SIGTERM, removes its links and
-prints a final {"done": true, ...} line with frames, bytes and drop counts per port, and
-per fault kind the injections and bytes touched (the recording's faults.jsonl lists each).
+prints a final {"done": true, ...} line with frames, bytes and drop counts per port (and in a
+paced run how late its writes were, "late"), and per fault kind the injections and bytes
+touched (the recording's faults.jsonl lists each).
 Progress goes to stderr every few seconds. While it runs, `navtwin ctl` (DIR/control)
 injects faults, unplugs and replugs ports.
 
@@ -53,6 +55,13 @@ def register(sub) -> None:
                    help="realtime (default) keeps the devices' absolute schedule on the wall "
                         f"clock; a FACTOR {span(*SPEEDS)} runs it that many times faster; max "
                         "as fast as possible. The bytes are the same at every speed")
+    p.add_argument("--timing", default="auto", choices=TIMINGS,
+                   help="how a paced run waits for its deadlines: fifo (SCHED_FIFO real-time "
+                        "priority and 1 ns timer slack), slack (1 ns timer slack), spin (neither; "
+                        "a longer busy-wait); auto (default) the first of these the process may "
+                        "use. The ready and done lines and the recording name it (\"timing\"); "
+                        "the done line and the recording count, per port, how late its writes "
+                        "were (docs/emulator.md, Timing)")
     p.add_argument("--link-dir", metavar="DIR",
                    help="directory for the port links, created 0700 (default: "
                         "$XDG_RUNTIME_DIR/navtwin or /tmp/navtwin-UID)")
@@ -173,9 +182,10 @@ def run_emulate(args) -> int:
     stop = threading.Event()
     try:
         emu = Emulation(scenario, args.seed, speed=args.speed, duration_s=args.duration,
-                        link_dir=args.link_dir, record=args.record, progress=progress)
+                        link_dir=args.link_dir, record=args.record, timing=args.timing,
+                        progress=progress)
     except (LinkDirError, RunError) as e:
-        raise UsageError(str(e)) from None
+        raise UsageError(flagged(str(e))) from None  # "timing: ..." -> "--timing ..."
     # stop cleanly, links removed, on Ctrl-C, kill and a closed terminal
     if args.timeout is not None and not (args.expect or args.fail_on):
         raise UsageError("--timeout bounds --expect/--fail-on; pass one of them, or "

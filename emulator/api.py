@@ -185,9 +185,11 @@ class Lab:
 
 def command(scenario: str, *, seed: int | None = None, speed: str | float = "realtime",
             duration: float | None = None, link_dir: str | os.PathLike | None = None,
-            record: str | os.PathLike | None = None, overwrite: bool = False) -> list[str]:
+            record: str | os.PathLike | None = None, overwrite: bool = False,
+            timing: str = "auto") -> list[str]:
     """The ``navtwin emulate`` command line for these settings (run with this Python)."""
-    args = [sys.executable, "-m", "navtwin", "emulate", "--scenario", str(scenario), "--speed", str(speed)]
+    args = [sys.executable, "-m", "navtwin", "emulate", "--scenario", str(scenario),
+            "--speed", str(speed), "--timing", timing]
     for flag, value in (("--seed", seed), ("--duration", duration), ("--link-dir", link_dir),
                         ("--record", record)):
         if value is not None:
@@ -201,7 +203,7 @@ def command(scenario: str, *, seed: int | None = None, speed: str | float = "rea
 def emulate(scenario: str = "office", *, seed: int | None = None, speed: str | float = "realtime",
             duration: float | None = None, link_dir: str | os.PathLike | None = None,
             record: str | os.PathLike | None = None, overwrite: bool = False,
-            ready_timeout: float = 60.0) -> Iterator[Lab]:
+            timing: str = "auto", ready_timeout: float = 60.0) -> Iterator[Lab]:
     """Start ``navtwin emulate`` and yield the running :class:`Lab` once its ports exist;
     on exit stop it (if still running) and remove its private link directory."""
     private = None
@@ -209,7 +211,8 @@ def emulate(scenario: str = "office", *, seed: int | None = None, speed: str | f
         private = link_dir = tempfile.mkdtemp(prefix="navtwin-lab-")
     try:
         lab = Lab(command(scenario, seed=seed, speed=speed, duration=duration, link_dir=link_dir,
-                          record=record, overwrite=overwrite), ready_timeout, str(scenario))
+                          record=record, overwrite=overwrite, timing=timing), ready_timeout,
+                  str(scenario))
         try:
             yield lab
         finally:

@@ -1,14 +1,17 @@
 """Benchmarks of the emulator runtime (not tests: they measure, they do not assert).
 
-``navtwin bench emulator-jitter [--seconds 60] [--scenarios office,outage-bridging]``
-    for each scenario in turn, in one invocation (one JSON: a row per scenario, and each
-    one's p99s as a ratio of the first's: what a field of 1402 anchors costs the real time
-    beside office), starts ``navtwin emulate --speed realtime`` (as a subprocess, like a user would), reads
-    the ``sins`` port with pyserial and reports how regular the SINS frames arrive: p50, p99
-    and max of |period - nominal| (nominal = 10 ms of the board's clock, from the scenario's
-    ppm), frames lost (gaps in seq), drift (the last frame's lateness minus the first's,
-    against the absolute schedule t_first + k x nominal), and, from a recording of the same
-    run, the emulator's own lateness (write time minus scheduled end of each SINS chunk),
+``navtwin bench emulator-jitter [--seconds 60] [--scenarios office,outage-bridging]
+[--timings fifo,slack,spin]``
+    for each scenario in turn, and each in every timing mode of ``--timings`` (emulator.timing),
+    in one invocation (one JSON: a row per scenario and mode, and each one's p99s as a ratio
+    of the first's: what a field of 1402 anchors costs the real time beside office, what
+    each timing mode buys), starts ``navtwin emulate --speed realtime --timing MODE`` (as a
+    subprocess, like a user would), reads the ``sins`` port with pyserial and reports how
+    regular the SINS frames arrive: p50, p99 and max of |period - nominal| (nominal = 10 ms of
+    the board's clock, from the scenario's ppm), frames lost (gaps in seq), drift (the last
+    frame's lateness minus the first's, against the absolute schedule t_first + k x nominal),
+    and, from a recording of the same run, the emulator's own lateness (write time minus
+    scheduled end of each SINS chunk, and the recording's lateness histogram of the port),
     which separates the emulator's jitter from the reader's wake-up latency; and, as the peer
     in the same run, the same reader measure on a bare PTY pair written on an exact schedule
     (``bare_pty``): the floor of the kernel's PTY path on this machine.
@@ -46,16 +49,20 @@ from pathlib import Path
 import numpy as np
 
 from navtwin.common.limits import SEEDS
-from navtwin.common.schema import between, key, takes
+from navtwin.common.schema import Check, between, key, takes
 
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import Frame, sins_decoder
 
 from navtwin.protocols.serial import wire_ns
 
+from .timing import NAMES as TIMINGS
 
-def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = None) -> dict:
-    """Frame-period jitter seen by a pyserial reader on the ``sins`` port in real time."""
+
+def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = None,
+           timing: str = "auto") -> dict:
+    """Frame-period jitter seen by a pyserial reader on the ``sins`` port in real time, the
+    emulator in timing mode *timing*."""
     import serial
 
     from .api import emulate
@@ -68,7 +75,7 @@ def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = N
     dec = sins_decoder()
     tmp = tempfile.TemporaryDirectory(prefix="navtwin-jitter-")
     with tmp, emulate(scenario, seed=seed, speed="realtime", duration=seconds + 2,
-                      record=Path(tmp.name) / "rec") as lab:
+                      record=Path(tmp.name) / "rec", timing=timing) as lab:
         with serial.Serial(lab.ports["sins"], 115200, timeout=1.0) as ser:
             end = time.monotonic() + seconds
             while time.monotonic() < end:
@@ -81,6 +88,7 @@ def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = N
         lab.stop()
         # the emulator's own lateness: write time minus the scheduled end of each chunk
         rec = Recording(Path(tmp.name) / "rec")
+        histogram = rec.meta["lateness"]["sins"]
         late = np.array([c.t_wall_ns - c.t_device_ns - wire_ns(len(c.data), 115200)
                          for c in rec.chunks("sins")]) / 1e6
     t = np.array(arrivals[1:], dtype=np.int64)  # the first read may start mid-frame
@@ -89,24 +97,27 @@ def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = N
     period = np.diff(t) / np.diff(k)
     dev = np.abs(period - nominal_ns) / 1e6
     drift = (t - t[0]) - k * nominal_ns  # lateness against the absolute schedule
-    return {"benchmark": "jitter", "scenario": scenario, "seconds": seconds, "frames": int(len(t)),
+    return {"benchmark": "jitter", "scenario": scenario, "timing": lab.info["timing"],
+            "seconds": seconds, "frames": int(len(t)),
             "lost": int(k[-1] - (len(k) - 1)), "nominal_ms": nominal_ns / 1e6,
             "p50_ms": float(np.percentile(dev, 50)), "p99_ms": float(np.percentile(dev, 99)),
             "max_ms": float(dev.max()),
             "drift_ms": float((np.median(drift[-100:]) - np.median(drift[:100])) / 1e6),
             "emulator_late_p50_ms": float(np.percentile(late, 50)),
             "emulator_late_p99_ms": float(np.percentile(late, 99)),
-            "emulator_late_max_ms": float(late.max()),
+            "emulator_late_max_ms": float(late.max()), "emulator_late": histogram,
             # the peer in the same run: a bare PTY pair with exactly timed writes
             "bare_pty": pty_floor(min(len(t), 3000), int(round(nominal_ns)))}
 
 
-def jitter_beside(seconds: float, scenarios: list[str]) -> dict:
-    """:func:`jitter` of each scenario in turn: a row each, and each row's reader and
-    emulator p99 as a ratio of the first row's."""
-    rows = [jitter(seconds, name) for name in scenarios]
+def jitter_beside(seconds: float, scenarios: list[str], timings: list[str] = ("auto",)) -> dict:
+    """:func:`jitter` of each scenario in turn, each in every timing mode of *timings*: a row
+    each, and each row's reader and emulator p99 as a ratio of the first row's (keyed
+    ``scenario/mode``, the mode the run took)."""
+    rows = [jitter(seconds, name, timing=mode) for name in scenarios for mode in timings]
     first = rows[0]
-    ratio = {r["scenario"]: {k: r[k] / first[k] for k in ("p99_ms", "emulator_late_p99_ms")}
+    ratio = {f"{r['scenario']}/{r['timing']}": {k: r[k] / first[k]
+                                              for k in ("p99_ms", "emulator_late_p99_ms")}
              for r in rows[1:]}
     return {"benchmark": "jitter", "seconds": seconds, "rows": rows, "p99_ratio_to_first": ratio}
 
@@ -269,6 +280,11 @@ class RealTime:
                                 "(10 quick)", between(1, 3600))
     scenarios: str = key("office", "", "the scenarios run one after another, comma-separated "
                          "names or .toml paths (office,outage-bridging: the field beside office)")
+    timings: str = key("auto", "", "the timing modes each scenario runs in, one after another "
+                       "(fifo,slack,spin: what each buys)",
+                       Check(lambda v: set(v.split(",")) <= set(TIMINGS),
+                             f"must be modes of {', '.join(TIMINGS)}, comma-separated",
+                             "use e.g. fifo,slack,spin"))
 
 
 @dataclass(frozen=True)
@@ -288,7 +304,8 @@ def benchmarks() -> dict:
     @takes(RealTime)
     def emulator_jitter(quick: bool, s: RealTime) -> dict:
         """emulator: SINS frame-period jitter seen by a pyserial reader, real time (goal p99 <= 0.3 ms)"""
-        return jitter_beside(s.seconds or (10.0 if quick else 60.0), s.scenarios.split(","))
+        return jitter_beside(s.seconds or (10.0 if quick else 60.0), s.scenarios.split(","),
+                             s.timings.split(","))
 
     @takes(Repeat)
     def digi_xbee_open(quick: bool, s: Repeat) -> dict:

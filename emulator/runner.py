@@ -15,16 +15,18 @@ dropped whole. Times are integer nanoseconds since the run started.
 
 Speeds. ``realtime`` keeps an absolute schedule: the chunk that ends at virtual time t is
 written at wall time t0 + t (no drift; a late write never shifts later ones). The loop
-sleeps in ``select`` on the attached ports until 0.25 ms before the deadline and
-then spins. A FACTOR runs the same schedule at FACTOR x real time; ``max`` runs it as fast
-as the world can be generated. World events are generated in blocks: when paced, a second
-ahead before the clock starts and then, up to two seconds ahead, only in idle gaps longer
-than twice the slowest recent block, so generation does not delay a write (a thread
+sleeps in ``select`` on the attached ports until shortly before the deadline and then spins;
+how short, and what the kernel is asked for (real-time priority, timer slack), is the run's
+timing mode (emulator.timing), chosen when the run is made and applied to the thread that
+runs it for the run only. A FACTOR runs the same schedule at FACTOR x real time; ``max``
+runs it as fast as the world can be generated. World events are generated in blocks: when
+paced, a second ahead before the clock starts and then, up to two seconds ahead, only in idle
+gaps longer than twice the slowest recent block, so generation does not delay a write (a thread
 would: it competes for the GIL exactly when a deadline is near). After writing to the
 PTYs the loop yields the CPU once, so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
-device times, are identical in every mode; only host commands (read from the PTYs when
-they arrive) add answers on the ``xbee`` line.
+device times, are identical in every mode and timing mode; only host commands (read from
+the PTYs when they arrive) add answers on the ``xbee`` line.
 
 Clients' settings. Every CHECK_NS the attached ports' termios are read; while a client's
 rate, data bits or parity differ from its device's line, the port writes what the client's
@@ -37,7 +39,10 @@ monotonic ns since the run started when it was written to the PTY. The recording
 truth.csv up to the virtual time reached, are flushed every ``FLUSH_S`` of wall time (when
 paced, in an idle gap, as world generation is, but never more than ``FLUSH_S`` late; at max
 speed also every ``MAX_BLOCK_NS`` of virtual time), so a killed run leaves a replayable
-prefix. A write that fails ends the run (``record_error``).
+prefix. A write that fails ends the run (``record_error``). A paced run counts, per port,
+how late each chunk was written (emulator.timing.Lateness: the loop's wake-up that wrote it,
+``t_wall_ns``, minus the chunk's end in device time over the speed), in its summary and the
+recording's meta (``lateness``), beside its ``timing`` mode.
 
 The air. The frames the radio hop puts on the air (emulator.world ``air``: each attempt of
 the router's packets, lost or received, and the coordinator's MAC ACKs; the coordinator's
@@ -64,6 +69,7 @@ the in-memory run (``lab.run``) takes the lab's bytes from here, with no PTY and
 """
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import select
@@ -86,12 +92,12 @@ from .pty import LinkDir, PtyPort
 from .radio import AirFrame
 from .rng import stream
 from .tap import SOCKET as TAP_SOCKET, TapServer
+from .timing import Lateness, Mode, TimingError, choose as choose_timing
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
 from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked
 from .uart_rx import ClientView, Framing
 
 SEC = 1_000_000_000
-SPIN_NS = 250_000  # busy-wait for the last 0.25 ms before a deadline (select overshoots ~0.1 ms)
 CHECK_NS = 10_000_000  # how often detached ports are looked at for a new client
 PROGRESS_NS = 3 * SEC  # wall time between progress reports
 PACED_BLOCK_NS = 100_000_000  # world generation step when paced, done in idle gaps ...
@@ -177,7 +183,7 @@ class Emulation:
     def __init__(self, scenario, seed: int | None = None, *, speed: float | None = 1.0,
                  duration_s: float | None = None, link_dir: str | os.PathLike | None = None,
                  record: str | os.PathLike | None = None, ports: bool = True,
-                 response_delay_ns: int | None = None,
+                 response_delay_ns: int | None = None, timing: str = "auto",
                  progress: Callable[[str], None] | None = None,
                  sink: Callable[[Chunk], None] | None = None,
                  air_sink: Callable[[AirFrame], None] | None = None) -> None:
@@ -186,6 +192,13 @@ class Emulation:
         self.scenario = scenario
         self.seed = scenario.seed if seed is None else int(seed)
         self.speed = speed
+        #: how the paced loop waits (emulator.timing); None at --speed max, which never waits
+        self.timing: Mode | None = None
+        if speed is not None:
+            try:
+                self.timing = choose_timing(timing)
+            except TimingError as e:
+                raise RunError(str(e)) from None
         self.t0_monotonic_ns: int | None = None  # set when the clock starts
         self.world = World(scenario, self.seed)
         full = self.world.duration_ns
@@ -198,6 +211,7 @@ class Emulation:
         self.air_sink = air_sink
         self.coordinator = self._coordinator(response_delay_ns)
         self.devices = {p.name: DEVICES.get(p.device)(self, p) for p in lab_ports.listed()}
+        self.lateness = Lateness(self.devices)  # paced runs: per port, written how late
         bauds = {name: dev.settings["baud"] for name, dev in self.devices.items()}
         # a recorded run has its entries in faults.jsonl; others keep them in memory
         self.ledger = Ledger(self._record_fault if record is not None else None,
@@ -297,7 +311,7 @@ class Emulation:
         rec = RecordingWriter(directory, replace=True, meta={
             "source": "navtwin emulate", "scenario": self.scenario.name, "seed": self.seed,
             "speed": speed_name(self.speed), "duration_s": self.end_ns / SEC,
-            "ports": self.port_settings(),
+            "ports": self.port_settings(), **self._timing_info(),
             "clocks": {"t_device_ns": "ns since the run started when the chunk's first byte "
                                       "leaves the device's UART",
                        "t_wall_ns": "monotonic ns since the run started when the chunk was "
@@ -346,11 +360,15 @@ class Emulation:
         return {"ready": True, "ports": dict(self.links),
                 "pts": {n: p.pts for n, p in self.ports.items()},
                 "scenario": self.scenario.name, "seed": self.seed, "speed": speed_name(self.speed),
-                "duration_s": self.end_ns / SEC,
+                "duration_s": self.end_ns / SEC, **self._timing_info(),
                 "link_dir": str(self.link_dir.path) if self.link_dir else None,
                 "control": str(self.control.path) if self.control else None,
                 "tap": str(self.tap.path) if self.tap else None,
                 "pid": os.getpid()}
+
+    def _timing_info(self) -> dict:
+        """``timing``: the paced run's mode (emulator.timing); none at --speed max."""
+        return {"timing": self.timing.name} if self.timing is not None else {}
 
     # -- the loop ---------------------------------------------------------------------------
     def run(self, stop: threading.Event | None = None) -> dict:
@@ -369,7 +387,8 @@ class Emulation:
         next_progress = t0 + PROGRESS_NS if self.progress else END
         next_flush = t0 + FLUSH_NS if self.recorder is not None else END
         try:
-            self._loop(stop, feed, paced, t0, next_check, next_progress, next_flush)
+            with self.timing.applied() if paced else contextlib.nullcontext():
+                self._loop(stop, feed, paced, t0, next_check, next_progress, next_flush)
         except RecordingWriteError as e:
             self.record_error = e
             self.interrupted = True
@@ -398,7 +417,10 @@ class Emulation:
                     self._deliver(chunk, wall - t0 if paced else None)
                     delivered = True
             if delivered and paced and self.ports:
-                os.sched_yield()  # let a client woken by these writes run before we go on
+                # let a client woken by these writes run before we go on (under SCHED_FIFO
+                # this gives way to nothing: the client runs on another core, or when the
+                # loop sleeps again)
+                os.sched_yield()
             self.reached_ns = max(self.reached_ns, min(now, self.end_ns))
             if wall >= next_progress:
                 self._report(wall - t0)
@@ -421,7 +443,8 @@ class Emulation:
                 continue
             deadline = t0 + int(target / self.speed)
             if (feed.known_ns < now + LOOKAHEAD_NS and not feed.exhausted
-                    and deadline - time.monotonic_ns() > 2 * feed.cost_ns + 2 * SPIN_NS):
+                    and deadline - time.monotonic_ns()
+                    > 2 * feed.cost_ns + 2 * self.timing.spin_ns):
                 for ev in feed.step():  # generate ahead while there is time to spare
                     self._enqueue(ev)
                 continue
@@ -434,21 +457,24 @@ class Emulation:
             return wall >= next_flush or self.reached_ns >= self._truth_ns + MAX_BLOCK_NS
         idle_ns = t0 + int(target / self.speed) - wall  # until the next write is due
         return wall >= next_flush and (wall >= next_flush + FLUSH_NS
-                                       or idle_ns > 2 * self._flush_cost_ns + 2 * SPIN_NS)
+                                       or idle_ns > 2 * self._flush_cost_ns
+                                       + 2 * self.timing.spin_ns)
 
     def _wait(self, deadline: int, check_at: int) -> None:
-        """Sleep until *deadline* (monotonic ns) or a client writes; spin the last SPIN_NS."""
+        """Sleep until *deadline* (monotonic ns) or a client writes; spin the last
+        ``spin_ns`` of the timing mode, never longer (a SCHED_FIFO thread must sleep)."""
         fds = [p.fd for p in self.ports.values() if p.attached]
         if self.control is not None:
             fds += self.control.fds() + self.tap.fds()
         now = time.monotonic_ns()
-        sleep_until = min(deadline - SPIN_NS, check_at)
+        spin_from = deadline - self.timing.spin_ns
+        sleep_until = min(spin_from, check_at)
         if sleep_until > now:
             r, _, _ = select.select(fds, [], [], (sleep_until - now) / SEC)
             now = time.monotonic_ns()
         else:
             r = []
-        if r or now < deadline - SPIN_NS:
+        if r or now < spin_from:
             return  # input, or time to look at the ports: the loop comes back here
         while time.monotonic_ns() < deadline:
             pass
@@ -502,6 +528,8 @@ class Emulation:
         self.lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
 
     def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
+        if wall_ns is not None:
+            self.lateness.add(chunk.port, wall_ns - int(chunk.end_ns / self.speed))
         port = self.ports.get(chunk.port)
         if port is not None:  # the recording below keeps the device's bytes, not this view
             port.write(self.views[chunk.port].view(chunk.start_ns, chunk.data,
@@ -666,10 +694,12 @@ class Emulation:
             if name in self.ports:
                 entry.update(self.ports[name].stats())
                 entry.update(self.views[name].stats())
+            if self.timing is not None:
+                entry["late"] = self.lateness.histograms()[name]
             ports[name] = entry
         return {"done": True, "scenario": self.scenario.name, "seed": self.seed,
-                "speed": speed_name(self.speed), "virtual_s": self.reached_ns / SEC,
-                "interrupted": self.interrupted, "ports": ports,
+                "speed": speed_name(self.speed), **self._timing_info(),
+                "virtual_s": self.reached_ns / SEC, "interrupted": self.interrupted, "ports": ports,
                 "faults": self.ledger.totals(),  # per kind: injections, bytes touched
                 # scenario time 0 on this machine's CLOCK_MONOTONIC (paced runs), so a host on
                 # the same machine can put its estimates on the scenario's time for evaluation
@@ -686,6 +716,8 @@ class Emulation:
         if rec is not None:
             rec.meta["interrupted"] = self.interrupted
             rec.meta["virtual_s"] = self.reached_ns / SEC
+            if self.timing is not None:
+                rec.meta["lateness"] = self.lateness.histograms()
             for finish in (lambda: self._flush(rec, max(self.reached_ns, 1)), rec.close):
                 try:
                     finish()

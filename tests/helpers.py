@@ -8,8 +8,10 @@ paper's survey (shared/specs/scenarios.md). Fixtures live in tests/conftest.py.
 from __future__ import annotations
 
 import dataclasses
+import os
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 from navtwin.cli.main import main
@@ -89,3 +91,20 @@ def tight(method: str) -> dict:
     """An EstimatorConfig's ``settings`` that make the EKF and UKF measure ranges by *method*
     (``"toa"``: each range, ``"tdoa"``: each cycle's differences; their ``tight`` key)."""
     return {"ekf": TightSettings(tight=method), "ukf": UkfSettings(tight=method)}
+
+
+def fifo_permitted() -> bool:
+    """Whether this process may take SCHED_FIFO, asked of the kernel on a thread of its own."""
+    answer = []
+
+    def probe():
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            answer.append(True)
+        except PermissionError:
+            answer.append(False)
+
+    t = threading.Thread(target=probe)  # the probe's policy dies with its thread
+    t.start()
+    t.join()
+    return answer[0]

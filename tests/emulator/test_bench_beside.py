@@ -1,23 +1,50 @@
-"""emulator-jitter beside another scenario: one invocation runs each scenario of
-``--scenarios`` in turn and gives a row each and their p99s against the first's."""
+"""emulator-jitter beside another scenario or timing mode: one invocation runs each scenario
+of ``--scenarios`` in turn, in each mode of ``--timings``, and gives a row each and their p99s
+against the first's."""
 import pytest
 
 from navtwin.cli.bench import available, settings
+from navtwin.cli.main import UsageError
 from navtwin.emulator import bench
 
 
 def test_a_row_per_scenario_and_the_p99_ratios(monkeypatch):
     runs = []
 
-    def fake(seconds, scenario):
-        runs.append((seconds, scenario))
+    def fake(seconds, scenario, timing):
+        runs.append((seconds, scenario, timing))
         p99 = {"office": 0.2, "outage-bridging": 0.3}[scenario]
-        return {"benchmark": "jitter", "scenario": scenario, "p99_ms": p99, "emulator_late_p99_ms": p99 / 10}
+        return {"benchmark": "jitter", "scenario": scenario, "timing": "fifo", "p99_ms": p99,
+                "emulator_late_p99_ms": p99 / 10}
 
     monkeypatch.setattr(bench, "jitter", fake)
     run = available()["emulator-jitter"]
     out = run(False, settings("emulator-jitter", run.Settings, {"seconds": "5", "scenarios": "office,outage-bridging"}))
-    assert runs == [(5.0, "office"), (5.0, "outage-bridging")]
+    assert runs == [(5.0, "office", "auto"), (5.0, "outage-bridging", "auto")]
     assert [r["scenario"] for r in out["rows"]] == ["office", "outage-bridging"]
-    ratio = out["p99_ratio_to_first"]["outage-bridging"]
+    ratio = out["p99_ratio_to_first"]["outage-bridging/fifo"]
     assert ratio == {"p99_ms": pytest.approx(1.5), "emulator_late_p99_ms": pytest.approx(1.5)}
+
+
+def test_a_row_per_timing_mode_beside_the_first(monkeypatch):
+    runs = []
+
+    def fake(seconds, scenario, timing):
+        runs.append(timing)
+        p99 = {"fifo": 0.1, "slack": 0.2, "spin": 0.4}[timing]
+        return {"benchmark": "jitter", "scenario": scenario, "timing": timing, "p99_ms": p99,
+                "emulator_late_p99_ms": p99}
+
+    monkeypatch.setattr(bench, "jitter", fake)
+    run = available()["emulator-jitter"]
+    out = run(False, settings("emulator-jitter", run.Settings,
+                              {"seconds": "5", "timings": "fifo,slack,spin"}))
+    assert runs == ["fifo", "slack", "spin"]
+    assert {k: v["p99_ms"] for k, v in out["p99_ratio_to_first"].items()} == \
+        {"office/slack": pytest.approx(2.0), "office/spin": pytest.approx(4.0)}
+
+
+def test_an_unknown_timing_mode_is_one_line():
+    run = available()["emulator-jitter"]
+    with pytest.raises(UsageError, match="timings.*fifo,slack,spin"):
+        settings("emulator-jitter", run.Settings, {"timings": "fifo,fast"})

@@ -10,6 +10,7 @@ from navtwin.emulator.runner import SEC, Emulation, parse_speed
 from navtwin.emulator.uart import END, Line, Wire
 from navtwin.protocols.serial import wire_ns
 from navtwin.emulator.scenario import load_scenario
+from navtwin.emulator.timing import BINS, MODES
 from navtwin.emulator.truth import read_truth_csv
 from navtwin.emulator.world import World
 from navtwin.protocols import xbee
@@ -17,6 +18,8 @@ from navtwin.protocols.ports import names
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.stream import (DecodeError, Frame, XBeeDecoder, XBeeSinsChain, nanoloc_decoder,
                               sins_decoder)
+
+from ..helpers import fifo_permitted
 
 PORTS = names()  # the lab's ports, in its order
 
@@ -166,9 +169,10 @@ def test_same_seed_same_bytes_other_seed_different(tmp_path, office):
         assert a.read_bytes(port) != c.read_bytes(port)
 
 
-def test_paced_and_max_speed_give_identical_recordings(tmp_path, office):
-    fast, _ = record(tmp_path / "max", office, duration_s=2)
-    paced, summary = record(tmp_path / "x25", office, duration_s=2, speed=25.0)
+@pytest.mark.parametrize("mode", [m for m in MODES if m != "fifo" or fifo_permitted()])
+def test_paced_and_max_speed_give_identical_recordings(tmp_path, office, mode):
+    fast, fast_summary = record(tmp_path / "max", office, duration_s=2)
+    paced, summary = record(tmp_path / "x25", office, duration_s=2, speed=25.0, timing=mode)
     assert not summary["interrupted"]
     for port in PORTS:
         assert fast.read_bytes(port) == paced.read_bytes(port)
@@ -176,6 +180,15 @@ def test_paced_and_max_speed_give_identical_recordings(tmp_path, office):
     walls = [c.t_wall_ns for c in paced.chunks("sins")]
     assert all(w is not None for w in walls) and walls == sorted(walls)
     assert all(c.t_wall_ns is None for c in fast.chunks("sins"))
+    # the paced run's mode and its lateness histogram: every chunk written, counted once
+    assert summary["timing"] == paced.meta["timing"] == mode
+    for port in PORTS:
+        late = summary["ports"][port]["late"]
+        assert list(late) == list(BINS) and paced.meta["lateness"][port] == late
+        assert sum(late.values()) == summary["ports"][port]["frames"] \
+            == len(list(paced.chunks(port))) > 0
+    assert "timing" not in fast.meta and "lateness" not in fast.meta
+    assert "late" not in fast_summary["ports"]["sins"]
 
 
 def test_recording_decodes_into_clean_consistent_streams(tmp_path, office):
