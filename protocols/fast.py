@@ -74,19 +74,19 @@ def compile_flat(st: c.Struct) -> tuple[Callable, int | None]:
     fixed = layout.size
     must_equal = exact and greedy is None
     unpack_from = layout.unpack_from
+    # where each field sits in the unpacked tuple: an index, or a slice for an array (which so
+    # comes out as a tuple); one comprehension per frame, no branch per field
+    plan, k = [], 0
+    for name, n in names:
+        plan.append((name, k if n == 1 else slice(k, k + n)))
+        k += n
+    plan = tuple(plan)
 
     def parse(buf, start: int, size: int):
         if size < fixed or (must_equal and size != fixed):
             return None
         values = unpack_from(buf, start)
-        out = {}
-        k = 0
-        for name, n in names:
-            if n == 1:
-                out[name] = values[k]
-            else:
-                out[name] = values[k:k + n]
-            k += n
+        out = {name: values[at] for name, at in plan}
         if greedy is not None:
             out[greedy] = bytes(buf[start + fixed:start + size])
         return out

@@ -147,7 +147,8 @@ class Decoder:
         raise NotImplementedError
 
     def _frame(self, frame: Frame) -> None:
-        self._close_garbage(frame.offset)
+        if self._garbage_at >= 0:
+            self._close_garbage(frame.offset)
         self.frames += 1
         self._out.append(frame)
 
@@ -209,7 +210,8 @@ class LengthFramed(Decoder):
         raise NotImplementedError
 
     def _scan(self, final: bool) -> int:
-        buf, base, sync, header = self._buf, self._base, self.sync, self.header
+        # a bytes copy of the buffer: its slices are the frames' raw bytes with no second copy
+        buf, base, sync, header = bytes(self._buf), self._base, self.sync, self.header
         size_of, intact, take, garbage = self._size, self._intact, self._take, self._garbage
         n = len(buf)
         i = 0
@@ -232,7 +234,7 @@ class LengthFramed(Decoder):
             elif not intact(buf, j, j + size):
                 self._error(self.integrity, base + j, size)
             else:
-                take(base + j, bytes(buf[j:j + size]))
+                take(base + j, buf[j:j + size])
                 i = j + size
                 continue
             self._garbage(base + j, 1)  # resync one byte after the failed start
@@ -300,10 +302,6 @@ class XBeeDecoder(LengthFramed):
         if escaped:
             self._scan = self._scan_escaped
 
-    def _emit(self, offset: int, raw: bytes, data: bytes) -> None:
-        """An intact frame with its unescaped frame data (type + fields)."""
-        self._accept(offset, raw, data[0], _XBEE_PARSERS.get(data[0]), data, 1, len(data) - 1)
-
     # API mode 1: the shared length-framed scan
     def _size(self, buf, j: int) -> tuple[int, bool]:
         length = buf[j + 1] << 8 | buf[j + 2]
@@ -313,11 +311,12 @@ class XBeeDecoder(LengthFramed):
         return sum(buf[j + 3:end]) & 0xFF == 0xFF
 
     def _take(self, offset: int, raw: bytes) -> None:
-        self._emit(offset, raw, raw[3:-1])
+        ftype = raw[3]
+        self._accept(offset, raw, ftype, _XBEE_PARSERS.get(ftype), raw, 4, len(raw) - 5)
 
     # API mode 2: a candidate runs to the next bare 7E
     def _scan_escaped(self, final: bool) -> int:
-        buf, base = self._buf, self._base
+        buf, base = bytes(self._buf), self._base  # (as in LengthFramed._scan)
         n = len(buf)
         i = 0
         while True:
@@ -325,7 +324,8 @@ class XBeeDecoder(LengthFramed):
             if j < 0:
                 self._garbage(base + i, n - i)
                 return n
-            self._garbage(base + i, j - i)
+            if j > i:
+                self._garbage(base + i, j - i)
             k = buf.find(0x7E, j + 1)
             # a bare 7E only ever starts a frame: the candidate cannot reach past it
             stop = n if k < 0 else k
@@ -349,9 +349,13 @@ class XBeeDecoder(LengthFramed):
                 else:
                     kind, size = TRUNCATED, stop - j
             else:
-                end = j + 1 + _raw_extent(seg, need)
+                # the usual case, a frame running exactly to the next 7E, needs no extent count
+                end = stop if used == len(seg) and len(u) == need else \
+                    j + 1 + _raw_extent(seg, need)
                 if sum(u[2:need]) & 0xFF == 0xFF:
-                    self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
+                    ftype = u[2]
+                    self._accept(base + j, buf[j:end], ftype, _XBEE_PARSERS.get(ftype), u, 3,
+                                 need - 4)
                     i = end
                     continue
                 kind, size = BAD_CHECKSUM, end - j
