@@ -73,23 +73,25 @@ def compile_flat(st: c.Struct) -> tuple[Callable, int | None]:
     layout = struct.Struct(fmt)
     fixed = layout.size
     must_equal = exact and greedy is None
-    unpack_from = layout.unpack_from
-    # where each field sits in the unpacked tuple: an index, or a slice for an array (which so
-    # comes out as a tuple); one comprehension per frame, no branch per field
-    plan, k = [], 0
+    # The parser is generated from the declaration, as namedtuple and dataclasses generate
+    # theirs: a dict display ({"seq": v[0], "words": v[1:12]}) builds the fields about 3x
+    # faster than any loop over them. Its source holds only the declaration's field names (as
+    # literals) and offsets, never a byte of input.
+    items, k = [], 0
     for name, n in names:
-        plan.append((name, k if n == 1 else slice(k, k + n)))
+        items.append(f"{name!r}: v[{k}]" if n == 1 else f"{name!r}: v[{k}:{k + n}]")
         k += n
-    plan = tuple(plan)
-
-    def parse(buf, start: int, size: int):
-        if size < fixed or (must_equal and size != fixed):
-            return None
-        values = unpack_from(buf, start)
-        out = {name: values[at] for name, at in plan}
-        if greedy is not None:
-            out[greedy] = bytes(buf[start + fixed:start + size])
-        return out
+    if greedy is not None:
+        items.append(f"{greedy!r}: bytes(buf[start + {fixed}:start + size])")
+    check = f"size != {fixed}" if must_equal else f"size < {fixed}"
+    source = (f"def parse(buf, start, size):\n"
+              f"    if {check}:\n"
+              f"        return None\n"
+              f"    v = unpack_from(buf, start)\n"
+              f"    return {{{', '.join(items)}}}\n")
+    namespace = {"unpack_from": layout.unpack_from}
+    exec(compile(source, f"<fast parser {fmt}>", "exec"), namespace)
+    parse = namespace["parse"]
 
     return parse, (fixed if must_equal else None)
 
