@@ -146,12 +146,6 @@ class Decoder:
         With *final* (end of stream) every byte must be consumed."""
         raise NotImplementedError
 
-    def _frame(self, frame: Frame) -> None:
-        if self._garbage_at >= 0:
-            self._close_garbage(frame.offset)
-        self.frames += 1
-        self._out.append(frame)
-
     def _garbage(self, offset: int, size: int) -> None:
         """Bytes [offset, offset+size) belong to no frame."""
         if size and self._garbage_at < 0:
@@ -177,22 +171,24 @@ class Decoder:
         *parser* (a :func:`navtwin.protocols.fast.parser_for` pair), kept raw when the type is not
         declared, malformed when the body does not fit its layout."""
         if parser is None:
-            self._frame(Frame(self.format, offset, raw, ftype,
-                              {"payload": bytes(data[start:start + size])}, False))
-            return
-        fields = parser[0](data, start, size)
-        if fields is None:
-            self._error(MALFORMED, offset, len(raw))
-            self._garbage(offset, len(raw))
-            return
-        self._frame(Frame(self.format, offset, raw, ftype, fields))
+            fields, known = {"payload": bytes(data[start:start + size])}, False
+        else:
+            fields, known = parser[0](data, start, size), True
+            if fields is None:
+                self._error(MALFORMED, offset, len(raw))
+                self._garbage(offset, len(raw))
+                return
+        if self._garbage_at >= 0:
+            self._close_garbage(offset)
+        self.frames += 1
+        self._out.append(Frame(self.format, offset, raw, ftype, fields, known))
 
 
 class LengthFramed(Decoder):
     """Frames that start with a sync pattern and say their length in a header: the scan and
     its resync rule, shared by the SINS/nanoLOC framing and XBee API mode 1. A subclass
     gives ``sync``, ``header`` (bytes needed to know the size), ``integrity`` (the error kind
-    of a failed check) and the three methods below."""
+    of a failed check) and the two methods below."""
 
     sync: bytes
     header: int
@@ -202,17 +198,15 @@ class LengthFramed(Decoder):
         """(claimed frame size, whether any frame can have it) of the candidate at *j*."""
         raise NotImplementedError
 
-    def _intact(self, buf, j: int, end: int) -> bool:
-        raise NotImplementedError
-
-    def _take(self, offset: int, raw: bytes) -> None:
-        """Parse and emit an intact frame."""
+    def _take(self, buf: bytes, j: int, end: int, offset: int) -> bool:
+        """Parse and emit the candidate ``buf[j:end]`` (at stream *offset*) if it passes the
+        integrity check; whether it did. (One call per frame: the check and the parse.)"""
         raise NotImplementedError
 
     def _scan(self, final: bool) -> int:
         # a bytes copy of the buffer: its slices are the frames' raw bytes with no second copy
         buf, base, sync, header = bytes(self._buf), self._base, self.sync, self.header
-        size_of, intact, take, garbage = self._size, self._intact, self._take, self._garbage
+        size_of, take, garbage = self._size, self._take, self._garbage
         n = len(buf)
         i = 0
         while True:
@@ -231,12 +225,11 @@ class LengthFramed(Decoder):
                 if not final:
                     return j
                 self._error(TRUNCATED, base + j, n - j)
-            elif not intact(buf, j, j + size):
-                self._error(self.integrity, base + j, size)
-            else:
-                take(base + j, buf[j:j + size])
+            elif take(buf, j, j + size, base + j):
                 i = j + size
                 continue
+            else:
+                self._error(self.integrity, base + j, size)
             self._garbage(base + j, 1)  # resync one byte after the failed start
             i = j + 1
 
@@ -259,11 +252,13 @@ class CrcFramedDecoder(LengthFramed):
         # a declared type of fixed size must say exactly that; others are skipped by len
         return HEADER + length + TRAILER, parser is None or parser[1] in (None, length)
 
-    def _intact(self, buf, j: int, end: int) -> bool:
-        return crc16(buf[j + 2:end - 2]) == (buf[end - 2] << 8 | buf[end - 1])
-
-    def _take(self, offset: int, raw: bytes) -> None:
-        self._accept(offset, raw, raw[2], self._parsers.get(raw[2]), raw, HEADER, raw[3])
+    def _take(self, buf: bytes, j: int, end: int, offset: int) -> bool:
+        if crc16(buf[j + 2:end - 2]) != (buf[end - 2] << 8 | buf[end - 1]):
+            return False
+        ftype = buf[j + 2]
+        self._accept(offset, buf[j:end], ftype, self._parsers.get(ftype), buf, j + HEADER,
+                     buf[j + 3])
+        return True
 
 
 def sins_decoder() -> CrcFramedDecoder:
@@ -307,39 +302,38 @@ class XBeeDecoder(LengthFramed):
         length = buf[j + 1] << 8 | buf[j + 2]
         return length + 4, 0 < length <= self.max_frame_data
 
-    def _intact(self, buf, j: int, end: int) -> bool:
-        return sum(buf[j + 3:end]) & 0xFF == 0xFF
-
-    def _take(self, offset: int, raw: bytes) -> None:
-        ftype = raw[3]
-        self._accept(offset, raw, ftype, _XBEE_PARSERS.get(ftype), raw, 4, len(raw) - 5)
+    def _take(self, buf: bytes, j: int, end: int, offset: int) -> bool:
+        if sum(buf[j + 3:end]) & 0xFF != 0xFF:
+            return False
+        ftype = buf[j + 3]
+        self._accept(offset, buf[j:end], ftype, _XBEE_PARSERS.get(ftype), buf, j + 4,
+                     end - j - 5)
+        return True
 
     # API mode 2: a candidate runs to the next bare 7E
     def _scan_escaped(self, final: bool) -> int:
         buf, base = bytes(self._buf), self._base  # (as in LengthFramed._scan)
-        n = len(buf)
-        i = 0
-        while True:
-            j = buf.find(0x7E, i)
-            if j < 0:
-                self._garbage(base + i, n - i)
-                return n
-            if j > i:
-                self._garbage(base + i, j - i)
-            k = buf.find(0x7E, j + 1)
-            # a bare 7E only ever starts a frame: the candidate cannot reach past it
-            stop = n if k < 0 else k
-            more = k < 0 and not final  # the candidate may still grow
-            seg = buf[j + 1:stop]
+        # a bare 7E only ever starts a frame, so each candidate is one piece of a split on 7E
+        # (one C call for the whole chunk, instead of two finds and a slice per frame)
+        pieces = buf.split(b"\x7e")
+        j = len(pieces[0])  # bytes before the first 7E belong to no frame
+        if j:
+            self._garbage(base, j)
+        last = len(pieces) - 1
+        for p in range(1, last + 1):
+            seg = pieces[p]
+            stop = j + 1 + len(seg)
+            more = p == last and not final  # the candidate may still grow
             u, used = xbee.unescape_partial(seg)
-            length = u[0] << 8 | u[1] if len(u) >= 2 else -1
+            got = len(u)
+            length = u[0] << 8 | u[1] if got >= 2 else -1
             need = length + 3
             # An error's size is what its judgement read, never "up to the next 7E", which
             # a later chunk may still move: so chunking cannot change it.
             if length == 0 or length > self.max_frame_data:
                 # judged before waiting, so a false length cannot grow the buffer
                 kind, size = BAD_LENGTH, length + 4  # the claimed size, as in API mode 1
-            elif length < 0 or len(u) < need:
+            elif got < need:  # (or length < 0)
                 if used < len(seg) and not (more and used == len(seg) - 1):
                     # (a 7D that is merely the last byte so far may complete); size: up to
                     # and including the bad pair
@@ -350,18 +344,21 @@ class XBeeDecoder(LengthFramed):
                     kind, size = TRUNCATED, stop - j
             else:
                 # the usual case, a frame running exactly to the next 7E, needs no extent count
-                end = stop if used == len(seg) and len(u) == need else \
+                end = stop if got == need and used == len(seg) else \
                     j + 1 + _raw_extent(seg, need)
                 if sum(u[2:need]) & 0xFF == 0xFF:
                     ftype = u[2]
                     self._accept(base + j, buf[j:end], ftype, _XBEE_PARSERS.get(ftype), u, 3,
                                  need - 4)
-                    i = end
+                    if end < stop:  # bytes after the frame, before the next 7E
+                        self._garbage(base + end, stop - end)
+                    j = stop
                     continue
                 kind, size = BAD_CHECKSUM, end - j
             self._error(kind, base + j, size)
             self._garbage(base + j, stop - j)
-            i = stop
+            j = stop
+        return len(buf)
 
 
 class XBeeSinsChain:
