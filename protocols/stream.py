@@ -282,20 +282,41 @@ def _raw_extent(seg, need: int) -> int:
     return end
 
 
+_RECEIVE_PACKET = int(xbee.FrameType.RECEIVE_PACKET)
+
+
 class XBeeDecoder(LengthFramed):
-    """XBee API frames in API mode 1 (``escaped=False``) or 2 (``escaped=True``)."""
+    """XBee API frames in API mode 1 (``escaped=False``) or 2 (``escaped=True``).
+
+    With *payloads* a 0x90 packet comes out as its ``(src64, data)`` pair, not as a Frame:
+    all that the xbee-sins chain reads of it, one object fewer per SINS frame."""
 
     format = "xbee"
     sync = b"\x7e"
     header = 3
     integrity = BAD_CHECKSUM
 
-    def __init__(self, escaped: bool = True, max_frame_data: int = 1024) -> None:
+    def __init__(self, escaped: bool = True, max_frame_data: int = 1024,
+                 payloads: bool = False) -> None:
         super().__init__()
         self.escaped = escaped
         self.max_frame_data = max_frame_data
         if escaped:
             self._scan = self._scan_escaped
+        if payloads:
+            self._accept = self._accept_payload
+
+    def _accept_payload(self, offset: int, raw: bytes, ftype: int, parser, data, start: int,
+                        size: int) -> None:
+        """:meth:`Decoder._accept`, but a 0x90 packet is emitted as its (src64, data) pair."""
+        fields = parser[0](data, start, size) if ftype == _RECEIVE_PACKET else None
+        if fields is None:  # another type, or a malformed packet: as always
+            Decoder._accept(self, offset, raw, ftype, parser, data, start, size)
+            return
+        if self._garbage_at >= 0:
+            self._close_garbage(offset)
+        self.frames += 1
+        self._out.append((fields["src64"], fields["data"]))
 
     # API mode 1: the shared length-framed scan
     def _size(self, buf, j: int) -> tuple[int, bool]:
@@ -377,7 +398,7 @@ class XBeeSinsChain:
 
     def __init__(self, escaped: bool = True, max_frame_data: int = 1024,
                  max_sources: int = MAX_SOURCES) -> None:
-        self.xbee = XBeeDecoder(escaped, max_frame_data)
+        self.xbee = XBeeDecoder(escaped, max_frame_data, payloads=True)
         self.sins: dict[int, CrcFramedDecoder] = {}  # least recently heard first
         self.max_sources = max_sources
         self.evicted = 0
@@ -386,11 +407,11 @@ class XBeeSinsChain:
         out: list = []
         src, pending = None, []  # a run of 0x90 payloads from one source, fed at once
         for ev in events:
-            if isinstance(ev, Frame) and ev.type == xbee.FrameType.RECEIVE_PACKET:
-                if ev.fields["src64"] != src:
+            if type(ev) is tuple:  # a 0x90 packet's (src64, data)
+                if ev[0] != src:
                     self._feed_sins(src, pending, out)
-                    src, pending = ev.fields["src64"], []
-                pending.append(ev.fields["data"])
+                    src, pending = ev[0], []
+                pending.append(ev[1])
             else:
                 self._feed_sins(src, pending, out)
                 src, pending = None, []
