@@ -100,6 +100,8 @@ class Decoder:
         self._base = 0  # stream offset of _buf[0]
         self._garbage_at = -1  # stream offset where the open garbage run began
         self._out: list = []
+        #: stamped on each frame and error: the xbee-sins chain's sending radio of this stream
+        self.source: int | None = None
         self.frames = 0
         self.bytes = 0
         self.errors: Counter[str] = Counter()
@@ -156,14 +158,15 @@ class Decoder:
             size = end - self._garbage_at
             self.errors[GARBAGE] += 1
             self.error_bytes[GARBAGE] += size
-            self._out.append(DecodeError(GARBAGE, self._garbage_at, size, self.format))
+            self._out.append(DecodeError(GARBAGE, self._garbage_at, size, self.format,
+                                         self.source))
             self._garbage_at = -1
 
     def _error(self, kind: str, offset: int, size: int) -> None:
         """A failed candidate at *offset*; its bytes are accounted to garbage later."""
         self._close_garbage(offset)
         self.errors[kind] += 1
-        self._out.append(DecodeError(kind, offset, size, self.format))
+        self._out.append(DecodeError(kind, offset, size, self.format, self.source))
 
     def _accept(self, offset: int, raw: bytes, ftype: int, parser, data, start: int,
                 size: int) -> None:
@@ -181,7 +184,7 @@ class Decoder:
         if self._garbage_at >= 0:
             self._close_garbage(offset)
         self.frames += 1
-        self._out.append(Frame(self.format, offset, raw, ftype, fields, known))
+        self._out.append(Frame(self.format, offset, raw, ftype, fields, known, self.source))
 
 
 class LengthFramed(Decoder):
@@ -427,20 +430,16 @@ class XBeeSinsChain:
             if len(self.sins) >= self.max_sources:
                 self._evict(out)
             dec = sins_decoder()
+            dec.source = src
         self.sins[src] = dec  # now the most recently heard
-        for s in dec.feed(b"".join(payloads)):
-            s.source = src
-            out.append(s)
+        out += dec.feed(b"".join(payloads))
 
     def _evict(self, out: list) -> None:
         src = next(iter(self.sins))
         dec = self.sins.pop(src)
         held = dec.buffered
-        events = dec.flush()
-        events.append(DecodeError(EVICTED, dec.bytes, held, dec.format))
-        for ev in events:
-            ev.source = src
-            out.append(ev)
+        out += dec.flush()
+        out.append(DecodeError(EVICTED, dec.bytes, held, dec.format, src))
         self.evicted += 1
 
     def feed(self, data: bytes) -> list:
@@ -448,10 +447,8 @@ class XBeeSinsChain:
 
     def flush(self) -> list:
         out = self._route(self.xbee.flush())
-        for src, dec in self.sins.items():
-            for ev in dec.flush():
-                ev.source = src
-                out.append(ev)
+        for dec in self.sins.values():
+            out += dec.flush()
         return out
 
     def decode(self, data: bytes) -> list:
