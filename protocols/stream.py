@@ -47,7 +47,7 @@ from typing import Any
 from . import nanoloc, sins, xbee
 from .crc import crc16
 from .crcframe import HEADER, TRAILER
-from .fast import parser_for, plain
+from .fast import parser_for, picker_for, plain
 
 # one compiled parser per layout, shared by every decoder (a chain makes one per source)
 parser_for = functools.cache(parser_for)
@@ -286,6 +286,7 @@ def _raw_extent(seg, need: int) -> int:
 
 
 _RECEIVE_PACKET = int(xbee.FrameType.RECEIVE_PACKET)
+_pick_payload = picker_for(xbee.FRAME_BODIES[_RECEIVE_PACKET], "src64", "data")
 
 
 class XBeeDecoder(LengthFramed):
@@ -312,14 +313,14 @@ class XBeeDecoder(LengthFramed):
     def _accept_payload(self, offset: int, raw: bytes, ftype: int, parser, data, start: int,
                         size: int) -> None:
         """:meth:`Decoder._accept`, but a 0x90 packet is emitted as its (src64, data) pair."""
-        fields = parser[0](data, start, size) if ftype == _RECEIVE_PACKET else None
-        if fields is None:  # another type, or a malformed packet: as always
+        pair = _pick_payload(data, start, size) if ftype == _RECEIVE_PACKET else None
+        if pair is None:  # another type, or a malformed packet: as always
             Decoder._accept(self, offset, raw, ftype, parser, data, start, size)
             return
         if self._garbage_at >= 0:
             self._close_garbage(offset)
         self.frames += 1
-        self._out.append((fields["src64"], fields["data"]))
+        self._out.append(pair)
 
     # API mode 1: the shared length-framed scan
     def _size(self, buf, j: int) -> tuple[int, bool]:
@@ -344,21 +345,23 @@ class XBeeDecoder(LengthFramed):
         if j:
             self._garbage(base, j)
         last = len(pieces) - 1
-        for p in range(1, last + 1):
-            seg = pieces[p]
-            stop = j + 1 + len(seg)
-            more = p == last and not final  # the candidate may still grow
-            u, used = xbee.unescape_partial(seg)
+        unescape, accept, parsers, most = (xbee.unescape_partial, self._accept, _XBEE_PARSERS,
+                                           self.max_frame_data)
+        for p, seg in enumerate(pieces[1:], 1):
+            raw_size = len(seg)
+            stop = j + 1 + raw_size
+            u, used = unescape(seg)
             got = len(u)
             length = u[0] << 8 | u[1] if got >= 2 else -1
             need = length + 3
             # An error's size is what its judgement read, never "up to the next 7E", which
             # a later chunk may still move: so chunking cannot change it.
-            if length == 0 or length > self.max_frame_data:
+            if length == 0 or length > most:
                 # judged before waiting, so a false length cannot grow the buffer
                 kind, size = BAD_LENGTH, length + 4  # the claimed size, as in API mode 1
             elif got < need:  # (or length < 0)
-                if used < len(seg) and not (more and used == len(seg) - 1):
+                more = p == last and not final  # the candidate may still grow
+                if used < raw_size and not (more and used == raw_size - 1):
                     # (a 7D that is merely the last byte so far may complete); size: up to
                     # and including the bad pair
                     kind, size = BAD_ESCAPE, min(used + 3, stop - j)
@@ -368,12 +371,11 @@ class XBeeDecoder(LengthFramed):
                     kind, size = TRUNCATED, stop - j
             else:
                 # the usual case, a frame running exactly to the next 7E, needs no extent count
-                end = stop if got == need and used == len(seg) else \
+                end = stop if got == need and used == raw_size else \
                     j + 1 + _raw_extent(seg, need)
                 if sum(u[2:need]) & 0xFF == 0xFF:
                     ftype = u[2]
-                    self._accept(base + j, buf[j:end], ftype, _XBEE_PARSERS.get(ftype), u, 3,
-                                 need - 4)
+                    accept(base + j, buf[j:end], ftype, parsers.get(ftype), u, 3, need - 4)
                     if end < stop:  # bytes after the frame, before the next 7E
                         self._garbage(base + end, stop - end)
                     j = stop
