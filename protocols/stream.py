@@ -256,7 +256,7 @@ class CrcFramedDecoder(LengthFramed):
         return HEADER + length + TRAILER, parser is None or parser[1] in (None, length)
 
     def _take(self, buf: bytes, j: int, end: int, offset: int) -> bool:
-        if crc16(buf[j + 2:end - 2]) != (buf[end - 2] << 8 | buf[end - 1]):
+        if crc16(buf[j + 2:end]):  # the CRC of the covered bytes and the CRC is 0 (crc.py)
             return False
         ftype = buf[j + 2]
         self._accept(offset, buf[j:end], ftype, self._parsers.get(ftype), buf, j + HEADER,
