@@ -78,7 +78,7 @@ def _generate(st: c.Struct, only: tuple[str, ...] | None):
         values[name] = f"v[{k}]" if n == 1 else f"v[{k}:{k + n}]"
         k += n
     if greedy is not None:
-        values[greedy] = f"bytes(buf[start + {fixed}:start + size])"
+        values[greedy] = f"buf[start + {fixed}:start + size]"  # a slice of bytes is bytes
     if only is None:
         result = "{" + ", ".join(f"{name!r}: {expr}" for name, expr in values.items()) + "}"
     else:
@@ -96,7 +96,8 @@ def _generate(st: c.Struct, only: tuple[str, ...] | None):
 
 def compile_flat(st: c.Struct) -> tuple[Callable, int | None]:
     """Compile a flat Struct (fixed-size ints, arrays of ints, fixed Bytes, an optional
-    GreedyBytes last, an optional Terminated) into ``parse(buf, start, size) -> dict | None``.
+    GreedyBytes last, an optional Terminated) into ``parse(buf, start, size) -> dict | None``,
+    *buf* a ``bytes`` (a greedy tail is its slice).
 
     Returns the parser and the exact payload size when the layout has one (Terminated and
     no greedy tail), else None. The parser returns None when *size* does not fit the layout,
