@@ -307,20 +307,21 @@ class XBeeDecoder(LengthFramed):
         self.max_frame_data = max_frame_data
         if escaped:
             self._scan = self._scan_escaped
-        if payloads:
-            self._accept = self._accept_payload
+        # the type handed on as a (src64, data) pair; -1, no type: every frame a Frame
+        self._payload_type = _RECEIVE_PACKET if payloads else -1
 
-    def _accept_payload(self, offset: int, raw: bytes, ftype: int, parser, data, start: int,
-                        size: int) -> None:
-        """:meth:`Decoder._accept`, but a 0x90 packet is emitted as its (src64, data) pair."""
-        pair = _pick_payload(data, start, size) if ftype == _RECEIVE_PACKET else None
-        if pair is None:  # another type, or a malformed packet: as always
-            Decoder._accept(self, offset, raw, ftype, parser, data, start, size)
-            return
+    def _payload(self, offset: int, data: bytes, start: int, size: int) -> bool:
+        """Emit the 0x90 packet whose body is ``data[start:start + size]`` as its (src64,
+        data) pair (its raw bytes never sliced); False when it is malformed, for the caller
+        to accept as any frame."""
+        pair = _pick_payload(data, start, size)
+        if pair is None:
+            return False
         if self._garbage_at >= 0:
             self._close_garbage(offset)
         self.frames += 1
         self._out.append(pair)
+        return True
 
     # API mode 1: the shared length-framed scan
     def _size(self, buf, j: int) -> tuple[int, bool]:
@@ -331,8 +332,9 @@ class XBeeDecoder(LengthFramed):
         if sum(buf[j + 3:end]) & 0xFF != 0xFF:
             return False
         ftype = buf[j + 3]
-        self._accept(offset, buf[j:end], ftype, _XBEE_PARSERS.get(ftype), buf, j + 4,
-                     end - j - 5)
+        if ftype != self._payload_type or not self._payload(offset, buf, j + 4, end - j - 5):
+            self._accept(offset, buf[j:end], ftype, _XBEE_PARSERS.get(ftype), buf, j + 4,
+                         end - j - 5)
         return True
 
     # API mode 2: a candidate runs to the next bare 7E
@@ -347,6 +349,7 @@ class XBeeDecoder(LengthFramed):
         last = len(pieces) - 1
         unescape, accept, parsers, most = (xbee.unescape_partial, self._accept, _XBEE_PARSERS,
                                            self.max_frame_data)
+        payload, payload_type = self._payload, self._payload_type
         for p, seg in enumerate(pieces[1:], 1):
             raw_size = len(seg)
             stop = j + 1 + raw_size
@@ -375,7 +378,8 @@ class XBeeDecoder(LengthFramed):
                     j + 1 + _raw_extent(seg, need)
                 if sum(u[2:need]) & 0xFF == 0xFF:
                     ftype = u[2]
-                    accept(base + j, buf[j:end], ftype, parsers.get(ftype), u, 3, need - 4)
+                    if ftype != payload_type or not payload(base + j, u, 3, need - 4):
+                        accept(base + j, buf[j:end], ftype, parsers.get(ftype), u, 3, need - 4)
                     if end < stop:  # bytes after the frame, before the next 7E
                         self._garbage(base + end, stop - end)
                     j = stop
