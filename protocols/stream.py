@@ -96,7 +96,7 @@ class Decoder:
     format = ""
 
     def __init__(self) -> None:
-        self._buf = bytearray()
+        self._buf = b""  # the bytes held for the next feed (a candidate waiting for more)
         self._base = 0  # stream offset of _buf[0]
         self._garbage_at = -1  # stream offset where the open garbage run began
         self._out: list = []
@@ -111,20 +111,21 @@ class Decoder:
     def feed(self, data: bytes) -> list:
         """Decode *data* after all that was fed before; frames and errors in stream order."""
         self.bytes += len(data)
-        self._buf += data
-        consumed = self._scan(final=False)
-        if consumed:
-            del self._buf[:consumed]
-            self._base += consumed
+        # one bytes object to scan: what was held, then data (no copy when nothing was held);
+        # its slices are then the frames' raw bytes, with no second copy
+        buf = self._buf + data if self._buf else bytes(data)
+        consumed = self._scan(buf, final=False)
+        self._buf = buf[consumed:]
+        self._base += consumed
         out, self._out = self._out, []
         return out
 
     def flush(self) -> list:
         """End of stream: a candidate still waiting for bytes is truncated, and the search
         goes on one byte after it, so no intact frame behind a false start is lost."""
-        self._scan(final=True)
+        self._scan(self._buf, final=True)
         self._base += len(self._buf)
-        self._buf.clear()
+        self._buf = b""
         self._close_garbage(self._base)
         out, self._out = self._out, []
         return out
@@ -143,9 +144,10 @@ class Decoder:
                 "buffered": self.buffered}
 
     # -- for subclasses ------------------------------------------------------------------
-    def _scan(self, final: bool) -> int:
-        """Consume from ``self._buf``; return how many leading bytes are done with.
-        With *final* (end of stream) every byte must be consumed."""
+    def _scan(self, buf: bytes, final: bool) -> int:
+        """Consume from *buf* (held bytes, then the new ones; ``self._base`` is its stream
+        offset); return how many leading bytes are done with. With *final* (end of stream)
+        every byte must be consumed."""
         raise NotImplementedError
 
     def _garbage(self, offset: int, size: int) -> None:
@@ -206,9 +208,8 @@ class LengthFramed(Decoder):
         integrity check; whether it did. (One call per frame: the check and the parse.)"""
         raise NotImplementedError
 
-    def _scan(self, final: bool) -> int:
-        # a bytes copy of the buffer: its slices are the frames' raw bytes with no second copy
-        buf, base, sync, header = bytes(self._buf), self._base, self.sync, self.header
+    def _scan(self, buf: bytes, final: bool) -> int:
+        base, sync, header = self._base, self.sync, self.header
         size_of, take, garbage = self._size, self._take, self._garbage
         n = len(buf)
         i = 0
@@ -338,8 +339,8 @@ class XBeeDecoder(LengthFramed):
         return True
 
     # API mode 2: a candidate runs to the next bare 7E
-    def _scan_escaped(self, final: bool) -> int:
-        buf, base = bytes(self._buf), self._base  # (as in LengthFramed._scan)
+    def _scan_escaped(self, buf: bytes, final: bool) -> int:
+        base = self._base
         # a bare 7E only ever starts a frame, so each candidate is one piece of a split on 7E
         # (one C call for the whole chunk, instead of two finds and a slice per frame)
         pieces = buf.split(b"\x7e")
