@@ -47,7 +47,7 @@ from typing import Any
 from . import nanoloc, sins, xbee
 from .crc import crc16
 from .crcframe import HEADER, TRAILER
-from .fast import parser_for, plain
+from .fast import parser_for, picker_for, plain
 
 # one compiled parser per layout, shared by every decoder (a chain makes one per source)
 parser_for = functools.cache(parser_for)
@@ -96,10 +96,12 @@ class Decoder:
     format = ""
 
     def __init__(self) -> None:
-        self._buf = bytearray()
+        self._buf = b""  # the bytes held for the next feed (a candidate waiting for more)
         self._base = 0  # stream offset of _buf[0]
         self._garbage_at = -1  # stream offset where the open garbage run began
         self._out: list = []
+        #: stamped on each frame and error: the xbee-sins chain's sending radio of this stream
+        self.source: int | None = None
         self.frames = 0
         self.bytes = 0
         self.errors: Counter[str] = Counter()
@@ -109,20 +111,21 @@ class Decoder:
     def feed(self, data: bytes) -> list:
         """Decode *data* after all that was fed before; frames and errors in stream order."""
         self.bytes += len(data)
-        self._buf += data
-        consumed = self._scan(final=False)
-        if consumed:
-            del self._buf[:consumed]
-            self._base += consumed
+        # one bytes object to scan: what was held, then data (no copy when nothing was held);
+        # its slices are then the frames' raw bytes, with no second copy
+        buf = self._buf + data if self._buf else bytes(data)
+        consumed = self._scan(buf, final=False)
+        self._buf = buf[consumed:]
+        self._base += consumed
         out, self._out = self._out, []
         return out
 
     def flush(self) -> list:
         """End of stream: a candidate still waiting for bytes is truncated, and the search
         goes on one byte after it, so no intact frame behind a false start is lost."""
-        self._scan(final=True)
+        self._scan(self._buf, final=True)
         self._base += len(self._buf)
-        self._buf.clear()
+        self._buf = b""
         self._close_garbage(self._base)
         out, self._out = self._out, []
         return out
@@ -141,15 +144,11 @@ class Decoder:
                 "buffered": self.buffered}
 
     # -- for subclasses ------------------------------------------------------------------
-    def _scan(self, final: bool) -> int:
-        """Consume from ``self._buf``; return how many leading bytes are done with.
-        With *final* (end of stream) every byte must be consumed."""
+    def _scan(self, buf: bytes, final: bool) -> int:
+        """Consume from *buf* (held bytes, then the new ones; ``self._base`` is its stream
+        offset); return how many leading bytes are done with. With *final* (end of stream)
+        every byte must be consumed."""
         raise NotImplementedError
-
-    def _frame(self, frame: Frame) -> None:
-        self._close_garbage(frame.offset)
-        self.frames += 1
-        self._out.append(frame)
 
     def _garbage(self, offset: int, size: int) -> None:
         """Bytes [offset, offset+size) belong to no frame."""
@@ -161,14 +160,15 @@ class Decoder:
             size = end - self._garbage_at
             self.errors[GARBAGE] += 1
             self.error_bytes[GARBAGE] += size
-            self._out.append(DecodeError(GARBAGE, self._garbage_at, size, self.format))
+            self._out.append(DecodeError(GARBAGE, self._garbage_at, size, self.format,
+                                         self.source))
             self._garbage_at = -1
 
     def _error(self, kind: str, offset: int, size: int) -> None:
         """A failed candidate at *offset*; its bytes are accounted to garbage later."""
         self._close_garbage(offset)
         self.errors[kind] += 1
-        self._out.append(DecodeError(kind, offset, size, self.format))
+        self._out.append(DecodeError(kind, offset, size, self.format, self.source))
 
     def _accept(self, offset: int, raw: bytes, ftype: int, parser, data, start: int,
                 size: int) -> None:
@@ -176,22 +176,24 @@ class Decoder:
         *parser* (a :func:`navtwin.protocols.fast.parser_for` pair), kept raw when the type is not
         declared, malformed when the body does not fit its layout."""
         if parser is None:
-            self._frame(Frame(self.format, offset, raw, ftype,
-                              {"payload": bytes(data[start:start + size])}, False))
-            return
-        fields = parser[0](data, start, size)
-        if fields is None:
-            self._error(MALFORMED, offset, len(raw))
-            self._garbage(offset, len(raw))
-            return
-        self._frame(Frame(self.format, offset, raw, ftype, fields))
+            fields, known = {"payload": bytes(data[start:start + size])}, False
+        else:
+            fields, known = parser[0](data, start, size), True
+            if fields is None:
+                self._error(MALFORMED, offset, len(raw))
+                self._garbage(offset, len(raw))
+                return
+        if self._garbage_at >= 0:
+            self._close_garbage(offset)
+        self.frames += 1
+        self._out.append(Frame(self.format, offset, raw, ftype, fields, known, self.source))
 
 
 class LengthFramed(Decoder):
     """Frames that start with a sync pattern and say their length in a header: the scan and
     its resync rule, shared by the SINS/nanoLOC framing and XBee API mode 1. A subclass
     gives ``sync``, ``header`` (bytes needed to know the size), ``integrity`` (the error kind
-    of a failed check) and the three methods below."""
+    of a failed check) and the two methods below."""
 
     sync: bytes
     header: int
@@ -201,16 +203,14 @@ class LengthFramed(Decoder):
         """(claimed frame size, whether any frame can have it) of the candidate at *j*."""
         raise NotImplementedError
 
-    def _intact(self, buf, j: int, end: int) -> bool:
+    def _take(self, buf: bytes, j: int, end: int, offset: int) -> bool:
+        """Parse and emit the candidate ``buf[j:end]`` (at stream *offset*) if it passes the
+        integrity check; whether it did. (One call per frame: the check and the parse.)"""
         raise NotImplementedError
 
-    def _take(self, offset: int, raw: bytes) -> None:
-        """Parse and emit an intact frame."""
-        raise NotImplementedError
-
-    def _scan(self, final: bool) -> int:
-        buf, base, sync, header = self._buf, self._base, self.sync, self.header
-        size_of, intact, take, garbage = self._size, self._intact, self._take, self._garbage
+    def _scan(self, buf: bytes, final: bool) -> int:
+        base, sync, header = self._base, self.sync, self.header
+        size_of, take, garbage = self._size, self._take, self._garbage
         n = len(buf)
         i = 0
         while True:
@@ -229,12 +229,11 @@ class LengthFramed(Decoder):
                 if not final:
                     return j
                 self._error(TRUNCATED, base + j, n - j)
-            elif not intact(buf, j, j + size):
-                self._error(self.integrity, base + j, size)
-            else:
-                take(base + j, bytes(buf[j:j + size]))
+            elif take(buf, j, j + size, base + j):
                 i = j + size
                 continue
+            else:
+                self._error(self.integrity, base + j, size)
             self._garbage(base + j, 1)  # resync one byte after the failed start
             i = j + 1
 
@@ -257,11 +256,13 @@ class CrcFramedDecoder(LengthFramed):
         # a declared type of fixed size must say exactly that; others are skipped by len
         return HEADER + length + TRAILER, parser is None or parser[1] in (None, length)
 
-    def _intact(self, buf, j: int, end: int) -> bool:
-        return crc16(buf[j + 2:end - 2]) == (buf[end - 2] << 8 | buf[end - 1])
-
-    def _take(self, offset: int, raw: bytes) -> None:
-        self._accept(offset, raw, raw[2], self._parsers.get(raw[2]), raw, HEADER, raw[3])
+    def _take(self, buf: bytes, j: int, end: int, offset: int) -> bool:
+        if crc16(buf[j + 2:end]):  # the CRC of the covered bytes and the CRC is 0 (crc.py)
+            return False
+        ftype = buf[j + 2]
+        self._accept(offset, buf[j:end], ftype, self._parsers.get(ftype), buf, j + HEADER,
+                     buf[j + 3])
+        return True
 
 
 def sins_decoder() -> CrcFramedDecoder:
@@ -285,62 +286,86 @@ def _raw_extent(seg, need: int) -> int:
     return end
 
 
+_RECEIVE_PACKET = int(xbee.FrameType.RECEIVE_PACKET)
+_pick_payload = picker_for(xbee.FRAME_BODIES[_RECEIVE_PACKET], "src64", "data")
+
+
 class XBeeDecoder(LengthFramed):
-    """XBee API frames in API mode 1 (``escaped=False``) or 2 (``escaped=True``)."""
+    """XBee API frames in API mode 1 (``escaped=False``) or 2 (``escaped=True``).
+
+    With *payloads* a 0x90 packet comes out as its ``(src64, data)`` pair, not as a Frame:
+    all that the xbee-sins chain reads of it, one object fewer per SINS frame."""
 
     format = "xbee"
     sync = b"\x7e"
     header = 3
     integrity = BAD_CHECKSUM
 
-    def __init__(self, escaped: bool = True, max_frame_data: int = 1024) -> None:
+    def __init__(self, escaped: bool = True, max_frame_data: int = 1024,
+                 payloads: bool = False) -> None:
         super().__init__()
         self.escaped = escaped
         self.max_frame_data = max_frame_data
         if escaped:
             self._scan = self._scan_escaped
+        # the type handed on as a (src64, data) pair; -1, no type: every frame a Frame
+        self._payload_type = _RECEIVE_PACKET if payloads else -1
 
-    def _emit(self, offset: int, raw: bytes, data: bytes) -> None:
-        """An intact frame with its unescaped frame data (type + fields)."""
-        self._accept(offset, raw, data[0], _XBEE_PARSERS.get(data[0]), data, 1, len(data) - 1)
+    def _payload(self, offset: int, data: bytes, start: int, size: int) -> bool:
+        """Emit the 0x90 packet whose body is ``data[start:start + size]`` as its (src64,
+        data) pair (its raw bytes never sliced); False when it is malformed, for the caller
+        to accept as any frame."""
+        pair = _pick_payload(data, start, size)
+        if pair is None:
+            return False
+        if self._garbage_at >= 0:
+            self._close_garbage(offset)
+        self.frames += 1
+        self._out.append(pair)
+        return True
 
     # API mode 1: the shared length-framed scan
     def _size(self, buf, j: int) -> tuple[int, bool]:
         length = buf[j + 1] << 8 | buf[j + 2]
         return length + 4, 0 < length <= self.max_frame_data
 
-    def _intact(self, buf, j: int, end: int) -> bool:
-        return sum(buf[j + 3:end]) & 0xFF == 0xFF
-
-    def _take(self, offset: int, raw: bytes) -> None:
-        self._emit(offset, raw, raw[3:-1])
+    def _take(self, buf: bytes, j: int, end: int, offset: int) -> bool:
+        if sum(buf[j + 3:end]) & 0xFF != 0xFF:
+            return False
+        ftype = buf[j + 3]
+        if ftype != self._payload_type or not self._payload(offset, buf, j + 4, end - j - 5):
+            self._accept(offset, buf[j:end], ftype, _XBEE_PARSERS.get(ftype), buf, j + 4,
+                         end - j - 5)
+        return True
 
     # API mode 2: a candidate runs to the next bare 7E
-    def _scan_escaped(self, final: bool) -> int:
-        buf, base = self._buf, self._base
-        n = len(buf)
-        i = 0
-        while True:
-            j = buf.find(0x7E, i)
-            if j < 0:
-                self._garbage(base + i, n - i)
-                return n
-            self._garbage(base + i, j - i)
-            k = buf.find(0x7E, j + 1)
-            # a bare 7E only ever starts a frame: the candidate cannot reach past it
-            stop = n if k < 0 else k
-            more = k < 0 and not final  # the candidate may still grow
-            seg = buf[j + 1:stop]
-            u, used = xbee.unescape_partial(seg)
-            length = u[0] << 8 | u[1] if len(u) >= 2 else -1
+    def _scan_escaped(self, buf: bytes, final: bool) -> int:
+        base = self._base
+        # a bare 7E only ever starts a frame, so each candidate is one piece of a split on 7E
+        # (one C call for the whole chunk, instead of two finds and a slice per frame)
+        pieces = buf.split(b"\x7e")
+        j = len(pieces[0])  # bytes before the first 7E belong to no frame
+        if j:
+            self._garbage(base, j)
+        last = len(pieces) - 1
+        unescape, accept, parsers, most = (xbee.unescape_partial, self._accept, _XBEE_PARSERS,
+                                           self.max_frame_data)
+        payload, payload_type = self._payload, self._payload_type
+        for p, seg in enumerate(pieces[1:], 1):
+            raw_size = len(seg)
+            stop = j + 1 + raw_size
+            u, used = unescape(seg)
+            got = len(u)
+            length = u[0] << 8 | u[1] if got >= 2 else -1
             need = length + 3
             # An error's size is what its judgement read, never "up to the next 7E", which
             # a later chunk may still move: so chunking cannot change it.
-            if length == 0 or length > self.max_frame_data:
+            if length == 0 or length > most:
                 # judged before waiting, so a false length cannot grow the buffer
                 kind, size = BAD_LENGTH, length + 4  # the claimed size, as in API mode 1
-            elif length < 0 or len(u) < need:
-                if used < len(seg) and not (more and used == len(seg) - 1):
+            elif got < need:  # (or length < 0)
+                more = p == last and not final  # the candidate may still grow
+                if used < raw_size and not (more and used == raw_size - 1):
                     # (a 7D that is merely the last byte so far may complete); size: up to
                     # and including the bad pair
                     kind, size = BAD_ESCAPE, min(used + 3, stop - j)
@@ -349,15 +374,22 @@ class XBeeDecoder(LengthFramed):
                 else:
                     kind, size = TRUNCATED, stop - j
             else:
-                end = j + 1 + _raw_extent(seg, need)
+                # the usual case, a frame running exactly to the next 7E, needs no extent count
+                end = stop if got == need and used == raw_size else \
+                    j + 1 + _raw_extent(seg, need)
                 if sum(u[2:need]) & 0xFF == 0xFF:
-                    self._emit(base + j, bytes(buf[j:end]), u[2:need - 1])
-                    i = end
+                    ftype = u[2]
+                    if ftype != payload_type or not payload(base + j, u, 3, need - 4):
+                        accept(base + j, buf[j:end], ftype, parsers.get(ftype), u, 3, need - 4)
+                    if end < stop:  # bytes after the frame, before the next 7E
+                        self._garbage(base + end, stop - end)
+                    j = stop
                     continue
                 kind, size = BAD_CHECKSUM, end - j
             self._error(kind, base + j, size)
             self._garbage(base + j, stop - j)
-            i = stop
+            j = stop
+        return len(buf)
 
 
 class XBeeSinsChain:
@@ -376,7 +408,7 @@ class XBeeSinsChain:
 
     def __init__(self, escaped: bool = True, max_frame_data: int = 1024,
                  max_sources: int = MAX_SOURCES) -> None:
-        self.xbee = XBeeDecoder(escaped, max_frame_data)
+        self.xbee = XBeeDecoder(escaped, max_frame_data, payloads=True)
         self.sins: dict[int, CrcFramedDecoder] = {}  # least recently heard first
         self.max_sources = max_sources
         self.evicted = 0
@@ -385,11 +417,11 @@ class XBeeSinsChain:
         out: list = []
         src, pending = None, []  # a run of 0x90 payloads from one source, fed at once
         for ev in events:
-            if isinstance(ev, Frame) and ev.type == xbee.FrameType.RECEIVE_PACKET:
-                if ev.fields["src64"] != src:
+            if type(ev) is tuple:  # a 0x90 packet's (src64, data)
+                if ev[0] != src:
                     self._feed_sins(src, pending, out)
-                    src, pending = ev.fields["src64"], []
-                pending.append(ev.fields["data"])
+                    src, pending = ev[0], []
+                pending.append(ev[1])
             else:
                 self._feed_sins(src, pending, out)
                 src, pending = None, []
@@ -405,20 +437,16 @@ class XBeeSinsChain:
             if len(self.sins) >= self.max_sources:
                 self._evict(out)
             dec = sins_decoder()
+            dec.source = src
         self.sins[src] = dec  # now the most recently heard
-        for s in dec.feed(b"".join(payloads)):
-            s.source = src
-            out.append(s)
+        out += dec.feed(b"".join(payloads))
 
     def _evict(self, out: list) -> None:
         src = next(iter(self.sins))
         dec = self.sins.pop(src)
         held = dec.buffered
-        events = dec.flush()
-        events.append(DecodeError(EVICTED, dec.bytes, held, dec.format))
-        for ev in events:
-            ev.source = src
-            out.append(ev)
+        out += dec.flush()
+        out.append(DecodeError(EVICTED, dec.bytes, held, dec.format, src))
         self.evicted += 1
 
     def feed(self, data: bytes) -> list:
@@ -426,10 +454,8 @@ class XBeeSinsChain:
 
     def flush(self) -> list:
         out = self._route(self.xbee.flush())
-        for src, dec in self.sins.items():
-            for ev in dec.flush():
-                ev.source = src
-                out.append(ev)
+        for dec in self.sins.values():
+            out += dec.flush()
         return out
 
     def decode(self, data: bytes) -> list:

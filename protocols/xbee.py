@@ -227,11 +227,17 @@ def unescape_partial(data: bytes) -> tuple[bytes, int]:
     if not escapes:
         return bytes(data), len(data)
     # In valid data every 7D starts a pair and no pair's second byte is 7D, so the pairs
-    # never overlap and four C-level replaces undo them; 7D 5D goes last so its 7D is final.
-    out = (data.replace(b"\x7d\x5e", b"\x7e").replace(b"\x7d\x31", b"\x11")
-           .replace(b"\x7d\x33", b"\x13").replace(b"\x7d\x5d", b"\x7d"))
-    if len(data) - len(out) == escapes:
-        return bytes(out), len(data)
+    # never overlap and four C-level replaces undo them; 7D 5D goes last so its 7D is final
+    # (the others make no 7D, so their order is free). 7D 33 goes first, and alone when it
+    # accounts for every 7D: an XBee's 64-bit address (00 13 A2 ..) puts one in every packet
+    # it sends, often the only one. Each pair replaced removes one byte.
+    size = len(data)
+    out = data.replace(b"\x7d\x33", b"\x13")
+    if size - len(out) != escapes:
+        out = (out.replace(b"\x7d\x5e", b"\x7e").replace(b"\x7d\x31", b"\x11")
+               .replace(b"\x7d\x5d", b"\x7d"))
+    if size - len(out) == escapes:
+        return bytes(out), size
     parts = bytes(data).split(b"\x7d")  # some escape is bad: find the valid prefix
     out = bytearray(parts[0])
     used = len(parts[0])
