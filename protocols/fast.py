@@ -8,6 +8,7 @@ fields on the same bytes.
 """
 from __future__ import annotations
 
+import operator
 import struct
 from typing import Callable
 
@@ -61,37 +62,85 @@ def packer_for(st: c.Struct) -> Callable[..., bytes]:
     return struct.Struct(fmt).pack
 
 
-def _generate(st: c.Struct, only: tuple[str, ...] | None):
-    """The source of a flat Struct's parser and what it needs, built from the declaration.
+def _getter(items: list) -> Callable[[tuple], tuple]:
+    """``get(v) -> tuple`` of v[item] for each item (an index or a slice), in C:
+    :func:`operator.itemgetter`, which gives a bare value for one item, made to give a tuple."""
+    if len(items) == 1:
+        (item,) = items
+        return lambda v: (v[item],)
+    return operator.itemgetter(*items) if items else lambda v: ()
 
-    The parser is generated, as namedtuple and dataclasses generate theirs: a dict display
-    (``{"seq": v[0], "words": v[1:12]}``) builds the fields about 3x faster than any loop over
-    them. Its source holds only the declaration's field names (as literals) and offsets,
-    never a byte of input. With *only*, it returns those fields as a tuple, in that order.
+
+def _generate(st: c.Struct, only: tuple[str, ...] | None):
+    """A flat Struct's parser and its exact size, built from the declaration.
+
+    One precompiled ``unpack_from`` gives the flat values; an ``itemgetter`` of each field's
+    index (a scalar) or slice (an array) regroups them in declaration order, and ``dict(zip())``
+    names them: each step one C call, no Python loop over the fields (3x faster than one). A
+    greedy tail, always last, is the frame's remaining slice. With *only*, those fields as a
+    tuple, in that order (a greedy tail among them last).
     """
     fmt, names, greedy, exact = _flat_layout(st)
     layout = struct.Struct(fmt)
-    fixed = layout.size
+    unpack_from, fixed = layout.unpack_from, layout.size
     must_equal = exact and greedy is None
-    values, k = {}, 0
+    items, k = {}, 0
     for name, n in names:
-        values[name] = f"v[{k}]" if n == 1 else f"v[{k}:{k + n}]"
+        items[name] = k if n == 1 else slice(k, k + n)
         k += n
-    if greedy is not None:
-        values[greedy] = f"buf[start + {fixed}:start + size]"  # a slice of bytes is bytes
     if only is None:
-        result = "{" + ", ".join(f"{name!r}: {expr}" for name, expr in values.items()) + "}"
+        wanted, tail = list(items), greedy is not None
     else:
-        result = "(" + "".join(f"{values[name]}, " for name in only) + ")"
-    check = f"size != {fixed}" if must_equal else f"size < {fixed}"
-    source = (f"def parse(buf, start, size):\n"
-              f"    if {check}:\n"
-              f"        return None\n"
-              f"    v = unpack_from(buf, start)\n"
-              f"    return {result}\n")
-    namespace = {"unpack_from": layout.unpack_from}
-    exec(compile(source, f"<fast parser {fmt}>", "exec"), namespace)
-    return namespace["parse"], (fixed if must_equal else None)
+        tail = greedy is not None and only[-1:] == (greedy,)
+        wanted = list(only[:-1] if tail else only)
+        if not set(wanted) <= set(items):
+            raise TypeError(f"pick {only}: fields of the layout, a greedy tail last")
+    get = _getter([items[n] for n in wanted])
+
+    if only is not None:
+        if tail and len(wanted) == 1:  # 0x90's (src64, data): the chain's pick, per packet
+            (item,) = (items[n] for n in wanted)
+
+            def parse(buf, start, size):
+                if size < fixed:
+                    return None
+                return unpack_from(buf, start)[item], buf[start + fixed:start + size]
+        elif tail:
+            def parse(buf, start, size):
+                if size < fixed:
+                    return None
+                return get(unpack_from(buf, start)) + (buf[start + fixed:start + size],)
+        else:
+            def parse(buf, start, size):
+                return None if size < fixed else get(unpack_from(buf, start))
+        return parse, None
+
+    keys = tuple(wanted)
+    name = _namer(keys, [items[n] for n in wanted], get)
+    if tail:
+        def parse(buf, start, size):
+            if size < fixed:
+                return None
+            fields = name(unpack_from(buf, start))
+            fields[greedy] = buf[start + fixed:start + size]  # a slice of bytes is bytes
+            return fields
+    elif must_equal:
+        def parse(buf, start, size):
+            return None if size != fixed else name(unpack_from(buf, start))
+    else:
+        def parse(buf, start, size):
+            return None if size < fixed else name(unpack_from(buf, start))
+    return parse, (fixed if must_equal else None)
+
+
+def _namer(keys: tuple, items: list, get: Callable) -> Callable[[tuple], dict]:
+    """``name(v) -> dict`` of the fields: a dict display for the two-field layouts (the SINS
+    sample, seq and words: 100 a second per vehicle, 0.39 us against dict(zip())'s 0.64),
+    else ``dict(zip(keys, get(v)))``."""
+    if len(keys) == 2:
+        (k0, k1), (i0, i1) = keys, items
+        return lambda v: {k0: v[i0], k1: v[i1]}
+    return lambda v: dict(zip(keys, get(v)))
 
 
 def compile_flat(st: c.Struct) -> tuple[Callable, int | None]:
