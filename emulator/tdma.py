@@ -43,6 +43,7 @@ class CycleStarts:
         self.clip_ns = (r.cycle_ms - r.slot_ms) * 1e6 / 2
         self.rng = stream(seed, "nanoloc.cycle") if self.sigma_ns > 0 else None
         self.delta = np.zeros(0)
+        self.first = 0  # the cycle of delta[0]: a block never asks for an earlier one than before
 
     @property
     def margin_ns(self) -> float:
@@ -53,10 +54,14 @@ class CycleStarts:
         """delta_c (ns) of cycles *k*, drawn in cycle order as far as the largest."""
         if self.rng is None or not len(k):
             return np.zeros(len(k))
-        if (need := int(k.max()) + 1 - len(self.delta)) > 0:
+        if (need := int(k.max()) + 1 - self.first - len(self.delta)) > 0:
             new = self.sigma_ns * self.rng.standard_normal(need)
             self.delta = np.concatenate((self.delta, np.clip(new, -self.clip_ns, self.clip_ns)))
-        return self.delta[k]
+        # the cycles before this block's are done with: a long run keeps a few, not all
+        drop = int(k.min()) - self.first
+        assert drop >= 0, "blocks come in time order"
+        self.delta, self.first = self.delta[drop:], self.first + drop
+        return self.delta[k - self.first]
 
 
 class Slots:
