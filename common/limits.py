@@ -28,6 +28,9 @@ SEEDS = (0, 2**63 - 1)
 SPEEDS = (0.01, 10000.0)
 #: Longest run, emulated or live, in seconds (about 115 days; ns counts stay far inside int64).
 MAX_DURATION_S = 10_000_000
+#: vehicle numbers of a scenario: 256 vehicles' ports are 768 PTYs, a fifth of Linux's
+#: default kernel.pty.max
+VEHICLES = (1, 256)
 
 
 def show(v) -> str:

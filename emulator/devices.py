@@ -1,7 +1,8 @@
 """Device models: what stands behind each port of the emulated lab.
 
 A port's declaration (protocols.ports) names its device model; :data:`DEVICES` maps the name
-to a factory ``model(emulation, port) -> Device``, called once per run (installed packages add
+to a factory ``model(emulation, port) -> Device``, called once per run and port instance
+(vehicle n's ``sins<n>``: the declaration under its instance's name) (installed packages add
 theirs in the ``navtwin.devices`` entry-point group). The runner (emulator.runner) gives
 every declared port a UART line and a PTY, and asks the port's device for everything else:
 
@@ -57,7 +58,7 @@ class CoordinatorDevice(Device):
 
     def __init__(self, emulation, port) -> None:
         super().__init__(emulation, port)
-        self.coordinator = emulation.coordinator
+        self.coordinator = emulation.coordinators[port.name]
         self.line_device = self.coordinator
 
     def to_line(self, ev) -> tuple[int, object]:

@@ -1,4 +1,11 @@
-"""nanoLOC ranging: the anchors, one tag, the four-timestamp exchange, the gateway.
+"""nanoLOC ranging: the anchors, the tags, the four-timestamp exchange, the gateway.
+
+Tags. A network ranges one tag or, when several vehicles share it (``[ranging] network =
+"shared"``), their tags in turn: cycle c is the cycle of tag c mod T (T tags, vehicle 1's
+first), so each tag is ranged every T-th cycle and its rate falls as tags are added; a
+vehicle with a network of its own (``"per-vehicle"``) has the anchors' draws and cycle
+starts from streams named under "vehicle<n>." (the anchors' multipath field is the
+room's, the same in every network).
 
 Schedule (emulator.tdma). The anchors share a wired network clock (ppm
 ``clocks.network_ppm``). Cycle c starts at network time start + c x cycle (+ delta_c, 004
@@ -90,8 +97,9 @@ class Anchor:
     """One anchor: its crystal, range bias, faults and random stream (made at its first
     exchange: a field of 1400 anchors starts without 1400 generators)."""
 
-    def __init__(self, sc, spec, seed: int) -> None:
+    def __init__(self, sc, spec, seed: int, prefix: str = "") -> None:
         r = sc.ranging
+        self.stream_name = f"{prefix}nanoloc.anchor.{spec.id}"
         self.id = spec.id
         self.position = sc.anchor_position(spec)
         self.e = spec.ppm * 1e-6
@@ -105,7 +113,7 @@ class Anchor:
         """The random draws of its next *n* exchanges (n, 9): jitter T, jitter A, n1..n4,
         shadowing, uniform (timeout), exponential (NLOS)."""
         if self._rng is None:
-            self._rng = stream(self.seed, f"nanoloc.anchor.{self.id}")
+            self._rng = stream(self.seed, self.stream_name)
         draws = np.empty((n, 9))
         draws[:, :7] = self._rng.standard_normal((n, 7))
         draws[:, 7] = self._rng.random(n)
@@ -114,31 +122,43 @@ class Anchor:
 
 
 class NanolocNetwork:
-    """All anchors, the tag and the gateway's serial line."""
+    """All anchors, the tags (each with its vehicle's trajectory) and the gateway's serial
+    line; *prefix* names the network's streams (module doc)."""
 
-    def __init__(self, sc, tag, trajectory, seed: int) -> None:
+    def __init__(self, sc, tags, trajectories, seed: int, prefix: str = "") -> None:
         by_id = {a.id: a for a in sc.all_anchors}
         order = sc.slot_order if sc.ranging.tdma == "slots" else [a.id for a in sc.all_anchors]
-        self.anchors = [Anchor(sc, by_id[a], seed) for a in order]
+        self.anchors = [Anchor(sc, by_id[a], seed, prefix) for a in order]
         # the anchors' constants as arrays, indexed as self.anchors: a block never loops over them
         self.ids = np.array([a.id for a in self.anchors])
         self.positions = np.array([a.position for a in self.anchors])
         self.e_a = np.array([a.e for a in self.anchors])
         self.bias = np.array([a.bias for a in self.anchors])
         self.r = sc.ranging
-        self.e_t = tag.ppm * 1e-6
-        self.tag = tag.id
+        self.e_t = np.array([tag.ppm * 1e-6 for tag in tags])
+        self.tags = np.array([tag.id for tag in tags])
+        self.trajectories = tuple(trajectories)
         m, every = len(self.anchors), sc.ranging.anchor_exchange_every_cycles
         self.anchor_every = every if m > 1 else 0  # a lone anchor has no one to range
-        self.trajectory = trajectory
-        self.starts = CycleStarts(sc.ranging, seed)
+        self.starts = CycleStarts(sc.ranging, seed, prefix)
         self.schedule = SCHEDULES[sc.ranging.tdma](sc, self)
         self.latency_ns = round(sc.gateway.latency_us * 1e3)
         # ids past type 01's byte: every report is the wide type 02 (protocols.nanoloc)
-        self.wide = max(max(by_id), tag.id) > NARROW_IDS[1]
+        self.wide = max(max(by_id), int(self.tags.max())) > NARROW_IDS[1]
         self.report_ns = round((WIDE_FRAME_SIZE if self.wide else FRAME_SIZE) * char_ns(sc.gateway.baud))
         self.busy_until = 0
         self.seq = 0
+
+    def tag_position(self, k: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
+        """(n, 3) true positions at *t_ns* of the tags of cycles *k* (module doc), in metres."""
+        if len(self.trajectories) == 1:
+            return self.trajectories[0].position(t_ns)
+        which = k % len(self.trajectories)
+        out = np.empty((len(t_ns), 3))
+        for i in np.unique(which).tolist():
+            mine = which == i
+            out[mine] = self.trajectories[i].position(t_ns[mine])
+        return out
 
     def exchanges(self, lo_ns: int, hi_ns: int) -> dict:
         """The exchanges starting in [lo_ns, hi_ns), in start order: anchor, start, t_us,
@@ -160,7 +180,8 @@ class NanolocNetwork:
             among = k % self.anchor_every == 0
             peer[among] = (idx[among] + 1 + (k[among] // self.anchor_every) % (n - 1)) % n
         peered = peer >= 0
-        e_t = np.where(peered, self.e_a[peer], self.e_t)
+        tag_of = k % len(self.tags)  # the cycle's tag
+        e_t = np.where(peered, self.e_a[peer], self.e_t[tag_of])
         p_t = r.tag_reply_us * 1e-6 / (1 + e_t) + r.reply_jitter_ns * 1e-9 * z[:, 0]
         p_a = r.anchor_reply_us * 1e-6 / (1 + e_a) + r.reply_jitter_ns * 1e-9 * z[:, 1]
         gap = r.leg_gap_us * 1e-6 / (1 + e_t)
@@ -168,7 +189,7 @@ class NanolocNetwork:
         offsets = np.column_stack((np.zeros(m), p_t, p_t + gap, p_t + gap + p_a))
         when = t0[:, None] + np.rint(offsets * 1e9).astype(np.int64)
         where = self.positions[idx]
-        tag = self.trajectory.position(when.ravel()).reshape(m, 4, 3)
+        tag = self.tag_position(np.repeat(k, 4), when.ravel()).reshape(m, 4, 3)
         if peered.any():
             tag[peered] = self.positions[peer[peered], None, :]
         d = np.linalg.norm(tag - where[:, None, :], axis=2)
@@ -218,7 +239,7 @@ class NanolocNetwork:
         return {
             "marks": marks,
             "anchor": self.ids[idx][order],
-            "tag": np.where(peered, self.ids[peer], self.tag)[order],
+            "tag": np.where(peered, self.ids[peer], self.tags[tag_of])[order],
             "start_ns": t0[order],
             "t_us": t_us.astype(np.int64)[order],
             "status": np.select([timeout, value_error], [STATUS_TIMEOUT, STATUS_VALUE_ERROR],

@@ -70,6 +70,7 @@ the in-memory run (``lab.run``) takes the lab's bytes from here, with no PTY and
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gc
 import os
 import select
@@ -93,7 +94,7 @@ from .radio import AirFrame
 from .rng import stream
 from .tap import SOCKET as TAP_SOCKET, TapServer
 from .timing import Lateness, Mode, TimingError, choose as choose_timing
-from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows
+from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows, file_name as truth_file
 from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked
 from .uart_rx import ClientView, Framing
 
@@ -209,8 +210,13 @@ class Emulation:
         self.progress = progress
         self.sink = sink
         self.air_sink = air_sink
-        self.coordinator = self._coordinator(response_delay_ns)
-        self.devices = {p.name: DEVICES.get(p.device)(self, p) for p in lab_ports.listed()}
+        #: per coordinator's port (xbee, and xbee<n> with a coordinator per vehicle)
+        self.coordinators = self._coordinators(response_delay_ns)
+        # every port instance of the scenario's vehicles (protocols.ports), vehicle by vehicle;
+        # a device is given its instance as a declaration under the instance's name
+        self.devices = {name: DEVICES.get(p.device)(self, dataclasses.replace(p, name=name))
+                        for n in range(1, len(scenario.fleet) + 1) for p in lab_ports.listed()
+                        if n <= scenario.units(p.unit) and (name := lab_ports.instance(p.name, n))}
         self.lateness = Lateness(self.devices)  # paced runs: per port, written how late
         bauds = {name: dev.settings["baud"] for name, dev in self.devices.items()}
         # a recorded run has its entries in faults.jsonl; others keep them in memory
@@ -218,21 +224,19 @@ class Emulation:
                              keep=record is None, faults=scenario.faults)
         self.lines = {name: Line(name, dev.line_device, ledger=self.ledger)
                       for name, dev in self.devices.items()}
-        #: the coordinator's port: its power-ups and answers go on this line
-        self.coordinator_port = next(name for name, dev in self.devices.items()
-                                     if dev.line_device is self.coordinator)
-        # what the host writes to the port whose device reads it (the coordinator's)
-        written = next(p.name for p in lab_ports.listed() if p.host_writes)
-        self.inbound = Inbound(written, self.devices[written].line_device, ledger=self.ledger)
+        # what the host writes to each port whose device reads it (the coordinators')
+        self.inbounds = {name: Inbound(name, dev.line_device, ledger=self.ledger)
+                         for name, dev in self.devices.items() if dev.port.host_writes}
         line_faults = [(i, f) for i, f in enumerate(scenario.faults) if f.ACTS_ON == "line"]
         for n, (index, fault) in enumerate(line_faults):
             wrapper = fault.wrapper(stream(self.seed, f"faults.line.{n}"))
             wrapper.kind, wrapper.fault_index = fault.KIND, index
             self.wrap(fault.port, wrapper, fault.direction)
-        self.coordinator.faults = tuple(acting_on(scenario.faults, "coordinator"))
-        for out in self.coordinator.power_up() + [o for f in self.coordinator.faults
-                                                  for o in self._power_ups(f)]:
-            self.lines[self.coordinator_port].put(out.t_ns, out.item)
+        for n, (port, coordinator) in enumerate(self.coordinators.items(), 1):
+            coordinator.faults = tuple(acting_on(scenario.faults, "coordinator", vehicle=n))
+            for out in coordinator.power_up() + [o for f in coordinator.faults
+                                                 for o in self._power_ups(f)]:
+                self.lines[port].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
         self.views: dict[str, ClientView] = {}  # per port: what the client's UART reads
@@ -268,10 +272,10 @@ class Emulation:
         if port not in self.lines:
             raise RunError(f"no port {port!r} to wrap; use one of {', '.join(self.lines)}")
         if direction == "to_device":
-            if port != self.inbound.name:
-                raise RunError(f"{port} ignores what the host writes; wrap the "
-                               f"{self.inbound.name} port to_device, or {port} to_host")
-            self.inbound.wrap(wrapper)
+            if port not in self.inbounds:
+                raise RunError(f"{port} ignores what the host writes; wrap "
+                               f"{' or '.join(self.inbounds)} to_device, or {port} to_host")
+            self.inbounds[port].wrap(wrapper)
         else:
             self.lines[port].wrap(wrapper)
         wrapper.direction = direction
@@ -298,12 +302,19 @@ class Emulation:
                              lambda: time.monotonic_ns() - self.t0_monotonic_ns)
         self.tap.declare(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC)
 
-    def _coordinator(self, response_delay_ns: int | None) -> Coordinator:
-        radios = self.world.radios  # the routers' MY, the network: from the seed
-        coord = identity_registers(radios["coordinator"], CE=1)  # CE: see coordinator.py
-        routers = [Remote(identity_registers(r)) for r in self.scenario.routers_for(self.seed)]
-        kw = {} if response_delay_ns is None else {"response_delay_ns": response_delay_ns}
-        return Coordinator(coord, routers, self.world.link, stream(self.seed, "coordinator"), **kw)
+    def _coordinators(self, response_delay_ns: int | None) -> dict[str, Coordinator]:
+        """Each coordinator by its port, with the routers that joined it: every vehicle's,
+        or with a coordinator per vehicle (the scenario's [xbee] network) its vehicle's."""
+        sc, kw = self.scenario, {} if response_delay_ns is None else {"response_delay_ns": response_delay_ns}
+        routers = [Remote(identity_registers(r)) for r in sc.routers_for(self.seed)]
+        alone = sc.units("coordinator") > 1
+        out = {}
+        for n, (port, downlink) in enumerate(self.world.downlinks.items(), 1):
+            radios = sc.radios_for(self.seed, n)  # the routers' MY, the network: from the seed
+            coord = identity_registers(radios["coordinator"], CE=1)  # CE: see coordinator.py
+            out[port] = Coordinator(coord, routers[n - 1:n] if alone else routers, downlink,
+                                    stream(self.seed, "coordinator" if n == 1 else f"vehicle{n}.coordinator"), **kw)
+        return out
 
     def _recorder(self, directory) -> RecordingWriter:
         # an existing recording in *directory* is replaced (the CLI checks that it is one,
@@ -321,7 +332,8 @@ class Emulation:
         try:
             rec.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC)  # there, empty or not
             rec.write_file("scenario.toml", self.scenario.to_toml().encode())
-            rec.file("truth.csv").append(TRUTH_HEADER)
+            for v in self.world.vehicles:
+                rec.file(truth_file(v.number)).append(TRUTH_HEADER)
             rec.file(FAULTS)  # the ledger: there, and empty, even when no fault acts
         except BaseException:
             rec.close()
@@ -333,11 +345,12 @@ class Emulation:
         if rec.error is not None:
             return  # it ended the run; nothing more is written
         t = time.monotonic_ns()
-        truth = rec.file("truth.csv")
         while True:
             t1 = min(self._truth_ns + TRUTH_STEP_NS, truth_until_ns)
             if t1 > self._truth_ns:
-                truth.append(truth_rows(self.world.truth(self._truth_ns, t1)))
+                for v in self.world.vehicles:
+                    rec.file(truth_file(v.number)).append(
+                        truth_rows(self.world.truth(self._truth_ns, t1, v.number)))
                 self._truth_ns = t1
             rec.flush()
             if t1 >= truth_until_ns:
@@ -425,7 +438,7 @@ class Emulation:
             if wall >= next_progress:
                 self._report(wall - t0)
                 next_progress = wall + PROGRESS_NS
-            target = min((t for line in (*self.lines.values(), self.inbound)
+            target = min((t for line in (*self.lines.values(), *self.inbounds.values())
                           if (t := line.next_ns()) is not None), default=None)
             if not feed.exhausted:
                 target = feed.known_ns if target is None else min(target, feed.known_ns)
@@ -508,20 +521,20 @@ class Emulation:
         data = port.read()
         if data and self.tap.clients:
             self.tap.chunk(port.name, "to_device", now, data)
-        if data and port.name == self.inbound.name:
-            self.inbound.put(now, data)
+        if data and port.name in self.inbounds:
+            self.inbounds[port.name].put(now, data)
             self._to_device(now)
         # the SINS board and the nanoLOC gateway ignore what the host sends them
 
     def _to_device(self, now: int) -> None:
-        """Give the device what the host wrote, as its to_device faults let it through."""
-        name = self.inbound.name
-        view, device, line = self.views.get(name), self.devices[name], self.lines[name]
-        for t, data in self.inbound.poll(now):
-            if view is not None:  # read by the device's UART at its rate
-                data = view.heard(t, data, Framing(device.line_device.baud))
-            for t_ns, item in device.host(t, data):
-                line.put(t_ns, item)
+        """Give each device what the host wrote, as its to_device faults let it through."""
+        for name, inbound in self.inbounds.items():
+            view, device, line = self.views.get(name), self.devices[name], self.lines[name]
+            for t, data in inbound.poll(now):
+                if view is not None:  # read by the device's UART at its rate
+                    data = view.heard(t, data, Framing(device.line_device.baud))
+                for t_ns, item in device.host(t, data):
+                    line.put(t_ns, item)
 
     def _enqueue(self, ev) -> None:
         t_ns, item = self.devices[ev.port].to_line(ev)
@@ -547,10 +560,11 @@ class Emulation:
         loop's time, before which no host write comes any more, so no frame comes later
         that is earlier than one handed out."""
         until_ns = min(until_ns, self.end_ns)
-        sent = self.coordinator.air
-        mine = [f for f in sent if f.t_ns < until_ns]
-        if mine:
-            self.coordinator.air = [f for f in sent if f.t_ns >= until_ns]
+        mine = []
+        for coordinator in self.coordinators.values():
+            if coordinator.air:
+                mine += [f for f in coordinator.air if f.t_ns < until_ns]
+                coordinator.air = [f for f in coordinator.air if f.t_ns >= until_ns]
         for frame in sorted(self.world.air(until_ns) + mine, key=lambda f: f.t_ns):
             if self.recorder is not None:
                 self.recorder.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC).write(
@@ -617,9 +631,10 @@ class Emulation:
             wrapper.kind, wrapper.fault_index = fault.KIND, None  # live: in no [[faults]]
             self.wrap(fault.port, wrapper, fault.direction)
         elif fault.ACTS_ON == "coordinator":
-            self.coordinator.faults += (fault,)
+            port, coordinator = list(self.coordinators.items())[fault.vehicle - 1]
+            coordinator.faults += (fault,)
             for out in self._power_ups(fault):
-                self.lines[self.coordinator_port].put(out.t_ns, out.item)
+                self.lines[port].put(out.t_ns, out.item)
         else:
             self.world.inject(fault)
         self.live[self._live_ids] = (fault, wrapper)
@@ -640,10 +655,11 @@ class Emulation:
     def _power_ups(self, fault) -> list:
         """The coordinator's power-up at the end of each episode of coordinator fault *fault*
         (its first frame marked for the ledger)."""
+        coordinator = list(self.coordinators.values())[fault.vehicle - 1]
         out, t = [], fault.next_active(0)
         while t is not None and t < self.end_ns:
             up = fault.episode_end(t)
-            first, *rest = self.coordinator.power_up(up)
+            first, *rest = coordinator.power_up(up)
             mark = {"kind": fault.KIND, "fault": fault, "t_ns": up, "off_ns": up - t}
             out += [first._replace(item=Marked(first.item, (mark,))), *rest]
             t = fault.next_active(up)
@@ -660,7 +676,7 @@ class Emulation:
     def _end_live(self, n: int) -> None:
         fault, wrapper = self.live.pop(n)
         if wrapper is not None:
-            (self.inbound if wrapper.direction == "to_device" else
+            (self.inbounds[fault.port] if wrapper.direction == "to_device" else
              self.lines[fault.port]).wrappers.remove(wrapper)
         elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
             self.world.remove(fault)

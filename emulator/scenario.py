@@ -26,13 +26,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from navtwin.protocols.adis16350 import GYRO_LSB_DPS, POWER_UP_FILTER_TAPS
-from navtwin.protocols.ports import NANOLOC, SINS
+from navtwin.protocols import ports
+from navtwin.protocols.ports import NANOLOC, SINS, XBEE
 from navtwin.protocols.xbee import BAUD_CODES, baud_rate
 from navtwin.common import geomagnetic, lab
 from navtwin.common.anchorgrid import WIDE_ANCHOR_IDS, AnchorGrid, expand
 from navtwin.common.geodesy import LocalFrame
 from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG,
-                              MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS,
+                              MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS, VEHICLES,
                               limit_problem)
 
 from . import trajectory as geometry
@@ -326,6 +327,10 @@ class Multipath:
                               positive(hi=1e9))
 
 
+#: how several vehicles share a radio network (the ``network`` keys of [xbee] and [ranging])
+NETWORKS = ("shared", "per-vehicle")
+
+
 @dataclass(frozen=True)
 class Ranging:
     cycle_ms: float = key(100.0, "ms", "TDMA cycle: every anchor (in-range: every one in range at "
@@ -377,6 +382,11 @@ class Ranging:
                                         "clipped to (cycle_ms - slot_ms) / 2); none = 0",
                                         non_negative(hi=10000))
     multipath: Multipath = Multipath()
+    network: str | None = key(None, "", "with several vehicles: shared = one TDMA ranges every tag, "
+                              "cycle c the tag of vehicle 1 + c mod N (each tag's rate falls as "
+                              "tags are added), one gateway port; per-vehicle = a network of the "
+                              "same anchors per vehicle, each its own gateway port (nanoloc2 ...) "
+                              "and random streams; none = shared", one_of(*NETWORKS))
 
     def __post_init__(self):
         if len(set(self.slot_order)) != len(self.slot_order):
@@ -455,6 +465,11 @@ Router = _table("Router", _radio(0x40A1B2D4, "SINS-ROUTER", 0x22A7, 0, {
 class XBee:
     coordinator: Coordinator = Coordinator()
     router: Router = Router()
+    network: str | None = key(None, "", "with several vehicles: shared = every vehicle's router "
+                              "joins the one coordinator (its UART and transmit buffer carry "
+                              "them all; what does not fit is dropped and counted); per-vehicle = "
+                              "a coordinator, network and port (xbee2 ...) per vehicle; none = "
+                              "shared", one_of(*NETWORKS))
 
 
 @dataclass(frozen=True)
@@ -478,7 +493,7 @@ class Vehicle:
 VEHICLE_KEYS = {"trajectory": ("trajectory",), "tag": ("tag",), "imu": ("imu",),
                 "board": ("board",), "router": ("xbee", "router"),
                 "magnetometer": ("magnetometer",)}
-MAX_VEHICLES = 1  # many vehicles' ports and radios come later (issue 8 point 8)
+MAX_VEHICLES = VEHICLES[1]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -504,6 +519,9 @@ class Scenario:
     link: Link = Link()
     xbee: XBee = XBee()
     magnetometer: Magnetometer | None = key(None, "", "")
+    #: vehicles 2, 3, ... (the top-level tables are vehicle 1; the loader's doc); none given:
+    #: not written by to_toml, so one-vehicle scenarios keep their text
+    vehicles: tuple[Vehicle, ...] | None = key(None, "", "")
     faults: tuple[Fault, ...] = ()
 
     def __post_init__(self):
@@ -524,18 +542,13 @@ class Scenario:
             if not all(self.area.contains(x, y) for x, y in (g.box[:2], g.box[2:])):
                 raise Invalid(f"[[anchor_grids]] #{k + 1} count", f"the grid spans {g.box} m, beyond the "
                                                                    "area; shrink the grid or enlarge [area]")
-        if self.tag.id in self.anchor_ids:
-            raise Invalid("[tag] id", f"{self.tag.id} is also an anchor id; give the tag its own id")
+        self._check_fleet()
         for i, a in enumerate(self.anchors):
             x, y, _ = self.anchor_position(a)
             if not self.area.contains(x, y):
                 x, y = round(x, 3) + 0.0, round(y, 3) + 0.0  # as a message shows them (no -0)
                 raise Invalid(f"[[anchors]] #{i + 1} x", f"({x:g}, {y:g}) m is outside the area; "
                                                           "move the anchor or enlarge [area]")
-        for i, (x, y) in enumerate(self.trajectory.waypoints):
-            if not self.area.contains(x, y):
-                raise Invalid("[trajectory] waypoints", f"{i + 1} ({x:g}, {y:g}) m is outside the area; "
-                                                        "move it or enlarge [area]")
         for a in self.ranging.slot_order:
             if a not in self.anchor_ids:
                 raise Invalid("[ranging] slot_order", f"names anchor {a}, which is not in [[anchors]] "
@@ -546,26 +559,56 @@ class Scenario:
         for i, f in enumerate(self.faults):
             if (problem := self.fault_problem(f)) is not None:
                 raise Invalid(f"[[faults]] #{i + 1} {problem[0]}", problem[1])
-        mag = self.magnetometer
-        if mag is not None and mag.enabled:
-            every = 1000.0 / self.board.period_ms / mag.rate_hz
-            if every < 1 - 1e-9 or abs(every - round(every)) > 1e-9:
-                raise Invalid("[magnetometer] rate_hz", f"{mag.rate_hz:g} does not divide the board's "
-                                                        f"{1000 / self.board.period_ms:g} frames/s; use "
-                                                        "a rate that does, e.g. 10")
-        if baud_rate(self.xbee.router.BD) != self.board.baud:
-            raise Invalid("[xbee.router] BD", f"{baud_rate(self.xbee.router.BD)} bit/s differs from the "
-                                              f"board's {self.board.baud}; match [board] baud")
+
+    def _check_fleet(self) -> None:
+        """Each vehicle's own rules, and that no two share a tag id or a router address."""
+        tags, addresses = {}, {}
+        for n, v in enumerate(self.fleet, 1):
+            at = (lambda table: f"[{table}]") if n == 1 else \
+                (lambda table, n=n: f"vehicle {n} [{table.replace('xbee.', '')}]")
+            if v.tag.id in self.anchor_ids:
+                raise Invalid(f"{at('tag')} id", f"{v.tag.id} is also an anchor id; give the tag its own id")
+            if v.tag.id in tags:
+                raise Invalid(f"{at('tag')} id", f"{v.tag.id} is vehicle {tags[v.tag.id]}'s tag too; "
+                                                 "give each vehicle's tag its own id")
+            tags[v.tag.id] = n
+            address = (v.router.SH, v.router.SL)
+            if address in addresses:
+                raise Invalid(f"{at('xbee.router')} SL", f"{v.router.SL:#X} with SH {v.router.SH:#X} "
+                                                         f"is vehicle {addresses[address]}'s router "
+                                                         "too; give each router its own SL")
+            addresses[address] = n
+            for i, (x, y) in enumerate(v.trajectory.waypoints):
+                if not self.area.contains(x, y):
+                    raise Invalid(f"{at('trajectory')} waypoints", f"{i + 1} ({x:g}, {y:g}) m is outside "
+                                                                   "the area; move it or enlarge [area]")
+            mag = v.magnetometer
+            if mag is not None and mag.enabled:
+                every = 1000.0 / v.board.period_ms / mag.rate_hz
+                if every < 1 - 1e-9 or abs(every - round(every)) > 1e-9:
+                    raise Invalid(f"{at('magnetometer')} rate_hz", f"{mag.rate_hz:g} does not divide the "
+                                                                   f"board's {1000 / v.board.period_ms:g} "
+                                                                   "frames/s; use a rate that does, e.g. 10")
+            if baud_rate(v.router.BD) != v.board.baud:
+                raise Invalid(f"{at('xbee.router')} BD", f"{baud_rate(v.router.BD)} bit/s differs from "
+                                                         f"the board's {v.board.baud}; match [board] baud")
 
     def fault_problem(self, f) -> tuple[str, str] | None:
         """The part fault *f* names that this scenario lacks, as (setting, problem), or None:
         the one rule for the scenario's [[faults]], --fault and live faults."""
         if getattr(f, "anchor", None) is not None and f.anchor not in self.anchor_ids:
             return "anchor", f"{f.anchor} is not in [[anchors]] or [[anchor_grids]]; name an anchor id"
-        n = len(self.vehicles)
+        n = len(self.fleet)
+        has = f"vehicles 1 to {n}" if n > 1 else "vehicle 1 only"
         if getattr(f, "vehicle", None) is not None and not 1 <= f.vehicle <= n:
-            has = f"vehicles 1 to {n}" if n > 1 else "vehicle 1 only"
             return "vehicle", f"{f.vehicle}: the scenario has {has}; name one of its vehicles"
+        if f.ACTS_ON == "coordinator" and f.vehicle > self.units("coordinator"):
+            return "vehicle", (f"{f.vehicle}: the vehicles share one coordinator ([xbee] network); "
+                               "use vehicle 1")
+        port = getattr(f, "port", None)
+        if port is not None and port not in self.ports and ports.known(port):
+            return "port", (f"{port}: the scenario has {has} and its ports are "
+                            f"{', '.join(self.ports)}; name one of them")
         return None
 
     # -- derived views ---------------------------------------------------------------------
@@ -603,22 +646,37 @@ class Scenario:
         return x, y, self.tag.z if anchor.height_m is None else z
 
     @property
-    def vehicles(self) -> tuple[Vehicle, ...]:
-        """The vehicles in order, vehicle 1 first (one today: the top-level tables)."""
+    def fleet(self) -> tuple[Vehicle, ...]:
+        """Every vehicle in order: vehicle 1 (the top-level tables), then :attr:`vehicles`."""
         return (Vehicle(self.trajectory, self.tag, self.imu, self.board, self.xbee.router,
-                        self.magnetometer),)
+                        self.magnetometer), *(self.vehicles or ()))
+
+    def units(self, unit: str) -> int:
+        """How many of *unit* (a port's, protocols.ports) the lab has: a vehicle's, one per
+        vehicle; the coordinator and the gateway, one per vehicle when the scenario gives each
+        vehicle its own network, else one."""
+        per_vehicle = {"vehicle": True, "coordinator": self.xbee.network == "per-vehicle",
+                       "gateway": self.ranging.network == "per-vehicle"}
+        return len(self.fleet) if per_vehicle.get(unit, False) else 1
 
     @property
     def duration_ns(self) -> int:
         return round(self.duration_s * 1e9)
 
-    @property
+    @functools.cached_property
     def ports(self) -> dict:
-        """Serial settings of the three ports the emulated lab exposes."""
+        """Serial settings of the ports the emulated lab exposes, by instance name
+        (protocols.ports: ``sins``, then vehicle n's ``sins<n>`` ...), vehicle by vehicle."""
         c = self.xbee.coordinator
-        return {"sins": {"baud": self.board.baud},
-                "xbee": {"baud": baud_rate(c.BD), "api_mode": c.AP},
-                "nanoloc": {"baud": self.gateway.baud}}
+        own = {SINS.name: lambda v: {"baud": v.board.baud},
+               XBEE.name: lambda v: {"baud": baud_rate(c.BD), "api_mode": c.AP},
+               NANOLOC.name: lambda v: {"baud": self.gateway.baud}}
+        out = {}
+        for n, v in enumerate(self.fleet, 1):
+            for name, settings in own.items():
+                if n <= self.units(ports.get(name).unit):
+                    out[ports.instance(name, n)] = settings(v)
+        return out
 
     @property
     def radios(self) -> dict:
@@ -627,18 +685,24 @@ class Scenario:
 
     def routers_for(self, seed: int) -> tuple[dict, ...]:
         """AT values of each vehicle's router for a run with *seed*, in vehicle order."""
-        return (self.radios_for(seed)["router"],)
+        return tuple(self.radios_for(seed, n)["router"] for n in range(1, len(self.fleet) + 1))
 
-    def radios_for(self, seed: int) -> dict:
-        """AT values of both radios for a run with *seed*: the network the coordinator formed
-        (OP, OI, CH) and the router's MY come from the seed, as on a real join."""
-        rng = stream(seed, "xbee.join")
-        my, oi = (int(v) for v in rng.integers(0x0001, 0xFFF8, size=2))  # 0xFFF8.. reserved
-        op = int(rng.integers(1, 2**63))
-        ch = int(rng.integers(0x0B, 0x1B))
-        network = {"OP": op, "OI": oi, "CH": ch, "ID": 0}
+    def radios_for(self, seed: int, vehicle: int = 1) -> dict:
+        """AT values of vehicle *vehicle*'s router and its coordinator for a run with *seed*:
+        the network the coordinator formed (OP, OI, CH) and the router's MY come from the
+        seed, as on a real join (vehicle n > 1: its MY from the stream "vehicle<n>.xbee.join",
+        and, with per-vehicle networks, its coordinator's network too)."""
+        def joined(n: int):
+            rng = stream(seed, "xbee.join" if n == 1 else f"vehicle{n}.xbee.join")
+            my, oi = (int(v) for v in rng.integers(0x0001, 0xFFF8, size=2))  # 0xFFF8.. reserved
+            op = int(rng.integers(1, 2**63))
+            ch = int(rng.integers(0x0B, 0x1B))
+            return my, {"OP": op, "OI": oi, "CH": ch, "ID": 0}
+        my, network = joined(vehicle)
+        if vehicle > 1 and self.xbee.network != "per-vehicle":
+            network = joined(1)[1]  # it joined vehicle 1's coordinator
         coord = dataclasses.asdict(self.xbee.coordinator) | network | {"MY": 0x0000}
-        router = dataclasses.asdict(self.xbee.router) | network | {"MY": my}
+        router = dataclasses.asdict(self.fleet[vehicle - 1].router) | network | {"MY": my}
         return {"coordinator": coord, "router": router}
 
     def to_toml(self) -> str:
@@ -680,7 +744,7 @@ def _resolve(ref: str, relative_to: Path | None) -> Path:
 def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
     if path.resolve() in chain:
         raise ScenarioError(f"{path.name}: base chain loops back to {path.name}; remove the loop")
-    data = _vehicles(tomlfile.read(path, ScenarioError, path.name), path.name)
+    data = tomlfile.read(path, ScenarioError, path.name)
     base = data.pop("base", None)
     if base is None:
         return data
@@ -691,24 +755,29 @@ def _read(path: Path, chain: tuple[Path, ...] = ()) -> dict:
 
 
 def _vehicles(data: dict, source: str) -> dict:
-    """*data* with its ``[[vehicles]]`` entry read into the top-level tables it stands for
-    (VEHICLE_KEYS); a table set in both places is refused."""
+    """*data* (its ``base`` chain merged) with its ``[[vehicles]]`` tables read as the
+    vehicles they stand for. With a top-level ``[trajectory]`` the top-level tables are
+    vehicle 1 and every ``[[vehicles]]`` table is one more; without one, ``[[vehicles]]`` #1
+    is read into the top-level tables (VEHICLE_KEYS; a table set in both places is refused)
+    and the rest are vehicles 2, 3, .... A further vehicle starts from vehicle 1's tables and
+    overrides them key by key."""
     vehicles = data.get("vehicles")
     if vehicles is None:
         return data
     if not isinstance(vehicles, list) or not all(isinstance(v, dict) for v in vehicles):
         raise ScenarioError(f"{source}: vehicles must be an array of tables; write each vehicle "
                             "as [[vehicles]]")
-    if len(vehicles) > MAX_VEHICLES:
-        raise ScenarioError(f"{source}: [[vehicles]] lists {len(vehicles)} vehicles; this version "
-                            f"runs {MAX_VEHICLES}; keep one [[vehicles]] table")
-    out = {k: v for k, v in data.items() if k != "vehicles"}
     for n, vehicle in enumerate(vehicles, 1):
-        for name, value in vehicle.items():
-            if name not in VEHICLE_KEYS:
-                known = ", ".join(VEHICLE_KEYS)
-                raise ScenarioError(f"{source}: [[vehicles]] #{n} has an unknown key '{name}'; "
-                                    f"known keys: {known}")
+        if unknown := [name for name in vehicle if name not in VEHICLE_KEYS]:
+            raise ScenarioError(f"{source}: [[vehicles]] #{n} has an unknown key '{unknown[0]}'; "
+                                f"known keys: {', '.join(VEHICLE_KEYS)}")
+    out = {k: v for k, v in data.items() if k != "vehicles"}
+    first_at_top = "trajectory" in out
+    if len(vehicles) + first_at_top > MAX_VEHICLES:
+        raise ScenarioError(f"{source}: the scenario has {len(vehicles) + first_at_top} vehicles; "
+                            f"this version runs up to {MAX_VEHICLES}; remove [[vehicles]] tables")
+    if not first_at_top and vehicles:
+        for name, value in vehicles[0].items():
             *parents, leaf = VEHICLE_KEYS[name]
             table = out
             for p in parents:
@@ -719,8 +788,18 @@ def _vehicles(data: dict, source: str) -> dict:
             if leaf in table:
                 top = ".".join(VEHICLE_KEYS[name])
                 raise ScenarioError(f"{source}: [{top}] is set at the top level and in "
-                                    f"[[vehicles]] #{n}; keep one of them")
+                                    f"[[vehicles]] #1; keep one of them")
             table[leaf] = value
+        vehicles = vehicles[1:]
+    first = {}  # vehicle 1's tables, where the top level gives them
+    for name, (*parents, leaf) in VEHICLE_KEYS.items():
+        table = out
+        for p in parents:
+            table = table.get(p, {}) if isinstance(table.get(p, {}), dict) else {}
+        if leaf in table:
+            first[name] = table[leaf]
+    if vehicles:
+        out["vehicles"] = [_merge(first, v) for v in vehicles]
     return out
 
 

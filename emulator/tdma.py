@@ -14,7 +14,7 @@ so the draws do not depend on how time is cut into blocks. 0 (the default) draws
 Schedules, registered in :data:`SCHEDULES` by the ``schedule`` key's value:
 
 ``slots``     every anchor of slot_order has slot i (its place there) in every cycle.
-``in-range``  at each cycle start the anchors within radio_range_m of the tag's true
+``in-range``  at each cycle start the anchors within radio_range_m of the cycle's tag's true
               position take the cycle's slots in order of distance (nearest first, ties by
               id), at most floor(cycle / slot) of them; only they exchange. The distances are
               one vectorised computation over the field's array per block, so a cycle costs
@@ -38,10 +38,10 @@ from .rng import stream
 class CycleStarts:
     """delta_c, the offset of each cycle's start on the network clock (ns; module doc)."""
 
-    def __init__(self, r, seed: int) -> None:
+    def __init__(self, r, seed: int, prefix: str = "") -> None:
         self.sigma_ns = (r.cycle_jitter_ms or 0.0) * 1e6
         self.clip_ns = (r.cycle_ms - r.slot_ms) * 1e6 / 2
-        self.rng = stream(seed, "nanoloc.cycle") if self.sigma_ns > 0 else None
+        self.rng = stream(seed, f"{prefix}nanoloc.cycle") if self.sigma_ns > 0 else None
         self.delta = np.zeros(0)
         self.first = 0  # the cycle of delta[0]: a block never asks for an earlier one than before
 
@@ -103,7 +103,7 @@ class InRange:
     def __init__(self, sc, net) -> None:
         r = sc.ranging
         self.starts = net.starts
-        self.trajectory = net.trajectory
+        self.tag_position = net.tag_position
         self.positions = net.positions
         self.ids = net.ids
         self.range_m = r.radio_range_m
@@ -122,7 +122,7 @@ class InRange:
         t = np.rint(net / self.scale).astype(np.int64)
         keep = (t >= lo_ns) & (t < hi_ns)
         c, net, t = c[keep], net[keep], t[keep]
-        tag = self.trajectory.position(t)
+        tag = self.tag_position(c, t)  # the cycle's tag (emulator.nanoloc: tags take turns)
         d = np.linalg.norm(tag[:, None, :] - self.positions[None, :, :], axis=2)
         idx, k, slot = [], [], []
         for row, cycle in enumerate(c.tolist()):

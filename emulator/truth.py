@@ -46,6 +46,12 @@ def truth_arrays(trajectory, t0_ns: int, t1_ns: int) -> np.ndarray:
 
 
 HEADER = (",".join(FIELDS) + "\n").encode("ascii")
+
+
+def file_name(vehicle: int = 1) -> str:
+    """The recording's truth file of vehicle *vehicle*: truth.csv, then truth2.csv, ... (as
+    its ports are named, protocols.ports)."""
+    return "truth.csv" if vehicle == 1 else f"truth{vehicle}.csv"
 _FMT = ["%d"] + ["%.6f"] * 9 + ["%.9f"] * 6
 
 

@@ -1,15 +1,17 @@
 """The emulated lab in virtual time: every device's output as timed events.
 
 ``World(sc, seed)`` builds the vehicles of scenario *sc* (:class:`Vehicle`: trajectory,
-ADIS16350 and DSP board, XBee router and uplink; one today), the coordinator's downlink and
-the nanoLOC network. ``advance(until_ns)`` returns, sorted by
-(t_ns, port order sins < nanoloc < xbee), every event with t_ns < until_ns not returned
-before:
+ADIS16350 and DSP board, XBee router and uplink), each coordinator's downlink and the nanoLOC
+networks (one for every tag, or one per vehicle: the scenario's ``network`` keys).
+``advance(until_ns)`` returns, sorted by (t_ns, port order sins < nanoloc < xbee, vehicle),
+every event with t_ns < until_ns not returned before, each on its port instance (vehicle n's
+``sins<n>``; protocols.ports):
 
 - ``Event(t, "sins", bytes)``: one SINS frame; t = when the board starts writing it;
 - ``Event(t, "nanoloc", bytes)``: one gateway report; t = when the gateway starts writing it;
 - ``Event(t, "xbee", RfPacket)``: an RF packet the coordinator's radio received at t (after
-  the router's packetisation, latency and retries; lost packets never appear).
+  the router's packetisation, latency and retries; lost packets never appear); with one
+  coordinator for all, every router's packets are on ``xbee``.
 
 Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
 (emulator.radio.AirFrame: every attempt, received or lost, and the coordinator's MAC ACK of
@@ -43,10 +45,9 @@ from .scenario import BLOCK_S, Scenario
 from .trajectory import Trajectory
 from .truth import truth_arrays
 
-#: events at the same t_ns come in this port order, so the event list never depends on how
-#: the devices were generated
+#: events at the same t_ns come in this port order (then vehicle order), so the event list
+#: never depends on how the devices were generated
 EVENT_ORDER = (ports.SINS.name, ports.NANOLOC.name, ports.XBEE.name)
-EVENT_RANK = {p: i for i, p in enumerate(EVENT_ORDER)}
 
 
 class RfPacket(NamedTuple):
@@ -70,10 +71,6 @@ class Event(NamedTuple):
     marks: tuple = ()  # ledger marks of the device faults that changed it (emulator.uart.Marked)
 
 
-def _order(e: Event) -> tuple[int, int]:
-    return e.t_ns, EVENT_RANK[e.port]
-
-
 class Vehicle:
     """One vehicle's devices: its trajectory, the ADIS16350 (and a magnetometer, when the
     scenario enables one) on its DSP board, and the XBee router that packetises the board's
@@ -88,6 +85,9 @@ class Vehicle:
     def __init__(self, sc: Scenario, spec, router: dict, number: int, seed: int) -> None:
         self.number = number
         self.spec = spec
+        self.sins_port = ports.instance(ports.SINS.name, number)
+        #: the port of the coordinator its router joined (its own, or vehicle 1's)
+        self.xbee_port = ports.instance(ports.XBEE.name, number if sc.units("coordinator") > 1 else 1)
         self.src64 = (router["SH"] << 32) | router["SL"]
         self.src16 = router["MY"]
         self.trajectory = Trajectory(spec.trajectory, spec.tag.z)
@@ -118,7 +118,7 @@ class Vehicle:
         those packets put on the air (none while the router is out of the network)."""
         self.imu.generate(lo, hi)
         t_sins, frames, marks = self.board.frames(lo, hi)
-        events = [Event(t, "sins", f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
+        events = [Event(t, self.sins_port, f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
         times = self.board.byte_times(t_sins, [len(f) for f in frames])
         packets = self.router.packetise(b"".join(frames), times, next_byte)
@@ -138,7 +138,7 @@ class Vehicle:
                     marks, self._absent = marks + ({**self._absent, "my": self.src16},), None
             air += self.sender.frames(attempts, i, self.src16, COORDINATOR16, p)
             if ok:
-                out.append(Event(t, "xbee", RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p),
+                out.append(Event(t, self.xbee_port, RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p),
                                  marks))
         return events, out, air
 
@@ -169,13 +169,21 @@ class World:
         self.duration_ns = sc.duration_ns
         self.radios = sc.radios_for(self.seed)
         self.vehicles = [Vehicle(sc, spec, router, n, self.seed) for n, (spec, router)
-                         in enumerate(zip(sc.vehicles, sc.routers_for(self.seed)), 1)]
-        #: the host -> router direction (0x10, 0x17); its own stream, so host activity never
-        #: changes the device byte streams
-        self.link = Link(sc.link, acting_on(sc.faults, "link"), stream(self.seed, "xbee.link.coordinator"))
-        # ranges vehicle 1's tag (ranging several tags is the TDMA of a later issue)
-        first = self.vehicles[0]
-        self.nanoloc = NanolocNetwork(sc, first.spec.tag, first.trajectory, self.seed)
+                         in enumerate(zip(sc.fleet, sc.routers_for(self.seed)), 1)]
+        #: per coordinator's port, the host -> router direction (0x10, 0x17); each its own
+        #: stream, so host activity never changes the device byte streams
+        self.downlinks = {ports.instance(ports.XBEE.name, n): Link(sc.link, acting_on(sc.faults, "link"), stream(
+            self.seed, "xbee.link.coordinator" if n == 1 else f"vehicle{n}.xbee.link.coordinator"))
+            for n in range(1, sc.units("coordinator") + 1)}
+        #: per gateway's port, its network: one ranging every tag in turn, or one per vehicle
+        gateways = sc.units("gateway")
+        groups = [self.vehicles] if gateways == 1 else [[v] for v in self.vehicles]
+        self.networks = {ports.instance(ports.NANOLOC.name, n): NanolocNetwork(
+            sc, [v.spec.tag for v in group], [v.trajectory for v in group], self.seed,
+            "" if n == 1 else f"vehicle{n}.") for n, group in enumerate(groups, 1)}
+        self.nanoloc = self.networks[ports.NANOLOC.name]  # vehicle 1's
+        names = [ports.instance(p, n) for p in EVENT_ORDER for n in range(1, len(self.vehicles) + 1)]
+        self._rank = {name: i for i, name in enumerate(names)}
         self._generated_ns = 0  # blocks before this are generated
         self._pending: list[Event] = []  # generated, not yet returned, in order
         self._times: list[int] = []  # their t_ns
@@ -196,9 +204,10 @@ class World:
         if air:
             self._air += [f for f in air if f.t_ns < self.duration_ns]
             self._air.sort(key=lambda f: f.t_ns)  # stable: an ACK stays after its frame
-        t_nl, reports, marks = self.nanoloc.reports(lo, hi)
-        return sins + [Event(t, "nanoloc", r, marks.get(i, ()))
-                       for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))] + rf
+        for port, network in self.networks.items():
+            t_nl, reports, marks = network.reports(lo, hi)
+            sins += [Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))]
+        return sins + rf
 
     def advance(self, until_ns: int) -> list[Event]:
         """Events with t_ns < until_ns not returned before, in (t_ns, port) order."""
@@ -210,7 +219,8 @@ class World:
             fresh += [e for e in self._block() if e.t_ns < self.duration_ns]
         if fresh:  # a stable sort keeps generation order among equal keys
             self._pending += fresh
-            self._pending.sort(key=_order)
+            rank = self._rank
+            self._pending.sort(key=lambda e: (e.t_ns, rank[e.port]))
             self._times = [e.t_ns for e in self._pending]
         cut = bisect.bisect_left(self._times, until_ns)
         out = self._pending[:cut]
@@ -229,12 +239,13 @@ class World:
     # -- live faults ------------------------------------------------------------------------
     def _holders(self):
         """(model, what it is, which) for every model that device faults act on."""
-        for a in self.nanoloc.anchors:
-            yield a, "anchor", {"anchor": a.id}
+        for network in self.networks.values():
+            for a in network.anchors:
+                yield a, "anchor", {"anchor": a.id}
         for v in self.vehicles:
             yield v.board, "board", {"vehicle": v.number}
             yield v, "router", {"vehicle": v.number}
-        for link in [v.uplink for v in self.vehicles] + [self.link]:
+        for link in [v.uplink for v in self.vehicles] + list(self.downlinks.values()):
             yield link, "link", {}
 
     @property
@@ -260,11 +271,12 @@ class World:
         return self._returned_ns >= self.duration_ns
 
     # -- truth ------------------------------------------------------------------------------
-    def truth(self, t0_ns: int, t1_ns: int) -> np.ndarray:
-        """Vehicle 1's true state every millisecond in [t0_ns, t1_ns) (emulator.truth.FIELDS;
-        truth.csv is one vehicle's)."""
-        return truth_arrays(self.vehicles[0].trajectory, t0_ns, t1_ns)
+    def truth(self, t0_ns: int, t1_ns: int, vehicle: int = 1) -> np.ndarray:
+        """Vehicle *vehicle*'s true state every millisecond in [t0_ns, t1_ns)
+        (emulator.truth.FIELDS; truth.csv is vehicle 1's, truth<n>.csv vehicle n's)."""
+        return truth_arrays(self.vehicles[vehicle - 1].trajectory, t0_ns, t1_ns)
 
-    def device_truth(self) -> dict:
-        """What vehicle 1's devices drew at power-on and its router's join: evaluation only."""
-        return {"seed": self.seed, **self.vehicles[0].device_truth()}
+    def device_truth(self, vehicle: int = 1) -> dict:
+        """What vehicle *vehicle*'s devices drew at power-on and its router's join:
+        evaluation only."""
+        return {"seed": self.seed, **self.vehicles[vehicle - 1].device_truth()}

@@ -14,9 +14,18 @@ Orders. :func:`listed` is the lab's order: link directories, recordings and run 
 list the ports in it (``order``). The host processes its inputs in ``host_order``: the
 streams that carry the IMU samples before the ranges that wait for them, the coordinator's
 first, so that of two copies of the IMU stream the radio's is the one the host keeps.
+
+Several vehicles. A port belongs to a ``unit``: a vehicle (the SINS board's line), the
+coordinator, the gateway, or the lab. A scenario with N vehicles has one port of a vehicle's
+unit per vehicle, and one coordinator's or gateway's port per vehicle when it gives each
+vehicle its own XBee or nanoLOC network (emulator.scenario). Vehicle 1's port has the
+declared name; vehicle n's the name followed by n (``sins2``, ``xbee2``, ``nanoloc2``), so
+every side resolves an instance to its declaration (:func:`get`, :func:`parse`) and a
+one-vehicle lab's names never change.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from .plugins import Registry
@@ -50,6 +59,8 @@ class Port:
     #: its device reads what the host writes (the coordinator answers AT queries); the host
     #: writes its queries to it, and ``to_device`` line faults act on those bytes
     host_writes: bool = False
+    #: what the port belongs to (module doc): "vehicle", "coordinator", "gateway" or "lab"
+    unit: str = "lab"
 
     @property
     def reads_host(self) -> bool:
@@ -70,13 +81,13 @@ def _check(name: str, port) -> None:
 
 
 SINS = Port("sins", "sins", "board", "the SINS DSP board's frames over RS-232",
-            order=0, host_order=1, carries_imu=True)
+            order=0, host_order=1, carries_imu=True, unit="vehicle")
 XBEE = Port("xbee", "xbee-sins", "coordinator",
             "the XBee coordinator's API frames (0x90 packets carry the SINS stream)",
             order=1, host_order=0, carries_imu=True, frames="xbee", api_mode=True,
-            host_writes=True)
+            host_writes=True, unit="coordinator")
 NANOLOC = Port("nanoloc", "nanoloc", "gateway", "the nanoLOC gateway's range reports",
-               order=2, host_order=2)
+               order=2, host_order=2, unit="gateway")
 
 #: every port: the lab's three, then those registered in process, then installed packages'
 PORTS: Registry[Port] = Registry("navtwin.ports", "port",
@@ -107,6 +118,35 @@ def host_inputs() -> tuple[str, ...]:
                                         key=lambda p: p.host_order))
 
 
+def instance(name: str, n: int) -> str:
+    """The name of vehicle *n*'s port of declaration *name* (module doc): ``sins``, ``sins2``."""
+    return name if n == 1 else f"{name}{n}"
+
+
+_NUMBERED = re.compile(r"(.+?)([1-9][0-9]*)")
+
+
+def parse(name: str) -> tuple[str, int]:
+    """(declaration, vehicle) of port instance *name*: ``sins2`` -> ("sins", 2); a declared
+    name is itself, vehicle 1 (KeyError if *name* is neither)."""
+    if name in PORTS:
+        return name, 1
+    m = _NUMBERED.fullmatch(name)
+    if m is None or m[1] not in PORTS or int(m[2]) < 2:
+        raise KeyError(name)
+    return m[1], int(m[2])
+
+
+def known(name: str) -> bool:
+    """Whether *name* is a declared port or a vehicle's instance of one."""
+    try:
+        parse(name)
+    except KeyError:
+        return False
+    return True
+
+
 def get(name: str) -> Port:
-    """The declaration of port *name* (KeyError if none)."""
-    return PORTS.get(name)
+    """The declaration of port *name*, or of the port it is an instance of (``sins2``: SINS);
+    KeyError if none."""
+    return PORTS.get(parse(name)[0])

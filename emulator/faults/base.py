@@ -37,7 +37,7 @@ import math
 from dataclasses import dataclass
 
 from navtwin.common.anchorgrid import WIDE_ANCHOR_IDS
-from navtwin.common.limits import MAX_DURATION_S
+from navtwin.common.limits import MAX_DURATION_S, VEHICLES
 from navtwin.protocols.plugins import Registry
 from navtwin.common.schema import REQUIRED, Check, Invalid, between, key, non_negative, one_of
 from navtwin.protocols import ports
@@ -49,9 +49,10 @@ MODELS = ("anchor", "link", "board", "router", "coordinator", "line")
 #: which bytes a line fault acts on: what the device sends the host, or what the host writes
 DIRECTIONS = ("to_host", "to_device")
 _LAB_PORTS = ", ".join(map(repr, ports.PORTS.built_in))
-#: a line's port: the lab's or one an installed package declares (protocols.ports)
-DECLARED_PORT = Check(lambda v: v in ports.PORTS, f"must be one of {_LAB_PORTS} or a port a "
-                      "package declares", f"use one of {_LAB_PORTS}, or install the package "
+#: a line's port: the lab's or one an installed package declares (protocols.ports), or a
+#: vehicle's instance of one (sins2); the scenario checks that it has that vehicle
+DECLARED_PORT = Check(ports.known, f"must be one of {_LAB_PORTS}, a port a package declares, "
+                      "or vehicle n's (sins2)", f"use one of {_LAB_PORTS}, or install the package "
                       "that declares the port")
 #: The shortest episode and period: the emulator keeps time in integer ns, and a schedule
 #: finer than these only multiplies episodes (each a power-up, a Poisson draw) with nothing
@@ -180,7 +181,7 @@ class BoardFault(DeviceFault):
     """A fault on one vehicle's SINS board."""
 
     ACTS_ON = "board"
-    vehicle: int = key(1, "", "the vehicle whose board it is, 1 = the first", between(1, 64))
+    vehicle: int = key(1, "", "the vehicle whose board it is, 1 = the first", between(*VEHICLES))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -188,7 +189,17 @@ class RouterFault(DeviceFault):
     """A fault on one vehicle's XBee router."""
 
     ACTS_ON = "router"
-    vehicle: int = key(1, "", "the vehicle whose router it is, 1 = the first", between(1, 64))
+    vehicle: int = key(1, "", "the vehicle whose router it is, 1 = the first", between(*VEHICLES))
+
+
+@dataclass(frozen=True, kw_only=True)
+class CoordinatorFault(DeviceFault):
+    """A fault on an XBee coordinator: the one every router joined, or with a coordinator
+    per vehicle (``[xbee] network = "per-vehicle"``) vehicle *vehicle*'s."""
+
+    ACTS_ON = "coordinator"
+    vehicle: int = key(1, "", "with a coordinator per vehicle, the vehicle whose coordinator it "
+                       "is; 1 = the first (the only one of a shared network)", between(*VEHICLES))
 
 
 @dataclass(frozen=True, kw_only=True)

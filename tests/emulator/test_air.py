@@ -179,7 +179,7 @@ def test_the_coordinators_transmit_requests_are_on_the_air_in_time_order(tmp_pat
                                          data=b"\x01AP"))]
     with Emulation(sc, SEED, speed=None, ports=False, record=tmp_path / "rec") as emu:
         for t, frame in requests:
-            emu.inbound.put(t, frame)
+            emu.inbounds["xbee"].put(t, frame)
         emu.run()
     rec = Recording(tmp_path / "rec")
     chunks = list(rec.chunks(AIR))

@@ -421,9 +421,9 @@ def test_the_emulation_puts_to_device_faults_on_what_the_host_writes(tmp_path):
                                      'direction = "to_device"\nprobability = 1.0\n'
                                      "start_s = 0.0\nend_s = 1.0\n")
     with Emulation(sc, 1, speed=None, ports=False, duration_s=2.0) as emu:
-        assert len(emu.inbound.wrappers) == 1 and not emu.lines["xbee"].wrappers
+        assert len(emu.inbounds["xbee"].wrappers) == 1 and not emu.lines["xbee"].wrappers
         at_frame = bytes.fromhex("7E00040801414951") + b"\x00"  # any bytes: all dropped
-        emu.inbound.put(10 * MS, at_frame)
+        emu.inbounds["xbee"].put(10 * MS, at_frame)
         emu._to_device(10 * MS)
         emu.run()
     (e,) = emu.ledger.entries

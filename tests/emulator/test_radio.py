@@ -162,6 +162,6 @@ def test_host_traffic_never_changes_the_device_streams():
     events = []
     for t in range(0, busy.duration_ns, 250_000_000):
         events += busy.advance(t)
-        busy.link.unicast(t, 40)  # the host sends to the router now and then
+        busy.downlinks["xbee"].unicast(t, 40)  # the host sends to the router now and then
     events += busy.advance(busy.duration_ns)
     assert events == quiet

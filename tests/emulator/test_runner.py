@@ -248,7 +248,7 @@ def test_host_answers_land_between_frames_never_inside(office):
     out = bytearray()
     emu._deliver = lambda chunk, wall: out.extend(chunk.data) if chunk.port == "xbee" else None
     # a query at 1.0 s, straight into the coordinator as the PTY path would pass it
-    for o in emu.coordinator.host(SEC, xbee.build(0x08, True, frame_id=1, command=b"VR",
+    for o in emu.coordinators["xbee"].host(SEC, xbee.build(0x08, True, frame_id=1, command=b"VR",
                                                   parameter=b"")):
         emu.lines["xbee"].put(o.t_ns, o.item)
     emu.run()
@@ -290,7 +290,7 @@ def drive(emu, host, step_ns=1_000_000):
         for ev in emu.world.advance(min(t, emu.end_ns)):
             emu._enqueue(ev)
         while host and host[0][0] <= t:
-            for out in emu.coordinator.host(*host.pop(0)):
+            for out in emu.coordinators["xbee"].host(*host.pop(0)):
                 emu.lines["xbee"].put(out.t_ns, out.item)
         for name, line in emu.lines.items():
             chunks[name] += line.poll(t, t, emu.end_ns)
@@ -323,7 +323,7 @@ def test_a_slow_host_line_drops_rf_packets_and_answers_stay_prompt(office):
     assert most <= SERIAL_TX_BUFFER + 16  # RF packets within the buffer, plus an answer
     assert ages and max(ages[:20]) < SEC
     dropped = emu.summary()["ports"]["xbee"]["dropped_tx_buffer"]
-    assert dropped == emu.coordinator.dropped_tx_buffer > 300  # most of the 10 s at 9600
+    assert dropped == emu.coordinators["xbee"].dropped_tx_buffer > 300  # most of the 10 s at 9600
 
 
 def test_what_a_slow_line_drops_does_not_depend_on_when_the_loop_polls(office):
@@ -333,5 +333,5 @@ def test_what_a_slow_line_drops_does_not_depend_on_when_the_loop_polls(office):
         emu = Emulation(office, speed=None, ports=False, duration_s=3)
         chunks, _ = drive(emu, host, step)
         runs.append(([(c.start_ns, c.data) for c in chunks["xbee"]],
-                     emu.coordinator.dropped_tx_buffer))
+                     emu.coordinators["xbee"].dropped_tx_buffer))
     assert runs[0] == runs[1] and runs[0][1] > 50

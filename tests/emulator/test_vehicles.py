@@ -1,50 +1,79 @@
-"""Vehicles as a list: the top-level tables are vehicle 1, a [[vehicles]] table says the
-same, and the world and the emulation hold their vehicles in a list."""
+"""Vehicles: the top-level tables are vehicle 1, each [[vehicles]] table one more; their
+ports, radios, tags and truth, on one air or each on its own."""
 from __future__ import annotations
 
+import tomllib
+
+import numpy as np
 import pytest
 
 from navtwin.emulator.runner import Emulation
-from navtwin.emulator.scenario import ScenarioError, Vehicle, load_scenario
+from navtwin.emulator.scenario import ScenarioError, Vehicle, load_scenario, parse_scenario
+from navtwin.emulator.truth import HEADER, csv_rows
 from navtwin.emulator.world import World
+from navtwin.protocols.stream import Frame, XBeeDecoder, nanoloc_decoder
 
-from .world_helpers import variant
+from .world_helpers import port_bytes, variant
 
-VEHICLE = """
+SECOND = """
 [[vehicles]]
 [vehicles.tag]
-z = 0.35
-[vehicles.board]
-period_ms = 20.0
+id = {tag}
 [vehicles.router]
-RO = 4
+SL = {sl}
 [vehicles.trajectory]
 waypoints = [[5.0, 1.0], [8.0, 1.0], [8.0, 5.0], [2.0, 5.0], [2.0, 1.0]]
 speed_m_s = 0.3
 """
 
 
+def fleet(n: int, extra: str = "") -> str:
+    return extra + "".join(SECOND.format(tag=16 + k, sl=0x40A1B2D4 + k) for k in range(1, n))
+
+
 def test_the_top_level_tables_are_vehicle_1():
     sc = load_scenario("office")
-    (v,) = sc.vehicles
+    (v,) = sc.fleet
     assert v == Vehicle(sc.trajectory, sc.tag, sc.imu, sc.board, sc.xbee.router)
     assert sc.routers_for(7) == (sc.radios_for(7)["router"],)
+    assert list(sc.ports) == ["sins", "xbee", "nanoloc"]
 
 
-def test_a_vehicles_table_is_the_same_scenario_as_its_top_level_tables(tmp_path):
-    by_vehicle = variant(tmp_path, "office", VEHICLE, "v")
-    top = variant(tmp_path, "office", VEHICLE.replace("[[vehicles]]\n", "").replace("vehicles.", "")
-                  .replace("[router]", "[xbee.router]"), "v")
-    assert by_vehicle == top and by_vehicle.to_toml() == top.to_toml()
-    assert by_vehicle.board.period_ms == 20.0 and by_vehicle.xbee.router.RO == 4
-    assert by_vehicle.trajectory.speed_m_s == 0.3 and by_vehicle.tag.z == 0.35
+def test_a_first_vehicles_table_without_top_level_ones_is_vehicle_1():
+    office = load_scenario("office")
+    data = tomllib.loads(office.to_toml())
+    data["vehicles"] = [{"trajectory": data.pop("trajectory"), "tag": data.pop("tag"),
+                         "router": data["xbee"].pop("router")}]
+    assert parse_scenario(data) == office
+
+
+def test_further_vehicles_start_from_vehicle_1s_tables_and_round_trip(tmp_path):
+    sc = variant(tmp_path, "office", '[imu]\ngrade = "paper003"\n' + fleet(3), "v")
+    assert len(sc.fleet) == 3 and [v.tag.id for v in sc.fleet] == [16, 17, 18]
+    second = sc.fleet[1]
+    assert second.imu == sc.imu and second.board == sc.board  # taken from vehicle 1
+    assert second.trajectory.speed_m_s == 0.3 and second.router.SL == 0x40A1B2D5
+    assert parse_scenario(tomllib.loads(sc.to_toml())) == sc
+    assert list(sc.ports) == ["sins", "xbee", "nanoloc", "sins2", "sins3"]
+    per = variant(tmp_path, "office", '[xbee]\nnetwork = "per-vehicle"\n[ranging]\nnetwork = '
+                  '"per-vehicle"\n' + fleet(2), "p")
+    assert list(per.ports) == ["sins", "xbee", "nanoloc", "sins2", "xbee2", "nanoloc2"]
 
 
 @pytest.mark.parametrize("toml, message", [
-    (VEHICLE + VEHICLE, "lists 2 vehicles; this version runs 1"),
-    ("[tag]\nz = 0.2\n" + VEHICLE, r"\[tag\] is set at the top level and in \[\[vehicles\]\] #1"),
+    (SECOND.format(tag=16, sl=0x40A1B2D5), r"vehicle 2 \[tag\] id 16 is vehicle 1's tag too"),
+    (SECOND.format(tag=17, sl=0x40A1B2D4), r"SL 0X40A1B2D4 .* is vehicle 1's router too"),
+    (SECOND.format(tag=3, sl=0x40A1B2D5), r"id 3 is also an anchor id"),
+    (SECOND.format(tag=17, sl=0x40A1B2D5).replace("[8.0, 5.0], [2.0, 5.0]", "[8.0, 50.0], [2.0, 50.0]"),
+     r"vehicle 2 \[trajectory\] waypoints 3 \(8, 50\) m is outside the area"),
+    (fleet(2) + '[[faults]]\nkind = "byte_drop"\nport = "sins3"\nprobability = 0.1\n',
+     r"port sins3: the scenario has vehicles 1 to 2 and its ports are sins, xbee, nanoloc, sins2"),
+    (fleet(2) + '[[faults]]\nkind = "coordinator_reset"\nvehicle = 2\n',
+     r"vehicle 2: the vehicles share one coordinator"),
+    (fleet(2) + '[[faults]]\nkind = "board_reset"\nvehicle = 3\n', "the scenario has vehicles 1 to 2"),
     ("[[vehicles]]\nspeed = 1\n", "#1 has an unknown key 'speed'"),
     ("vehicles = 3\n", "vehicles must be an array of tables"),
+    (fleet(257), "the scenario has 257 vehicles; this version runs up to 256"),
 ])
 def test_bad_vehicles_are_one_line_with_the_fix(tmp_path, toml, message):
     with pytest.raises(ScenarioError, match=message) as e:
@@ -52,10 +81,67 @@ def test_bad_vehicles_are_one_line_with_the_fix(tmp_path, toml, message):
     assert "\n" not in str(e.value)
 
 
-def test_the_world_and_the_emulation_hold_a_list_of_vehicles(tmp_path):
-    sc = variant(tmp_path, "office", VEHICLE, "v")
+def _run(sc, seed=4, duration=4.0):
+    out = {}
+    with Emulation(sc, seed, speed=None, ports=False, duration_s=duration,
+                   sink=lambda c: out.setdefault(c.port, []).append(c.data)) as emu:
+        summary = emu.run()
+    return {p: b"".join(d) for p, d in out.items()}, summary
+
+
+def _packets(data: bytes) -> list[Frame]:
+    return [f for f in XBeeDecoder(True).decode(data) if isinstance(f, Frame) and f.type == 0x90]
+
+
+def test_a_shared_air_carries_every_vehicle_and_adding_one_changes_no_other(tmp_path):
+    """Vehicle 1's board bytes are its bytes alone; the coordinator's port carries both
+    routers' packets; the anchors range the tags in turn, so each tag's rate halves."""
+    alone, _ = _run(load_scenario("office"))
+    two, summary = _run(variant(tmp_path, "office", fleet(2), "two"))
+    assert two["sins"] == alone["sins"] and len(two["sins2"]) == len(two["sins"])
+    senders = {p.fields["src64"] for p in _packets(two["xbee"])}
+    assert senders == {0x0013A20040A1B2D4, 0x0013A20040A1B2D5}
+    reports = [f for f in nanoloc_decoder().decode(two["nanoloc"]) if isinstance(f, Frame)]
+    tags = np.array([r.fields["tag"] for r in reports])
+    alone_reports = [f for f in nanoloc_decoder().decode(alone["nanoloc"]) if isinstance(f, Frame)]
+    assert set(tags.tolist()) == {16, 17}
+    assert abs(len(reports) - len(alone_reports)) <= 4  # the same exchanges, shared
+    assert abs(int((tags == 16).sum()) - int((tags == 17).sum())) <= 4
+    assert summary["ports"]["xbee"]["dropped_tx_buffer"] == 0
+
+
+def test_a_shared_coordinators_line_drops_what_it_cannot_carry_and_counts_it(tmp_path):
+    """At 115200 baud one coordinator's UART carries the 100 Hz streams of about two
+    routers: with four, RF packets arrive faster than its transmit buffer drains."""
+    data, summary = _run(variant(tmp_path, "office", fleet(4), "four"))
+    dropped = summary["ports"]["xbee"]["dropped_tx_buffer"]
+    carried = len(_packets(data["xbee"]))
+    sent = sum(len(data[p]) for p in ("sins", "sins2", "sins3", "sins4")) // 30  # SINS frames
+    assert dropped > 0 and carried < sent and summary["ports"]["xbee"]["bytes"] <= 4.0 * 11520 + 200
+
+
+def test_per_vehicle_networks_leave_vehicle_1s_lab_as_it_was_alone(tmp_path):
+    alone, _ = _run(load_scenario("office"))
+    sc = variant(tmp_path, "office", '[xbee]\nnetwork = "per-vehicle"\n[ranging]\nnetwork = '
+                 '"per-vehicle"\n' + fleet(3), "own")
+    many, _ = _run(sc)
+    for port in ("sins", "xbee", "nanoloc"):
+        assert many[port] == alone[port], port
+    assert {p.fields["src64"] for p in _packets(many["xbee3"])} == {0x0013A20040A1B2D6}
+    tags = {f.fields["tag"] for f in nanoloc_decoder().decode(many["nanoloc2"]) if isinstance(f, Frame)}
+    assert tags == {17}
+    assert many["nanoloc2"] != many["nanoloc"]  # its own draws
+
+
+def test_each_vehicle_has_its_truth_file_and_faults_address_one_vehicle(tmp_path):
+    sc = variant(tmp_path, "office", fleet(2) + '[[faults]]\nkind = "byte_drop"\nport = "sins2"\n'
+                 'probability = 0.5\n', "t")
     w = World(sc, 4)
-    (v,) = w.vehicles
-    assert v.number == 1 and v.spec == sc.vehicles[0] and v.src16 == sc.routers_for(4)[0]["MY"]
-    with Emulation(sc, 4, speed=None, ports=False, duration_s=0.1) as emu:
-        assert [r.registers.values["MY"] for r in emu.coordinator.remotes] == [v.src16]
+    assert [v.number for v in w.vehicles] == [1, 2]
+    with Emulation(sc, 4, speed=None, ports=False, duration_s=2.0, record=tmp_path / "rec") as emu:
+        summary = emu.run()
+    truth2 = (tmp_path / "rec" / "truth2.csv").read_bytes()
+    assert truth2 == HEADER + csv_rows(w.truth(0, 2 * 10**9, 2))  # vehicle 2's own line
+    assert truth2 != (tmp_path / "rec" / "truth.csv").read_bytes()
+    assert summary["ports"]["sins2"]["bytes"] < summary["ports"]["sins"]["bytes"]  # dropped there only
+    assert summary["ports"]["sins"]["bytes"] == 200 * 30

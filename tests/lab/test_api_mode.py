@@ -14,7 +14,7 @@ def test_a_second_clients_atap1_is_seen_by_an_api2_host():
     at 3 s (and reads the OK itself); the host learns it from its own periodic AP query and
     says so; the second client's ATAP2 at 12 s puts things right, and the host says that."""
     emu = Emulation(load_scenario("office"), speed=None, ports=False, duration_s=20)
-    coord, line = emu.coordinator, emu.lines["xbee"]
+    coord, line = emu.coordinators["xbee"], emu.lines["xbee"]
     second = {3 * SEC: xbee.build(0x08, True, frame_id=0x42, command=b"AP", parameter=b"\x01"),
               12 * SEC: xbee.build(0x08, False, frame_id=0x43, command=b"AP", parameter=b"\x02")}
     pipe = Pipeline(OFFICE, make_estimator=lambda _: RecordingEstimator(), inputs=("xbee",))
