@@ -9,9 +9,10 @@ import sys
 import threading
 from pathlib import Path
 
-from navtwin.common.limits import MAX_DURATION_S, SEEDS, SPEEDS, span
+from navtwin.common.limits import MAX_DURATION_S, NETWORKS, SEEDS, SPEEDS, VEHICLES, span
 from navtwin.emulator.timing import NAMES as TIMINGS
 
+MAX_VEHICLES = VEHICLES[1]
 from .main import UsageError, flagged, number, stop_on_signals
 
 #: --seed and --duration, shared with ``navtwin lab``.
@@ -40,6 +41,29 @@ those values, integers in any base: type=0x88,command=AP,status=0). --timeout S 
 wait, in device time at --speed max or a FACTOR. Exit status 3: an expect timed out (or the
 run ended first) or a fail-on came; the message names it, with the port's last frames."""
 
+def add_fleet_options(p) -> None:
+    """--vehicles and --network, shared with ``navtwin demo``."""
+    p.add_argument("--vehicles", type=number(1, MAX_VEHICLES, integer=True), metavar="N",
+                   help="run N cars: the scenario's vehicle and N - 1 copies in a queue on its "
+                        "line, each with its own tag id, router address and ports (sins2, "
+                        "...) (emulator.fleet; docs/scenarios.md, Vehicles)")
+    p.add_argument("--network", choices=NETWORKS,
+                   help="with --vehicles: shared = one coordinator (xbee) and one anchors' TDMA "
+                        "for every car (the scenario's default); per-vehicle = a coordinator, "
+                        "nanoLOC network and ports (xbee2, nanoloc2, ...) per car")
+
+
+def fleet_scenario(scenario, args):
+    """*scenario* with --vehicles and --network applied (ScenarioError if it cannot be)."""
+    from navtwin.emulator.fleet import convoy
+
+    if args.vehicles is None:
+        if args.network is not None:
+            raise UsageError("--network says how --vehicles share the air; pass --vehicles N")
+        return scenario
+    return convoy(scenario, args.vehicles, network=args.network)
+
+
 #: exit status of a failed --expect / --fail-on (2 stays bad input, like Wokwi CI's own code)
 EXPECT_FAILED = 3
 
@@ -51,6 +75,7 @@ def register(sub) -> None:
                    help="a shipped scenario name (e.g. office, corridor-outage) or a .toml file")
     p.add_argument("--seed", type=seed, help=SEED_HELP)
     p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
+    add_fleet_options(p)
     p.add_argument("--speed", default="realtime", type=_speed, metavar="realtime|max|FACTOR",
                    help="realtime (default) keeps the devices' absolute schedule on the wall "
                         f"clock; a FACTOR {span(*SPEEDS)} runs it that many times faster; max "
@@ -112,9 +137,9 @@ def _check_arg(text: str):
     from navtwin.protocols.match import parse
 
     port, colon, pattern = text.partition(":")
-    if not colon or port not in ports.names():
+    if not colon or not ports.known(port):
         raise argparse.ArgumentTypeError(f"{text!r}: write PORT:PATTERN with PORT one of "
-                                         f"{', '.join(ports.names())}")
+                                         f"{', '.join(ports.names())} (vehicle n's: sins2, ...)")
     try:
         return port, parse(pattern)
     except ValueError as e:
@@ -175,7 +200,7 @@ def run_emulate(args) -> int:
     try:
         if args.record is not None:
             _check_record_dir(args.record, args.overwrite)
-        scenario = with_faults(load_scenario(args.scenario), args.fault)
+        scenario = with_faults(fleet_scenario(load_scenario(args.scenario), args), args.fault)
     except (RunError, ScenarioError) as e:
         raise UsageError(str(e)) from None
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))

@@ -31,6 +31,8 @@ MAX_DURATION_S = 10_000_000
 #: vehicle numbers of a scenario: 256 vehicles' ports are 768 PTYs, a fifth of Linux's
 #: default kernel.pty.max
 VEHICLES = (1, 256)
+#: how several vehicles share a radio network (a scenario's [xbee] and [ranging] network)
+NETWORKS = ("shared", "per-vehicle")
 
 
 def show(v) -> str:

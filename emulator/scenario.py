@@ -33,7 +33,7 @@ from navtwin.common import geomagnetic, lab
 from navtwin.common.anchorgrid import WIDE_ANCHOR_IDS, AnchorGrid, expand
 from navtwin.common.geodesy import LocalFrame
 from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2, LATITUDE_DEG, LONGITUDE_DEG,
-                              MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, SEEDS, VEHICLES,
+                              MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, NETWORKS, SEEDS, VEHICLES,
                               limit_problem)
 
 from . import trajectory as geometry
@@ -325,10 +325,6 @@ class Multipath:
                                non_negative(hi=10))
     drift_corr_s: float = key(10.0, "s", "its correlation time (first-order Gauss-Markov)",
                               positive(hi=1e9))
-
-
-#: how several vehicles share a radio network (the ``network`` keys of [xbee] and [ranging])
-NETWORKS = ("shared", "per-vehicle")
 
 
 @dataclass(frozen=True)

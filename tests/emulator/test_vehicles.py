@@ -145,3 +145,31 @@ def test_each_vehicle_has_its_truth_file_and_faults_address_one_vehicle(tmp_path
     assert truth2 != (tmp_path / "rec" / "truth.csv").read_bytes()
     assert summary["ports"]["sins2"]["bytes"] < summary["ports"]["sins"]["bytes"]  # dropped there only
     assert summary["ports"]["sins"]["bytes"] == 200 * 30
+
+
+def test_a_convoy_copies_vehicle_1_with_its_own_tag_router_and_start():
+    from navtwin.emulator.fleet import convoy
+
+    office = load_scenario("office")
+    sc = convoy(office, 4, network="per-vehicle")
+    assert [v.tag.id for v in sc.fleet] == [16, 17, 18, 19]
+    assert [v.router.SL - office.xbee.router.SL for v in sc.fleet] == [0, 1, 2, 3]
+    assert [v.trajectory.alignment_s - office.trajectory.alignment_s for v in sc.fleet] == [0, 2, 4, 6]
+    assert sc.fleet[3].imu == office.imu and sc.xbee.network == sc.ranging.network == "per-vehicle"
+    assert convoy(office, 1) == office
+    with pytest.raises(ScenarioError, match="already has 4 vehicles"):
+        convoy(sc, 2)
+
+
+def test_emulate_runs_a_convoy_with_ports_per_vehicle(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "navtwin", "emulate", "--scenario", "office",
+                          "--vehicles", "2", "--network", "per-vehicle", "--speed", "max",
+                          "--duration", "1", "--quiet", "--link-dir", str(tmp_path / "l")],
+                         capture_output=True, text=True, timeout=120, check=True)
+    ready, done = (json.loads(line) for line in out.stdout.splitlines())
+    assert list(ready["ports"]) == ["sins", "xbee", "nanoloc", "sins2", "xbee2", "nanoloc2"]
+    assert done["ports"]["sins2"]["frames"] == done["ports"]["sins"]["frames"] == 100
