@@ -341,9 +341,31 @@ def _scalar(v: Any, hex: int = 0) -> str:
         return repr(v)
     if isinstance(v, str):  # JSON string escapes are TOML basic-string escapes
         return json.dumps(v).replace("\x7f", "\\u007f")
-    if isinstance(v, tuple):
+    if isinstance(v, (tuple, list)):
         return "[" + ", ".join(_scalar(x) for x in v) + "]"
     raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def dump_document(doc: dict, path: str = "") -> str:
+    """TOML text of a document of plain data (tables as dicts, arrays of tables as lists of
+    dicts, as :func:`plain` and ``tomllib`` give them): ``tomllib.loads`` reads it back equal."""
+    def bare(k: str) -> str:
+        return k if k and all(c.isascii() and (c.isalnum() or c in "_-") for c in k) else _scalar(k)
+
+    def sections(table: dict, at: str, header: str) -> list[str]:
+        keys, tables = [], []
+        for k, v in table.items():
+            sub = f"{at}.{bare(k)}" if at else bare(k)
+            if isinstance(v, dict):
+                tables += sections(v, sub, f"\n[{sub}]")
+            elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+                for item in v:
+                    tables += sections(item, sub, f"\n[[{sub}]]")
+            else:
+                keys.append(f"{bare(k)} = {_scalar(v)}")
+        head = [header] if header and (keys or header.startswith("\n[[")) else []
+        return head + keys + tables
+    return "\n".join(sections(doc, path, "")).lstrip("\n") + "\n"
 
 
 def dump(obj, path: str = "") -> str:

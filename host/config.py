@@ -74,7 +74,7 @@ from navtwin.common import tomlfile
 from navtwin.common.anchorgrid import AnchorGrid, expand
 from navtwin.common.geodesy import LocalFrame
 from navtwin.common.extras import require
-from navtwin.common.schema import REQUIRED, Invalid, between, boolean, build, key, plain, rows
+from navtwin.common.schema import REQUIRED, Invalid, between, boolean, build, dump_document, key, plain, rows
 
 from . import calibration as range_calibration
 from . import tracks
@@ -205,6 +205,11 @@ class HostConfig:
         if self.calibration is not None:  # inline: a recording replays without the file
             out["calibration"] = self.calibration.to_dict()
         return out
+
+    def to_toml(self) -> str:
+        """The config as a TOML file that :func:`load` reads back equal but for its name (the
+        file's): the lab writes the configs of the hosts it starts."""
+        return dump_document({k: v for k, v in self.to_dict().items() if k != "name"})
 
 
 def with_calibration(config: HostConfig, calibration: Calibration) -> HostConfig:

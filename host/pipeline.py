@@ -326,18 +326,21 @@ class Pipeline:
     def _range(self, ev: Frame, a: float, out: list) -> None:
         f = ev.fields
         self.counts["reports"] += 1
-        # an anchor's id in the tag field: two anchors ranged each other, for every vehicle
-        among = f["tag"] in self._anchor_ids and f["tag"] not in self._by_tag
-        v = self._by_tag.get(f["tag"], None if self._by_tag else self.vehicles[0])
-        if v is None and not among:
-            self.counts["reports_other_tag"] += 1
-            return
+        # the gateway counts every report, whichever tag: lost and repeated reports are
+        # counted before the host picks its vehicles' (a host following some of the tags on
+        # a shared network loses nothing by skipping the others)
         _, step = self._report_seq.unwrap(f["seq"], a)
         if step is not None:
             if step <= 0:
                 self.counts["reports_duplicate"] += 1
                 return
             self.counts["reports_lost"] += step - 1
+        # an anchor's id in the tag field: two anchors ranged each other, for every vehicle
+        among = f["tag"] in self._anchor_ids and f["tag"] not in self._by_tag
+        v = self._by_tag.get(f["tag"], None if self._by_tag else self.vehicles[0])
+        if v is None and not among:
+            self.counts["reports_other_tag"] += 1
+            return
         restarts = self.range_clock.restarts
         t = self.range_clock.time(f["t_us"], a)
         if self.range_clock.restarts != restarts:  # the anchors restarted: in order, before t

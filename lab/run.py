@@ -29,39 +29,49 @@ from navtwin.host.arrival import arrivals
 from navtwin.host.pipeline import Pipeline
 from navtwin.host.replay import drive, emulator_settings
 
+from .fleet import Follower
+
 
 def _scenario(scenario: str | Path | Scenario) -> Scenario:
     return scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
 
 
 def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,
-               duration: float | None = None, **overrides) -> tuple[dict, Iterator]:
+               duration: float | None = None, follower: Follower | None = None,
+               **overrides) -> tuple[dict, Iterator]:
     """The pipeline's keyword arguments for the scenario's lab (``config``, ``filters``,
     ``inputs``, ``escaped``; *overrides* as for :func:`navtwin.host.replay.emulator_settings`) and
-    the lab computer's ``(port, bytes, arrival ns)`` in processing order."""
+    the lab computer's ``(port, bytes, arrival ns)`` in processing order. With several
+    vehicles, *follower* (lab.fleet) says which ports a host reads as its inputs, and its
+    config."""
     sc = _scenario(scenario)
-    kw = emulator_settings(sc.name, {p: dict(v) for p, v in sc.ports.items()}, **overrides)
-    streams: dict[str, list[tuple[bytes, int]]] = {p: [] for p in kw["inputs"]}
+    plugged = follower.inputs if follower is not None else {p: p for p in sc.ports}
+    if follower is not None:
+        overrides = {"config": follower.config, **overrides}
+    kw = emulator_settings(sc.name, {i: dict(sc.ports[p]) for i, p in plugged.items()}, **overrides)
+    streams: dict[str, list[tuple[bytes, int]]] = {i: [] for i in kw["inputs"]}
+    by_port = {plugged[i]: streams[i] for i in kw["inputs"]}
 
     def sink(chunk: Chunk) -> None:
-        taken = streams.get(chunk.port)
+        taken = by_port.get(chunk.port)
         if taken is not None:
             taken.append((chunk.data, chunk.start_ns))
 
     with Emulation(sc, seed, speed=None, duration_s=duration, ports=False, sink=sink) as emu:
         emu.run()
-    return kw, arrivals(streams, {p: sc.ports[p]["baud"] for p in streams})
+    return kw, arrivals(streams, {i: sc.ports[plugged[i]]["baud"] for i in streams})
 
 
 def run_in_memory(scenario: str | Path | Scenario, seed: int | None = None, *,
                   config=None, filters: tuple[str, ...] | None = None,
                   duration: float | None = None, make_estimator=None,
-                  on_innovation=None) -> tuple[list, Pipeline]:
+                  on_innovation=None, follower: Follower | None = None) -> tuple[list, Pipeline]:
     """The host's estimates on the emulated lab of *scenario* and *seed* (the scenario's
     shipped host config and its filters unless *config*/*filters* are given; the whole
     scenario unless *duration* s), and the pipeline (its ``stats()``); *on_innovation* as
-    for the :class:`~host.pipeline.Pipeline`."""
-    kw, chunks = lab_chunks(scenario, seed, duration=duration, config=config, filters=filters)
+    for the :class:`~host.pipeline.Pipeline`; *follower* as for :func:`lab_chunks`."""
+    kw, chunks = lab_chunks(scenario, seed, duration=duration, filters=filters, follower=follower,
+                            **({} if config is None else {"config": config}))
     pipe = Pipeline(kw.pop("config"), kw.pop("filters"), make_estimator=make_estimator,
                     on_innovation=on_innovation, **kw)
     estimates: list = []
@@ -69,9 +79,10 @@ def run_in_memory(scenario: str | Path | Scenario, seed: int | None = None, *,
     return estimates, pipe
 
 
-def truth(scenario: str | Path | Scenario, seed: int | None = None) -> dict:
-    """The vehicle's true ``t`` (s), ``x``, ``y`` (m), ``vx``, ``vy`` (m/s), one row per millisecond, as
-    :func:`navtwin.lab.evaluate.load_truth` reads them from the emulator's ``truth.csv``."""
+def truth(scenario: str | Path | Scenario, seed: int | None = None, vehicle: int = 1) -> dict:
+    """Vehicle *vehicle*'s true ``t`` (s), ``x``, ``y`` (m), ``vx``, ``vy`` (m/s), one row per
+    millisecond, as :func:`navtwin.lab.evaluate.load_truth` reads them from the emulator's
+    ``truth.csv`` (``truth<n>.csv``)."""
     w = World(_scenario(scenario), seed)
-    tr = w.truth(0, w.duration_ns)
+    tr = w.truth(0, w.duration_ns, vehicle)
     return {"t": tr["t"] / 1e9, "x": tr["x"], "y": tr["y"], "vx": tr["vx"], "vy": tr["vy"]}
