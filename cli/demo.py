@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 import threading
 
-from .emulate import SEED_HELP, duration, seed
+from .emulate import SEED_HELP, add_fleet_options, duration, fleet_kwargs, seed
 from .lab import _filter_list, print_report
 from .main import UsageError, missing_extra, stop_on_signals
 
@@ -23,14 +23,16 @@ def register(sub) -> None:
         description="Run the emulated lab in real time with the host on its PTYs (as 'navtwin "
         "lab' does) and every fusion track on, and show it live: the scenario's progress, "
         "frames and errors per port, each track's error against the emulator's truth (now, "
-        "mean, max) beside the paper's figure, and live faults. At the end: the accuracy "
-        "table and the run directory's report. Ctrl-C ends the run early and still reports.")
+        "mean, max) beside the paper's figure, and live faults; with --vehicles N every car's "
+        "best track. At the end: the accuracy table (and each car's) and the run directory's "
+        "report. Ctrl-C ends the run early and still reports.")
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
                    help="a shipped scenario (office, corridor, corridor-outage, rssi-centroid, outage-bridging, calibration) or a TOML file")
     p.add_argument("--duration", type=duration, default=DEFAULT_DURATION_S, metavar="S",
                    help=f"seconds of the scenario to run (default {DEFAULT_DURATION_S:g}; "
                    "at most the scenario's length)")
     p.add_argument("--seed", type=seed, help=SEED_HELP)
+    add_fleet_options(p)
     p.add_argument("--config", metavar="NAME|FILE",
                    help="the host's config (default: the scenario's lab, e.g. office)")
     p.add_argument("--filters", metavar="LIST", type=_filter_list, default="all",
@@ -59,11 +61,12 @@ def run(args) -> int:
             raise UsageError(f"{line}, or give --json") from None
         watch = LiveView()
     stop = threading.Event()
+    fleet = fleet_kwargs(args)
     try:
         with stop_on_signals(stop), watch:
             report = run_lab(args.scenario, seed=args.seed, duration=args.duration,
                              config=args.config, filters=args.filters, directory=args.dir,
-                             stop=stop, watch=watch)
+                             stop=stop, watch=watch, **fleet)
     except LabError as e:
         raise UsageError(str(e)) from None
     print_report(report)

@@ -41,6 +41,11 @@ class ProgressLines(Watch):
         if tracks:
             parts.append("error now (m) " + ", ".join(f"{name} {e.last:.3f}"
                                                       for name, e in sorted(tracks.items())))
+        if state.get("vehicles"):  # each car's best track now
+            best = {v: min(t.items(), key=lambda kv: kv[1].mean) for v, t in state["vehicles"].items() if t}
+            if best:
+                parts.append("cars (best track, m) " + ", ".join(
+                    f"{v} {name} {e.last:.3f}" for v, (name, e) in sorted(best.items())))
         if emu and emu.get("faults"):
             parts.append("live faults " + ", ".join(f["kind"] for f in emu["faults"]))
         self._print("; ".join(parts))

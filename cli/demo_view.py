@@ -64,6 +64,8 @@ class LiveView(Watch):
                 f"{host['latency'].get('p50_ms', 0):.2f} ms")]
         if state["tracks"]:
             parts.append(self._tracks(state["tracks"]))
+        if state.get("vehicles"):
+            parts.append(self._vehicles(state["vehicles"]))
         if emu and emu.get("faults"):
             parts.append(Text("live faults: " + ", ".join(
                 f"{f['kind']} (id {f['id']})" for f in emu["faults"]), style="yellow"))
@@ -91,4 +93,16 @@ class LiveView(Watch):
         for name, e in sorted(tracks.items()):
             t.add_row(name, _m(e.last), _m(e.mean), _m(e.max), str(e.n),
                       evaluate.paper_cell(self.info.get("scenario"), name))
+        return t
+
+    def _vehicles(self, vehicles: dict) -> Table:
+        t = Table(title="cars: each one's best track against its own truth (m)", title_justify="left")
+        for col in ("car", "best track", "now", "mean", "max", "estimates"):
+            t.add_column(col, justify="left" if col in ("car", "best track") else "right")
+        for v, tracks in sorted(vehicles.items()):
+            if not tracks:
+                t.add_row(str(v), "waiting", "-", "-", "-", "0")
+                continue
+            name, e = min(tracks.items(), key=lambda kv: kv[1].mean)
+            t.add_row(str(v), name, _m(e.last), _m(e.mean), _m(e.max), str(e.n))
         return t

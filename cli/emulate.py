@@ -42,7 +42,7 @@ wait, in device time at --speed max or a FACTOR. Exit status 3: an expect timed 
 run ended first) or a fail-on came; the message names it, with the port's last frames."""
 
 def add_fleet_options(p) -> None:
-    """--vehicles and --network, shared with ``navtwin demo``."""
+    """--vehicles and --network, shared with ``navtwin lab`` and ``navtwin demo``."""
     p.add_argument("--vehicles", type=number(1, MAX_VEHICLES, integer=True), metavar="N",
                    help="run N cars: the scenario's vehicle and N - 1 copies in a queue on its "
                         "line, each with its own tag id, router address and ports (sins2, "
@@ -53,15 +53,19 @@ def add_fleet_options(p) -> None:
                         "nanoLOC network and ports (xbee2, nanoloc2, ...) per car")
 
 
+def fleet_kwargs(args) -> dict:
+    """``vehicles`` and ``network`` of --vehicles and --network (UsageError: --network alone)."""
+    if args.vehicles is None and args.network is not None:
+        raise UsageError("--network says how --vehicles share the air; pass --vehicles N")
+    return {"vehicles": args.vehicles, "network": args.network}
+
+
 def fleet_scenario(scenario, args):
     """*scenario* with --vehicles and --network applied (ScenarioError if it cannot be)."""
     from navtwin.emulator.fleet import convoy
 
-    if args.vehicles is None:
-        if args.network is not None:
-            raise UsageError("--network says how --vehicles share the air; pass --vehicles N")
-        return scenario
-    return convoy(scenario, args.vehicles, network=args.network)
+    kw = fleet_kwargs(args)
+    return scenario if kw["vehicles"] is None else convoy(scenario, kw["vehicles"], network=kw["network"])
 
 
 #: exit status of a failed --expect / --fail-on (2 stays bad input, like Wokwi CI's own code)

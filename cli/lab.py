@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import threading
 
-from .emulate import DURATION_HELP, SEED_HELP, duration, seed
+from .emulate import DURATION_HELP, SEED_HELP, add_fleet_options, duration, fleet_kwargs, seed
 from .main import UsageError, stop_on_signals
 
 
@@ -14,13 +14,17 @@ def register(sub) -> None:
         description="Start 'navtwin emulate' (real time, recording) and 'navtwin host' on its "
         "PTYs, each as its own process, and when the scenario ends compare the host's estimates "
         "with the emulator's truth.csv: mean and max position error per filter beside paper "
-        "000's figures, and a plot. Ctrl-C ends the run early and still reports.")
+        "000's figures, and a plot. With --vehicles N, one host follows the cars on a shared "
+        "air, or one host per car with --network per-vehicle, and every car is scored against "
+        "its own truth. Ctrl-C ends the run early and still reports.")
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
                    help="a shipped scenario (office, corridor, corridor-outage, rssi-centroid, outage-bridging, calibration) or a TOML file")
     p.add_argument("--seed", type=seed, help=SEED_HELP)
     p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
+    add_fleet_options(p)
     p.add_argument("--config", metavar="NAME|FILE",
-                   help="the host's config (default: the scenario's lab, e.g. office)")
+                   help="the host's config (default: the scenario's lab, e.g. office); with "
+                        "--vehicles each car is its vehicle 1 with the car's tag and router")
     p.add_argument("--filters", metavar="LIST", type=_filter_list,
                    help="the host's --filters, which checks the names (default: its config's)")
     p.add_argument("--dir", metavar="DIR", help="run directory (default: a new private temp dir)")
@@ -41,11 +45,12 @@ def run(args) -> int:
     from navtwin.lab.orchestrator import LabError, run_lab
 
     stop = threading.Event()
+    fleet = fleet_kwargs(args)
     try:
         with stop_on_signals(stop):
             report = run_lab(args.scenario, seed=args.seed, duration=args.duration,
                              config=args.config, filters=args.filters, directory=args.dir,
-                             stop=stop, plot=args.plot)
+                             stop=stop, plot=args.plot, **fleet)
     except LabError as e:
         raise UsageError(str(e)) from None
     print_report(report)
@@ -59,6 +64,8 @@ def print_report(report: dict) -> None:
 
     print(evaluate.table(report["errors"], report["emulator"].get("scenario"))
           if report["errors"] else "no estimates to compare")
+    if report.get("vehicles"):
+        print("\n" + evaluate.vehicles_table({int(v): r["errors"] for v, r in report["vehicles"].items()}))
     if "audit" in report:  # the scenario injected faults
         a = report["audit"]
         print("\naudit of the host against the fault ledger:\n" +

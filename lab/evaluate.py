@@ -311,6 +311,19 @@ def table(errors: dict[str, dict[str, float]], scenario: str | None = "office") 
     return "\n".join(lines)
 
 
+def vehicles_table(errors: dict[int, dict[str, dict[str, float]]]) -> str:
+    """A text table of each vehicle's mean error per track (m), against its own truth; a
+    vehicle without a track's estimates shows "-"."""
+    tracks = sorted({t for e in errors.values() for t in e})
+    w = max([len("vehicle"), *map(len, tracks)]) + 2
+    lines = ["mean position error per vehicle and track (m)",
+             f"{'vehicle':<9}" + "".join(f"{t:>{w}}" for t in tracks)]
+    for v in sorted(errors):
+        lines.append(f"{v:<9}" + "".join(f"{errors[v][t]['mean']:>{w}.3f}" if t in errors[v]
+                                         else f"{'-':>{w}}" for t in tracks))
+    return "\n".join(lines)
+
+
 def plot(truth: dict, estimates: dict, path: str | Path, offset_s: float = 0.0,
          anchors: dict | None = None) -> Path:
     """Tracks and error over time, as a PNG (needs matplotlib: the ``plot`` extra)."""

@@ -57,9 +57,11 @@ class TrackError:
 
 
 class LiveErrors:
-    """Vehicle 1's tracks against the truth of a running lab."""
+    """A vehicle's tracks against the truth of a running lab: *truth_csv* is its truth file,
+    *vehicle* its number in the *estimates* file (its host's config order)."""
 
-    def __init__(self, truth_csv: str | Path, estimates: str | Path) -> None:
+    def __init__(self, truth_csv: str | Path, estimates: str | Path, vehicle: int = 1) -> None:
+        self.vehicle = vehicle
         self._truth = Tail(truth_csv)
         self._estimates = Tail(estimates)
         self._cols: tuple[int, int, int] | None = None  # t, x, y in truth.csv's header
@@ -90,7 +92,7 @@ class LiveErrors:
         if offset_s is None or not self._t.size:
             return self.tracks
         truth = {"t": self._t, "x": self._x, "y": self._y}
-        ready = evaluate.load_estimates(self._take_ready(offset_s))
+        ready = evaluate.load_estimates(self._take_ready(offset_s), self.vehicle)
         for name, e in sorted(ready.items()):
             err = evaluate.error(truth, e, offset_s)
             tr = self.tracks.setdefault(name, TrackError())

@@ -17,6 +17,14 @@ Everything lands in one run directory (private, 0700)::
     DIR/report.json     errors per filter, with the paper's figures
     DIR/report.png      tracks and errors over time (with matplotlib)
     DIR/report.html, report.md  the run's report (with matplotlib; lab.report, 'navtwin report')
+
+With several vehicles (``vehicles=N``: emulator.fleet's convoy; ``network`` how they share the
+air), the scenario as run is DIR/scenario.toml, and the hosts that follow them (lab.fleet) are
+one on the shared ports, or one per vehicle on its own ports: host ``k`` > 1 has
+DIR/host<k>/, host<k>.toml (its config), host<k>.log, estimates<k>.jsonl and
+innovations<k>.jsonl (host 1's config is DIR/host.toml). report.json then also has
+``vehicles``: per vehicle its truth file, its host's estimates file and vehicle number there,
+and its errors per filter; ``errors`` stays vehicle 1's.
 """
 from __future__ import annotations
 
@@ -32,11 +40,15 @@ from pathlib import Path
 
 from navtwin.emulator.api import EmulatorError, emulate
 from navtwin.emulator.control import ControlError
+from navtwin.emulator.fleet import convoy
 from navtwin.emulator.scenario import ScenarioError, load_scenario
+from navtwin.emulator.truth import file_name as truth_file
+from navtwin.host import config as host_config
 from navtwin.host.replay import config_for
 from navtwin.protocols.recording import FAULTS
 
 from . import evaluate
+from .fleet import FleetError, Follower, followers
 from .live import LiveErrors, Tail
 from .audit import AuditError, audit
 from .report import ReportError, write_report
@@ -116,7 +128,7 @@ class Watch:
         """*state*: ``elapsed_s``; ``emulator``, its control status (virtual time, ports,
         live faults) or None; ``host``, its last status line's body or None; ``tracks``,
         filter -> :class:`navtwin.lab.live.TrackError` (empty until truth and estimates
-        meet)."""
+        meet); with several vehicles ``vehicles``, vehicle -> its ``tracks`` (1 included)."""
         line = {"host": state["host"]} if state["host"] else {}
         if state["tracks"]:
             line["error_m"] = {k: round(v.last, 3) for k, v in state["tracks"].items()}
@@ -124,76 +136,124 @@ class Watch:
             print(json.dumps(line), file=self.out, flush=True)
 
 
+def _files(k: int) -> dict[str, str]:
+    """Host *k*'s files in the run directory (module doc)."""
+    sfx = "" if k == 1 else str(k)
+    return {"record": f"host{sfx}", "config": f"host{sfx}.toml", "log": f"host{sfx}.log",
+            "estimates": f"estimates{sfx}.jsonl", "innovations": f"innovations{sfx}.jsonl"}
+
+
 def run_lab(scenario: str = "office", *, seed: int | None = None, duration: float | None = None,
             config: str | None = None, filters: str | None = None, directory=None,
             stop: threading.Event | None = None, watch: Watch | None = None,
-            plot: bool = True) -> dict:
-    """Run the lab; returns the report (errors per filter, paths, both summaries)."""
+            plot: bool = True, vehicles: int | None = None, network: str | None = None) -> dict:
+    """Run the lab; returns the report (errors per filter, paths, both summaries). With
+    *vehicles* N, a convoy of N cars sharing the air as *network* says (module doc)."""
     stop = stop or threading.Event()
     watch = watch or Watch()
     try:  # refused before anything is made (the emulator would refuse it the same way)
-        load_scenario(scenario)
+        sc = load_scenario(scenario)
+        if vehicles is not None:
+            sc = convoy(sc, vehicles, network=network)
     except ScenarioError as e:
         raise LabError(str(e)) from None
     config = config or config_for(Path(scenario).stem)  # the scenario's lab, as replay finds it
     if config is None:
         raise LabError(f"config: no host config for scenario {scenario!r}; name one (a shipped "
                        "name or a file)")
+    try:
+        hosts = followers(sc, host_config.load(config))
+    except (FleetError, host_config.ConfigError) as e:
+        raise LabError(str(e)) from None
     d = run_dir(directory)
-    log = d / "host.log"
+    if len(sc.fleet) > 1:  # the emulator runs the fleet as written, the hosts their configs
+        scenario = d / "scenario.toml"
+        scenario.write_text(sc.to_toml(), encoding="utf-8")
+        for h in hosts:
+            (d / _files(h.number)["config"]).write_text(h.config.to_toml(), encoding="utf-8")
     watch.phase("starting")
     try:
         with emulate(scenario, seed=seed, speed="realtime", duration=duration,
                      link_dir=d / "links", record=d / "emulator") as lab:
-            cmd = [sys.executable, "-m", "navtwin", "host", "--xbee", lab.ports["xbee"],
-                   "--nanoloc", lab.ports["nanoloc"], "--config", config,
-                   "--record", str(d / "host"), "--out", str(d / "estimates.jsonl"),
-                   "--innovations", str(d / "innovations.jsonl"),
-                   "--status-period", str(min(watch.tick_s, 2.0))]
-            if filters is not None:
-                cmd += ["--filters", filters]
-            with open(log, "wb") as f:
-                host = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                        stderr=f)
+            procs = [_start_host(d, h, lab, config if len(sc.fleet) == 1 else None, filters, watch)
+                     for h in hosts]
             watch.started({"dir": str(d), **{k: lab.info[k] for k in (
-                "scenario", "seed", "duration_s", "ports")}})
+                "scenario", "seed", "duration_s", "ports")}, "vehicles": len(sc.fleet)})
             try:
-                _watch(lab, host, log, d, watch, stop)
-                if host.poll() is None:  # a host that died is a failure, reported below
+                _watch(lab, procs, hosts, d, watch, stop)
+                if all(p.poll() is None for p in procs):  # a host that died: reported below
                     watch.phase("ended")
                 done = lab.stop()
                 # the emulator's ports are gone once it has ended: a host that has read all
                 # they held reports them down; then it is told to stop
-                _wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down", 10.0)
+                for h in hosts:
+                    _wait_log(d / _files(h.number)["log"],
+                              lambda x: x.get("status", {}).get("event") == "port_down", 10.0)
             finally:
-                if host.poll() is None:
-                    host.send_signal(signal.SIGTERM)
-                host.wait(timeout=HOST_STOP_S)
+                for p in procs:
+                    if p.poll() is None:
+                        p.send_signal(signal.SIGTERM)
+                for p in procs:
+                    p.wait(timeout=HOST_STOP_S)
     except EmulatorError as e:
         raise LabError(f"the emulator failed: {str(e).strip().splitlines()[-1]}") from None
-    summaries = [x["summary"] for x in _log_lines(log) if "summary" in x]
-    if not summaries:
-        tail = _log_lines(log)[-1:] or [{"text": "no output"}]
-        raise LabError(f"the host failed: {tail[0].get('text', tail[0])}; see {log}")
+    summaries = []
+    for h in hosts:
+        log = d / _files(h.number)["log"]
+        mine = [x["summary"] for x in _log_lines(log) if "summary" in x]
+        if not mine:
+            tail = _log_lines(log)[-1:] or [{"text": "no output"}]
+            raise LabError(f"the host failed: {tail[0].get('text', tail[0])}; see {log}")
+        summaries.append(mine[-1])
     watch.phase("reporting")
-    return _report(d, summaries[-1], done, plot)
+    return _report(d, summaries, hosts, done, plot)
 
 
-def _watch(lab, host, log: Path, d: Path, watch: Watch, stop: threading.Event) -> None:
-    """Until the scenario ends, the host exits or *stop* is set: the live state to *watch*."""
-    status_log = Tail(log)
-    live = LiveErrors(d / "emulator" / "truth.csv", d / "estimates.jsonl")
-    t0, host_t0, emu_t0, last = time.monotonic(), None, None, None
-    while lab.running() and host.poll() is None and not stop.is_set():
+def _start_host(d: Path, h: Follower, lab, config: str | None, filters: str | None,
+                watch: Watch) -> subprocess.Popen:
+    """``navtwin host`` for follower *h* on its ports of the running *lab*, as a user runs it
+    (*config*: the config's name for a one-vehicle lab; else the file the lab wrote)."""
+    f = _files(h.number)
+    cmd = [sys.executable, "-m", "navtwin", "host"]
+    for given, port in h.inputs.items():
+        cmd += [f"--{given}", lab.ports[port]]
+    cmd += ["--config", config or str(d / f["config"]), "--record", str(d / f["record"]),
+            "--out", str(d / f["estimates"]), "--innovations", str(d / f["innovations"]),
+            "--status-period", str(min(watch.tick_s, 2.0))]
+    if filters is not None:
+        cmd += ["--filters", filters]
+    with open(d / f["log"], "wb") as log:
+        return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log)
+
+
+def _followed(d: Path, hosts: list[Follower]) -> dict[int, dict]:
+    """Per vehicle of the lab: its truth file, its host's estimates file, its number there."""
+    return {v: {"truth": f"emulator/{truth_file(v)}", "estimates": _files(h.number)["estimates"],
+                "host": h.number, "host_vehicle": k}
+            for h in hosts for k, v in enumerate(h.vehicles, 1)}
+
+
+def _watch(lab, procs, hosts: list[Follower], d: Path, watch: Watch, stop: threading.Event) -> None:
+    """Until the scenario ends, a host exits or *stop* is set: the live state to *watch*
+    (``host``: host 1's last status line)."""
+    logs = {h.number: Tail(d / _files(h.number)["log"]) for h in hosts}
+    followed = _followed(d, hosts)
+    lives = {v: LiveErrors(d / f["truth"], d / f["estimates"], f["host_vehicle"])
+             for v, f in followed.items()}
+    t0, emu_t0, last = time.monotonic(), None, None
+    host_t0: dict[int, int] = {}
+    while lab.running() and all(p.poll() is None for p in procs) and not stop.is_set():
         stop.wait(watch.tick_s)
-        for line in status_log.lines():
-            try:
-                st = json.loads(line).get("status")
-            except json.JSONDecodeError:
-                continue
-            if isinstance(st, dict):
-                host_t0 = st.get("t0_monotonic_ns", host_t0)
-                last = st if "t_s" in st else last
+        for k, log in logs.items():
+            for line in log.lines():
+                try:
+                    st = json.loads(line).get("status")
+                except json.JSONDecodeError:
+                    continue
+                if isinstance(st, dict):
+                    if st.get("t0_monotonic_ns"):
+                        host_t0[k] = st["t0_monotonic_ns"]
+                    last = st if "t_s" in st and k == 1 else last
         try:
             emu = lab.status()
         except (ControlError, OSError):  # it is ending
@@ -201,15 +261,21 @@ def _watch(lab, host, log: Path, d: Path, watch: Watch, stop: threading.Event) -
         # kept from an earlier status: the tick after the run ended still scores the host,
         # which on a starved machine may have sent its first status line only then
         emu_t0 = (emu or {}).get("t0_monotonic_ns") or emu_t0
-        offset = None
-        if host_t0 and emu_t0:
-            offset = (host_t0 - emu_t0) / 1e9  # scenario = host time + offset
-        watch.tick({"elapsed_s": time.monotonic() - t0, "emulator": emu, "host": last,
-                    "tracks": live.update(offset)})
+        tracks = {}
+        for v, live in lives.items():
+            mine = host_t0.get(followed[v]["host"])
+            # scenario time = host time + offset, each host on its own start
+            tracks[v] = live.update((mine - emu_t0) / 1e9 if mine and emu_t0 else None)
+        state = {"elapsed_s": time.monotonic() - t0, "emulator": emu, "host": last,
+                 "tracks": tracks.get(1, {})}
+        if len(lives) > 1:
+            state["vehicles"] = tracks
+        watch.tick(state)
 
 
-def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
+def _report(d: Path, summaries: list[dict], hosts: list[Follower], done: dict, plot: bool) -> dict:
     truth_path = d / "emulator" / "truth.csv"
+    host_summary = summaries[0]
     report = {"dir": str(d), "host": {k: host_summary.get(k) for k in ("chunks", "lines", "latency")},
               "emulator": done, "errors": {}, "paper_mean_m": evaluate.PAPER_MEAN_ERROR_M}
     if done.get("t0_monotonic_ns") and host_summary.get("t0_monotonic_ns") and truth_path.is_file():
@@ -221,6 +287,13 @@ def _report(d: Path, host_summary: dict, done: dict, plot: bool) -> dict:
         sc = load_scenario(d / "emulator" / "scenario.toml")
         # with the latitude/longitude figures in the scenario's frame (003's Table 1)
         report["errors"] = evaluate.position_errors(truth, estimates, offset, frame=sc.frame)
+        if len(sc.fleet) > 1:  # every vehicle against its own truth, each host on its clock
+            report["vehicles"] = {}
+            for v, f in _followed(d, hosts).items():
+                host_offset = (summaries[f["host"] - 1]["t0_monotonic_ns"] - done["t0_monotonic_ns"]) / 1e9
+                mine = evaluate.load_estimates(d / f["estimates"], vehicle=f["host_vehicle"])
+                report["vehicles"][str(v)] = {**f, "time_offset_s": host_offset, "errors": evaluate.position_errors(
+                    evaluate.load_truth(d / f["truth"]), mine, host_offset, frame=sc.frame)}
         if plot:
             try:
                 report["plot"] = str(evaluate.plot(truth, estimates, d / "report.png", offset,

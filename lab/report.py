@@ -162,11 +162,46 @@ def collect(run_dir: str | Path) -> dict:
                       for n in HASHED if (d / n).is_file()},
            "code": code_version()}
     run["tables"] = layout_tables(run)
+    run["vehicles"] = _vehicles(d, report.get("vehicles"), sc)
     if cfg is not None:
         ec = cfg.estimator_config()
         run["bound"] = pcrb.position_bound(sc, truth, ec.jerk_psd, ec.p0_sigma)
         run["bound_model"] = {"jerk_psd": ec.jerk_psd, "p0_sigma": list(ec.p0_sigma)}
     return run
+
+
+#: the files report.json's ``vehicles`` may name (lab.orchestrator): nothing outside the run
+_VEHICLE_FILES = re.compile(r"emulator/truth[0-9]*\.csv|estimates[0-9]*\.jsonl")
+
+
+def _vehicles(d: Path, followed, sc) -> dict[int, dict]:
+    """Each car of a lab of several (report.json's ``vehicles``): its truth, its estimates
+    and its errors per track against its own truth; {} for a one-vehicle lab."""
+    if not followed:
+        return {}
+    out = {}
+    try:
+        for v, f in sorted(followed.items(), key=lambda kv: int(kv[0])):
+            if not all(_VEHICLE_FILES.fullmatch(f[k]) for k in ("truth", "estimates")):
+                raise ValueError(f"names {f['truth']!r} and {f['estimates']!r}")
+            truth = evaluate.load_truth(d / f["truth"])
+            est = evaluate.load_estimates(d / f["estimates"], vehicle=int(f["host_vehicle"]))
+            off = value(f["time_offset_s"], float, "time_offset_s")
+            out[int(v)] = {"truth": truth, "estimates": est, "offset_s": off,
+                           "errors": evaluate.position_errors(truth, est, off, frame=sc.frame)}
+    except (ValueError, KeyError, TypeError, AttributeError, OSError, Invalid) as e:
+        raise ReportError(f"{d}/report.json: vehicles is not what navtwin lab writes "
+                          f"({type(e).__name__}: {e}); re-run navtwin lab") from None
+    return out
+
+
+def vehicle_rows(run: dict) -> tuple[list[str], list[tuple[str, ...]]]:
+    """The cars' table: per car, each track's mean (max) error against its own truth, m."""
+    tracks = sorted({t for v in run["vehicles"].values() for t in v["errors"]})
+    rows = [(str(n), *(f"{fmt(v['errors'][t]['mean'])} ({fmt(v['errors'][t]['max'])})"
+                       if t in v["errors"] else "-" for t in tracks))
+            for n, v in run["vehicles"].items()]
+    return ["car", *tracks], rows
 
 
 def nees_series(run: dict) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -235,6 +270,25 @@ def figures(run: dict) -> dict[str, str]:
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0, -0.22), ncol=3, frameon=False)
     fig.tight_layout()
     out["tracks"] = _svg(fig, "tracks")
+    if run["vehicles"]:  # each car's truth and its best track, one panel a car
+        fig, axes = _grid(len(run["vehicles"]), (4.2, 4.2 * min(1.2, max(0.3, ratio)) + 1.1))
+        for ax, (v, car) in zip(axes, run["vehicles"].items()):
+            if not car["errors"]:
+                ax.set_title(f"car {v}: no estimates")
+                continue
+            best = min(car["errors"], key=lambda t: car["errors"][t]["mean"])
+            e = car["estimates"][best]
+            ax.plot(car["truth"]["x"], car["truth"]["y"], "k-", lw=1.5, label="truth")
+            ax.plot(e["x"], e["y"], "-", color=colours.get(best, "C0"), lw=1, label=best,
+                    gid=f"car-{v}")
+            ax.plot(anchors[:, 0], anchors[:, 1], "r^", ms=8, label="anchors")
+            ax.set(xlim=(xs.min() - margin, xs.max() + margin), ylim=(ys.min() - margin, ys.max() + margin),
+                   aspect="equal", title=f"car {v}: {best}, mean {fmt(car['errors'][best]['mean'])} m",
+                   xlabel="x (m)", ylabel="y (m)")
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0, -0.22), ncol=3, frameon=False)
+        fig.tight_layout()
+        out["cars"] = _svg(fig, "cars")
 
     # the error, one small panel per track on one scale: overlaid, pairs that agree hid each other
     errors = {n: evaluate.error(truth, run["estimates"][n], off) for n in names}
@@ -492,6 +546,9 @@ def markdown(run: dict) -> str:
                                                for _, label, cells in accuracy_rows(run)])]
     for t in run["tables"]:
         parts += ["", f"## {t['title']}", "", _md_table(t["head"], _cells(t)), "", t["note"]]
+    if run["vehicles"]:
+        parts += ["", "## Cars: each car's error against its own truth, mean (max), m", "",
+                  _md_table(*vehicle_rows(run)), "", "The accuracy above is car 1's."]
     if paper_note(run):
         parts += ["", paper_note(run)]
     if "bound" in run:
@@ -586,6 +643,11 @@ def html_page(run: dict, figs: dict[str, str]) -> str:
         body += [f"<h2>{e(t['title'], quote=False)}</h2>",
                  _html_table(t["head"], rows, attrs, ["" if r[1] else "paper" for r in rows]),
                  f"<p class=note>{e(t['note'])}</p>"]
+    if run["vehicles"]:
+        body += ["<h2>Cars: each car's error against its own truth, mean (max), m</h2>",
+                 "<p class=note>The figures and tables above are car 1's; each panel below is "
+                 "a car's truth and its best track.</p>",
+                 _html_table(*vehicle_rows(run)), f"<div class=fig id=fig-cars>{figs['cars']}</div>"]
     if "latlon" in figs:
         body += ["<h2>Latitude and longitude error against time</h2>",
                  f"<div class=fig id=fig-latlon>{figs['latlon']}</div>"]

@@ -14,6 +14,8 @@ from navtwin.host.output import estimate_line
 from navtwin.lab import evaluate
 from navtwin.lab.live import LiveErrors, Tail
 from navtwin.lab.orchestrator import PHASES, Watch, _watch
+from navtwin.lab.fleet import followers
+from navtwin.host import config as host_config
 from navtwin.lab.run import run_in_memory
 from navtwin.emulator.scenario import load_scenario
 
@@ -99,7 +101,7 @@ def test_a_host_heard_only_after_the_run_ended_is_still_scored_live(tmp_path):
             log.write_text(json.dumps({"status": {"t0_monotonic_ns": t0, "t_s": 4.0}}) + "\n")
 
     log.write_text("")
-    _watch(Lab(), Host(), log, tmp_path, Seen(), threading.Event())
+    _watch(Lab(), [Host()], followers(sc, host_config.load("office")), tmp_path, Seen(), threading.Event())
     assert [s["emulator"] is None for s in seen] == [False, True]
     assert not seen[0]["tracks"] and seen[1]["host"]
     assert set(seen[1]["tracks"]) == {"sins", "wsn", "kf", "ekf", "ukf"}

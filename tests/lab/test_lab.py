@@ -50,3 +50,32 @@ def test_lab_reports_a_bad_scenario_in_one_line(tmp_path):
     p = navtwin("lab", "--scenario", "nowhere", "--config", "office", "--dir", tmp_path / "r")
     err = p.stderr.strip()
     assert p.returncode == 2 and len(err.splitlines()) == 1 and "nowhere" in err
+
+
+@pytest.mark.parametrize("network", ["shared", "per-vehicle"])
+def test_a_lab_of_two_cars_scores_each_against_its_own_truth(tmp_path, network):
+    """Two cars, one host following both on the shared air or one host each on its own
+    ports: every car's fused tracks stay near its own truth, and `navtwin report` shows both."""
+    d = tmp_path / "run"
+    p = navtwin("lab", "--vehicles", "2", "--network", network, "--duration", "14", "--dir", d,
+                "--filters", "wsn,kf", "--no-plot", timeout=180)
+    assert p.returncode == 0, p.stderr[-2000:]
+    report = json.loads((d / "report.json").read_text())
+    cars = report["vehicles"]
+    assert set(cars) == {"1", "2"} and report["errors"] == cars["1"]["errors"]
+    hosts = {c["host"] for c in cars.values()}
+    assert hosts == ({1} if network == "shared" else {1, 2})
+    for car in cars.values():
+        assert car["errors"]["kf"]["n"] >= 50 and car["errors"]["kf"]["mean"] < 1.0, car
+    assert "mean position error per vehicle and track" in p.stdout
+    live = [json.loads(x) for x in p.stderr.splitlines() if x.startswith("{")]
+    assert any(x.get("lab") == "running" and x.get("vehicles") == 2 for x in live)
+    made = navtwin("report", d)
+    assert made.returncode == 0, made.stderr[-2000:]
+    md = (d / "report.md").read_text()
+    assert "## Cars" in md and fmt(cars["2"]["errors"]["kf"]["mean"]) in md
+
+
+def test_network_without_vehicles_is_one_line(tmp_path):
+    p = navtwin("lab", "--network", "per-vehicle", "--dir", tmp_path / "r")
+    assert p.returncode == 2 and "pass --vehicles N" in p.stderr and len(p.stderr.strip().splitlines()) == 1
