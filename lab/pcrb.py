@@ -58,13 +58,15 @@ def exchanges(sc: Scenario, duration_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Scenario time (s) and anchor index (in ``sc.all_anchors``) of every scheduled exchange
     before *duration_s*, in time order: the emulator's own TDMA schedule (emulator.tdma; the
     in-range one picks its anchors by the tag's true position, and any cycle jitter is the
-    scenario seed's), less the exchanges beyond the radio range, which give no report."""
-    net = World(sc).nanoloc
-    idx, _, t0, _ = net.schedule.block(0, round(duration_s * 1e9))
+    scenario seed's), less the exchanges beyond the radio range, which give no report; of vehicle
+1's tag, with several on one network."""
+    net = World(sc).nanoloc  # vehicle 1's: of a network several tags share, its cycles
+    idx, k, t0, _ = net.schedule.block(0, round(duration_s * 1e9))
     order = np.argsort(t0, kind="stable")
-    idx, t0 = idx[order], t0[order]
+    order = order[k[order] % len(net.tags) == 0]
+    idx, k, t0 = idx[order], k[order], t0[order]
     if sc.ranging.radio_range_m is not None:
-        far = np.linalg.norm(net.trajectory.position(t0) - net.positions[idx], axis=1)
+        far = np.linalg.norm(net.tag_position(k, t0) - net.positions[idx], axis=1)
         keep = far <= sc.ranging.radio_range_m
         idx, t0 = idx[keep], t0[keep]
     index = {a.id: i for i, a in enumerate(sc.all_anchors)}
