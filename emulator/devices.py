@@ -59,6 +59,7 @@ class CoordinatorDevice(Device):
     def __init__(self, emulation, port) -> None:
         super().__init__(emulation, port)
         self.coordinator = emulation.coordinators[port.name]
+        self.channels = emulation.world.channels
         self.line_device = self.coordinator
 
     def to_line(self, ev) -> tuple[int, object]:
@@ -69,8 +70,12 @@ class CoordinatorDevice(Device):
         return [(out.t_ns, out.item) for out in self.coordinator.host(t_ns, data)]
 
     def stats(self) -> dict:
-        # RF packets its serial transmit buffer had no room for
-        return {"dropped_tx_buffer": self.coordinator.dropped_tx_buffer}
+        # RF packets its serial transmit buffer had no room for; with routers sharing its
+        # channel, their packets their full queues dropped (emulator.channel)
+        out = {"dropped_tx_buffer": self.coordinator.dropped_tx_buffer}
+        if (channel := self.channels.get(self.port.name)) is not None:
+            out["dropped_channel"] = channel.dropped
+        return out
 
 
 def _check(name: str, model) -> None:

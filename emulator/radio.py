@@ -98,6 +98,7 @@ class Attempts(NamedTuple):
     on_air_ns: np.ndarray  # (n, tries) each attempt's first bit (preamble) on the air
     lost: np.ndarray  # (n, tries) bool: the attempt was not received (not ACKed)
     air_ns: np.ndarray  # (n,) one attempt's PPDU duration
+    start_ns: np.ndarray | None = None  # (n,) transmit's: when each packet took the radio
 
     @property
     def count(self) -> np.ndarray:
@@ -167,7 +168,7 @@ class Link:
         if len(end):
             self.busy_until = int(end[-1])
         return (start + offset, delivered, marks,
-                attempts._replace(on_air_ns=start[:, None] + attempts.on_air_ns))
+                attempts._replace(on_air_ns=start[:, None] + attempts.on_air_ns, start_ns=start))
 
     def unicast(self, t_ns: int, nbytes: int,
                 air: Callable[[Attempts], None] | None = None) -> tuple[bool, int, int]:

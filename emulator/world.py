@@ -13,7 +13,9 @@ every event with t_ns < until_ns not returned before, each on its port instance 
   the router's packetisation, latency and retries; lost packets never appear); with one
   coordinator for all, every router's packets are on ``xbee``.
 
-Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
+Routers that joined one coordinator share its channel (emulator.channel): one packet on the
+air at a time, a packet waiting while another is sent, dropped when its router's queue is
+full. Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
 (emulator.radio.AirFrame: every attempt, received or lost, and the coordinator's MAC ACK of
 each received one), in time order, once ``advance`` has reached *until_ns*.
 
@@ -35,6 +37,7 @@ from navtwin.protocols import ports
 from navtwin.protocols.zigbee import COORDINATOR16
 
 from .board import Board
+from .channel import Channel, Offered
 from .faults import acting_on
 from .imu import Adis16350
 from .magnetometer import Magnetometer
@@ -111,11 +114,12 @@ class Vehicle:
     def _stream(self, seed: int, name: str):
         return stream(seed, name if self.number == 1 else f"vehicle{self.number}.{name}")
 
-    def block(self, lo: int, hi: int, more: bool) -> tuple[list[Event], list[Event],
-                                                           list[AirFrame]]:
-        """The board's SINS frames written in [lo, hi), the RF packets they become (*more*:
-        the run goes on after *hi*, so an open packet waits for the next bytes) and the frames
-        those packets put on the air (none while the router is out of the network)."""
+    def block(self, lo: int, hi: int, more: bool) -> tuple[list[Event], list[Offered]]:
+        """The board's SINS frames written in [lo, hi) and the RF packets they become (*more*:
+        the run goes on after *hi*, so an open packet waits for the next bytes), each as it
+        is offered to the channel (emulator.channel): its event at the coordinator (None when
+        the link lost it) and its frames on the air (a packet the router sends while out of
+        the network is not offered)."""
         self.imu.generate(lo, hi)
         t_sins, frames, marks = self.board.frames(lo, hi)
         events = [Event(t, self.sins_port, f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
@@ -124,7 +128,7 @@ class Vehicle:
         packets = self.router.packetise(b"".join(frames), times, next_byte)
         arrival, delivered, lost, attempts = self.uplink.transmit(
             packets.ready_ns, [len(p) for p in packets.payloads])
-        out, air, (absent, cause) = [], [], self._out_of_network(packets.ready_ns)
+        offered, (absent, cause) = [], self._out_of_network(packets.ready_ns)
         for i, (t, p, ok) in enumerate(zip(arrival.tolist(), packets.payloads, delivered.tolist())):
             marks = lost.get(i, ())
             if absent is not None:
@@ -136,11 +140,11 @@ class Vehicle:
                 if self._absent is not None:  # back in the network, under a new address
                     self.src16 = int(self._rejoin_rng.integers(1, 0xFFF8))
                     marks, self._absent = marks + ({**self._absent, "my": self.src16},), None
-            air += self.sender.frames(attempts, i, self.src16, COORDINATOR16, p)
-            if ok:
-                out.append(Event(t, self.xbee_port, RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p),
-                                 marks))
-        return events, out, air
+            offered.append(Offered(
+                self.number, int(attempts.start_ns[i]), int(attempts.service[i]),
+                Event(t, self.xbee_port, RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p), marks)
+                if ok else None, self.sender.frames(attempts, i, self.src16, COORDINATOR16, p)))
+        return events, offered
 
     def _out_of_network(self, ready_ns):
         """(which packets the router sends while a router fault has it out of the network,
@@ -182,6 +186,9 @@ class World:
             sc, [v.spec.tag for v in group], [v.trajectory for v in group], self.seed,
             "" if n == 1 else f"vehicle{n}.") for n, group in enumerate(groups, 1)}
         self.nanoloc = self.networks[ports.NANOLOC.name]  # vehicle 1's
+        #: per coordinator's port that several routers joined, their shared channel
+        self.channels = {port: Channel() for port in self.downlinks
+                         if sum(v.xbee_port == port for v in self.vehicles) > 1}
         names = [ports.instance(p, n) for p in EVENT_ORDER for n in range(1, len(self.vehicles) + 1)]
         self._rank = {name: i for i, name in enumerate(names)}
         self._generated_ns = 0  # blocks before this are generated
@@ -196,9 +203,18 @@ class World:
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
         self._generated_ns = hi
         sins, rf, air = [], [], []
+        offered: dict[str, list[Offered]] = {}
         for vehicle in self.vehicles:
-            s, r, a = vehicle.block(lo, hi, hi < self.duration_ns)
+            s, packets = vehicle.block(lo, hi, hi < self.duration_ns)
             sins += s
+            offered.setdefault(vehicle.xbee_port, []).extend(packets)
+        for port, packets in offered.items():
+            channel = self.channels.get(port)
+            if channel is not None:  # routers that wait for each other
+                r, a = channel.share(packets)
+            else:  # a router alone on its channel: its link's own schedule
+                r = [p.event for p in packets if p.event is not None]
+                a = [f for p in packets for f in p.air]
             rf += r
             air += a
         if air:
