@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 import threading
 
-from .emulate import SEED_HELP, add_fleet_options, duration, fleet_kwargs, seed
+from .emulate import SEED_HELP, add_fleet_options, duration, fleet_kwargs, scenario_help, seed
 from .lab import _filter_list, print_report
 from .main import UsageError, missing_extra, stop_on_signals
 
@@ -27,7 +27,7 @@ def register(sub) -> None:
         "best track. At the end: the accuracy table (and each car's) and the run directory's "
         "report. Ctrl-C ends the run early and still reports.")
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
-                   help="a shipped scenario (office, corridor, corridor-outage, rssi-centroid, outage-bridging, calibration) or a TOML file")
+                   help=scenario_help())
     p.add_argument("--duration", type=duration, default=DEFAULT_DURATION_S, metavar="S",
                    help=f"seconds of the scenario to run (default {DEFAULT_DURATION_S:g}; "
                    "at most the scenario's length)")

@@ -15,6 +15,15 @@ from navtwin.emulator.timing import NAMES as TIMINGS
 MAX_VEHICLES = VEHICLES[1]
 from .main import UsageError, flagged, number, stop_on_signals
 
+def scenario_help() -> str:
+    """--scenario's help: the shipped names (emulator/scenarios, read without importing the
+    scenario module: the CLI starts fast)."""
+    import navtwin.emulator
+
+    names = sorted(p.stem for p in (Path(navtwin.emulator.__file__).parent / "scenarios").glob("*.toml"))
+    return f"a shipped scenario ({', '.join(names)}) or a TOML file"
+
+
 #: --seed and --duration, shared with ``navtwin lab``.
 seed = number(*SEEDS, integer=True)
 SEED_HELP = f"random seed {span(*SEEDS)} (default: the scenario's)"
@@ -75,8 +84,7 @@ EXPECT_FAILED = 3
 def register(sub) -> None:
     p = sub.add_parser("emulate", help="run a scenario on pseudo-terminals",
                        description=DESCRIPTION)
-    p.add_argument("--scenario", required=True, metavar="NAME|FILE",
-                   help="a shipped scenario name (e.g. office, corridor-outage) or a .toml file")
+    p.add_argument("--scenario", required=True, metavar="NAME|FILE", help=scenario_help())
     p.add_argument("--seed", type=seed, help=SEED_HELP)
     p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
     add_fleet_options(p)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import threading
 
-from .emulate import DURATION_HELP, SEED_HELP, add_fleet_options, duration, fleet_kwargs, seed
+from .emulate import DURATION_HELP, SEED_HELP, add_fleet_options, duration, fleet_kwargs, scenario_help, seed
 from .main import UsageError, stop_on_signals
 
 
@@ -18,7 +18,7 @@ def register(sub) -> None:
         "air, or one host per car with --network per-vehicle, and every car is scored against "
         "its own truth. Ctrl-C ends the run early and still reports.")
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
-                   help="a shipped scenario (office, corridor, corridor-outage, rssi-centroid, outage-bridging, calibration) or a TOML file")
+                   help=scenario_help())
     p.add_argument("--seed", type=seed, help=SEED_HELP)
     p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
     add_fleet_options(p)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from navtwin.common.limits import SEEDS, span
 
-from .emulate import DURATION_HELP, duration
+from .emulate import DURATION_HELP, duration, scenario_help
 from .main import UsageError, number
 
 #: Seeds a sweep takes at most (its cells are held in memory).
@@ -68,7 +68,7 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="Monte Carlo sweep of a scenario over seeds, on "
                        "dask.distributed, with confidence intervals", description=DESCRIPTION)
     p.add_argument("--scenario", default="office", metavar="NAME|FILE",
-                   help="a shipped scenario (office, corridor, corridor-outage, rssi-centroid, outage-bridging, calibration) or a TOML file")
+                   help=scenario_help())
     p.add_argument("--seeds", required=True, type=seed_range, metavar="A..B",
                    help=f"the seeds, both ends included, each {span(*SEEDS)}, e.g. 1..100")
     p.add_argument("--filters", type=filter_names, metavar="LIST",

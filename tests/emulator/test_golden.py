@@ -13,6 +13,7 @@ import pytest
 
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import SCENARIO_NAMES, load_scenario
+from navtwin.emulator.truth import file_name as truth_file
 from navtwin.protocols.recording import Recording
 
 PORTS = ("sins", "xbee", "nanoloc")
@@ -40,11 +41,13 @@ def test_golden_reproduces_in_virtual_time(root, tmp_path, name):
                    duration_s=gold.meta["duration_s"], record=tmp_path / name) as emu:
         emu.run()
     again = Recording(tmp_path / name)
-    for port in PORTS:
+    assert sorted(again.ports) == sorted(gold.ports) == sorted(sc.ports)  # a car's ports: sins2 ...
+    for port in gold.ports:
         assert again.read_bytes(port) == gold.read_bytes(port), f"{name}/{port} bytes differ"
         assert chunks(again, port) == chunks(gold, port), f"{name}/{port} chunking differs"
-    truth = (tmp_path / name / "truth.csv").read_bytes()
-    assert truth == (gold.directory / "truth.csv").read_bytes()
+    for n in range(1, len(sc.fleet) + 1):  # each car's truth
+        truth = (tmp_path / name / truth_file(n)).read_bytes()
+        assert truth == (gold.directory / truth_file(n)).read_bytes(), f"{name}/{truth_file(n)} differs"
 
 
 @pytest.mark.pty

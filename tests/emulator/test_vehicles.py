@@ -197,3 +197,14 @@ def test_emulate_runs_a_convoy_with_ports_per_vehicle(tmp_path):
     ready, done = (json.loads(line) for line in out.stdout.splitlines())
     assert list(ready["ports"]) == ["sins", "xbee", "nanoloc", "sins2", "xbee2", "nanoloc2"]
     assert done["ports"]["sins2"]["frames"] == done["ports"]["sins"]["frames"] == 100
+
+
+def test_the_shipped_convoy_is_the_office_with_two_more_cars():
+    """office-convoy writes out what `--vehicles 3` makes of the office."""
+    import dataclasses
+
+    from navtwin.emulator.fleet import convoy
+
+    shipped = load_scenario("office-convoy")
+    made = convoy(load_scenario("office"), 3)
+    assert dataclasses.replace(made, name=shipped.name, description=shipped.description) == shipped
