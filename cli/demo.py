@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 import threading
 
-from .emulate import SEED_HELP, add_fleet_options, duration, fleet_kwargs, scenario_help, seed
+from .emulate import SEED_HELP, add_fleet_options, add_follow_option, duration, fleet_kwargs, scenario_help, seed
 from .lab import _filter_list, print_report
 from .main import UsageError, missing_extra, stop_on_signals
 
@@ -33,6 +33,7 @@ def register(sub) -> None:
                    "at most the scenario's length)")
     p.add_argument("--seed", type=seed, help=SEED_HELP)
     add_fleet_options(p)
+    add_follow_option(p)
     p.add_argument("--config", metavar="NAME|FILE",
                    help="the host's config (default: the scenario's lab, e.g. office)")
     p.add_argument("--filters", metavar="LIST", type=_filter_list, default="all",

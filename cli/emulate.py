@@ -63,10 +63,31 @@ def add_fleet_options(p) -> None:
 
 
 def fleet_kwargs(args) -> dict:
-    """``vehicles`` and ``network`` of --vehicles and --network (UsageError: --network alone)."""
+    """``vehicles`` and ``network`` of --vehicles and --network (UsageError: --network alone),
+    and ``follow`` of ``navtwin lab`` and ``demo``'s --follow."""
     if args.vehicles is None and args.network is not None:
         raise UsageError("--network says how --vehicles share the air; pass --vehicles N")
-    return {"vehicles": args.vehicles, "network": args.network}
+    out = {"vehicles": args.vehicles, "network": args.network}
+    if getattr(args, "follow", None) is not None:
+        out["follow"] = args.follow
+    return out
+
+
+def _cars(text: str) -> tuple[int, ...]:
+    """--follow's comma list of car numbers."""
+    try:
+        cars = tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: write car numbers separated by commas, "
+                                         "e.g. 1,3") from None
+    return cars
+
+
+def add_follow_option(p) -> None:
+    """--follow of ``navtwin lab`` and ``demo``: the hosts follow only these cars."""
+    p.add_argument("--follow", type=_cars, metavar="LIST",
+                   help="the hosts follow only these cars (e.g. 2,3; default all): one host for "
+                        "those on a shared air, one each on their own ports (lab/fleet.py)")
 
 
 def fleet_scenario(scenario, args):

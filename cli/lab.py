@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import threading
 
-from .emulate import DURATION_HELP, SEED_HELP, add_fleet_options, duration, fleet_kwargs, scenario_help, seed
+from .emulate import DURATION_HELP, SEED_HELP, add_fleet_options, add_follow_option, duration, fleet_kwargs, scenario_help, seed
 from .main import UsageError, stop_on_signals
 
 
@@ -22,6 +22,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=seed, help=SEED_HELP)
     p.add_argument("--duration", type=duration, metavar="S", help=DURATION_HELP)
     add_fleet_options(p)
+    add_follow_option(p)
     p.add_argument("--config", metavar="NAME|FILE",
                    help="the host's config (default: the scenario's lab, e.g. office); with "
                         "--vehicles each car is its vehicle 1 with the car's tag and router")
@@ -62,6 +63,8 @@ def print_report(report: dict) -> None:
     from navtwin.lab import evaluate
     from navtwin.lab.audit import report as audit_report
 
+    if "car" in report:  # the main figures are of the first car the hosts followed
+        print(f"car {report['car']}:")
     print(evaluate.table(report["errors"], report["emulator"].get("scenario"))
           if report["errors"] else "no estimates to compare")
     if report.get("vehicles"):

@@ -24,7 +24,8 @@ one on the shared ports, or one per vehicle on its own ports: host ``k`` > 1 has
 DIR/host<k>/, host<k>.toml (its config), host<k>.log, estimates<k>.jsonl and
 innovations<k>.jsonl (host 1's config is DIR/host.toml). report.json then also has
 ``vehicles``: per vehicle its truth file, its host's estimates file and vehicle number there,
-and its errors per filter; ``errors`` stays vehicle 1's.
+and its errors per filter; ``errors`` stays the first followed car's (``car``, when not 1;
+``follow`` picks the cars to follow, default all).
 """
 from __future__ import annotations
 
@@ -146,9 +147,11 @@ def _files(k: int) -> dict[str, str]:
 def run_lab(scenario: str = "office", *, seed: int | None = None, duration: float | None = None,
             config: str | None = None, filters: str | None = None, directory=None,
             stop: threading.Event | None = None, watch: Watch | None = None,
-            plot: bool = True, vehicles: int | None = None, network: str | None = None) -> dict:
+            plot: bool = True, vehicles: int | None = None, network: str | None = None,
+            follow: tuple[int, ...] | None = None) -> dict:
     """Run the lab; returns the report (errors per filter, paths, both summaries). With
-    *vehicles* N, a convoy of N cars sharing the air as *network* says (module doc)."""
+    *vehicles* N, a convoy of N cars sharing the air as *network* says (module doc);
+    *follow*: the cars the hosts follow (default all)."""
     stop = stop or threading.Event()
     watch = watch or Watch()
     try:  # refused before anything is made (the emulator would refuse it the same way)
@@ -162,7 +165,7 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
         raise LabError(f"config: no host config for scenario {scenario!r}; name one (a shipped "
                        "name or a file)")
     try:
-        hosts = followers(sc, host_config.load(config))
+        hosts = followers(sc, host_config.load(config), follow)
     except (FleetError, host_config.ConfigError) as e:
         raise LabError(str(e)) from None
     d = run_dir(directory)
@@ -267,17 +270,20 @@ def _watch(lab, procs, hosts: list[Follower], d: Path, watch: Watch, stop: threa
             # scenario time = host time + offset, each host on its own start
             tracks[v] = live.update((mine - emu_t0) / 1e9 if mine and emu_t0 else None)
         state = {"elapsed_s": time.monotonic() - t0, "emulator": emu, "host": last,
-                 "tracks": tracks.get(1, {})}
+                 "tracks": tracks[hosts[0].vehicles[0]]}
         if len(lives) > 1:
             state["vehicles"] = tracks
         watch.tick(state)
 
 
 def _report(d: Path, summaries: list[dict], hosts: list[Follower], done: dict, plot: bool) -> dict:
-    truth_path = d / "emulator" / "truth.csv"
+    car = hosts[0].vehicles[0]  # the first car followed: host 1's vehicle 1
+    truth_path = d / "emulator" / truth_file(car)
     host_summary = summaries[0]
     report = {"dir": str(d), "host": {k: host_summary.get(k) for k in ("chunks", "lines", "latency")},
               "emulator": done, "errors": {}, "paper_mean_m": evaluate.PAPER_MEAN_ERROR_M}
+    if car != 1:
+        report["car"] = car
     if done.get("t0_monotonic_ns") and host_summary.get("t0_monotonic_ns") and truth_path.is_file():
         # scenario time = host time + (host start - emulator start), both on CLOCK_MONOTONIC
         offset = (host_summary["t0_monotonic_ns"] - done["t0_monotonic_ns"]) / 1e9

@@ -30,6 +30,7 @@ from scipy.stats import chi2
 
 from navtwin.common.schema import Invalid, value
 from navtwin.emulator.scenario import ScenarioError, load_scenario
+from navtwin.emulator.truth import file_name as truth_file
 from navtwin.host import config as host_config
 from navtwin.host.config import ConfigError
 from navtwin.host.replay import config_for
@@ -127,15 +128,18 @@ def collect(run_dir: str | Path) -> dict:
         sc = load_scenario(d / "emulator" / "scenario.toml")
     except ScenarioError as e:
         raise ReportError(f"{d}/emulator/scenario.toml: {e}") from None
+    report = _json(d / "report.json")
+    car = report.get("car", 1)  # the car of the main figures: the first the hosts followed
+    if not isinstance(car, int) or isinstance(car, bool) or car < 1:
+        raise ReportError(f"{d}/report.json: car is not a car number; re-run navtwin lab")
     try:
-        truth = evaluate.load_truth(d / "emulator" / "truth.csv")
+        truth = evaluate.load_truth(d / "emulator" / truth_file(car))
         estimates = evaluate.load_estimates(d / "estimates.jsonl")
     except (ValueError, KeyError, IndexError, StopIteration) as e:
         raise ReportError(f"{d}: truth.csv or estimates.jsonl is not what navtwin lab writes "
                           f"({type(e).__name__}: {e}); re-run navtwin lab") from None
     if not estimates:
         raise ReportError(f"{d}/estimates.jsonl: no estimate; the host wrote none (see host.log)")
-    report = _json(d / "report.json")
     offset = report.get("time_offset_s", 0.0)
     try:
         value(offset, float, "time_offset_s")
@@ -149,7 +153,7 @@ def collect(run_dir: str | Path) -> dict:
     summaries = [x["summary"] for x in logs if "summary" in x]
     recording = _json(d / "emulator" / "recording.json")
     cfg = _host_config(d, sc.name)
-    run = {"dir": str(d), "scenario": sc, "truth": truth, "estimates": estimates,
+    run = {"dir": str(d), "scenario": sc, "car": car, "truth": truth, "estimates": estimates,
            "offset_s": offset,
            "errors": evaluate.position_errors(truth, estimates, offset, frame=sc.frame),
            "innovations": _jsonl(d / "innovations.jsonl") if (d / "innovations.jsonl").is_file()
@@ -548,7 +552,7 @@ def markdown(run: dict) -> str:
         parts += ["", f"## {t['title']}", "", _md_table(t["head"], _cells(t)), "", t["note"]]
     if run["vehicles"]:
         parts += ["", "## Cars: each car's error against its own truth, mean (max), m", "",
-                  _md_table(*vehicle_rows(run)), "", "The accuracy above is car 1's."]
+                  _md_table(*vehicle_rows(run)), "", f"The accuracy above is car {run['car']}'s."]
     if paper_note(run):
         parts += ["", paper_note(run)]
     if "bound" in run:
@@ -645,7 +649,7 @@ def html_page(run: dict, figs: dict[str, str]) -> str:
                  f"<p class=note>{e(t['note'])}</p>"]
     if run["vehicles"]:
         body += ["<h2>Cars: each car's error against its own truth, mean (max), m</h2>",
-                 "<p class=note>The figures and tables above are car 1's; each panel below is "
+                 f"<p class=note>The figures and tables above are car {run['car']}'s; each panel below is "
                  "a car's truth and its best track.</p>",
                  _html_table(*vehicle_rows(run)), f"<div class=fig id=fig-cars>{figs['cars']}</div>"]
     if "latlon" in figs:

@@ -52,17 +52,19 @@ def test_lab_reports_a_bad_scenario_in_one_line(tmp_path):
     assert p.returncode == 2 and len(err.splitlines()) == 1 and "nowhere" in err
 
 
-@pytest.mark.parametrize("network", ["shared", "per-vehicle"])
-def test_a_lab_of_two_cars_scores_each_against_its_own_truth(tmp_path, network):
+@pytest.mark.parametrize("network, follow", [("shared", "1,2"), ("per-vehicle", "2,1")])
+def test_a_lab_of_two_cars_scores_each_against_its_own_truth(tmp_path, network, follow):
     """Two cars, one host following both on the shared air or one host each on its own
-    ports: every car's fused tracks stay near its own truth, and `navtwin report` shows both."""
+    ports: every car's fused tracks stay near its own truth, the main figures are the first
+    followed car's, and `navtwin report` shows both."""
     d = tmp_path / "run"
-    p = navtwin("lab", "--vehicles", "2", "--network", network, "--duration", "14", "--dir", d,
-                "--filters", "wsn,kf", "--no-plot", timeout=180)
+    p = navtwin("lab", "--vehicles", "2", "--network", network, "--follow", follow, "--duration",
+                "14", "--dir", d, "--filters", "wsn,kf", "--no-plot", timeout=180)
     assert p.returncode == 0, p.stderr[-2000:]
     report = json.loads((d / "report.json").read_text())
-    cars = report["vehicles"]
-    assert set(cars) == {"1", "2"} and report["errors"] == cars["1"]["errors"]
+    cars, first = report["vehicles"], follow.split(",")[0]
+    assert set(cars) == {"1", "2"} and report["errors"] == cars[first]["errors"]
+    assert report.get("car", 1) == int(first)
     hosts = {c["host"] for c in cars.values()}
     assert hosts == ({1} if network == "shared" else {1, 2})
     for car in cars.values():
