@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 import sys
 
-from navtwin.common.limits import MAX_DURATION_S
+from navtwin.common.limits import MAX_DURATION_S, VEHICLES
 from navtwin.protocols.linkdir import default_link_dir
 
 from .main import UsageError, number
@@ -21,7 +21,8 @@ Talk to a running `navtwin emulate` through the control socket in its link direc
   unplug PORT / replug PORT   pull a port's cable (its link vanishes, clients read a hang-up)
                               and plug it back (a new PTY behind the same link)
   reset board|coordinator     power-cycle the SINS board (its counter starts again) or the
-                              coordinator (modem status 0x00, 0x06) now, --duration S off
+                              coordinator (modem status 0x00, 0x06) now, --duration S off;
+                              --vehicle N: car N's board (or its own coordinator)
 
 The fault kinds and their settings are those of a scenario's [[faults]] (docs/scenarios.md);
 live faults have no start_s/end_s: they start now. A refusal is one line on stderr, exit 2;
@@ -41,6 +42,9 @@ def register(sub) -> None:
     p.add_argument("--duration", type=number(0, MAX_DURATION_S, above=True), metavar="S",
                    help="with fault: how long it lasts (default: until cleared); with reset: "
                         "how long the device is off (default 0.5)")
+    p.add_argument("--vehicle", type=number(*VEHICLES, integer=True), metavar="N",
+                   help="with reset: car N's device (default 1); a fault names its car in its "
+                        "settings (board_reset:vehicle=2, byte_drop:port=sins2,...)")
     p.set_defaults(func=run_ctl)
 
 
@@ -61,6 +65,8 @@ def run_ctl(args) -> int:
         raise UsageError(f"ctl {op} needs {needs[op]}")
     if args.duration is not None and op not in ("fault", "reset"):
         raise UsageError("--duration goes with ctl fault and ctl reset only")
+    if args.vehicle is not None and op != "reset":
+        raise UsageError("--vehicle goes with ctl reset only; a fault names its car in its settings")
     request: dict = {}
     if op == "fault":
         from navtwin.emulator.scenario import ScenarioError, parse_fault  # only a fault needs it
@@ -79,6 +85,8 @@ def run_ctl(args) -> int:
         request["port"] = arg
     elif op == "reset":
         request["device"] = arg
+        if args.vehicle is not None:
+            request["vehicle"] = args.vehicle
         if args.duration is not None:
             request["duration_s"] = args.duration
     ctl = Control(args.link_dir or default_link_dir(), timeout=args.timeout)

@@ -93,10 +93,11 @@ class Lab:
         self.pts[port] = reply["pts"]
         return reply
 
-    def reset(self, device: str, duration_s: float | None = None) -> dict:
+    def reset(self, device: str, duration_s: float | None = None, vehicle: int | None = None) -> dict:
         """Power-cycle ``"board"`` (the SINS board: its counter starts again) or
-        ``"coordinator"`` (modem status 0x00, 0x06) now, off for *duration_s* (0.5 s)."""
-        return self.control.reset(device, duration_s)
+        ``"coordinator"`` (modem status 0x00, 0x06) now, off for *duration_s* (0.5 s); of car
+        *vehicle* (default 1; a coordinator of its own with per-vehicle networks)."""
+        return self.control.reset(device, duration_s, vehicle)
 
     def status(self) -> dict:
         return self.control.status()

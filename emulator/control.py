@@ -32,8 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from navtwin.common.limits import MAX_DURATION_S, limit_problem
-from navtwin.common.schema import REQUIRED, Invalid, build, key, positive
+from navtwin.common.limits import MAX_DURATION_S, VEHICLES, limit_problem
+from navtwin.common.schema import REQUIRED, Invalid, between, build, key, positive
 
 SOCKET = "control"  # its name in the link directory
 MAX_LINE = 64 * 1024  # a request longer than this is refused, its connection closed
@@ -74,7 +74,7 @@ class Clear:
 class Unplug:
     """pull a port's cable: {port}; its link vanishes, clients read a hang-up"""
 
-    port: str = key(REQUIRED, "", "the port: sins, xbee or nanoloc")
+    port: str = key(REQUIRED, "", "the port: sins, xbee or nanoloc (car n's: sins<n> ...)")
 
 
 @dataclass(frozen=True)
@@ -84,11 +84,14 @@ class Replug(Unplug):
 
 @dataclass(frozen=True)
 class Reset:
-    """power-cycle a device now: {device: board|coordinator, duration_s?} (default 0.5 s)"""
+    """power-cycle a device now: {device: board|coordinator, duration_s?, vehicle?} (default
+    0.5 s, vehicle 1)"""
 
     device: str = key(REQUIRED, "", "the device: board or coordinator")
     duration_s: float | None = key(None, "s", "how long it is off; none = 0.5 s",
                                    positive(hi=MAX_DURATION_S))
+    vehicle: int | None = key(None, "", "whose: the car's board, or its coordinator with a "
+                              "coordinator per car; none = 1", between(*VEHICLES))
 
 
 #: op -> its arguments (the class's docstring says what it does; ``navtwin ctl`` and the
@@ -308,6 +311,6 @@ class Control:
     def replug(self, port: str) -> dict:
         return self.call("replug", port=port)
 
-    def reset(self, device: str, duration_s: float | None = None) -> dict:
-        return self.call("reset", device=device, **({} if duration_s is None else
-                                                    {"duration_s": duration_s}))
+    def reset(self, device: str, duration_s: float | None = None, vehicle: int | None = None) -> dict:
+        return self.call("reset", device=device, **({} if vehicle is None else {"vehicle": vehicle}),
+                         **({} if duration_s is None else {"duration_s": duration_s}))

@@ -649,7 +649,8 @@ class Emulation:
         if kind is None:
             raise ControlError(f"no device {args.device[:40]!r} to reset; use one of "
                                f"{', '.join(self.RESETS)}")
-        return self._op_fault(Inject({"kind": kind}, self.RESET_S if args.duration_s is None
+        whose = {} if args.vehicle is None else {"vehicle": args.vehicle}
+        return self._op_fault(Inject({"kind": kind, **whose}, self.RESET_S if args.duration_s is None
                                      else args.duration_s))
 
     def _power_ups(self, fault) -> list:

@@ -242,6 +242,33 @@ def test_reset_power_cycles_the_board_under_a_reading_client(tmp_path):
             lab.control.call("reset", device="toaster")
 
 
+def test_reset_and_faults_address_one_car(tmp_path):
+    """In a three-car lab, `ctl reset board --vehicle 2` power-cycles car 2's board only: its
+    port's counter starts again while car 1's runs on; a car the lab lacks is refused."""
+    with emulate("office-convoy", duration=60, link_dir=tmp_path / "links") as lab:
+        with serial.Serial(lab.ports["sins2"], 115200, timeout=0.2) as two, \
+                serial.Serial(lab.ports["sins"], 115200, timeout=0.2) as one:
+            d2, d1 = sins_decoder(), sins_decoder()
+            assert len(_read_frames(two, d2, 3)) >= 3
+            r = navtwin("ctl", "--link-dir", tmp_path / "links", "reset", "board", "--vehicle", "2",
+                        "--duration", "0.3")
+            assert r.returncode == 0 and json.loads(r.stdout)["kind"] == "board_reset", r.stderr
+            end = time.monotonic() + DEADLINE_S
+            seqs = []
+            while time.monotonic() < end and 0 not in seqs:
+                seqs += [f.fields["seq"] for f in _read_frames(two, d2, 1, 1.0)]
+            assert 0 in seqs  # car 2's board came back
+            one.reset_input_buffer()
+            first = [f.fields["seq"] for f in _read_frames(one, sins_decoder(), 20)]
+            # car 1's board never stopped: it counts on from before car 2's power-cycle, which
+            # took 0.3 s (30 frames) after car 2's board had counted up to seqs[0]
+            assert min(first) > max(seqs[0], 30) and first == sorted(first)
+        with pytest.raises(ControlError, match=r"vehicle 4: the scenario has vehicles 1 to 3"):
+            lab.reset("board", vehicle=4)
+        with pytest.raises(ControlError, match=r"the vehicles share one coordinator"):
+            lab.reset("coordinator", vehicle=2)
+
+
 def test_a_live_line_fault_garbles_the_port_until_cleared_and_the_ledger_has_it(tmp_path):
     rec = tmp_path / "rec"
     with emulate("office", duration=60, link_dir=tmp_path / "links", record=rec) as lab:
