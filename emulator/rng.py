@@ -15,3 +15,10 @@ def stream(seed: int, name: str) -> np.random.Generator:
     """The Generator named *name* of run *seed* (same seed and name -> same numbers)."""
     key = zlib.crc32(name.encode("utf-8"))
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(key,))))
+
+
+def vehicles_name(vehicle: int, name: str) -> str:
+    """The name of vehicle *vehicle*'s stream *name*: vehicle 1's is *name*, vehicle n's
+    "vehicle<n>.<name>", so adding a vehicle never changes another's draws, and a one-vehicle
+    lab draws what it always drew."""
+    return name if vehicle == 1 else f"vehicle{vehicle}.{name}"

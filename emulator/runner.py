@@ -91,7 +91,7 @@ from .faults import Fault, LineFault, acting_on
 from .ledger import Ledger
 from .pty import LinkDir, PtyPort
 from .radio import AirFrame
-from .rng import stream
+from .rng import stream, vehicles_name
 from .tap import SOCKET as TAP_SOCKET, TapServer
 from .timing import Lateness, Mode, TimingError, choose as choose_timing
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows, file_name as truth_file
@@ -313,7 +313,7 @@ class Emulation:
             radios = sc.radios_for(self.seed, n)  # the routers' MY, the network: from the seed
             coord = identity_registers(radios["coordinator"], CE=1)  # CE: see coordinator.py
             out[port] = Coordinator(coord, routers[n - 1:n] if alone else routers, downlink,
-                                    stream(self.seed, "coordinator" if n == 1 else f"vehicle{n}.coordinator"), **kw)
+                                    stream(self.seed, vehicles_name(n, "coordinator")), **kw)
         return out
 
     def _recorder(self, directory) -> RecordingWriter:

@@ -40,7 +40,7 @@ from . import trajectory as geometry
 from .faults import Fault
 from .imu_errors import GRADES, ImuErrors, override_keys, profile
 from .imu_words import DEFAULT_WORDS, WORDS
-from .rng import stream
+from .rng import stream, vehicles_name
 from .tdma import SCHEDULES as TDMA_SCHEDULES
 from navtwin.common import tomlfile
 from navtwin.common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
@@ -689,7 +689,7 @@ class Scenario:
         seed, as on a real join (vehicle n > 1: its MY from the stream "vehicle<n>.xbee.join",
         and, with per-vehicle networks, its coordinator's network too)."""
         def joined(n: int):
-            rng = stream(seed, "xbee.join" if n == 1 else f"vehicle{n}.xbee.join")
+            rng = stream(seed, vehicles_name(n, "xbee.join"))
             my, oi = (int(v) for v in rng.integers(0x0001, 0xFFF8, size=2))  # 0xFFF8.. reserved
             op = int(rng.integers(1, 2**63))
             ch = int(rng.integers(0x0B, 0x1B))

@@ -43,7 +43,7 @@ from .imu import Adis16350
 from .magnetometer import Magnetometer
 from .nanoloc import NanolocNetwork
 from .radio import OPT_ACKNOWLEDGED, AirFrame, Link, Router, Sender
-from .rng import stream
+from .rng import stream, vehicles_name
 from .scenario import BLOCK_S, Scenario
 from .trajectory import Trajectory
 from .truth import truth_arrays
@@ -112,7 +112,7 @@ class Vehicle:
         self._absent: dict | None = None  # the router's packets lost while out of the network
 
     def _stream(self, seed: int, name: str):
-        return stream(seed, name if self.number == 1 else f"vehicle{self.number}.{name}")
+        return stream(seed, vehicles_name(self.number, name))
 
     def block(self, lo: int, hi: int, more: bool) -> tuple[list[Event], list[Offered]]:
         """The board's SINS frames written in [lo, hi) and the RF packets they become (*more*:
@@ -177,14 +177,14 @@ class World:
         #: per coordinator's port, the host -> router direction (0x10, 0x17); each its own
         #: stream, so host activity never changes the device byte streams
         self.downlinks = {ports.instance(ports.XBEE.name, n): Link(sc.link, acting_on(sc.faults, "link"), stream(
-            self.seed, "xbee.link.coordinator" if n == 1 else f"vehicle{n}.xbee.link.coordinator"))
+            self.seed, vehicles_name(n, "xbee.link.coordinator")))
             for n in range(1, sc.units("coordinator") + 1)}
         #: per gateway's port, its network: one ranging every tag in turn, or one per vehicle
         gateways = sc.units("gateway")
         groups = [self.vehicles] if gateways == 1 else [[v] for v in self.vehicles]
         self.networks = {ports.instance(ports.NANOLOC.name, n): NanolocNetwork(
             sc, [v.spec.tag for v in group], [v.trajectory for v in group], self.seed,
-            "" if n == 1 else f"vehicle{n}.") for n, group in enumerate(groups, 1)}
+            vehicles_name(n, "")) for n, group in enumerate(groups, 1)}
         self.nanoloc = self.networks[ports.NANOLOC.name]  # vehicle 1's
         #: per coordinator's port that several routers joined, their shared channel
         self.channels = {port: Channel() for port in self.downlinks
