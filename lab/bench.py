@@ -3,6 +3,7 @@ and the live soak (not tests: they measure, they do not assert).
 
     navtwin bench host-latency [--seconds 20] [--filters all]
     navtwin bench host-replay [--recording DIR] [--seconds 60] [--filters all] [--runs 7]
+    navtwin bench host-replays [--recordings 4] [--jobs 2] [--seconds 70] [--runs 3]
     navtwin bench lab-in-memory [--scenario office] [--seeds 3]
     navtwin bench lab-soak [--seconds 600] [--faults] [--dir DIR]
     navtwin bench lab-sweep [--scenario office] [--seeds 8] [--workers 2] [--duration S]
@@ -11,7 +12,10 @@ and the live soak (not tests: they measure, they do not assert).
 made in memory (:func:`navtwin.lab.run.lab_chunks`). ``host-replay``:
 :func:`navtwin.host.bench.replay_speeds` over a recording (a host or emulator recording), by
 default over a host recording of the office lab's first seconds, of one filter set or of 000's
-five tracks and all eight compared. ``lab-in-memory``: seeds per second of the whole scenario
+five tracks and all eight compared. ``host-replays``: several emulator recordings of the
+office lab (seeds 1..K) replayed with every track by :func:`navtwin.host.replays.replay_all`,
+one job and N jobs alternately in the same run: medians of wall time, their ratio (the goal:
+1.8 at 2 jobs on 2 cores), and the CPU time of each recording's replay. ``lab-in-memory``: seeds per second of the whole scenario
 through the host, in memory (:func:`navtwin.lab.run.run_in_memory`) against ``navtwin emulate
 --speed max --record`` then ``navtwin replay`` (the disk in between). ``lab-soak``:
 :func:`navtwin.lab.soak.soak`. ``lab-sweep``: seeds per second of :func:`navtwin.lab.sweep.run`,
@@ -20,6 +24,8 @@ serial and on a LocalCluster. Each prints one JSON object; a setting left out ta
 """
 from __future__ import annotations
 
+import os
+import statistics
 import sys
 import tempfile
 import time
@@ -54,6 +60,41 @@ def office_replays(seconds: float, sets: dict, seed: int = 1, runs: int = 5) -> 
         rec = write_host_recording(Path(tmp) / "rec", kw["config"], kw["filters"], chunks,
                                    escaped=kw["escaped"])
         return replay_speeds(rec, {name: tuple(f) for name, f in sets.items()}, runs)
+
+
+def replays_scaling(recordings: int = 4, jobs: int = 2, seconds: float = 70.0,
+                    runs: int = 3) -> dict:
+    """Wall time of :func:`navtwin.host.replays.replay_all` over *recordings* office emulator
+    recordings (seeds 1..K, *seconds* each) with one job and with *jobs*, alternated *runs*
+    times in the same run; medians and their ratio."""
+    from navtwin.host.replays import replay_all
+
+    sc = load_scenario("office")
+    with tempfile.TemporaryDirectory(prefix="navtwin-bench-") as tmp:
+        dirs = []
+        for seed in range(1, recordings + 1):
+            with Emulation(sc, seed, speed=None, ports=False, duration_s=seconds,
+                           record=Path(tmp) / f"seed{seed}") as emu:
+                emu.run()
+            dirs.append(str(Path(tmp) / f"seed{seed}"))
+        # warm: the imports and one-off set-ups (the LMI of the H-infinity tracks) before timing
+        list(replay_all(dirs[:1], Path(tmp) / "warm", 1, filters=tracks.names()))
+        walls: dict[int, list[float]] = {1: [], jobs: []}
+        cpu: list[float] = []
+        for _ in range(runs):
+            for n in (1, jobs):
+                t = time.perf_counter()
+                done = list(replay_all(dirs, Path(tmp) / f"out{n}", n, filters=tracks.names()))
+                walls[n].append(time.perf_counter() - t)
+                cpu += [s["cpu_s"] for s in done]
+        same = all((Path(tmp) / "out1" / f"{Path(d).name}.jsonl").read_bytes()
+                   == (Path(tmp) / f"out{jobs}" / f"{Path(d).name}.jsonl").read_bytes() for d in dirs)
+    med = {n: statistics.median(w) for n, w in walls.items()}
+    return {"benchmark": "host-replays", "recordings": recordings, "seconds": seconds,
+            "filters": "all", "runs": runs, "jobs": jobs,
+            "wall_s_one_job": round(med[1], 3), f"wall_s_{jobs}_jobs": round(med[jobs], 3),
+            "speedup": round(med[1] / med[jobs], 3), "cpu_s_per_recording": round(statistics.median(cpu), 3),
+            "same_lines": same, "cpus": os.cpu_count()}
 
 
 def in_memory(scenario: str = "office", seeds: int = 3) -> dict:
@@ -139,6 +180,17 @@ class Replay:
 
 
 @dataclass(frozen=True)
+class Replays:
+    """host-replays' settings."""
+    recordings: int | None = key(None, "", "office recordings (seeds 1..K); none = 4 (2 quick)",
+                                 between(1, 64))
+    jobs: int = key(2, "", "worker processes against one", between(2, 64))
+    seconds: float | None = key(None, "s", "of each recording; none = 70 (10 quick)",
+                                between(1, 3600))
+    runs: int | None = key(None, "", "alternated runs of each; none = 3 (1 quick)", between(1, 50))
+
+
+@dataclass(frozen=True)
 class Seeds:
     """lab-in-memory's settings."""
     scenario: str = key("office", "", "the scenario run (a name or a .toml path)")
@@ -187,6 +239,12 @@ def benchmarks() -> dict:
         return {"benchmark": "host-replay", **r,
                 "all_to_default": round(r["default"]["wall_s"] / r["all_tracks"]["wall_s"], 3)}
 
+    @takes(Replays)
+    def host_replays(quick: bool, s: Replays) -> dict:
+        """host: several recordings replayed with 1 and N worker processes, same run (goal: N=2 >= 1.8x)"""
+        return replays_scaling(s.recordings or (2 if quick else 4), s.jobs,
+                               s.seconds or (10.0 if quick else 70.0), s.runs or (1 if quick else 3))
+
     @takes(Seeds)
     def lab_in_memory(quick: bool, s: Seeds) -> dict:
         """emulator+host: office seeds/s in memory vs emulate --record then replay (goal: faster)"""
@@ -213,6 +271,6 @@ def benchmarks() -> dict:
 
         return measure(3 if quick else 7)
 
-    return {"host-latency": host_latency, "host-replay": host_replay,
+    return {"host-latency": host_latency, "host-replay": host_replay, "host-replays": host_replays,
             "lab-in-memory": lab_in_memory, "lab-soak": lab_soak, "lab-sweep": lab_sweep,
             "startup": startup}
