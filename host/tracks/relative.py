@@ -171,8 +171,16 @@ class RelativeTrack(OwnStrapdown, Track):
 
     def correct(self, t_ref: float, c: np.ndarray) -> None:
         """Remove the errors c = (e_p, e_v) estimated at t_ref from the strapdown and from
-        the history after t_ref (module doc, "Time")."""
+        the history from t_ref on (module doc, "Time"). The history gets a state at t_ref
+        itself, so the next update's INS at this fix's time is the corrected one: between two
+        kept states it would mix in the uncorrected one before t_ref, and a velocity measured
+        over a period of 0.1 s would take up to 10 x the position correction as its own error
+        (the loop then diverges)."""
         cp, cv = c[:2], c[2:]
+        k = bisect_right(self._t, t_ref)
+        if 0 < k < len(self._t) and self._t[k - 1] != t_ref:
+            self._pv.insert(k, self.ins_at(t_ref))
+            self._t.insert(k, t_ref)
         self.nav.correct(cp + (self.t_nav - t_ref) * cv, cv, (0.0, 0.0, 0.0))
         for k in range(len(self._t) - 1, -1, -1):
             lag = self._t[k] - t_ref
