@@ -1,0 +1,163 @@
+"""``navtwin bench timing``: how punctually the host reads the emulated lab's ports while it
+runs, beside a bare PTY pair in the same run (a benchmark: it measures, it does not assert).
+
+One run: ``navtwin emulate --speed realtime --record`` and, on its links, ``navtwin host
+--filters F --record`` (each its own process, as a user runs them: lab.orchestrator's host
+command), and, in this process at the same time, emulator.bench's bare PTY pair written on
+the SINS board's exact 10 ms schedule and read as the host reads (``select``, one
+``read(2)``). The window measured starts ``SETTLE_S`` after the host's ``started`` line and
+lasts as long as the bare pair writes (``seconds``).
+
+Per port the host reads, from the two recordings, on one clock: the emulator's recording
+gives each chunk (one write of its device: a frame, a packet, a report) its schedule, the
+end of its last byte in device time (``t_device_ns + wire_ns(size, baud)``) after the
+emulator's ``t0_monotonic_ns`` (its done line); the host's recording gives each read its
+arrival (``t_wall_ns`` after the host's ``t0_monotonic_ns``, its recording's meta). A chunk
+is found in the bytes the host read (the host is the port's only reader, so they are the
+port's stream from the host's open on, chunk after chunk); it arrived with the read that
+brought its last byte. Of the chunks scheduled in the window:
+
+* written and read (``lost`` = written - read: the frame counts, exact when nothing was lost);
+* the period error ``|arrival interval - scheduled interval|`` (p50, p99, max; the scheduled
+  interval is the device times', so the gateway's irregular reports and the coordinator's
+  packets count right) and the drift (emulator.bench.period_error);
+* the lateness, arrival minus schedule (the reader's and the kernel's delay together), and
+  the emulator's own write lateness (its recording's ``t_wall_ns`` against the schedule).
+
+``p99_ratio``: each port's period-error p99 over the bare pair's (issue 22's goal: at most 1.2
+with the host running). ``cpu_cores``: the emulator's and the host's CPU time (user +
+system, ``/proc/PID/stat``) over the window, as fractions of a core.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from navtwin.emulator.api import emulate
+from navtwin.emulator.bench import arrivals, lateness, period_error, pty_floor, sins_period_ns
+from navtwin.host.replay import config_for
+from navtwin.protocols.ports import DEFAULT_BAUD
+from navtwin.protocols.recording import Recording
+from navtwin.protocols.serial import wire_ns
+
+from .orchestrator import HOST_STOP_S, host_command, wait_log
+
+HOST_START_S = 60.0  # the host's started line comes within this (a loaded box is slow)
+SETTLE_S = 1.0  # after it, before the window: the host's first reads, the emulator's attach
+WAIT_READ_S = 10.0  # after the emulator has stopped: the host reads what is left, then down
+#: a chunk is looked for this far past where the last one ended (bytes a lost part left)
+RESYNC_BYTES = 4096
+
+
+class TimingBenchError(RuntimeError):
+    """A side of the run failed: one line, with where to look."""
+
+
+def cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) process *pid* has used so far, its threads included."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def found_ends(chunks: list[bytes], stream: bytes) -> list[int | None]:
+    """Where each of *chunks* (in order) ends in *stream*, what a reader read of the port that
+    carried them, or None if it is not there (lost). The first is looked for anywhere (the
+    reader may have opened mid-chunk); each later one where the last found one ended, or up to
+    :data:`RESYNC_BYTES` past it (a chunk the line cut short leaves its part behind)."""
+    ends: list[int | None] = []
+    cursor = None
+    for data in chunks:
+        if cursor is None:
+            at = stream.find(data)
+        else:
+            at = stream.find(data, cursor, cursor + len(data) + RESYNC_BYTES)
+        if at < 0:
+            ends.append(None)
+            continue
+        cursor = at + len(data)
+        ends.append(cursor)
+    return ends
+
+
+def port_row(emulator: Recording, host: Recording, port: str, emu_t0: int, host_t0: int,
+             window: tuple[int, int]) -> dict:
+    """The reader-side figures of *port* for the chunks scheduled in *window* (monotonic ns)."""
+    baud = emulator.meta["ports"][port].get("baud", DEFAULT_BAUD)
+    chunks = [c for c in emulator.chunks(port)
+              if window[0] <= emu_t0 + c.t_device_ns + wire_ns(len(c.data), baud) < window[1]]
+    schedule = np.array([emu_t0 + c.t_device_ns + wire_ns(len(c.data), baud) for c in chunks],
+                        dtype=np.int64)
+    written = np.array([emu_t0 + c.t_wall_ns for c in chunks], dtype=np.int64)
+    reads = list(host.chunks(port))
+    stream = b"".join(r.data for r in reads)
+    read_ends = np.cumsum([len(r.data) for r in reads])
+    read_ns = np.array([host_t0 + r.t_wall_ns for r in reads], dtype=np.int64)
+    ends = found_ends([c.data for c in chunks], stream)
+    got = np.array([e is not None for e in ends], dtype=bool)
+    arrived = arrivals([e for e in ends if e is not None], read_ends, read_ns)
+    row = {"frames_written": len(chunks), "frames_read": int(got.sum()),
+           "lost": len(chunks) - int(got.sum())}
+    if got.sum() >= 2:
+        row.update(period_error(arrived, schedule[got]))
+        row.update(lateness(arrived, schedule[got]))
+    if len(chunks):
+        row.update({f"emulator_{k}": v for k, v in lateness(written, schedule).items()})
+    return row
+
+
+def timing(seconds: float = 60.0, scenario: str = "office", mode: str = "auto",
+           filters: str = "all", seed: int | None = None) -> dict:
+    """One run of the emulator (timing mode *mode*) with the host (tracks *filters*) on its
+    ports and the bare PTY pair beside them, *seconds* measured; the module docstring."""
+    config = config_for(Path(scenario).stem)
+    if config is None:
+        raise TimingBenchError(f"scenario: no host config for {scenario!r}; run a scenario "
+                               "named like a shipped host config (office, corridor, ...)")
+    period_ns = round(sins_period_ns(scenario))
+    with tempfile.TemporaryDirectory(prefix="navtwin-timing-") as tmp:
+        d = Path(tmp)
+        log = d / "host.log"
+        with emulate(scenario, seed=seed, speed="realtime", record=d / "emulator",
+                     timing=mode) as lab:
+            with open(log, "wb") as f:
+                host = subprocess.Popen(
+                    host_command(lab.ports, config, filters=filters, record=d / "host",
+                                 out=d / "estimates.jsonl"),
+                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=f)
+            try:
+                if not wait_log(log, lambda x: x.get("status", {}).get("event") == "started",
+                                HOST_START_S):
+                    raise TimingBenchError(f"the host did not start within {HOST_START_S:g} s: "
+                                           f"{log.read_text(errors='replace').strip()[-300:]}")
+                time.sleep(SETTLE_S)
+                pids = {"emulator": lab.process.pid, "host": host.pid}
+                cpu0, w0 = {k: cpu_s(p) for k, p in pids.items()}, time.monotonic_ns()
+                bare = pty_floor(round(seconds * 1e9 / period_ns), period_ns)
+                cpu1, w1 = {k: cpu_s(p) for k, p in pids.items()}, time.monotonic_ns()
+                done = lab.stop()
+                # the emulator's ports are gone: the host reads what they held, then says so
+                wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down",
+                         WAIT_READ_S)
+            finally:
+                if host.poll() is None:
+                    host.send_signal(signal.SIGTERM)
+                host.wait(timeout=HOST_STOP_S)
+        emulator, recorded = Recording(d / "emulator"), Recording(d / "host")
+        if "t0_monotonic_ns" not in recorded.meta:
+            raise TimingBenchError("the host's recording has no t0_monotonic_ns (a host older "
+                                   "than this benchmark, or one killed): update navtwin")
+        rows = {p: port_row(emulator, recorded, p, done["t0_monotonic_ns"],
+                            recorded.meta["t0_monotonic_ns"], (w0, w1))
+                for p in recorded.meta["host"]["inputs"]}
+    return {"benchmark": "timing", "scenario": scenario, "timing": lab.info["timing"],
+            "filters": filters, "seconds": (w1 - w0) / 1e9,
+            "load_average": [round(x, 2) for x in os.getloadavg()], "ports": rows,
+            "bare_pty": bare,
+            "p99_ratio": {p: r["p99_ms"] / bare["p99_ms"] for p, r in rows.items() if "p99_ms" in r},
+            "cpu_cores": {k: (cpu1[k] - cpu0[k]) / ((w1 - w0) / 1e9) for k in pids}}
