@@ -65,6 +65,11 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def _last_line(path: Path) -> str:
+    lines = path.read_text(errors="replace").strip().splitlines()
+    return lines[-1] if lines else "no output"
+
+
 def found_ends(chunks: list[bytes], stream: bytes) -> list[int | None]:
     """Where each of *chunks* (in order) ends in *stream*, what a reader read of the port that
     carried them, or None if it is not there (lost). The first is looked for anywhere (the
@@ -134,12 +139,15 @@ def timing(seconds: float = 60.0, scenario: str = "office", mode: str = "auto",
                 if not wait_log(log, lambda x: x.get("status", {}).get("event") == "started",
                                 HOST_START_S):
                     raise TimingBenchError(f"the host did not start within {HOST_START_S:g} s: "
-                                           f"{log.read_text(errors='replace').strip()[-300:]}")
+                                           f"{_last_line(log)}")
                 time.sleep(SETTLE_S)
                 pids = {"emulator": lab.process.pid, "host": host.pid}
                 cpu0, w0 = {k: cpu_s(p) for k, p in pids.items()}, time.monotonic_ns()
                 bare = pty_floor(round(seconds * 1e9 / period_ns), period_ns)
                 cpu1, w1 = {k: cpu_s(p) for k, p in pids.items()}, time.monotonic_ns()
+                if host.poll() is not None:  # its recording stops where it died: no figure
+                    raise TimingBenchError(f"the host exited during the run (status "
+                                           f"{host.returncode}): {_last_line(log)}")
                 done = lab.stop()
                 # the emulator's ports are gone: the host reads what they held, then says so
                 wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down",
