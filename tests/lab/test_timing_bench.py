@@ -108,6 +108,7 @@ def test_a_short_run_gives_every_port_the_host_reads_with_counts_that_add_up():
         assert row["lost"] == row["frames_written"] - row["frames_read"], name
         assert row["p99_ms"] >= row["p50_ms"] >= 0 and row["max_ms"] >= row["p99_ms"], name
         assert out["p99_ratio"][name] == row["p99_ms"] / out["bare_pty"]["p99_ms"]
+        assert out["late_p99_ratio"][name] == row["late_p99_ms"] / out["bare_pty"]["late_p99_ms"]
     assert (out["bare_pty"]["frames"], out["bare_pty"]["lost"]) == (250, 0)
     assert set(out["cpu_cores"]) == {"emulator", "host"}
     assert all(v >= 0 for v in out["cpu_cores"].values())
