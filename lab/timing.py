@@ -45,24 +45,20 @@ from pathlib import Path
 
 import numpy as np
 
-from navtwin.emulator.api import emulate
+from navtwin.emulator.api import EmulatorError, emulate
 from navtwin.emulator.bench import arrivals, lateness, period_error, pty_floor, sins_period_ns
 from navtwin.host.replay import config_for
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
 
-from .orchestrator import HOST_STOP_S, host_command, wait_log
+from .orchestrator import HOST_STOP_S, LabError, host_command, wait_log
 
 HOST_START_S = 60.0  # the host's started line comes within this (a loaded box is slow)
 SETTLE_S = 1.0  # after it, before the window: the host's first reads, the emulator's attach
 WAIT_READ_S = 10.0  # after the emulator has stopped: the host reads what is left, then down
 #: a chunk is looked for this far past where the last one ended (bytes a lost part left)
 RESYNC_BYTES = 4096
-
-
-class TimingBenchError(RuntimeError):
-    """A side of the run failed: one line, with where to look."""
 
 
 def cpu_s(pid: int) -> float:
@@ -129,54 +125,70 @@ def _ratios(rows: dict, bare: dict, figure: str) -> dict:
 def timing(seconds: float = 60.0, scenario: str = "office", mode: str = "auto",
            filters: str = "all", seed: int | None = None) -> dict:
     """One run of the emulator (timing mode *mode*) with the host (tracks *filters*) on its
-    ports and the bare PTY pair beside them, *seconds* measured; the module docstring."""
+    ports and the bare PTY pair beside them, *seconds* measured; the module docstring.
+    LabError (one line) if a side fails."""
     config = config_for(Path(scenario).stem)
     if config is None:
-        raise TimingBenchError(f"scenario: no host config for {scenario!r}; run a scenario "
-                               "named like a shipped host config (office, corridor, ...)")
-    period_ns = round(sins_period_ns(scenario))
+        raise LabError(f"scenario: no host config for {scenario!r}; run a scenario named like "
+                       "a shipped host config (office, corridor, ...)")
     with tempfile.TemporaryDirectory(prefix="navtwin-timing-") as tmp:
         d = Path(tmp)
-        log = d / "host.log"
-        with emulate(scenario, seed=seed, speed="realtime", record=d / "emulator",
-                     timing=mode) as lab:
-            with open(log, "wb") as f:
-                host = subprocess.Popen(
-                    host_command(lab.ports, config, filters=filters, record=d / "host",
-                                 out=d / "estimates.jsonl"),
-                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=f)
-            try:
-                if not wait_log(log, lambda x: x.get("status", {}).get("event") == "started",
-                                HOST_START_S):
-                    raise TimingBenchError(f"the host did not start within {HOST_START_S:g} s: "
-                                           f"{_last_line(log)}")
-                time.sleep(SETTLE_S)
-                pids = {"emulator": lab.process.pid, "host": host.pid}
-                cpu0, w0 = {k: cpu_s(p) for k, p in pids.items()}, time.monotonic_ns()
-                bare = pty_floor(round(seconds * 1e9 / period_ns), period_ns)
-                cpu1, w1 = {k: cpu_s(p) for k, p in pids.items()}, time.monotonic_ns()
-                if host.poll() is not None:  # its recording stops where it died: no figure
-                    raise TimingBenchError(f"the host exited during the run (status "
-                                           f"{host.returncode}): {_last_line(log)}")
-                done = lab.stop()
-                # the emulator's ports are gone: the host reads what they held, then says so
-                wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down",
-                         WAIT_READ_S)
-            finally:
-                if host.poll() is None:
-                    host.send_signal(signal.SIGTERM)
-                host.wait(timeout=HOST_STOP_S)
+        try:
+            run = _run(d, seconds, scenario, mode, seed, config, filters)
+        except EmulatorError as e:
+            raise LabError(f"the emulator failed: {str(e).strip().splitlines()[-1]}") from None
         emulator, recorded = Recording(d / "emulator"), Recording(d / "host")
         if "t0_monotonic_ns" not in recorded.meta:
-            raise TimingBenchError("the host's recording has no t0_monotonic_ns (a host older "
-                                   "than this benchmark, or one killed): update navtwin")
-        rows = {p: port_row(emulator, recorded, p, done["t0_monotonic_ns"],
-                            recorded.meta["t0_monotonic_ns"], (w0, w1))
+            raise LabError("the host's recording has no t0_monotonic_ns (a host older than "
+                           "this benchmark): update navtwin")
+        rows = {p: port_row(emulator, recorded, p, run["t0_monotonic_ns"],
+                            recorded.meta["t0_monotonic_ns"], run["window"])
                 for p in recorded.meta["host"]["inputs"]}
-    return {"benchmark": "timing", "scenario": scenario, "timing": lab.info["timing"],
+    w0, w1 = run["window"]
+    bare = run["bare_pty"]
+    return {"benchmark": "timing", "scenario": scenario, "timing": run["timing"],
             "filters": filters, "seconds": (w1 - w0) / 1e9,
             "load_average": [round(x, 2) for x in os.getloadavg()], "ports": rows,
-            "bare_pty": bare,
-            "p99_ratio": _ratios(rows, bare, "p99_ms"),
+            "bare_pty": bare, "p99_ratio": _ratios(rows, bare, "p99_ms"),
             "late_p99_ratio": _ratios(rows, bare, "late_p99_ms"),
-            "cpu_cores": {k: (cpu1[k] - cpu0[k]) / ((w1 - w0) / 1e9) for k in pids}}
+            "cpu_cores": {k: v / ((w1 - w0) / 1e9) for k, v in run["cpu_s"].items()}}
+
+
+def _run(d: Path, seconds: float, scenario: str, mode: str, seed: int | None, config: str,
+         filters: str) -> dict:
+    """The run itself, recorded in *d*: the emulator's ``t0_monotonic_ns`` and ``timing``,
+    the ``window`` measured (monotonic ns), the bare pair's figures and each program's CPU
+    seconds in the window."""
+    period_ns = round(sins_period_ns(scenario))
+    log = d / "host.log"
+    with emulate(scenario, seed=seed, speed="realtime", record=d / "emulator",
+                 timing=mode) as lab:
+        with open(log, "wb") as f:
+            host = subprocess.Popen(
+                host_command(lab.ports, config, filters=filters, record=d / "host",
+                             out=d / "estimates.jsonl"),
+                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=f)
+        try:
+            if not wait_log(log, lambda x: x.get("status", {}).get("event") == "started",
+                            HOST_START_S):
+                raise LabError(f"the host did not start within {HOST_START_S:g} s: "
+                               f"{_last_line(log)}")
+            time.sleep(SETTLE_S)
+            pids = {"emulator": lab.process.pid, "host": host.pid}
+            cpu0, w0 = {k: cpu_s(p) for k, p in pids.items()}, time.monotonic_ns()
+            bare = pty_floor(round(seconds * 1e9 / period_ns), period_ns)
+            cpu1, w1 = {k: cpu_s(p) for k, p in pids.items()}, time.monotonic_ns()
+            if host.poll() is not None:  # its recording stops where it died: no figure
+                raise LabError(f"the host exited during the run (status {host.returncode}): "
+                               f"{_last_line(log)}")
+            done = lab.stop()
+            # the emulator's ports are gone: the host reads what they held, then says so
+            wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down",
+                     WAIT_READ_S)
+        finally:
+            if host.poll() is None:
+                host.send_signal(signal.SIGTERM)
+            host.wait(timeout=HOST_STOP_S)
+    return {"t0_monotonic_ns": done["t0_monotonic_ns"], "timing": lab.info["timing"],
+            "window": (w0, w1), "bare_pty": bare,
+            "cpu_s": {k: cpu1[k] - cpu0[k] for k in pids}}

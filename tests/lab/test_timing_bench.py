@@ -112,3 +112,18 @@ def test_a_short_run_gives_every_port_the_host_reads_with_counts_that_add_up():
     assert (out["bare_pty"]["frames"], out["bare_pty"]["lost"]) == (250, 0)
     assert set(out["cpu_cores"]) == {"emulator", "host"}
     assert all(v >= 0 for v in out["cpu_cores"].values())
+
+
+def test_a_host_that_dies_in_the_run_is_one_line_and_exit_status_2(monkeypatch, capsys):
+    from navtwin.cli.main import main
+    from navtwin.lab import timing as module
+    from navtwin.lab.orchestrator import LabError
+
+    def died(*args):
+        raise LabError("the host exited during the run (status 1): ValueError: math domain error")
+
+    monkeypatch.setattr(module, "_run", died)
+    assert main(["bench", "timing", "--seconds", "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == ("navtwin bench: error: timing failed: the host exited during the run "
+                       "(status 1): ValueError: math domain error")
