@@ -59,7 +59,7 @@ def run_dir(path: str | os.PathLike | None) -> Path:
     return d
 
 
-def log_lines(path: Path) -> list[dict]:
+def _log_lines(path: Path) -> list[dict]:
     out = []
     for line in path.read_text(errors="replace").splitlines():
         try:
@@ -69,11 +69,11 @@ def log_lines(path: Path) -> list[dict]:
     return out
 
 
-def wait_log(path: Path, pred, timeout: float) -> bool:
+def _wait_log(path: Path, pred, timeout: float) -> bool:
     """Poll the host's log until a line satisfies *pred* (True) or *timeout* passes."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if any(pred(x) for x in log_lines(path)):
+        if any(pred(x) for x in _log_lines(path)):
             return True
         time.sleep(0.1)
     return False
@@ -124,24 +124,6 @@ class Watch:
             print(json.dumps(line), file=self.out, flush=True)
 
 
-#: the emulator's ports the lab's host reads: the coordinator's (the SINS stream rides in its
-#: 0x90 packets) and the nanoLOC gateway's
-HOST_PORTS = ("xbee", "nanoloc")
-
-
-def host_command(ports: dict[str, str], config: str, **flags) -> list[str]:
-    """``navtwin host`` (with this Python) on the emulator's *ports* (name -> link) that the
-    lab's host reads, with host config *config*; *flags*: its other options by name
-    (``status_period=1`` -> ``--status-period 1``), None left out."""
-    cmd = [sys.executable, "-m", "navtwin", "host", "--config", config]
-    for name in HOST_PORTS:
-        cmd += [f"--{name}", ports[name]]
-    for name, value in flags.items():
-        if value is not None:
-            cmd += [f"--{name.replace('_', '-')}", str(value)]
-    return cmd
-
-
 def run_lab(scenario: str = "office", *, seed: int | None = None, duration: float | None = None,
             config: str | None = None, filters: str | None = None, directory=None,
             stop: threading.Event | None = None, watch: Watch | None = None,
@@ -163,9 +145,13 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
     try:
         with emulate(scenario, seed=seed, speed="realtime", duration=duration,
                      link_dir=d / "links", record=d / "emulator") as lab:
-            cmd = host_command(lab.ports, config, record=d / "host", out=d / "estimates.jsonl",
-                               innovations=d / "innovations.jsonl",
-                               status_period=min(watch.tick_s, 2.0), filters=filters)
+            cmd = [sys.executable, "-m", "navtwin", "host", "--xbee", lab.ports["xbee"],
+                   "--nanoloc", lab.ports["nanoloc"], "--config", config,
+                   "--record", str(d / "host"), "--out", str(d / "estimates.jsonl"),
+                   "--innovations", str(d / "innovations.jsonl"),
+                   "--status-period", str(min(watch.tick_s, 2.0))]
+            if filters is not None:
+                cmd += ["--filters", filters]
             with open(log, "wb") as f:
                 host = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                         stderr=f)
@@ -178,16 +164,16 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
                 done = lab.stop()
                 # the emulator's ports are gone once it has ended: a host that has read all
                 # they held reports them down; then it is told to stop
-                wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down", 10.0)
+                _wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down", 10.0)
             finally:
                 if host.poll() is None:
                     host.send_signal(signal.SIGTERM)
                 host.wait(timeout=HOST_STOP_S)
     except EmulatorError as e:
         raise LabError(f"the emulator failed: {str(e).strip().splitlines()[-1]}") from None
-    summaries = [x["summary"] for x in log_lines(log) if "summary" in x]
+    summaries = [x["summary"] for x in _log_lines(log) if "summary" in x]
     if not summaries:
-        tail = log_lines(log)[-1:] or [{"text": "no output"}]
+        tail = _log_lines(log)[-1:] or [{"text": "no output"}]
         raise LabError(f"the host failed: {tail[0].get('text', tail[0])}; see {log}")
     watch.phase("reporting")
     return _report(d, summaries[-1], done, plot)

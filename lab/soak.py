@@ -33,6 +33,7 @@ import math
 import os
 import signal
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -44,7 +45,6 @@ from navtwin.emulator.api import Lab, command
 
 from . import evaluate
 from .audit import audit
-from .orchestrator import host_command
 
 WARMUP_S = 60.0  # memory is compared from here: imports, buffers and caches are in place
 HOLD_S = 5.0  # an error must stay under its threshold this long to count as recovered
@@ -217,8 +217,9 @@ def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
     first, first_ready = start_emulator("emulator-1")
     log = open(d / "host.log", "wb")
     host = subprocess.Popen(
-        host_command(first.ports, "office", status_period=1, out=d / "estimates.jsonl",
-                     record=d / "host" if faults else None),
+        [sys.executable, "-m", "navtwin", "host", "--xbee", first.ports["xbee"],
+         "--nanoloc", first.ports["nanoloc"], "--config", "office", "--status-period", "1",
+         "--out", str(d / "estimates.jsonl"), *(["--record", str(d / "host")] if faults else [])],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log)
     stop = threading.Event()
     reader = SecondReader({"xbee": first.ports["xbee"], "nanoloc": first.ports["nanoloc"]},

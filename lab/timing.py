@@ -2,8 +2,8 @@
 runs, beside a bare PTY pair in the same run (a benchmark: it measures, it does not assert).
 
 One run: ``navtwin emulate --speed realtime --record`` and, on its links, ``navtwin host
---filters F --record`` (each its own process, as a user runs them: lab.orchestrator's host
-command), and, in this process at the same time, emulator.bench's bare PTY pair written on
+--filters F --record`` (each its own process, as a user runs them and as ``navtwin lab``
+starts them), and, in this process at the same time, emulator.bench's bare PTY pair written on
 the SINS board's exact 10 ms schedule and read as the host reads (``select``, one
 ``read(2)``). The window measured starts ``SETTLE_S`` after the host's ``started`` line and
 lasts as long as the bare pair writes (``seconds``).
@@ -39,6 +39,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -52,8 +53,11 @@ from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
 
-from .orchestrator import HOST_STOP_S, LabError, host_command, wait_log
+from .orchestrator import HOST_STOP_S, LabError, _wait_log
 
+#: the ports the lab's host reads: the coordinator's (the SINS stream in its 0x90 packets)
+#: and the nanoLOC gateway's
+HOST_PORTS = ("xbee", "nanoloc")
 HOST_START_S = 60.0  # the host's started line comes within this (a loaded box is slow)
 SETTLE_S = 1.0  # after it, before the window: the host's first reads, the emulator's attach
 WAIT_READ_S = 10.0  # after the emulator has stopped: the host reads what is left, then down
@@ -165,11 +169,13 @@ def _run(d: Path, seconds: float, scenario: str, mode: str, seed: int | None, co
                  timing=mode) as lab:
         with open(log, "wb") as f:
             host = subprocess.Popen(
-                host_command(lab.ports, config, filters=filters, record=d / "host",
-                             out=d / "estimates.jsonl"),
+                [sys.executable, "-m", "navtwin", "host", "--config", config,
+                 *(x for port in HOST_PORTS for x in (f"--{port}", lab.ports[port])),
+                 "--filters", filters, "--record", str(d / "host"),
+                 "--out", str(d / "estimates.jsonl")],
                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=f)
         try:
-            if not wait_log(log, lambda x: x.get("status", {}).get("event") == "started",
+            if not _wait_log(log, lambda x: x.get("status", {}).get("event") == "started",
                             HOST_START_S):
                 raise LabError(f"the host did not start within {HOST_START_S:g} s: "
                                f"{_last_line(log)}")
@@ -183,7 +189,7 @@ def _run(d: Path, seconds: float, scenario: str, mode: str, seed: int | None, co
                                f"{_last_line(log)}")
             done = lab.stop()
             # the emulator's ports are gone: the host reads what they held, then says so
-            wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down",
+            _wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down",
                      WAIT_READ_S)
         finally:
             if host.poll() is None:
