@@ -100,10 +100,9 @@ def port_row(emulator: Recording, host: Recording, port: str, emu_t0: int, host_
              window: tuple[int, int]) -> dict:
     """The reader-side figures of *port* for the chunks scheduled in *window* (monotonic ns)."""
     baud = emulator.meta["ports"][port].get("baud", DEFAULT_BAUD)
-    chunks = [c for c in emulator.chunks(port)
-              if window[0] <= emu_t0 + c.t_device_ns + wire_ns(len(c.data), baud) < window[1]]
-    schedule = np.array([emu_t0 + c.t_device_ns + wire_ns(len(c.data), baud) for c in chunks],
-                        dtype=np.int64)
+    due = [(emu_t0 + c.t_device_ns + wire_ns(len(c.data), baud), c) for c in emulator.chunks(port)]
+    chunks = [c for t, c in due if window[0] <= t < window[1]]
+    schedule = np.array([t for t, _ in due if window[0] <= t < window[1]], dtype=np.int64)
     written = np.array([emu_t0 + c.t_wall_ns for c in chunks], dtype=np.int64)
     reads = list(host.chunks(port))
     stream = b"".join(r.data for r in reads)
