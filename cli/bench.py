@@ -7,7 +7,8 @@ dict`` runs one benchmark and returns its figures; the first line of ``fn``'s do
 ``--list`` line. A benchmark with settings declares them once, as a table class of
 ``common.schema.key`` fields (``@takes(Settings)``): ``navtwin bench NAME --setting value``
 (``--help`` after NAME lists them) builds and checks them as a TOML table is checked, and
-calls ``fn(quick, settings)``.
+calls ``fn(quick, settings)``. A benchmark whose live lab run fails (the emulator or the
+host died) raises :class:`navtwin.lab.orchestrator.LabError`: one line, exit status 2.
 """
 from __future__ import annotations
 
@@ -123,8 +124,13 @@ def run(args) -> int:
     runs = [(name, benches[name], getattr(benches[name], "Settings", None))
             for name in args.names or benches]
     runs = [(name, fn, cls and settings(name, cls, given)) for name, fn, cls in runs]  # all checked first
+    from navtwin.lab.orchestrator import LabError
+
     for name, fn, s in runs:
         print(f"running {name} ...", file=sys.stderr, flush=True)
-        result = fn(args.quick) if s is None else fn(args.quick, s)
+        try:
+            result = fn(args.quick) if s is None else fn(args.quick, s)
+        except LabError as e:  # a side of a live lab run failed: its one line
+            raise UsageError(f"{name} failed: {e}") from None
         print(json.dumps({"bench": name, **result}), flush=True)
     return 0

@@ -59,6 +59,14 @@ from navtwin.protocols.serial import wire_ns
 from .timing import NAMES as TIMINGS
 
 
+def sins_period_ns(scenario: str) -> float:
+    """The SINS board's frame period on the wall clock: 10 ms of its clock, at the scenario's
+    ppm."""
+    from .scenario import load_scenario
+
+    return 10_000_000 / (1 + load_scenario(scenario).clocks.board_ppm * 1e-6)
+
+
 def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = None,
            timing: str = "auto") -> dict:
     """Frame-period jitter seen by a pyserial reader on the ``sins`` port in real time, the
@@ -66,10 +74,8 @@ def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = N
     import serial
 
     from .api import emulate
-    from .scenario import load_scenario
 
-    ppm = load_scenario(scenario).clocks.board_ppm
-    nominal_ns = 10_000_000 / (1 + ppm * 1e-6)
+    nominal_ns = sins_period_ns(scenario)
     arrivals: list[int] = []
     seqs: list[int] = []
     dec = sins_decoder()
@@ -94,20 +100,53 @@ def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = N
     t = np.array(arrivals[1:], dtype=np.int64)  # the first read may start mid-frame
     seq = np.array(seqs[1:], dtype=np.int64)
     k = np.cumsum(np.r_[0, (np.diff(seq) % 65536)])
-    period = np.diff(t) / np.diff(k)
-    dev = np.abs(period - nominal_ns) / 1e6
-    drift = (t - t[0]) - k * nominal_ns  # lateness against the absolute schedule
+    # against the absolute schedule t_first + k x nominal (the board's counter numbers them)
+    stats = period_error(t, t[0] + k * nominal_ns)
     return {"benchmark": "jitter", "scenario": scenario, "timing": lab.info["timing"],
             "seconds": seconds, "frames": int(len(t)),
-            "lost": int(k[-1] - (len(k) - 1)), "nominal_ms": nominal_ns / 1e6,
-            "p50_ms": float(np.percentile(dev, 50)), "p99_ms": float(np.percentile(dev, 99)),
-            "max_ms": float(dev.max()),
-            "drift_ms": float((np.median(drift[-100:]) - np.median(drift[:100])) / 1e6),
+            "lost": int(k[-1] - (len(k) - 1)), "nominal_ms": nominal_ns / 1e6, **stats,
             "emulator_late_p50_ms": float(np.percentile(late, 50)),
             "emulator_late_p99_ms": float(np.percentile(late, 99)),
             "emulator_late_max_ms": float(late.max()), "emulator_late": histogram,
             # the peer in the same run: a bare PTY pair with exactly timed writes
             "bare_pty": pty_floor(min(len(t), 3000), int(round(nominal_ns)))}
+
+
+#: drift compares the median lateness of this many frames at each end (one frame's is noise)
+DRIFT_FRAMES = 100
+
+
+def period_error(arrival_ns, scheduled_ns) -> dict:
+    """How regularly frames arrived, against when they were due: for frames ``i`` read at
+    ``arrival_ns[i]`` and scheduled (written, on the writer's schedule) at ``scheduled_ns[i]``,
+    in order, the period error of each interval, ``|(a[i+1] - a[i]) - (s[i+1] - s[i])|`` (the
+    nominal interval is the schedule's, so irregular streams and skipped frames count
+    right), as p50, p99 and max (ms); and the drift, the lateness ``a - s`` of the last
+    :data:`DRIFT_FRAMES` frames minus that of the first (medians, ms): a reader falling behind
+    the schedule, or a schedule run on a wrong clock. Needs two frames or more."""
+    a, s = np.asarray(arrival_ns), np.asarray(scheduled_ns)
+    dev = np.abs(np.diff(a) - np.diff(s)) / 1e6
+    late = (a - s) / 1e6
+    n = min(DRIFT_FRAMES, len(late))
+    return {"p50_ms": float(np.percentile(dev, 50)), "p99_ms": float(np.percentile(dev, 99)),
+            "max_ms": float(dev.max()),
+            "drift_ms": float(np.median(late[-n:]) - np.median(late[:n]))}
+
+
+def lateness(arrival_ns, scheduled_ns) -> dict:
+    """p50, p99 and max (ms) of ``arrival - scheduled``, the two on one clock."""
+    late = (np.asarray(arrival_ns) - np.asarray(scheduled_ns)) / 1e6
+    return {"late_p50_ms": float(np.percentile(late, 50)),
+            "late_p99_ms": float(np.percentile(late, 99)), "late_max_ms": float(late.max())}
+
+
+def arrivals(frame_ends, read_ends, read_ns) -> np.ndarray:
+    """When each frame arrived: the time of the read that brought its last byte. *frame_ends*:
+    each frame's end in the stream (bytes, increasing); *read_ends*, *read_ns*: each read's
+    end in the same stream and its time. A frame past the last read gets -1."""
+    i = np.searchsorted(np.asarray(read_ends), np.asarray(frame_ends), side="left")
+    got = np.r_[np.asarray(read_ns, dtype=np.int64), -1]
+    return got[i]
 
 
 def jitter_beside(seconds: float, scenarios: list[str], timings: list[str] = ("auto",)) -> dict:
@@ -122,44 +161,53 @@ def jitter_beside(seconds: float, scenarios: list[str], timings: list[str] = ("a
     return {"benchmark": "jitter", "seconds": seconds, "rows": rows, "p99_ratio_to_first": ratio}
 
 
+FRAME_BYTES = 30  # the bare pair's frame: a SINS frame's size
+
+
 def _bare_writer(master: int, frames: int, start_ns: int, period_ns: int) -> None:
-    """Write 30 bytes at start + k x period: sleep, then spin the last 0.5 ms."""
+    """Write a frame at start + k x period: sleep, then spin the last 0.5 ms."""
     for k in range(frames):
         due = start_ns + k * period_ns
         while (left := due - time.monotonic_ns()) > 0:
             if left > 600_000:
                 time.sleep((left - 500_000) / 1e9)
-        os.write(master, b"\x00" * 30)
+        os.write(master, b"\x00" * FRAME_BYTES)
 
 
 def pty_floor(frames: int = 3000, period_ns: int = 10_000_000) -> dict:
     """The same reader measure on a bare PTY pair: a separate process writes 30 bytes every
-    10 ms on an exact schedule, this one reads. What is left is the kernel's PTY path and
-    the reader's wake-ups: the floor any PTY-based emulator sits on, on this machine."""
+    10 ms on an exact schedule, this one reads (``select``, then one ``read(2)`` of what is
+    there, as the host's port reader does). What is left is the kernel's PTY path and the
+    reader's wake-ups: the floor any PTY-based emulator sits on, on this machine. The
+    schedule is on this machine's CLOCK_MONOTONIC, so lateness is absolute."""
     import multiprocessing as mp
     import tty
 
     master, slave = os.openpty()
     tty.setraw(slave)
     reader = os.open(os.ttyname(slave), os.O_RDWR | os.O_NOCTTY)
+    start_ns = time.monotonic_ns() + 100_000_000
     writer = mp.get_context("fork").Process(
-        target=_bare_writer, args=(master, frames, time.monotonic_ns() + 100_000_000, period_ns))
+        target=_bare_writer, args=(master, frames, start_ns, period_ns))
     writer.start()
-    stamps, got = [], 0
+    stamps, ends, got = [], [], 0
     try:
-        while got < 30 * frames:
+        while got < FRAME_BYTES * frames:
             if select.select([reader], [], [], 5.0)[0]:
                 got += len(os.read(reader, 4096))
                 stamps.append(time.monotonic_ns())
+                ends.append(got)
             elif not writer.is_alive():
                 break
     finally:
         writer.join()
         for fd in (reader, slave, master):
             os.close(fd)
-    dev = np.abs(np.diff(np.array(stamps)) - period_ns) / 1e6
-    return {"frames": len(stamps), "p50_ms": float(np.percentile(dev, 50)),
-            "p99_ms": float(np.percentile(dev, 99)), "max_ms": float(dev.max())}
+    k = np.arange(got // FRAME_BYTES)
+    schedule = start_ns + k * period_ns
+    arrived = arrivals((k + 1) * FRAME_BYTES, ends, stamps)
+    return {"frames": int(len(k)), "lost": frames - int(len(k)), "nominal_ms": period_ns / 1e6,
+            **period_error(arrived, schedule), **lateness(arrived, schedule)}
 
 
 def speed(scenario: str = "office", seed: int | None = None, repeat: int = 3) -> dict:

@@ -331,6 +331,8 @@ class Service:
                     ser.close()
                 raise
         self._t0 = time.monotonic_ns()
+        if self.recorder is not None:  # host time 0 on CLOCK_MONOTONIC, in the final meta
+            self.recorder.meta["t0_monotonic_ns"] = self._t0
         for name, ser in opened.items():
             r = self._readers[name] = PortReader(name, self.ports[name], self.baud, ser,
                                                  self._queue, self._stop_readers)

@@ -7,6 +7,7 @@ and the live soak (not tests: they measure, they do not assert).
     navtwin bench lab-in-memory [--scenario office] [--seeds 3]
     navtwin bench lab-soak [--seconds 600] [--faults] [--dir DIR]
     navtwin bench lab-sweep [--scenario office] [--seeds 8] [--workers 2] [--duration S]
+    navtwin bench timing [--seconds 60] [--scenario office] [--timing auto] [--filters all]
 
 ``host-latency``: :func:`navtwin.host.bench.bench_latency` fed the office lab's first seconds,
 made in memory (:func:`navtwin.lab.run.lab_chunks`). ``host-replay``:
@@ -19,7 +20,8 @@ one job and N jobs alternately in the same run: medians of wall time, their rati
 through the host, in memory (:func:`navtwin.lab.run.run_in_memory`) against ``navtwin emulate
 --speed max --record`` then ``navtwin replay`` (the disk in between). ``lab-soak``:
 :func:`navtwin.lab.soak.soak`. ``lab-sweep``: seeds per second of :func:`navtwin.lab.sweep.run`,
-serial and on a LocalCluster. Each prints one JSON object; a setting left out takes its default
+serial and on a LocalCluster. ``timing``: :func:`navtwin.lab.timing.timing`, the host's
+reader-side period error per port in real time beside a bare PTY pair. Each prints one JSON object; a setting left out takes its default
 (smaller with ``--quick``).
 """
 from __future__ import annotations
@@ -33,13 +35,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from navtwin.emulator.runner import Emulation
-from navtwin.emulator.scenario import load_scenario
+from navtwin.emulator.scenario import ScenarioError, load_scenario
+from navtwin.emulator.timing import NAMES as TIMINGS
 from navtwin.common.limits import MAX_DURATION_S
-from navtwin.common.schema import Invalid, between, key, positive, takes
+from navtwin.common.schema import Invalid, between, key, one_of, positive, takes
 from navtwin.host import config as host_config
 from navtwin.host import tracks
 from navtwin.host.bench import bench_latency, replay_speeds, write_host_recording
-from navtwin.host.replay import replay
+from navtwin.host.replay import config_for, replay
 from navtwin.protocols.recording import Recording
 
 from .run import lab_chunks, run_in_memory
@@ -217,6 +220,41 @@ class Sweep:
                                  positive(hi=MAX_DURATION_S))
 
 
+#: what a scenario must run beyond timing's window: the emulator's and the host's start-up
+START_MARGIN_S = 10.0
+
+
+@dataclass(frozen=True)
+class Timing:
+    """timing's settings."""
+    seconds: float | None = key(None, "s", "measured, after the host's start; none = 60 (10 quick), "
+                                "at most the scenario's length less 10 s", between(1, 3600))
+    scenario: str = key("office", "", "the scenario run (a name or a .toml path named like a "
+                        "shipped host config: the host runs that config)")
+    timing: str = key("auto", "", "the emulator's timing mode", one_of(*TIMINGS))
+    filters: str = key("all", "", "the host's tracks, a comma list or all")
+
+    def __post_init__(self):
+        _tracks(self.filters)
+        try:
+            length = load_scenario(self.scenario).duration_s
+        except ScenarioError as e:
+            raise Invalid("scenario", f"cannot be run: {e}") from None
+        if config_for(Path(self.scenario).stem) is None:
+            raise Invalid("scenario", f"{self.scenario!r} has no shipped host config; name the "
+                          "file like one (office, corridor, ...)")
+        if self.seconds is not None and self.seconds > length - START_MARGIN_S:
+            raise Invalid("seconds", f"must be at most {length - START_MARGIN_S:g} s for "
+                          f"{self.scenario} ({length:g} s long); measure less or run a longer "
+                          "scenario")
+
+    def window_s(self, quick: bool) -> float:
+        """The seconds measured: as given, else the default, within the scenario."""
+        default = min(10.0 if quick else 60.0,
+                      load_scenario(self.scenario).duration_s - START_MARGIN_S)
+        return self.seconds or default
+
+
 def benchmarks() -> dict:
     """The lab's benchmarks for ``navtwin bench`` (a set of navtwin.cli.bench.SETS)."""
     @takes(Latency)
@@ -264,6 +302,13 @@ def benchmarks() -> dict:
         return sweep_rate(s.scenario, s.seeds or (4 if quick else 8), s.workers,
                           s.duration or (20.0 if quick else None))
 
+    @takes(Timing)
+    def reader_timing(quick: bool, s: Timing) -> dict:
+        """emulator+host: host's read period error per port vs a bare PTY pair (goal p99 <= 1.2x)"""
+        from .timing import timing
+
+        return timing(s.window_s(quick), s.scenario, s.timing, s.filters)
+
     def startup(quick: bool = False) -> dict:
         """navtwin: CPU-s to --version, ctl status and emulate's ready line vs importing numpy
         (goal <= 2x)"""
@@ -273,4 +318,4 @@ def benchmarks() -> dict:
 
     return {"host-latency": host_latency, "host-replay": host_replay, "host-replays": host_replays,
             "lab-in-memory": lab_in_memory, "lab-soak": lab_soak, "lab-sweep": lab_sweep,
-            "startup": startup}
+            "timing": reader_timing, "startup": startup}

@@ -98,6 +98,8 @@ def test_live_run_over_ptys_then_replay_gives_the_same_bytes(tmp_path):
     assert "".join(got) == live
     # the host asked the coordinator for DB and AP once (at the first chunk), and recorded it
     rec = Recording(tmp_path / "rec")
+    # host time 0 on CLOCK_MONOTONIC, as the summary gives it: reads go on the emulator's clock
+    assert rec.meta["t0_monotonic_ns"] == summary["t0_monotonic_ns"] > 0
     sent = XBeeDecoder(escaped=True).decode(rec.read_bytes(TX_PORT))
     assert [(f.type, f.fields["command"]) for f in sent] == [(0x08, b"DB"), (0x08, b"AP")]
     assert select.select([pairs["xbee"][0]], [], [], DEADLINE_S)[0], "nothing sent"

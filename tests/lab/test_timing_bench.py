@@ -1,0 +1,129 @@
+"""navtwin bench timing: the statistics on arrival times whose jitter is known (figures worked
+out by hand), the chunk search and the per-port row on recordings made here, and one short
+real-time run with the host (counts that add up, no timed assertion)."""
+import pytest
+
+from navtwin.cli.bench import available, settings
+from navtwin.cli.main import UsageError
+from navtwin.emulator.bench import arrivals, lateness, period_error
+from navtwin.lab.timing import found_ends, port_row, timing
+from navtwin.protocols.ports import host_inputs
+from navtwin.protocols.recording import Read, Recording, RecordingWriter
+from navtwin.protocols.serial import wire_ns
+
+MS = 1_000_000
+
+
+def test_one_late_frame_makes_two_period_errors_and_no_drift():
+    schedule = [k * 10 * MS for k in range(201)]
+    arrived = [s + MS + (3 * MS if k == 50 else 0) for k, s in enumerate(schedule)]
+    got = period_error(arrived, schedule)
+    # 200 intervals: 198 exact, 49->50 and 50->51 off by 3 ms; numpy's p99 of 200 values lies
+    # at rank 0.99 x 199 = 197.01, between the last 0 and the first 3: 0.01 x 3 ms
+    assert got == {"p50_ms": 0.0, "p99_ms": pytest.approx(0.03), "max_ms": 3.0,
+                   "drift_ms": 0.0}  # both ends' median lateness is 1 ms
+    assert lateness(arrived, schedule) == {"late_p50_ms": 1.0, "late_p99_ms": 1.0,
+                                           "late_max_ms": 4.0}
+
+
+def test_a_reader_falling_behind_drifts_by_the_difference_of_the_end_medians():
+    schedule = [k * 10 * MS for k in range(300)]
+    arrived = [s + k * 2_000 for k, s in enumerate(schedule)]  # 2 us later each frame
+    got = period_error(arrived, schedule)
+    assert got["p50_ms"] == got["p99_ms"] == got["max_ms"] == pytest.approx(0.002)
+    # medians of k in 200..299 and in 0..99: (249.5 - 49.5) x 2 us
+    assert got["drift_ms"] == pytest.approx(0.4)
+
+
+def test_an_irregular_schedule_is_its_own_nominal():
+    schedule = [0, 10 * MS, 25 * MS, 27 * MS, 40 * MS]  # the gateway's reports, say
+    got = period_error([s + 500_000 for s in schedule], schedule)
+    assert got == {"p50_ms": 0.0, "p99_ms": 0.0, "max_ms": 0.0, "drift_ms": 0.0}
+
+
+def test_a_frame_arrives_with_the_read_that_brought_its_last_byte():
+    # frames end at bytes 30, 60, 90, 120; reads end at 45 (t=100) and 90 (t=200)
+    assert list(arrivals([30, 60, 90, 120], [45, 90], [100, 200])) == [100, 200, 200, -1]
+
+
+def test_chunks_are_found_in_the_stream_read_after_a_mid_chunk_open_and_a_loss():
+    chunks = [b"abcd", b"efgh", b"ijkl", b"mnop"]
+    # opened in the middle of abcd; ijkl cut short by the line
+    assert found_ends(chunks, b"cd" + b"efgh" + b"ij" + b"mnop") == [None, 6, None, 12]
+
+
+def _recordings(tmp_path, t0: int, host_t0: int):
+    """Ten 10-byte gateway reports every 10 ms from 20 ms on, written 0.1 ms late; the host
+    reads each 0.3 ms after its schedule, the seventh 2 ms later still, and never gets the
+    fourth."""
+    wire = wire_ns(10, 115200)
+    emu = RecordingWriter(tmp_path / "emu", {"ports": {"nanoloc": {"baud": 115200}}})
+    host = RecordingWriter(tmp_path / "host", {"host": {"inputs": ["nanoloc"]},
+                                               "ports": {"nanoloc": {"baud": 115200}}}, reads=True)
+    offset = 0
+    for k in range(10):
+        data = bytes([65 + k]) * 10
+        due = (k + 2) * 10 * MS + wire
+        emu.port("nanoloc").write(data, (k + 2) * 10 * MS, due + 100_000)
+        if k != 3:
+            arrival = t0 + due + 300_000 + (2 * MS if k == 6 else 0)
+            host.port("nanoloc").write(data, t_wall_ns=arrival - host_t0, read=Read(offset, 0, 0))
+            offset += len(data)
+    emu.close()
+    host.close()
+    return Recording(tmp_path / "emu"), Recording(tmp_path / "host")
+
+
+def test_a_port_row_counts_the_frames_and_times_them_on_one_clock(tmp_path):
+    t0, host_t0 = 10**12, 10**12 + 5 * MS  # the host started 5 ms after the emulator
+    emu, host = _recordings(tmp_path, t0, host_t0)
+    row = port_row(emu, host, "nanoloc", t0, host_t0, (0, 2**62))
+    assert (row["frames_written"], row["frames_read"], row["lost"]) == (10, 9, 1)
+    # intervals between the nine read: 3->4 spans the lost one (its own nominal, 20 ms);
+    # 5->6 and 6->7 are off by 2 ms, the other six exact
+    assert row["p50_ms"] == 0.0 and row["max_ms"] == pytest.approx(2.0)
+    assert row["p99_ms"] == pytest.approx(2.0)  # rank 0.99 x 7 = 6.93: between the two 2s
+    assert row["drift_ms"] == pytest.approx(0.0)
+    assert (row["late_p50_ms"], row["late_max_ms"]) == (pytest.approx(0.3), pytest.approx(2.3))
+    assert row["emulator_late_max_ms"] == pytest.approx(0.1)
+    # the window takes the chunks scheduled in it: 2, 3 (lost), 4 and 5
+    row = port_row(emu, host, "nanoloc", t0, host_t0, (t0 + 35 * MS, t0 + 75 * MS))
+    assert (row["frames_written"], row["frames_read"], row["lost"]) == (4, 3, 1)
+
+
+def test_seconds_beyond_the_scenario_are_one_line():
+    run = available()["timing"]
+    with pytest.raises(UsageError, match=r"^--seconds must be at most 60 s for office \(70 s "):
+        settings("timing", run.Settings, {"seconds": "65"})
+
+
+@pytest.mark.pty
+@pytest.mark.slow
+def test_a_short_run_gives_every_port_the_host_reads_with_counts_that_add_up():
+    out = timing(2.5, "office", "auto", "wsn,kf")
+    assert set(out["ports"]) == {"xbee", "nanoloc"} == set(out["p99_ratio"])
+    assert set(out["ports"]) <= set(host_inputs())
+    for name, row in out["ports"].items():
+        assert 0 < row["frames_read"] <= row["frames_written"], name
+        assert row["lost"] == row["frames_written"] - row["frames_read"], name
+        assert row["p99_ms"] >= row["p50_ms"] >= 0 and row["max_ms"] >= row["p99_ms"], name
+        assert out["p99_ratio"][name] == row["p99_ms"] / out["bare_pty"]["p99_ms"]
+        assert out["late_p99_ratio"][name] == row["late_p99_ms"] / out["bare_pty"]["late_p99_ms"]
+    assert (out["bare_pty"]["frames"], out["bare_pty"]["lost"]) == (250, 0)
+    assert set(out["cpu_cores"]) == {"emulator", "host"}
+    assert all(v >= 0 for v in out["cpu_cores"].values())
+
+
+def test_a_host_that_dies_in_the_run_is_one_line_and_exit_status_2(monkeypatch, capsys):
+    from navtwin.cli.main import main
+    from navtwin.lab import timing as module
+    from navtwin.lab.orchestrator import LabError
+
+    def died(*args):
+        raise LabError("the host exited during the run (status 1): ValueError: math domain error")
+
+    monkeypatch.setattr(module, "_run", died)
+    assert main(["bench", "timing", "--seconds", "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == ("navtwin bench: error: timing failed: the host exited during the run "
+                       "(status 1): ValueError: math domain error")
