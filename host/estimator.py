@@ -43,6 +43,12 @@ Discontinuities (docs/filters.md). A restart (a device's clock began a new epoch
 every track (:meth:`Track.restart`) and, for the IMU, realigns the strapdown on the
 stationary start, placed at the mean of the fixes during the alignment (the configured
 start without any). Counted by track and cause in ``stats()["reinit"]``.
+
+A track that fails. A track whose step raises an arithmetic error (a math domain error, an
+overflow, a singular matrix: ValueError, ArithmeticError) or gives an estimate that is not
+finite is off from then (cause ``error``, counted in ``stats()["reinit"]``, its last error's
+line in ``stats()["track_errors"]``) and starts again at the next fix, as after a restart;
+the other tracks, and the host, run on. A bug that raises anything else still stops the run.
 """
 from __future__ import annotations
 
@@ -65,6 +71,8 @@ from .wsn import AnchorLayout
 __all__ = ["DEVICES", "Estimate", "Estimator"]
 
 DEVICES = ("imu", "anchors")  # what can restart (a Restart record)
+#: what a track's step may raise on numbers gone bad (module doc, "A track that fails")
+FAILURES = (ArithmeticError, ValueError)
 #: records a lab sends whether or not an enabled track uses them (an optional sensor)
 IGNORED_UNTAKEN = (MagSample, AnchorExchange)
 
@@ -89,10 +97,12 @@ class Estimator:
         self.tracks: list[Track] = [cls(self.context, cfg.settings.get(n))
                                     for n, cls in zip(cfg.filters, classes)]
         self.time.predicting = [track for track in self.tracks if track.predicts]
-        self._takers: dict[type, list] = {}  # record or product type -> its takers' handlers
+        # record or product type -> its takers: (track, its handler)
+        self._takers: dict[type, list[tuple[Track, Callable]]] = {}
         for track in self.tracks:
             for kind, handler in track.handlers().items():
-                self._takers.setdefault(kind, []).append(handler)
+                self._takers.setdefault(kind, []).append((track, handler))
+        self.track_errors: dict[str, str] = {}  # track -> the line of its last failure
         # record type -> (its part's check, its processing); other types: straight to takers
         self._own = {ImuSample: (self.inertial.accept, self._imu),
                      Exchange: (self.ranging.accept, self._exchange),
@@ -126,8 +136,16 @@ class Estimator:
 
     def _give(self, kind: type, item) -> None:
         """A record or product to the tracks that take its kind, in output order."""
-        for take in self._takers.get(kind, ()):
-            take(item)
+        for track, take in self._takers.get(kind, ()):
+            try:
+                take(item)
+            except FAILURES as e:
+                self._failed(track, e)
+
+    def _failed(self, track: Track, error: BaseException) -> None:
+        """*track* failed (module doc): off until the next fix."""
+        self.track_errors[track.name] = f"{type(error).__name__}: {error}"
+        track.discontinuity("error", self.time.t)
 
     def _imu(self, rec: ImuSample) -> None:
         if self.inertial.gap(rec.t):
@@ -154,7 +172,10 @@ class Estimator:
         else:
             self.inertial.fix(fix)
             for track in self.tracks:
-                track.offer_fix(fix)
+                try:
+                    track.offer_fix(fix)
+                except FAILURES as e:
+                    self._failed(track, e)
             self._give(Fix, fix)
         if Tdoa in self._takers:
             self._give(Tdoa, self.ranging.tdoa(cycle, fix, self.time.t))
@@ -199,7 +220,13 @@ class Estimator:
             sins = self.inertial.sins
             yaw = sins.yaw if sins is not None else self.cfg.heading_rad
             for track in self.tracks:
-                e = track.estimate(b, yaw)
+                try:
+                    e = track.estimate(b, yaw)
+                    if e is not None and not math.isfinite(e.x + e.y + e.vx + e.vy):
+                        raise FloatingPointError(f"estimate ({e.x}, {e.y}) m, ({e.vx}, {e.vy}) m/s")
+                except FAILURES as error:
+                    self._failed(track, error)
+                    continue
                 if e is not None:
                     out.append(e if e.vehicle == self.cfg.vehicle else
                                replace(e, vehicle=self.cfg.vehicle))
@@ -233,5 +260,6 @@ class Estimator:
             "estimates": {t.name: self.emitted[t.name] for t in self.tracks},
             "reinit": {t.name: dict(sorted(t.reinits.items())) for t in self.tracks if t.reinits},
             "reinit_pending": [t.name for t in self.tracks if t.pending],
+            **({"track_errors": dict(sorted(self.track_errors.items()))} if self.track_errors else {}),
             "alignment": self.inertial.stats(),
         }

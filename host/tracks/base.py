@@ -195,8 +195,10 @@ class Track:
             self.reinit_since, self.reinit_fix = None, fix
 
     def reinit_at(self, fix) -> bool:
-        """Start again at *fix* (a host.measurements.Fix); False: not yet, keep waiting."""
-        raise NotImplementedError
+        """Start again at *fix* (a host.measurements.Fix); False: not yet, keep waiting. A track
+        whose estimates come from what it shares (the fixes, the estimator's strapdown: wsn,
+        sins, the centroids) has nothing of its own to start again: it runs on at once."""
+        return True
 
     @property
     def pending(self) -> bool:
