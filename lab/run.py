@@ -27,9 +27,10 @@ from navtwin.emulator.scenario import Scenario, load_scenario
 from navtwin.emulator.world import World
 from navtwin.host.arrival import arrivals
 from navtwin.host.pipeline import Pipeline
-from navtwin.host.replay import drive, emulator_settings
+from navtwin.host import config as host_config
+from navtwin.host.replay import config_for, drive, emulator_settings
 
-from .fleet import Follower
+from .fleet import Follower, followers
 
 
 def _scenario(scenario: str | Path | Scenario) -> Scenario:
@@ -43,8 +44,12 @@ def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,
     ``inputs``, ``escaped``; *overrides* as for :func:`navtwin.host.replay.emulator_settings`) and
     the lab computer's ``(port, bytes, arrival ns)`` in processing order. With several
     vehicles, *follower* (lab.fleet) says which ports a host reads as its inputs, and its
-    config."""
+    config; without one, the host follows vehicle 1 (its config's vehicle 1 given vehicle 1's
+    tag and router), so a sweep of a scenario with several cars scores car 1."""
     sc = _scenario(scenario)
+    if follower is None and len(sc.fleet) > 1:
+        config = overrides.get("config") or host_config.load(config_for(sc.name))
+        follower = followers(sc, config, (1,))[0]
     plugged = follower.inputs if follower is not None else {p: p for p in sc.ports}
     if follower is not None:
         overrides = {"config": follower.config, **overrides}

@@ -73,3 +73,13 @@ def test_hosts_following_two_of_three_vehicles_track_each_ones_truth(network):
         assert pipe.counts["reports_lost"] == 0
         assert (pipe.counts["reports_other_tag"] > 0) == (network == "shared")
         assert (pipe.counts["imu_other_router"] > 0) == (network == "shared")
+
+
+def test_without_a_follower_the_in_memory_host_follows_car_1():
+    """A sweep of a scenario with several cars scores car 1: the in-memory host's config is
+    given car 1's tag and router, and skips the others' frames."""
+    est, pipe = run_in_memory("office-convoy", 3, filters=("kf",), duration=20)
+    lines = [estimate_line(e) for e in est]
+    mine = evaluate.position_errors(truth("office-convoy", 3, 1), evaluate.load_estimates(lines))
+    assert mine["kf"]["mean"] < 0.5 and pipe.counts["reports_other_tag"] > 0
+    assert [v.tag for v in pipe.config.vehicles] == [16]
