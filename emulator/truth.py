@@ -52,6 +52,8 @@ def file_name(vehicle: int = 1) -> str:
     """The recording's truth file of vehicle *vehicle*: truth.csv, then truth2.csv, ... (as
     its ports are named, protocols.ports)."""
     return "truth.csv" if vehicle == 1 else f"truth{vehicle}.csv"
+
+
 _FMT = ["%d"] + ["%.6f"] * 9 + ["%.9f"] * 6
 
 
