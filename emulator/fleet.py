@@ -33,7 +33,7 @@ def convoy(sc: Scenario, n: int, *, network: str | None = None, gap_s: float = G
     first, *more = sc.fleet
     if more:
         raise ScenarioError(f"vehicles: scenario {sc.name} already has {len(sc.fleet)} vehicles; "
-                            "give --vehicles with a one-vehicle scenario, or add [[vehicles]] tables")
+                            "make a convoy of a one-vehicle scenario, or add [[vehicles]] tables")
     if first.router.SL + n - 1 > SL_MAX:
         raise ScenarioError(f"vehicles: vehicle 1's router SL {first.router.SL:#X} leaves no room for "
                             f"{n - 1} more; lower [xbee.router] SL")

@@ -602,7 +602,8 @@ class Scenario:
             return "vehicle", (f"{f.vehicle}: the vehicles share one coordinator ([xbee] network); "
                                "use vehicle 1")
         port = getattr(f, "port", None)
-        if port is not None and port not in self.ports and ports.known(port):
+        # a vehicle's instance (sins3) that this lab lacks; a package's own port is the lab's
+        if port is not None and ports.known(port) and ports.parse(port)[1] > self.units(ports.get(port).unit):
             return "port", (f"{port}: the scenario has {has} and its ports are "
                             f"{', '.join(self.ports)}; name one of them")
         return None
