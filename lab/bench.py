@@ -245,7 +245,8 @@ class Timing:
     def __post_init__(self):
         _tracks(self.filters)
         if self.network is not None and self.vehicles is None:
-            raise Invalid("network", "says how the vehicles share the air; give --vehicles N")
+            raise Invalid("network", "says how the vehicles share the air; give the number of "
+                          "vehicles too")
         try:
             sc = load_scenario(self.scenario)
         except ScenarioError as e:

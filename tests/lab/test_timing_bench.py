@@ -183,7 +183,7 @@ def test_two_cars_on_networks_of_their_own_give_each_cars_ports_from_its_host():
 def test_network_without_vehicles_is_one_line():
     run = available()["timing"]
     with pytest.raises(UsageError, match=r"^--network says how the vehicles share the air; "
-                                         r"give --vehicles N$"):
+                                         r"give the number of vehicles too$"):
         settings("timing", run.Settings, {"network": "per-vehicle"})
 
 
