@@ -63,9 +63,9 @@ from .orchestrator import (HOST_STOP_S, LabError, _files, _wait_log, fleet_lab, 
                            write_fleet)
 
 STATUS_PERIOD_S = 2.0  # the hosts' status lines, as navtwin lab asks for them
-HOST_START_S = 60.0  # the host's started line comes within this (a loaded box is slow)
-SETTLE_S = 1.0  # after it, before the window: the host's first reads, the emulator's attach
-WAIT_READ_S = 10.0  # after the emulator has stopped: the host reads what is left, then down
+HOST_START_S = 60.0  # each host's started line comes within this (a loaded box is slow)
+SETTLE_S = 1.0  # after the last, before the window: the hosts' first reads, the emulator's attach
+WAIT_READ_S = 10.0  # after the emulator has stopped: each host reads what is left, then down
 #: a chunk is looked for this far past where the last one ended (bytes a lost part left)
 RESYNC_BYTES = 4096
 
