@@ -8,6 +8,7 @@ and the live soak (not tests: they measure, they do not assert).
     navtwin bench lab-soak [--seconds 600] [--faults] [--dir DIR]
     navtwin bench lab-sweep [--scenario office] [--seeds 8] [--workers 2] [--duration S]
     navtwin bench timing [--seconds 60] [--scenario office] [--timing auto] [--filters all]
+                         [--vehicles N] [--network shared|per-vehicle]
 
 ``host-latency``: :func:`navtwin.host.bench.bench_latency` fed the office lab's first seconds,
 made in memory (:func:`navtwin.lab.run.lab_chunks`). ``host-replay``:
@@ -20,8 +21,8 @@ one job and N jobs alternately in the same run: medians of wall time, their rati
 through the host, in memory (:func:`navtwin.lab.run.run_in_memory`) against ``navtwin emulate
 --speed max --record`` then ``navtwin replay`` (the disk in between). ``lab-soak``:
 :func:`navtwin.lab.soak.soak`. ``lab-sweep``: seeds per second of :func:`navtwin.lab.sweep.run`,
-serial and on a LocalCluster. ``timing``: :func:`navtwin.lab.timing.timing`, the host's
-reader-side period error per port in real time beside a bare PTY pair. Each prints one JSON object; a setting left out takes its default
+serial and on a LocalCluster. ``timing``: :func:`navtwin.lab.timing.timing`, the hosts'
+reader-side period error on every port of every car in real time beside a bare PTY pair. Each prints one JSON object; a setting left out takes its default
 (smaller with ``--quick``).
 """
 from __future__ import annotations
@@ -34,8 +35,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from navtwin.emulator.fleet import convoy
 from navtwin.emulator.runner import Emulation
-from navtwin.emulator.scenario import ScenarioError, load_scenario
+from navtwin.emulator.scenario import MAX_VEHICLES, NETWORKS, ScenarioError, load_scenario
 from navtwin.emulator.timing import NAMES as TIMINGS
 from navtwin.common.limits import MAX_DURATION_S
 from navtwin.common.schema import Invalid, between, key, one_of, positive, takes
@@ -233,13 +235,28 @@ class Timing:
                         "shipped host config: the host runs that config)")
     timing: str = key("auto", "", "the emulator's timing mode", one_of(*TIMINGS))
     filters: str = key("all", "", "the host's tracks, a comma list or all")
+    vehicles: int | None = key(None, "", "N cars: the scenario's vehicle and N - 1 copies (emulate "
+                               "--vehicles), each followed by the lab's hosts; none = the scenario's",
+                               between(1, MAX_VEHICLES))
+    network: str | None = key(None, "", "with vehicles: how they share the air (emulate --network: "
+                              "one host on shared ports, or one per car); none = the scenario's",
+                              one_of(*NETWORKS))
 
     def __post_init__(self):
         _tracks(self.filters)
+        if self.network is not None and self.vehicles is None:
+            raise Invalid("network", "says how the vehicles share the air; give the number of "
+                          "vehicles too")
         try:
-            length = load_scenario(self.scenario).duration_s
+            sc = load_scenario(self.scenario)
         except ScenarioError as e:
             raise Invalid("scenario", f"cannot be run: {e}") from None
+        length = sc.duration_s
+        try:
+            if self.vehicles is not None:
+                convoy(sc, self.vehicles, network=self.network)
+        except ScenarioError as e:
+            raise Invalid("vehicles", f"cannot be run with {self.scenario}: {e}") from None
         if config_for(Path(self.scenario).stem) is None:
             raise Invalid("scenario", f"{self.scenario!r} has no shipped host config; name the "
                           "file like one (office, corridor, ...)")
@@ -304,10 +321,11 @@ def benchmarks() -> dict:
 
     @takes(Timing)
     def reader_timing(quick: bool, s: Timing) -> dict:
-        """emulator+host: host's read period error per port vs a bare PTY pair (goal p99 <= 1.2x)"""
+        """emulator+host: hosts' read period error on every port vs a bare PTY pair (goal p99 <= 1.2x)"""
         from .timing import timing
 
-        return timing(s.window_s(quick), s.scenario, s.timing, s.filters)
+        return timing(s.window_s(quick), s.scenario, s.timing, s.filters,
+                      vehicles=s.vehicles, network=s.network)
 
     def startup(quick: bool = False) -> dict:
         """navtwin: CPU-s to --version, ctl status and emulate's ready line vs importing numpy

@@ -42,7 +42,7 @@ from pathlib import Path
 from navtwin.emulator.api import EmulatorError, emulate
 from navtwin.emulator.control import ControlError
 from navtwin.emulator.fleet import convoy
-from navtwin.emulator.scenario import ScenarioError, load_scenario
+from navtwin.emulator.scenario import Scenario, ScenarioError, load_scenario
 from navtwin.emulator.truth import file_name as truth_file
 from navtwin.host import config as host_config
 from navtwin.host.replay import config_for
@@ -154,31 +154,14 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
     *follow*: the cars the hosts follow (default all)."""
     stop = stop or threading.Event()
     watch = watch or Watch()
-    try:  # refused before anything is made (the emulator would refuse it the same way)
-        sc = load_scenario(scenario)
-        if vehicles is not None:
-            sc = convoy(sc, vehicles, network=network)
-    except ScenarioError as e:
-        raise LabError(str(e)) from None
-    config = config or config_for(Path(scenario).stem)  # the scenario's lab, as replay finds it
-    if config is None:
-        raise LabError(f"config: no host config for scenario {scenario!r}; name one (a shipped "
-                       "name or a file)")
-    try:
-        hosts = followers(sc, host_config.load(config), follow)
-    except (FleetError, host_config.ConfigError) as e:
-        raise LabError(str(e)) from None
+    sc, config, hosts = fleet_lab(scenario, vehicles, network, config, follow)
     d = run_dir(directory)
-    if len(sc.fleet) > 1:  # the emulator runs the fleet as written, the hosts their configs
-        scenario = d / "scenario.toml"
-        scenario.write_text(sc.to_toml(), encoding="utf-8")
-        for h in hosts:
-            (d / _files(h.number)["config"]).write_text(h.config.to_toml(), encoding="utf-8")
+    scenario, config = write_fleet(d, sc, hosts, scenario, config)
     watch.phase("starting")
     try:
         with emulate(scenario, seed=seed, speed="realtime", duration=duration,
                      link_dir=d / "links", record=d / "emulator") as lab:
-            procs = [_start_host(d, h, lab, config if len(sc.fleet) == 1 else None, filters, watch)
+            procs = [start_host(d, h, lab, config, filters, min(watch.tick_s, 2.0))
                      for h in hosts]
             watch.started({"dir": str(d), **{k: lab.info[k] for k in (
                 "scenario", "seed", "duration_s", "ports")}, "vehicles": len(sc.fleet)})
@@ -212,17 +195,53 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
     return _report(d, summaries, hosts, done, plot)
 
 
-def _start_host(d: Path, h: Follower, lab, config: str | None, filters: str | None,
-                watch: Watch) -> subprocess.Popen:
-    """``navtwin host`` for follower *h* on its ports of the running *lab*, as a user runs it
-    (*config*: the config's name for a one-vehicle lab; else the file the lab wrote)."""
+def fleet_lab(scenario: str, vehicles: int | None, network: str | None, config: str | None,
+              follow: tuple[int, ...] | None) -> tuple[Scenario, str, list[Follower]]:
+    """The lab *scenario* makes (with *vehicles* N, emulator.fleet's convoy sharing the air
+    as *network* says), the host config (*config*, else the scenario's, as replay finds it)
+    and the hosts that follow the cars *follow* (default all; lab.fleet); LabError (one
+    line) if any of them cannot be, refused before anything is made."""
+    try:
+        sc = load_scenario(scenario)
+        if vehicles is not None:
+            sc = convoy(sc, vehicles, network=network)
+    except ScenarioError as e:
+        raise LabError(str(e)) from None
+    config = config or config_for(Path(scenario).stem)
+    if config is None:
+        raise LabError(f"config: no host config for scenario {scenario!r}; name one (a shipped "
+                       "name or a file)")
+    try:
+        return sc, config, followers(sc, host_config.load(config), follow)
+    except (FleetError, host_config.ConfigError) as e:
+        raise LabError(str(e)) from None
+
+
+def write_fleet(d: Path, sc: Scenario, hosts: list[Follower], scenario: str,
+                config: str) -> tuple[str | Path, str | None]:
+    """What the emulator runs and host 1's config, for :func:`start_host`: *scenario* and
+    *config* as given for one vehicle; with several, the fleet as written to
+    DIR/scenario.toml, and None: each host reads the config written for it (module doc)."""
+    if len(sc.fleet) == 1:
+        return scenario, config
+    (d / "scenario.toml").write_text(sc.to_toml(), encoding="utf-8")
+    for h in hosts:
+        (d / _files(h.number)["config"]).write_text(h.config.to_toml(), encoding="utf-8")
+    return d / "scenario.toml", None
+
+
+def start_host(d: Path, h: Follower, lab, config: str | None, filters: str | None,
+               status_period: float) -> subprocess.Popen:
+    """``navtwin host`` for follower *h* on its ports of the running *lab*, as a user runs it,
+    its files in *d* (:func:`_files`; *config*: the config's name for a one-vehicle lab;
+    None: the file :func:`write_fleet` wrote)."""
     f = _files(h.number)
     cmd = [sys.executable, "-m", "navtwin", "host"]
     for given, port in h.inputs.items():
         cmd += [f"--{given}", lab.ports[port]]
     cmd += ["--config", config or str(d / f["config"]), "--record", str(d / f["record"]),
             "--out", str(d / f["estimates"]), "--innovations", str(d / f["innovations"]),
-            "--status-period", str(min(watch.tick_s, 2.0))]
+            "--status-period", str(status_period)]
     if filters is not None:
         cmd += ["--filters", filters]
     with open(d / f["log"], "wb") as log:

@@ -1,12 +1,13 @@
 """navtwin bench timing: the statistics on arrival times whose jitter is known (figures worked
-out by hand), the chunk search and the per-port row on recordings made here, and one short
-real-time run with the host (counts that add up, no timed assertion)."""
+out by hand), the chunk search, the per-port row and the hosts' ports mapped to the
+emulator's on recordings made here, and short real-time runs with the host and with a host
+per car (counts that add up, no timed assertion)."""
 import pytest
 
 from navtwin.cli.bench import available, settings
 from navtwin.cli.main import UsageError
 from navtwin.emulator.bench import arrivals, lateness, period_error
-from navtwin.lab.timing import found_ends, port_row, timing
+from navtwin.lab.timing import fleet_rows, found_ends, port_row, timing
 from navtwin.protocols.ports import host_inputs
 from navtwin.protocols.recording import Read, Recording, RecordingWriter
 from navtwin.protocols.serial import wire_ns
@@ -77,7 +78,7 @@ def _recordings(tmp_path, t0: int, host_t0: int):
 def test_a_port_row_counts_the_frames_and_times_them_on_one_clock(tmp_path):
     t0, host_t0 = 10**12, 10**12 + 5 * MS  # the host started 5 ms after the emulator
     emu, host = _recordings(tmp_path, t0, host_t0)
-    row = port_row(emu, host, "nanoloc", t0, host_t0, (0, 2**62))
+    row = port_row(emu, host, "nanoloc", "nanoloc", t0, host_t0, (0, 2**62))
     assert (row["frames_written"], row["frames_read"], row["lost"]) == (10, 9, 1)
     # intervals between the nine read: 3->4 spans the lost one (its own nominal, 20 ms);
     # 5->6 and 6->7 are off by 2 ms, the other six exact
@@ -87,7 +88,7 @@ def test_a_port_row_counts_the_frames_and_times_them_on_one_clock(tmp_path):
     assert (row["late_p50_ms"], row["late_max_ms"]) == (pytest.approx(0.3), pytest.approx(2.3))
     assert row["emulator_late_max_ms"] == pytest.approx(0.1)
     # the window takes the chunks scheduled in it: 2, 3 (lost), 4 and 5
-    row = port_row(emu, host, "nanoloc", t0, host_t0, (t0 + 35 * MS, t0 + 75 * MS))
+    row = port_row(emu, host, "nanoloc", "nanoloc", t0, host_t0, (t0 + 35 * MS, t0 + 75 * MS))
     assert (row["frames_written"], row["frames_read"], row["lost"]) == (4, 3, 1)
 
 
@@ -97,21 +98,93 @@ def test_seconds_beyond_the_scenario_are_one_line():
         settings("timing", run.Settings, {"seconds": "65"})
 
 
-@pytest.mark.pty
-@pytest.mark.slow
-def test_a_short_run_gives_every_port_the_host_reads_with_counts_that_add_up():
-    out = timing(2.5, "office", "auto", "wsn,kf")
-    assert set(out["ports"]) == {"xbee", "nanoloc"} == set(out["p99_ratio"])
-    assert set(out["ports"]) <= set(host_inputs())
+def _host_recording(path, t0: int, reads: dict[str, list[tuple[bytes, int]]]) -> Recording:
+    """A host recording started at *t0* (monotonic ns) of *reads*: input -> (data, arrival)."""
+    rec = RecordingWriter(path, {"host": {"inputs": list(reads)}, "t0_monotonic_ns": t0,
+                                 "ports": {i: {"baud": 115200} for i in reads}}, reads=True)
+    for given, got in reads.items():
+        offset = 0
+        for data, arrival in got:
+            rec.port(given).write(data, t_wall_ns=arrival - t0, read=Read(offset, 0, 0))
+            offset += len(data)
+    rec.close()
+    return Recording(path)
+
+
+def test_each_hosts_inputs_map_its_reads_to_the_emulators_ports(tmp_path):
+    """Two cars on networks of their own: host 1 reads nanoloc, host 2 nanoloc2, both as
+    ``nanoloc``; each row comes from the right host, keyed by the emulator's name."""
+    t0, wire = 10**12, wire_ns(10, 115200)
+    emu = RecordingWriter(tmp_path / "emu", {"ports": {p: {"baud": 115200}
+                                                       for p in ("nanoloc", "nanoloc2")}})
+    host1, host2 = [], []
+    for k in range(6):
+        for port, got, byte in (("nanoloc", host1, 65), ("nanoloc2", host2, 97)):
+            data = bytes([byte + k]) * 10
+            emu.port(port).write(data, (k + 1) * 10 * MS, (k + 1) * 10 * MS + wire)
+            late = 2 * MS if port == "nanoloc2" else 0  # car 2's host reads 2 ms late
+            if (port, k) != ("nanoloc2", 4):  # and never gets its fifth report
+                got.append((data, t0 + (k + 1) * 10 * MS + wire + late))
+    emu.close()
+    hosts = [({"nanoloc": "nanoloc"}, _host_recording(tmp_path / "host", t0 + MS, {"nanoloc": host1})),
+             ({"nanoloc": "nanoloc2"}, _host_recording(tmp_path / "host2", t0 + 3 * MS,
+                                                       {"nanoloc": host2}))]
+    rows = fleet_rows(Recording(tmp_path / "emu"), hosts, t0, (0, 2**62))
+    assert list(rows) == ["nanoloc", "nanoloc2"]
+    assert [(r["frames_written"], r["frames_read"], r["lost"]) for r in rows.values()] == \
+        [(6, 6, 0), (6, 5, 1)]
+    # each on its own host's clock: the lateness is 0 and 2 ms, not the hosts' start offsets
+    assert rows["nanoloc"]["late_max_ms"] == 0.0
+    assert rows["nanoloc2"]["late_p50_ms"] == rows["nanoloc2"]["late_max_ms"] == 2.0
+    # host 2's stream has car 2's bytes: had it been read for car 1's port, nothing is found
+    wrong = fleet_rows(Recording(tmp_path / "emu"), [({"nanoloc": "nanoloc"}, hosts[1][1])],
+                       t0, (0, 2**62))
+    assert wrong["nanoloc"]["frames_read"] == 0
+
+
+def _adds_up(out: dict, ports: set[str], hosts: int, frames: int) -> None:
+    """What every run of timing must hold: a row per port, counts, ratios and CPU."""
+    assert set(out["ports"]) == ports == set(out["p99_ratio"])
     for name, row in out["ports"].items():
         assert 0 < row["frames_read"] <= row["frames_written"], name
         assert row["lost"] == row["frames_written"] - row["frames_read"], name
         assert row["p99_ms"] >= row["p50_ms"] >= 0 and row["max_ms"] >= row["p99_ms"], name
         assert out["p99_ratio"][name] == row["p99_ms"] / out["bare_pty"]["p99_ms"]
         assert out["late_p99_ratio"][name] == row["late_p99_ms"] / out["bare_pty"]["late_p99_ms"]
-    assert (out["bare_pty"]["frames"], out["bare_pty"]["lost"]) == (250, 0)
-    assert set(out["cpu_cores"]) == {"emulator", "host"}
-    assert all(v >= 0 for v in out["cpu_cores"].values())
+    assert out["worst_p99_ratio"] == max(out["p99_ratio"].values())
+    assert out["frames_lost_total"] == sum(r["lost"] for r in out["ports"].values())
+    assert (out["bare_pty"]["frames"], out["bare_pty"]["lost"]) == (frames, 0)
+    cpu = out["cpu_cores"]
+    assert len(cpu["per_host"]) == out["hosts"] == hosts
+    assert cpu["emulator"] >= 0 and min(cpu["per_host"]) >= 0
+    assert cpu["host"] == pytest.approx(sum(cpu["per_host"]))
+
+
+@pytest.mark.pty
+@pytest.mark.slow
+def test_a_short_run_gives_every_port_the_host_reads_with_counts_that_add_up():
+    out = timing(2.5, "office", "auto", "wsn,kf")
+    _adds_up(out, {"xbee", "nanoloc"}, 1, 250)
+    assert set(out["ports"]) <= set(host_inputs())
+
+
+@pytest.mark.pty
+@pytest.mark.slow
+def test_two_cars_on_networks_of_their_own_give_each_cars_ports_from_its_host():
+    out = timing(3.0, "office", "auto", "wsn,kf", vehicles=2, network="per-vehicle")
+    _adds_up(out, {"xbee", "nanoloc", "xbee2", "nanoloc2"}, 2, 300)
+    assert out["vehicles"] == 2
+    # each car's coordinator carries its car's 100 Hz SINS stream: 300 packets scheduled in
+    # the 3 s window (counted on the device clock), less any the emulator had not written yet
+    assert out["ports"]["xbee"]["frames_written"] > 250
+    assert out["ports"]["xbee2"]["frames_written"] > 250
+
+
+def test_network_without_vehicles_is_one_line():
+    run = available()["timing"]
+    with pytest.raises(UsageError, match=r"^--network says how the vehicles share the air; "
+                                         r"give the number of vehicles too$"):
+        settings("timing", run.Settings, {"network": "per-vehicle"})
 
 
 def test_a_host_that_dies_in_the_run_is_one_line_and_exit_status_2(monkeypatch, capsys):
