@@ -22,7 +22,11 @@ runs it for the run only. A FACTOR runs the same schedule at FACTOR x real time;
 runs it as fast as the world can be generated. World events are generated in blocks: when
 paced, a second ahead before the clock starts and then, up to two seconds ahead, only in idle
 gaps longer than twice the slowest recent block, so generation does not delay a write (a thread
-would: it competes for the GIL exactly when a deadline is near). After writing to the
+would: it competes for the GIL exactly when a deadline is near); the world's own 1 s blocks
+are made a vehicle's share at a time (World.work), in such gaps or, once needed within a
+second, between writes, so a write waits for one vehicle's share at most. The loop wakes for
+the earliest line deadline (emulator.schedule: a heap, a line re-keyed when it gets an item
+or is polled), so a wake-up costs what is due, not every port's line. After writing to the
 PTYs the loop yields the CPU once, so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
 device times, are identical in every mode and timing mode; only host commands (read from
@@ -92,6 +96,7 @@ from .ledger import Ledger
 from .pty import LinkDir, PtyPort
 from .radio import AirFrame
 from .rng import stream
+from .schedule import Deadlines
 from .tap import SOCKET as TAP_SOCKET, TapServer
 from .timing import Lateness, Mode, TimingError, choose as choose_timing
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows, file_name as truth_file
@@ -148,6 +153,7 @@ class Feed:
         self.block_ns = block_ns
         self.known_ns = 0  # every event with t < known_ns has been taken
         self.cost_ns = 0  # a decaying maximum of the wall time one block takes
+        self.work_cost_ns = 0  # ... and one share of the world's next block (World.work)
 
     @property
     def exhausted(self) -> bool:
@@ -163,6 +169,15 @@ class Feed:
         self.known_ns = until
         self.cost_ns = max(time.monotonic_ns() - t, self.cost_ns * 99 // 100)
         return events
+
+    def work(self) -> bool:
+        """Make one vehicle's share of the world's next block ahead of :meth:`step`;
+        False when there is nothing to make."""
+        t = time.monotonic_ns()
+        if not self.world.work():
+            return False
+        self.work_cost_ns = max(time.monotonic_ns() - t, self.work_cost_ns * 99 // 100)
+        return True
 
     def take(self, need_ns: int) -> list:
         """New events; afterwards ``known_ns > need_ns`` or the feed is exhausted."""
@@ -227,6 +242,11 @@ class Emulation:
         # what the host writes to each port whose device reads it (the coordinators')
         self.inbounds = {name: Inbound(name, dev.line_device, ledger=self.ledger)
                          for name, dev in self.devices.items() if dev.port.host_writes}
+        # the loop's timers: each line's and inbound's next step (emulator.schedule)
+        self.line_deadlines = Deadlines(self.lines)
+        self.inbound_deadlines = Deadlines(self.inbounds)
+        self._line_order = {name: i for i, name in enumerate(self.lines)}  # delivery order
+        self._air_from: set[str] = set()  # coordinators the host made send since the last look
         line_faults = [(i, f) for i, f in enumerate(scenario.faults) if f.ACTS_ON == "line"]
         for n, (index, fault) in enumerate(line_faults):
             wrapper = fault.wrapper(stream(self.seed, f"faults.line.{n}"))
@@ -276,8 +296,10 @@ class Emulation:
                 raise RunError(f"{port} ignores what the host writes; wrap "
                                f"{' or '.join(self.inbounds)} to_device, or {port} to_host")
             self.inbounds[port].wrap(wrapper)
+            self.inbound_deadlines.touch(port)
         else:
             self.lines[port].wrap(wrapper)
+            self.line_deadlines.touch(port)
         wrapper.direction = direction
 
     def _record_fault(self, entry: dict) -> None:
@@ -425,8 +447,8 @@ class Emulation:
             if not paced:  # everything known so far, in one go
                 now = END if feed.exhausted else feed.known_ns
             delivered = False
-            for line in self.lines.values():
-                for chunk in line.poll(now, feed.known_ns, self.end_ns):
+            for name in sorted(self.line_deadlines.due(now), key=self._line_order.__getitem__):
+                for chunk in self.lines[name].poll(now, feed.known_ns, self.end_ns):
                     self._deliver(chunk, wall - t0 if paced else None)
                     delivered = True
             if delivered and paced and self.ports:
@@ -438,8 +460,8 @@ class Emulation:
             if wall >= next_progress:
                 self._report(wall - t0)
                 next_progress = wall + PROGRESS_NS
-            target = min((t for line in (*self.lines.values(), *self.inbounds.values())
-                          if (t := line.next_ns()) is not None), default=None)
+            target = min((t for t in (self.line_deadlines.next(), self.inbound_deadlines.next())
+                          if t is not None), default=None)
             if not feed.exhausted:
                 target = feed.known_ns if target is None else min(target, feed.known_ns)
             if target is None or (target >= self.end_ns
@@ -460,6 +482,12 @@ class Emulation:
                     > 2 * feed.cost_ns + 2 * self.timing.spin_ns):
                 for ev in feed.step():  # generate ahead while there is time to spare
                     self._enqueue(ev)
+                continue
+            # the world's next block, a vehicle's share at a time: in an idle gap, or between
+            # writes once it is needed within a second (made at once it would hold up every
+            # write due meanwhile: a few hundred ms for fifty vehicles)
+            if ((feed.known_ns < now + LOOKAHEAD_NS // 2 or deadline - time.monotonic_ns()
+                 > 2 * feed.work_cost_ns + 2 * self.timing.spin_ns) and feed.work()):
                 continue
             self._wait(deadline, min(next_check, next_progress))
         else:
@@ -527,18 +555,22 @@ class Emulation:
         # the SINS board and the nanoLOC gateway ignore what the host sends them
 
     def _to_device(self, now: int) -> None:
-        """Give each device what the host wrote, as its to_device faults let it through."""
-        for name, inbound in self.inbounds.items():
+        """Give each device what the host wrote, as its to_device faults let it through
+        (the inbounds due by *now*)."""
+        for name in self.inbound_deadlines.due(now):
             view, device, line = self.views.get(name), self.devices[name], self.lines[name]
-            for t, data in inbound.poll(now):
+            for t, data in self.inbounds[name].poll(now):
                 if view is not None:  # read by the device's UART at its rate
                     data = view.heard(t, data, Framing(device.line_device.baud))
                 for t_ns, item in device.host(t, data):
                     line.put(t_ns, item)
+                self.line_deadlines.touch(name)
+                self._air_from.add(name)
 
     def _enqueue(self, ev) -> None:
         t_ns, item = self.devices[ev.port].to_line(ev)
         self.lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
+        self.line_deadlines.touch(ev.port)
 
     def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
         if wall_ns is not None:
@@ -561,10 +593,13 @@ class Emulation:
         that is earlier than one handed out."""
         until_ns = min(until_ns, self.end_ns)
         mine = []
-        for coordinator in self.coordinators.values():
-            if coordinator.air:
-                mine += [f for f in coordinator.air if f.t_ns < until_ns]
-                coordinator.air = [f for f in coordinator.air if f.t_ns >= until_ns]
+        for port in [p for p in self.coordinators if p in self._air_from]:
+            coordinator = self.coordinators[port]  # only the host's requests put frames there
+            if not coordinator.air:
+                self._air_from.discard(port)
+                continue
+            mine += [f for f in coordinator.air if f.t_ns < until_ns]
+            coordinator.air = [f for f in coordinator.air if f.t_ns >= until_ns]
         for frame in sorted(self.world.air(until_ns) + mine, key=lambda f: f.t_ns):
             if self.recorder is not None:
                 self.recorder.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC).write(
@@ -635,6 +670,7 @@ class Emulation:
             coordinator.faults += (fault,)
             for out in self._power_ups(fault):
                 self.lines[port].put(out.t_ns, out.item)
+            self.line_deadlines.touch(port)
         else:
             self.world.inject(fault)
         self.live[self._live_ids] = (fault, wrapper)
@@ -676,8 +712,9 @@ class Emulation:
     def _end_live(self, n: int) -> None:
         fault, wrapper = self.live.pop(n)
         if wrapper is not None:
-            (self.inbounds[fault.port] if wrapper.direction == "to_device" else
-             self.lines[fault.port]).wrappers.remove(wrapper)
+            to_device = wrapper.direction == "to_device"
+            (self.inbounds if to_device else self.lines)[fault.port].wrappers.remove(wrapper)
+            (self.inbound_deadlines if to_device else self.line_deadlines).touch(fault.port)
         elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
             self.world.remove(fault)
 

@@ -13,6 +13,10 @@ every event with t_ns < until_ns not returned before, each on its port instance 
   the router's packetisation, latency and retries; lost packets never appear); with one
   coordinator for all, every router's packets are on ``xbee``.
 
+``work()`` generates one vehicle's share of the next block ahead of ``advance`` (a paced
+run's loop does it between writes: a block of fifty vehicles takes a few hundred ms at once,
+a vehicle's share a few ms); the events are the same however the block was made.
+
 Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
 (emulator.radio.AirFrame: every attempt, received or lost, and the coordinator's MAC ACK of
 each received one), in time order, once ``advance`` has reached *until_ns*.
@@ -185,29 +189,51 @@ class World:
         names = [ports.instance(p, n) for p in EVENT_ORDER for n in range(1, len(self.vehicles) + 1)]
         self._rank = {name: i for i, name in enumerate(names)}
         self._generated_ns = 0  # blocks before this are generated
+        self._taken_ns = 0  # ... and their events are in _pending
         self._pending: list[Event] = []  # generated, not yet returned, in order
         self._times: list[int] = []  # their t_ns
         self._returned_ns = 0
         self._air: list[AirFrame] = []  # generated, not yet returned, in order
+        self._making = None  # the block being made (a generator of _parts), or None
+        self._made: list[Event] | None = None  # a block made by work(), not yet taken
 
     # -- generation -------------------------------------------------------------------------
-    def _block(self) -> list[Event]:
+    def _parts(self):
+        """Make the next block one vehicle at a time (a step each), then the networks';
+        the block goes to ``_made``."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
-        self._generated_ns = hi
         sins, rf, air = [], [], []
         for vehicle in self.vehicles:
             s, r, a = vehicle.block(lo, hi, hi < self.duration_ns)
             sins += s
             rf += r
             air += a
+            yield
         if air:
             self._air += [f for f in air if f.t_ns < self.duration_ns]
             self._air.sort(key=lambda f: f.t_ns)  # stable: an ACK stays after its frame
         for port, network in self.networks.items():
             t_nl, reports, marks = network.reports(lo, hi)
             sins += [Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))]
-        return sins + rf
+        self._made, self._making, self._generated_ns = sins + rf, None, hi
+
+    def work(self) -> bool:
+        """Make one vehicle's share of the next block (or the networks' and finish it);
+        False when the block is made and waits for ``advance`` or the run is generated."""
+        if self._made is not None or self._generated_ns >= self.duration_ns:
+            return False
+        if self._making is None:
+            self._making = self._parts()
+        next(self._making, None)
+        return True
+
+    def _block(self) -> list[Event]:
+        """The next block's events, made now unless work() made them."""
+        while self.work():
+            pass
+        block, self._made = self._made, None
+        return block
 
     def advance(self, until_ns: int) -> list[Event]:
         """Events with t_ns < until_ns not returned before, in (t_ns, port) order."""
@@ -215,8 +241,9 @@ class World:
         if until_ns <= self._returned_ns:
             return []
         fresh = []
-        while self._generated_ns < until_ns:
+        while self._taken_ns < until_ns:
             fresh += [e for e in self._block() if e.t_ns < self.duration_ns]
+            self._taken_ns = self._generated_ns
         if fresh:  # a stable sort keeps generation order among equal keys
             self._pending += fresh
             rank = self._rank
@@ -250,7 +277,11 @@ class World:
 
     @property
     def generated_ns(self) -> int:
-        """Events before this are generated (and fixed): a live fault acts from here on."""
+        """Events before this are generated (and fixed): a live fault acts from here on.
+        A block that work() has begun is finished first, so no vehicle's share of it
+        misses the fault."""
+        while self._making is not None:
+            self.work()
         return self._generated_ns
 
     def inject(self, fault) -> None:
