@@ -202,7 +202,7 @@ class Emulation:
                  response_delay_ns: int | None = None, timing: str = "auto",
                  progress: Callable[[str], None] | None = None,
                  sink: Callable[[Chunk], None] | None = None,
-                 air_sink: Callable[[AirFrame], None] | None = None) -> None:
+                 air_sink: Callable[[AirFrame], None] | None = None, vehicles=None) -> None:
         from .world import World
 
         self.scenario = scenario
@@ -216,7 +216,9 @@ class Emulation:
             except TimingError as e:
                 raise RunError(str(e)) from None
         self.t0_monotonic_ns: int | None = None  # set when the clock starts
-        self.world = World(scenario, self.seed)
+        #: the vehicles this run hosts (default all): a worker process hosts some of them
+        #: (emulator.workers); each keeps its number, port names and bytes
+        self.world = World(scenario, self.seed, vehicles)
         full = self.world.duration_ns
         self.end_ns = full if duration_s is None else int(round(duration_s * SEC))
         if not 0 < self.end_ns <= full:
@@ -230,7 +232,7 @@ class Emulation:
         # every port instance of the scenario's vehicles (protocols.ports), vehicle by vehicle;
         # a device is given its instance as a declaration under the instance's name
         self.devices = {name: DEVICES.get(p.device)(self, dataclasses.replace(p, name=name))
-                        for n in range(1, len(scenario.fleet) + 1) for p in lab_ports.listed()
+                        for n in (v.number for v in self.world.vehicles) for p in lab_ports.listed()
                         if n <= scenario.units(p.unit) and (name := lab_ports.instance(p.name, n))}
         self.lateness = Lateness(self.devices)  # paced runs: per port, written how late
         bauds = {name: dev.settings["baud"] for name, dev in self.devices.items()}
@@ -252,8 +254,9 @@ class Emulation:
             wrapper = fault.wrapper(stream(self.seed, f"faults.line.{n}"))
             wrapper.kind, wrapper.fault_index = fault.KIND, index
             self.wrap(fault.port, wrapper, fault.direction)
-        for n, (port, coordinator) in enumerate(self.coordinators.items(), 1):
-            coordinator.faults = tuple(acting_on(scenario.faults, "coordinator", vehicle=n))
+        for port, coordinator in self.coordinators.items():
+            coordinator.faults = tuple(acting_on(scenario.faults, "coordinator",
+                                                 vehicle=lab_ports.parse(port)[1]))
             for out in coordinator.power_up() + [o for f in coordinator.faults
                                                  for o in self._power_ups(f)]:
                 self.lines[port].put(out.t_ns, out.item)
@@ -281,6 +284,7 @@ class Emulation:
         except BaseException:
             self.close()
             raise
+        self._feed: Feed | None = None  # the world's events, from prepare()
         self.reached_ns = 0
         self.interrupted = False
         self.record_error: RecordingWriteError | None = None  # the write that ended the run
@@ -331,7 +335,8 @@ class Emulation:
         routers = [Remote(identity_registers(r)) for r in sc.routers_for(self.seed)]
         alone = sc.units("coordinator") > 1
         out = {}
-        for n, (port, downlink) in enumerate(self.world.downlinks.items(), 1):
+        for port, downlink in self.world.downlinks.items():
+            n = lab_ports.parse(port)[1]
             radios = sc.radios_for(self.seed, n)  # the routers' MY, the network: from the seed
             coord = identity_registers(radios["coordinator"], CE=1)  # CE: see coordinator.py
             out[port] = Coordinator(coord, routers[n - 1:n] if alone else routers, downlink,
@@ -406,18 +411,15 @@ class Emulation:
         return {"timing": self.timing.name} if self.timing is not None else {}
 
     # -- the loop ---------------------------------------------------------------------------
-    def run(self, stop: threading.Event | None = None) -> dict:
-        """Play the timeline until the end or until *stop* is set; returns :meth:`summary`."""
+    def run(self, stop: threading.Event | None = None,
+            start_monotonic_ns: int | None = None) -> dict:
+        """Play the timeline until the end or until *stop* is set; returns :meth:`summary`.
+        *start_monotonic_ns*: scenario time 0 on CLOCK_MONOTONIC (default: once
+        :meth:`prepare` is done), so worker processes share one schedule."""
         stop = stop or threading.Event()
         paced = self.speed is not None
-        feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS,
-                    tuple(self.devices.values()))
-        for ev in feed.take(PREFILL_NS if paced else 0):  # before the clock starts
-            self._enqueue(ev)
-        if paced:  # what exists now lives for the run: keep full collections from walking it
-            gc.collect()
-            gc.freeze()
-        t0 = self.t0_monotonic_ns = time.monotonic_ns()
+        feed = self.prepare()
+        t0 = self.t0_monotonic_ns = start_monotonic_ns or time.monotonic_ns()
         next_check = t0 if self.ports else END
         next_progress = t0 + PROGRESS_NS if self.progress else END
         next_flush = t0 + FLUSH_NS if self.recorder is not None else END
@@ -428,6 +430,20 @@ class Emulation:
             self.record_error = e
             self.interrupted = True
         return self.summary()
+
+    def prepare(self) -> Feed:
+        """The world's events before the clock starts (paced: its first second), once; a
+        worker does it before its ready line, so the common start need not wait for it."""
+        if self._feed is None:
+            paced = self.speed is not None
+            self._feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS,
+                              tuple(self.devices.values()))
+            for ev in self._feed.take(PREFILL_NS if paced else 0):
+                self._enqueue(ev)
+            if paced:  # what exists now lives for the run: keep full collections from walking it
+                gc.collect()
+                gc.freeze()
+        return self._feed
 
     def _loop(self, stop, feed: Feed, paced: bool, t0: int, next_check: int,
               next_progress: int, next_flush: int) -> None:
@@ -666,8 +682,8 @@ class Emulation:
             wrapper.kind, wrapper.fault_index = fault.KIND, None  # live: in no [[faults]]
             self.wrap(fault.port, wrapper, fault.direction)
         elif fault.ACTS_ON == "coordinator":
-            port, coordinator = list(self.coordinators.items())[fault.vehicle - 1]
-            coordinator.faults += (fault,)
+            port = lab_ports.instance(lab_ports.XBEE.name, fault.vehicle)
+            self.coordinators[port].faults += (fault,)
             for out in self._power_ups(fault):
                 self.lines[port].put(out.t_ns, out.item)
             self.line_deadlines.touch(port)
@@ -691,7 +707,7 @@ class Emulation:
     def _power_ups(self, fault) -> list:
         """The coordinator's power-up at the end of each episode of coordinator fault *fault*
         (its first frame marked for the ledger)."""
-        coordinator = list(self.coordinators.values())[fault.vehicle - 1]
+        coordinator = self.coordinators[lab_ports.instance(lab_ports.XBEE.name, fault.vehicle)]
         out, t = [], fault.next_active(0)
         while t is not None and t < self.end_ns:
             up = fault.episode_end(t)

@@ -115,12 +115,14 @@ class Vehicle:
     def _stream(self, seed: int, name: str):
         return stream(seed, name if self.number == 1 else f"vehicle{self.number}.{name}")
 
-    def block(self, lo: int, hi: int, more: bool) -> tuple[list[Event], list[Event],
-                                                           list[AirFrame]]:
+    def block(self, lo: int, hi: int, more: bool):
         """The board's SINS frames written in [lo, hi), the RF packets they become (*more*:
         the run goes on after *hi*, so an open packet waits for the next bytes) and the frames
-        those packets put on the air (none while the router is out of the network)."""
+        those packets put on the air (none while the router is out of the network), made in
+        two steps: a generator that yields once, after the IMU's samples (half the cost), and
+        returns ``(sins events, xbee events, air frames)``."""
         self.imu.generate(lo, hi)
+        yield
         t_sins, frames, marks = self.board.frames(lo, hi)
         events = [Event(t, self.sins_port, f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
@@ -167,26 +169,32 @@ class Vehicle:
 class World:
     BLOCK_NS = round(BLOCK_S * 1e9)  # the IMU's sample period is checked against it
 
-    def __init__(self, sc: Scenario, seed: int | None = None) -> None:
+    def __init__(self, sc: Scenario, seed: int | None = None, vehicles=None) -> None:
+        """*vehicles*: the numbers of the vehicles to build (default all); a subset needs a
+        network per vehicle (emulator.workers refuses the rest), and each vehicle's events equal the
+        whole world's, as every vehicle draws from streams of its own."""
         self.scenario = sc
         self.seed = sc.seed if seed is None else seed
         self.duration_ns = sc.duration_ns
         self.radios = sc.radios_for(self.seed)
+        every = range(1, len(sc.fleet) + 1)
+        hosted = set(every if vehicles is None else vehicles)
         self.vehicles = [Vehicle(sc, spec, router, n, self.seed) for n, (spec, router)
-                         in enumerate(zip(sc.fleet, sc.routers_for(self.seed)), 1)]
+                         in enumerate(zip(sc.fleet, sc.routers_for(self.seed)), 1) if n in hosted]
+        self._numbered = {v.number: v for v in self.vehicles}
         #: per coordinator's port, the host -> router direction (0x10, 0x17); each its own
         #: stream, so host activity never changes the device byte streams
         self.downlinks = {ports.instance(ports.XBEE.name, n): Link(sc.link, acting_on(sc.faults, "link"), stream(
             self.seed, "xbee.link.coordinator" if n == 1 else f"vehicle{n}.xbee.link.coordinator"))
-            for n in range(1, sc.units("coordinator") + 1)}
+            for n in range(1, sc.units("coordinator") + 1) if n in hosted}
         #: per gateway's port, its network: one ranging every tag in turn, or one per vehicle
         gateways = sc.units("gateway")
-        groups = [self.vehicles] if gateways == 1 else [[v] for v in self.vehicles]
+        groups = {1: self.vehicles} if gateways == 1 else {v.number: [v] for v in self.vehicles}
         self.networks = {ports.instance(ports.NANOLOC.name, n): NanolocNetwork(
             sc, [v.spec.tag for v in group], [v.trajectory for v in group], self.seed,
-            "" if n == 1 else f"vehicle{n}.") for n, group in enumerate(groups, 1)}
-        self.nanoloc = self.networks[ports.NANOLOC.name]  # vehicle 1's
-        names = [ports.instance(p, n) for p in EVENT_ORDER for n in range(1, len(self.vehicles) + 1)]
+            "" if n == 1 else f"vehicle{n}.") for n, group in groups.items()}
+        self.nanoloc = self.networks.get(ports.NANOLOC.name)  # vehicle 1's
+        names = [ports.instance(p, n) for p in EVENT_ORDER for n in every]
         self._rank = {name: i for i, name in enumerate(names)}
         self._generated_ns = 0  # blocks before this are generated
         self._taken_ns = 0  # ... and their events are in _pending
@@ -199,13 +207,13 @@ class World:
 
     # -- generation -------------------------------------------------------------------------
     def _parts(self):
-        """Make the next block one vehicle at a time (a step each), then the networks';
+        """Make the next block one vehicle at a time (two steps each), then the networks';
         the block goes to ``_made``."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
         sins, rf, air = [], [], []
         for vehicle in self.vehicles:
-            s, r, a = vehicle.block(lo, hi, hi < self.duration_ns)
+            s, r, a = yield from vehicle.block(lo, hi, hi < self.duration_ns)
             sins += s
             rf += r
             air += a
@@ -219,7 +227,7 @@ class World:
         self._made, self._making, self._generated_ns = sins + rf, None, hi
 
     def work(self) -> bool:
-        """Make one vehicle's share of the next block (or the networks' and finish it);
+        """Make a step of a vehicle's share of the next block (or the networks' and finish it);
         False when the block is made and waits for ``advance`` or the run is generated."""
         if self._made is not None or self._generated_ns >= self.duration_ns:
             return False
@@ -305,9 +313,9 @@ class World:
     def truth(self, t0_ns: int, t1_ns: int, vehicle: int = 1) -> np.ndarray:
         """Vehicle *vehicle*'s true state every millisecond in [t0_ns, t1_ns)
         (emulator.truth.FIELDS; truth.csv is vehicle 1's, truth<n>.csv vehicle n's)."""
-        return truth_arrays(self.vehicles[vehicle - 1].trajectory, t0_ns, t1_ns)
+        return truth_arrays(self._numbered[vehicle].trajectory, t0_ns, t1_ns)
 
     def device_truth(self, vehicle: int = 1) -> dict:
         """What vehicle *vehicle*'s devices drew at power-on and its router's join:
         evaluation only."""
-        return {"seed": self.seed, **self.vehicles[vehicle - 1].device_truth()}
+        return {"seed": self.seed, **self._numbered[vehicle].device_truth()}
