@@ -567,6 +567,7 @@ class Emulation:
             self.tap.chunk(port.name, "to_device", now, data)
         if data and port.name in self.inbounds:
             self.inbounds[port.name].put(now, data)
+            self.inbound_deadlines.touch(port.name)
             self._to_device(now)
         # the SINS board and the nanoLOC gateway ignore what the host sends them
 
