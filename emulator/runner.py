@@ -26,7 +26,8 @@ would: it competes for the GIL exactly when a deadline is near); the world's own
 are made a vehicle's share at a time (World.work), in such gaps or, once needed within a
 second, between writes, so a write waits for one vehicle's share at most. The loop wakes for
 the earliest line deadline (emulator.schedule: a heap, a line re-keyed when it gets an item
-or is polled), so a wake-up costs what is due, not every port's line. After writing to the
+or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
+due and what is readable, not every port's line and file descriptor. After writing to the
 PTYs the loop yields the CPU once, so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
 device times, are identical in every mode and timing mode; only host commands (read from
@@ -262,6 +263,10 @@ class Emulation:
                 self.lines[port].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
+        # the attached ports, waited on in one epoll set: a wake-up costs what is readable,
+        # not a select over every port (kept in step every CHECK_NS, and at a hang-up)
+        self._attached = select.epoll() if ports else None
+        self._watched: dict[int, PtyPort] = {}  # fd -> port, as registered
         self.views: dict[str, ClientView] = {}  # per port: what the client's UART reads
         self.links: dict[str, str] = {}
         self.control: ControlServer | None = None
@@ -520,7 +525,7 @@ class Emulation:
     def _wait(self, deadline: int, check_at: int) -> None:
         """Sleep until *deadline* (monotonic ns) or a client writes; spin the last
         ``spin_ns`` of the timing mode, never longer (a SCHED_FIFO thread must sleep)."""
-        fds = [p.fd for p in self.ports.values() if p.attached]
+        fds = [self._attached.fileno()] if self.ports else []
         if self.control is not None:
             fds += self.control.fds() + self.tap.fds()
         now = time.monotonic_ns()
@@ -540,14 +545,14 @@ class Emulation:
         """Read what clients wrote (stamped *now*) and notice clients coming and going, and
         (every CHECK_NS) their termios settings."""
         ports = self.ports
-        attached = [p for p in ports.values() if p.attached]
-        control = self.control.fds() + self.tap.fds() if self.control is not None else []
-        readable = select.select(attached + control, [], [], 0)[0]
-        for port in readable:
-            if isinstance(port, PtyPort):
+        for fd, _ in self._attached.poll(0):
+            port = self._watched.get(fd)
+            if port is not None:
                 self._host_bytes(port, now)
-        if control:
-            sockets = [s for s in readable if not isinstance(s, PtyPort)]
+                if not port.attached:  # it read the hang-up
+                    self._unwatch(port)
+        if self.control is not None:
+            sockets = select.select(self.control.fds() + self.tap.fds(), [], [], 0)[0]
             self.control.serve(sockets)
             self.tap.serve(sockets)
         if check_detached:
@@ -560,6 +565,19 @@ class Emulation:
             for name, port in ports.items():
                 self.views[name].settle(*(port.client_framing() if port.attached
                                           else (None, 0)))
+                if port.attached and port.fd not in self._watched:
+                    self._watched[port.fd] = port
+                    self._attached.register(port.fd, select.EPOLLIN)
+                elif not port.attached and self._watched.get(port.fd) is port:
+                    self._unwatch(port)
+
+    def _unwatch(self, port: PtyPort) -> None:
+        """Stop waiting on *port* (detached, unplugged or replugged): a detached master is
+        readable forever."""
+        for fd in [fd for fd, p in self._watched.items() if p is port]:
+            del self._watched[fd]
+            with contextlib.suppress(OSError):  # closed: the kernel dropped it already
+                self._attached.unregister(fd)
 
     def _host_bytes(self, port: PtyPort, now: int) -> None:
         data = port.read()
@@ -743,6 +761,7 @@ class Emulation:
 
     def _op_unplug(self, args) -> dict:
         port = self._port(args)
+        self._unwatch(port)
         port.unplug()
         self.link_dir.unlink(port.name)
         self.links.pop(port.name, None)
@@ -751,6 +770,7 @@ class Emulation:
     def _op_replug(self, args) -> dict:
         port = self._port(args)
         if not port.plugged:
+            self._unwatch(port)
             port.replug()
             self.links[port.name] = str(self.link_dir.link(port.name, port.pts))
         return {"port": port.name, "plugged": True, "pts": port.pts}
@@ -801,6 +821,8 @@ class Emulation:
             self.tap = None
         for port in self.ports.values():
             port.close()
+        if getattr(self, "_attached", None) is not None:
+            self._attached.close()
         if self.link_dir is not None:
             self.link_dir.close()
             self.link_dir = None
