@@ -13,9 +13,9 @@ every event with t_ns < until_ns not returned before, each on its port instance 
   the router's packetisation, latency and retries; lost packets never appear); with one
   coordinator for all, every router's packets are on ``xbee``.
 
-``work()`` generates one vehicle's share of the next block ahead of ``advance`` (a paced
-run's loop does it between writes: a block of fifty vehicles takes a few hundred ms at once,
-a vehicle's share a few ms); the events are the same however the block was made.
+``work()`` makes a step of the next block ahead of ``advance`` (a paced run's loop does it
+between writes: a block of fifty vehicles takes a few hundred ms at once, a step a few ms);
+the events are the same however the block was made.
 
 Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
 (emulator.radio.AirFrame: every attempt, received or lost, and the coordinator's MAC ACK of
@@ -197,18 +197,17 @@ class World:
         names = [ports.instance(p, n) for p in EVENT_ORDER for n in every]
         self._rank = {name: i for i, name in enumerate(names)}
         self._generated_ns = 0  # blocks before this are generated
-        self._taken_ns = 0  # ... and their events are in _pending
         self._pending: list[Event] = []  # generated, not yet returned, in order
         self._times: list[int] = []  # their t_ns
         self._returned_ns = 0
         self._air: list[AirFrame] = []  # generated, not yet returned, in order
         self._making = None  # the block being made (a generator of _parts), or None
-        self._made: list[Event] | None = None  # a block made by work(), not yet taken
 
     # -- generation -------------------------------------------------------------------------
     def _parts(self):
-        """Make the next block one vehicle at a time (two steps each), then the networks';
-        the block goes to ``_made``."""
+        """Make the next block a step at a time: each vehicle in two, the networks', and
+        last the block sorted into the events that wait (the sort of fifty vehicles' second
+        is itself a step of several ms)."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
         sins, rf, air = [], [], []
@@ -224,39 +223,39 @@ class World:
         for port, network in self.networks.items():
             t_nl, reports, marks = network.reports(lo, hi)
             sins += [Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))]
-        self._made, self._making, self._generated_ns = sins + rf, None, hi
+        yield
+        # a block's events are never earlier than the block (module doc), so those that wait
+        # can take it before they are asked for: advance() returns none before their time
+        fresh = [e for e in sins + rf if e.t_ns < self.duration_ns]
+        if fresh:  # a stable sort keeps generation order among equal keys
+            self._pending += fresh
+            rank = self._rank
+            self._pending.sort(key=lambda e: (e.t_ns, rank[e.port]))
+            self._times = [e.t_ns for e in self._pending]
+        self._making, self._generated_ns = None, hi
 
-    def work(self) -> bool:
-        """Make a step of a vehicle's share of the next block (or the networks' and finish it);
-        False when the block is made and waits for ``advance`` or the run is generated."""
-        if self._made is not None or self._generated_ns >= self.duration_ns:
-            return False
+    def _step(self) -> None:
         if self._making is None:
             self._making = self._parts()
         next(self._making, None)
-        return True
 
-    def _block(self) -> list[Event]:
-        """The next block's events, made now unless work() made them."""
-        while self.work():
-            pass
-        block, self._made = self._made, None
-        return block
+    def work(self) -> bool:
+        """Make one step of the next block ahead of ``advance`` (a vehicle's IMU samples, the
+        rest of its share, the networks', the sort); False when a block of events waits
+        beyond what ``advance`` returned (no more is made ahead) or the run is generated."""
+        if self._generated_ns >= self.duration_ns or (
+                self._making is None and self._generated_ns >= self._returned_ns + self.BLOCK_NS):
+            return False
+        self._step()
+        return True
 
     def advance(self, until_ns: int) -> list[Event]:
         """Events with t_ns < until_ns not returned before, in (t_ns, port) order."""
         until_ns = min(until_ns, self.duration_ns)
         if until_ns <= self._returned_ns:
             return []
-        fresh = []
-        while self._taken_ns < until_ns:
-            fresh += [e for e in self._block() if e.t_ns < self.duration_ns]
-            self._taken_ns = self._generated_ns
-        if fresh:  # a stable sort keeps generation order among equal keys
-            self._pending += fresh
-            rank = self._rank
-            self._pending.sort(key=lambda e: (e.t_ns, rank[e.port]))
-            self._times = [e.t_ns for e in self._pending]
+        while self._generated_ns < until_ns:
+            self._step()
         cut = bisect.bisect_left(self._times, until_ns)
         out = self._pending[:cut]
         del self._times[:cut], self._pending[:cut]
@@ -289,7 +288,7 @@ class World:
         A block that work() has begun is finished first, so no vehicle's share of it
         misses the fault."""
         while self._making is not None:
-            self.work()
+            self._step()
         return self._generated_ns
 
     def inject(self, fault) -> None:
