@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from navtwin.emulator.bench_scale import arrivals, meets_goal, period_errors, port_figures, scale
+from navtwin.emulator.bench_scale import (arrivals, late_share, meets_goal, period_errors,
+                                          port_figures, scale)
 
 
 def test_period_error_is_arrival_interval_against_device_interval():
@@ -28,11 +29,19 @@ def test_port_figures_skip_what_was_written_before_the_reader_and_count_what_it_
 
 
 def test_the_goal_needs_every_figure():
-    row = {"p99_ratio_to_bare": 1.1, "frames_lost": 0, "cpu_per_vehicle": 0.015}
+    row = {"p99_ratio_to_bare": 1.1, "frames_lost": 0, "cpu_per_vehicle": 0.015,
+           "late_1ms_share": 0.005}
     assert meets_goal(row)
     assert not meets_goal({**row, "frames_lost": 1})
     assert not meets_goal({**row, "p99_ratio_to_bare": 1.3})
     assert not meets_goal({**row, "cpu_per_vehicle": 0.03})
+    assert not meets_goal({**row, "late_1ms_share": 0.02})
+
+
+def test_the_late_share_counts_the_bins_from_1_ms():
+    late = {"<10us": 90, "<30us": 0, "<100us": 0, "<300us": 0, "<1ms": 5, "<3ms": 3,
+            "<10ms": 1, ">=10ms": 1}
+    assert late_share(late) == 0.05 and late_share({}) == 0.0
 
 
 @pytest.mark.pty
