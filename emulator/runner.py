@@ -23,8 +23,8 @@ runs it as fast as the world can be generated. World events are generated in blo
 paced, a second ahead before the clock starts and then, up to two seconds ahead, only in idle
 gaps longer than twice the slowest recent block, so generation does not delay a write (a thread
 would: it competes for the GIL exactly when a deadline is near); the world's own 1 s blocks
-are made a vehicle's share at a time (World.work), in such gaps or, once needed within a
-second, between writes, so a write waits for one vehicle's share at most. The loop wakes for
+are made a step at a time (World.work: a vehicle's IMU, the rest of its share, ...), in such
+gaps or, once needed within a second, between writes, so a write waits for one step at most. The loop wakes for
 the earliest line deadline (emulator.schedule: a heap, a line re-keyed when it gets an item
 or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
 due and what is readable, not every port's line and file descriptor. After writing to the
@@ -154,7 +154,7 @@ class Feed:
         self.block_ns = block_ns
         self.known_ns = 0  # every event with t < known_ns has been taken
         self.cost_ns = 0  # a decaying maximum of the wall time one block takes
-        self.work_cost_ns = 0  # ... and one share of the world's next block (World.work)
+        self.work_cost_ns = 0  # ... and one step of the world's next block (World.work)
 
     @property
     def exhausted(self) -> bool:
@@ -172,7 +172,7 @@ class Feed:
         return events
 
     def work(self) -> bool:
-        """Make one vehicle's share of the world's next block ahead of :meth:`step`;
+        """Make one step of the world's next block ahead of :meth:`step` (World.work);
         False when there is nothing to make."""
         t = time.monotonic_ns()
         if not self.world.work():
@@ -504,7 +504,7 @@ class Emulation:
                 for ev in feed.step():  # generate ahead while there is time to spare
                     self._enqueue(ev)
                 continue
-            # the world's next block, a vehicle's share at a time: in an idle gap, or between
+            # the world's next block, a step at a time: in an idle gap, or between
             # writes once it is needed within a second (made at once it would hold up every
             # write due meanwhile: a few hundred ms for fifty vehicles)
             if ((feed.known_ns < now + LOOKAHEAD_NS // 2 or deadline - time.monotonic_ns()
