@@ -12,7 +12,8 @@ reads one JSON line on stdin: the scenario as run (``Scenario.to_toml``), seed, 
 duration, timing mode, its vehicles and a private link directory; it prints its ``ready``
 line, waits for ``{"t0_monotonic_ns": T}`` (every worker the same T, so all vehicles run on
 one clock) and prints its ``done`` line; an error is one JSON line ``{"error": ...}``.
-SIGINT and SIGTERM stop it as they stop ``navtwin emulate``. The parent holds the user's
+SIGINT and SIGTERM stop it as they stop ``navtwin emulate``, and so does its parent's death
+(``PR_SET_PDEATHSIG``: a parent killed outright leaves no worker writing). The parent holds the user's
 link directory (its lock, one stable link per port, to the workers' PTYs), prints one ready
 line listing every port and one done line with the workers' per-port entries merged; a
 worker that ends without its done line stops the others and ends the run with one line.
@@ -27,6 +28,7 @@ times the speed, against BUDGET of a core per worker, at most ``os.cpu_count()``
 """
 from __future__ import annotations
 
+import ctypes
 import json
 import math
 import os
@@ -45,6 +47,7 @@ from .runner import SEC, RunError, speed_name
 
 LOOP_FACTOR = 2.5  # a paced vehicle's CPU over the CPU of making its events (N=50: 8.8 / 3.8)
 BUDGET = 0.5  # of a core per worker: the rest is headroom for keeping the schedule
+PR_SET_PDEATHSIG = 1  # <linux/prctl.h>: a signal for this process when its parent dies
 START_NS = SEC // 5  # from the ready line to scenario time 0 (each worker made its first
 #                      second before its ready line)
 
@@ -118,7 +121,7 @@ class Workers:
                 proc.stdin.write(json.dumps({
                     "scenario": scenario.to_toml(), "seed": self.seed, "speed": speed,
                     "duration_s": duration_s, "timing": timing, "vehicles": hosted,
-                    "link_dir": os.path.join(self._private, str(i + 1)),
+                    "link_dir": os.path.join(self._private, str(i + 1)), "parent": os.getpid(),
                     "progress": f"worker {i + 1}: " if progress else None}) + "\n")
                 proc.stdin.flush()
                 threading.Thread(target=self._read, args=(i, proc), daemon=True).start()
@@ -264,6 +267,10 @@ def main() -> int:
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, lambda *_: stop.set())
     spec = json.loads(sys.stdin.readline())
+    # a parent killed outright (SIGKILL) cannot stop its workers: the kernel does, as SIGTERM
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    if os.getppid() != spec["parent"]:
+        return 0  # it died before that was asked
     prefix = spec["progress"]
     try:
         sc = parse_scenario(tomllib.loads(spec["scenario"]), "worker")

@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from collections import defaultdict
 
 import pytest
@@ -92,6 +93,30 @@ def test_a_worker_that_dies_ends_the_run_with_one_line(tmp_path):
     (line,) = err.splitlines()
     assert "worker 2 (vehicles 2) ended with status -9" in line
     assert not (tmp_path / "links").exists()
+
+
+@pytest.mark.pty
+def test_workers_end_when_their_parent_is_killed(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "navtwin", "emulate", "--scenario", "office",
+                             "--quiet", "--link-dir", str(tmp_path / "links"), "--vehicles", "2",
+                             "--network", "per-vehicle", "--workers", "2", "--duration", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    ready = json.loads(proc.stdout.readline())
+    proc.kill()
+    proc.wait()
+    for pid in ready["worker_pids"]:  # orphans now: ours to reap is not possible; poll /proc
+        deadline = time.monotonic() + 30
+        while os.path.exists(f"/proc/{pid}") and _state(pid) != "Z" and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not os.path.exists(f"/proc/{pid}") or _state(pid) == "Z"
+
+
+def _state(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "gone"
 
 
 def test_a_subset_needs_its_own_networks():
