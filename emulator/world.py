@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass
+from operator import itemgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -197,24 +198,22 @@ class World:
         names = [ports.instance(p, n) for p in EVENT_ORDER for n in every]
         self._rank = {name: i for i, name in enumerate(names)}
         self._generated_ns = 0  # blocks before this are generated
-        self._pending: list[Event] = []  # generated, not yet returned, in order
-        self._times: list[int] = []  # their t_ns
+        self._pending: list[tuple[int, Event]] = []  # generated, not returned, keyed, in order
         self._returned_ns = 0
         self._air: list[AirFrame] = []  # generated, not yet returned, in order
         self._making = None  # the block being made (a generator of _parts), or None
 
     # -- generation -------------------------------------------------------------------------
     def _parts(self):
-        """Make the next block a step at a time: each vehicle in two, the networks', and
-        last the block sorted into the events that wait (the sort of fifty vehicles' second
-        is itself a step of several ms)."""
+        """Make the next block a step at a time: each vehicle in two, each nanoLOC network,
+        and last the block sorted into the events that wait (the sort of fifty vehicles'
+        second is itself a step of several ms)."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
-        sins, rf, air = [], [], []
+        keyed, air = [], []
         for vehicle in self.vehicles:
             s, r, a = yield from vehicle.block(lo, hi, hi < self.duration_ns)
-            sins += s
-            rf += r
+            keyed += self._keyed(s + r)
             air += a
             yield
         if air:
@@ -222,17 +221,21 @@ class World:
             self._air.sort(key=lambda f: f.t_ns)  # stable: an ACK stays after its frame
         for port, network in self.networks.items():
             t_nl, reports, marks = network.reports(lo, hi)
-            sins += [Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))]
-        yield
+            keyed += self._keyed([Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))])
+            yield
         # a block's events are never earlier than the block (module doc), so those that wait
-        # can take it before they are asked for: advance() returns none before their time
-        fresh = [e for e in sins + rf if e.t_ns < self.duration_ns]
-        if fresh:  # a stable sort keeps generation order among equal keys
-            self._pending += fresh
-            rank = self._rank
-            self._pending.sort(key=lambda e: (e.t_ns, rank[e.port]))
-            self._times = [e.t_ns for e in self._pending]
+        # can take it before they are asked for: advance() returns none before their time.
+        # A stable sort keeps generation order among equal keys (one port's events, made in
+        # its order); the keys are made with each part, so this step only compares ints
+        self._pending += keyed
+        self._pending.sort(key=itemgetter(0))
         self._making, self._generated_ns = None, hi
+
+    def _keyed(self, events: list[Event]) -> list[tuple[int, Event]]:
+        """(order key, event) of *events* within the run: the key is (t_ns, port rank) as
+        one integer, the order :meth:`advance` returns them in."""
+        rank, ranks, end = self._rank, len(self._rank), self.duration_ns
+        return [(e.t_ns * ranks + rank[e.port], e) for e in events if e.t_ns < end]
 
     def _step(self) -> None:
         if self._making is None:
@@ -256,9 +259,9 @@ class World:
             return []
         while self._generated_ns < until_ns:
             self._step()
-        cut = bisect.bisect_left(self._times, until_ns)
-        out = self._pending[:cut]
-        del self._times[:cut], self._pending[:cut]
+        cut = bisect.bisect_left(self._pending, until_ns * len(self._rank), key=itemgetter(0))
+        out = [e for _, e in self._pending[:cut]]
+        del self._pending[:cut]
         self._returned_ns = until_ns
         return out
 

@@ -68,6 +68,6 @@ def test_making_a_block_a_vehicle_at_a_time_gives_the_same_events():
         while sliced.work():
             steps += 1
         got += sliced.advance(until)
-    # per block: each vehicle in two steps, the networks', the sort
-    assert got == expect and steps == 2 * (3 * 2 + 1 + 1)
+    # per block: each vehicle in two steps, each network, the sort
+    assert got == expect and steps == 2 * (3 * 2 + 3 + 1)
     assert whole.air(2_500_000_000) == sliced.air(2_500_000_000)
