@@ -71,3 +71,18 @@ def test_making_a_block_a_vehicle_at_a_time_gives_the_same_events():
     # per block: each vehicle in two steps, each network, the sort
     assert got == expect and steps == 2 * (3 * 2 + 3 + 1)
     assert whole.air(2_500_000_000) == sliced.air(2_500_000_000)
+
+
+def test_a_wrapper_due_later_does_not_hide_an_item_due_now():
+    """The loop polls a line only at its next_ns: an item arriving on an idle line must set
+    it, even with a wrapper that will release bytes much later (a garbage fault's burst)."""
+    from navtwin.emulator.uart import LineWrapper
+
+    class Later(LineWrapper):
+        def due_ns(self):
+            return 5_000_000_000
+
+    line = Line("xbee", Wire(115200), [Later()])
+    assert line.next_ns() == 5_000_000_000
+    line.put(1_000, b"reply")
+    assert line.next_ns() == 1_000
