@@ -26,6 +26,7 @@ from .main import UsageError, flag
 SETS = Registry("navtwin.benchmarks", "benchmark set", {
     "decode": "navtwin.protocols.bench:decode_benchmarks",
     "emulator": "navtwin.emulator.bench:benchmarks",
+    "scale": "navtwin.emulator.bench_scale:benchmarks",
     "host": "navtwin.host.bench:benchmarks",
     "lab": "navtwin.lab.bench:benchmarks",
 })

@@ -13,6 +13,7 @@ from navtwin.common.limits import MAX_DURATION_S, NETWORKS, SEEDS, SPEEDS, VEHIC
 from navtwin.emulator.timing import NAMES as TIMINGS
 
 MAX_VEHICLES = VEHICLES[1]
+MAX_WORKERS = 64  # processes; more than cores only slows the schedule down
 from .main import UsageError, flagged, number, stop_on_signals
 
 def scenario_help() -> str:
@@ -151,6 +152,13 @@ def register(sub) -> None:
                         "the lab's port order, on loopback unless HOST is given; the ready "
                         "line lists them under \"rfc2217\". The baud and stop bits the client "
                         "sets are the device's view of it, as on the PTY")
+    p.add_argument("--workers", default="1", type=_workers, metavar="K|auto",
+                   help="run the vehicles in K worker processes on one clock (vehicle n in "
+                        "worker (n - 1) mod K), when one process cannot keep their schedule; "
+                        "auto: from the cost of one vehicle measured at start-up, at most the "
+                        "CPU count. Needs --network per-vehicle; the ready line says how many "
+                        "(\"workers\"); no --record, --expect or control socket with K > 1 "
+                        "(docs/emulator.md, Workers)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_emulate)
 
@@ -162,6 +170,18 @@ def _speed(text: str) -> float | None:
         return parse_speed(text)
     except RunError as e:
         raise argparse.ArgumentTypeError(str(e).removeprefix("speed: ")) from None
+
+
+def _workers(text: str) -> str | int:
+    if text == "auto":
+        return text
+    try:
+        k = int(text)
+    except ValueError:
+        k = 0
+    if not 1 <= k <= MAX_WORKERS:
+        raise argparse.ArgumentTypeError(f"{text!r}: give auto or a count 1..{MAX_WORKERS}")
+    return k
 
 
 def _check_arg(text: str):
@@ -236,6 +256,9 @@ def run_emulate(args) -> int:
         scenario = with_faults(fleet_scenario(load_scenario(args.scenario), args), args.fault)
     except (RunError, ScenarioError) as e:
         raise UsageError(str(e)) from None
+    workers, chosen = _worker_count(args, scenario)
+    if workers > 1:
+        return _run_workers(args, scenario, workers, chosen)
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     stop = threading.Event()
     try:
@@ -252,6 +275,8 @@ def run_emulate(args) -> int:
     with emu, stop_on_signals(stop, (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)), \
             _rfc2217(args.rfc2217, emu.links) as servers:
         info = emu.info()
+        if chosen is not None:
+            info.update(workers=1, workers_chosen=chosen)
         if servers is not None:
             info["rfc2217"] = servers.urls
         _emit(info)
@@ -274,6 +299,43 @@ def run_emulate(args) -> int:
     if checks is not None and checks.failure is not None:
         print(f"navtwin emulate: {checks.failure}", file=sys.stderr, flush=True)
         return EXPECT_FAILED
+    return 0
+
+
+def _worker_count(args, scenario) -> tuple[int, str | None]:
+    """--workers as a count, and how auto chose it (None when given)."""
+    from navtwin.emulator import workers
+
+    if args.workers != "auto":
+        return args.workers, None
+    k = workers.auto(scenario, scenario.seed if args.seed is None else args.seed, args.speed)
+    return k, f"auto: {len(scenario.fleet)} vehicles at {workers.BUDGET:g} core per worker"
+
+
+def _run_workers(args, scenario, k: int, chosen: str | None) -> int:
+    """The run on *k* worker processes (emulator.workers): one ready and one done line."""
+    from navtwin.emulator.pty import LinkDirError
+    from navtwin.emulator.runner import RunError
+    from navtwin.emulator.workers import Workers
+
+    for given, flag in ((args.record, "--record"), (args.expect or args.fail_on, "--expect/--fail-on")):
+        if given:
+            raise UsageError(f"{flag} needs the one loop of a single process; pass --workers 1 "
+                             f"with it")
+    stop = threading.Event()
+    try:
+        with stop_on_signals(stop, (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)), \
+                Workers(scenario, args.seed, k, speed=args.speed, duration_s=args.duration,
+                        link_dir=args.link_dir, timing=args.timing, progress=not args.quiet,
+                        chosen=chosen) as run, _rfc2217(args.rfc2217, run.links) as servers:
+            info = run.info()
+            if servers is not None:
+                info["rfc2217"] = servers.urls
+            _emit(info)
+            summary = run.run(stop)
+    except (LinkDirError, RunError) as e:
+        raise UsageError(flagged(str(e))) from None
+    _emit(summary)
     return 0
 
 

@@ -22,7 +22,12 @@ runs it for the run only. A FACTOR runs the same schedule at FACTOR x real time;
 runs it as fast as the world can be generated. World events are generated in blocks: when
 paced, a second ahead before the clock starts and then, up to two seconds ahead, only in idle
 gaps longer than twice the slowest recent block, so generation does not delay a write (a thread
-would: it competes for the GIL exactly when a deadline is near). After writing to the
+would: it competes for the GIL exactly when a deadline is near); the world's own 1 s blocks
+are made a step at a time (World.work: a vehicle's IMU, the rest of its share, ...), in such
+gaps or, once needed within a second, between writes, so a write waits for one step at most. The loop wakes for
+the earliest line deadline (emulator.schedule: a heap, a line re-keyed when it gets an item
+or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
+due and what is readable, not every port's line and file descriptor. After writing to the
 PTYs the loop yields the CPU once, so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
 device times, are identical in every mode and timing mode; only host commands (read from
@@ -92,6 +97,7 @@ from .ledger import Ledger
 from .pty import LinkDir, PtyPort
 from .radio import AirFrame
 from .rng import stream, vehicles_name
+from .schedule import Deadlines
 from .tap import SOCKET as TAP_SOCKET, TapServer
 from .timing import Lateness, Mode, TimingError, choose as choose_timing
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows, file_name as truth_file
@@ -148,6 +154,7 @@ class Feed:
         self.block_ns = block_ns
         self.known_ns = 0  # every event with t < known_ns has been taken
         self.cost_ns = 0  # a decaying maximum of the wall time one block takes
+        self.work_cost_ns = 0  # ... and one step of the world's next block (World.work)
 
     @property
     def exhausted(self) -> bool:
@@ -163,6 +170,15 @@ class Feed:
         self.known_ns = until
         self.cost_ns = max(time.monotonic_ns() - t, self.cost_ns * 99 // 100)
         return events
+
+    def work(self) -> bool:
+        """Make one step of the world's next block ahead of :meth:`step` (World.work);
+        False when there is nothing to make."""
+        t = time.monotonic_ns()
+        if not self.world.work():
+            return False
+        self.work_cost_ns = max(time.monotonic_ns() - t, self.work_cost_ns * 99 // 100)
+        return True
 
     def take(self, need_ns: int) -> list:
         """New events; afterwards ``known_ns > need_ns`` or the feed is exhausted."""
@@ -187,7 +203,7 @@ class Emulation:
                  response_delay_ns: int | None = None, timing: str = "auto",
                  progress: Callable[[str], None] | None = None,
                  sink: Callable[[Chunk], None] | None = None,
-                 air_sink: Callable[[AirFrame], None] | None = None) -> None:
+                 air_sink: Callable[[AirFrame], None] | None = None, vehicles=None) -> None:
         from .world import World
 
         self.scenario = scenario
@@ -201,7 +217,9 @@ class Emulation:
             except TimingError as e:
                 raise RunError(str(e)) from None
         self.t0_monotonic_ns: int | None = None  # set when the clock starts
-        self.world = World(scenario, self.seed)
+        #: the vehicles this run hosts (default all): a worker process hosts some of them
+        #: (emulator.workers); each keeps its number, port names and bytes
+        self.world = World(scenario, self.seed, vehicles)
         full = self.world.duration_ns
         self.end_ns = full if duration_s is None else int(round(duration_s * SEC))
         if not 0 < self.end_ns <= full:
@@ -215,7 +233,7 @@ class Emulation:
         # every port instance of the scenario's vehicles (protocols.ports), vehicle by vehicle;
         # a device is given its instance as a declaration under the instance's name
         self.devices = {name: DEVICES.get(p.device)(self, dataclasses.replace(p, name=name))
-                        for n in range(1, len(scenario.fleet) + 1) for p in lab_ports.listed()
+                        for n in (v.number for v in self.world.vehicles) for p in lab_ports.listed()
                         if n <= scenario.units(p.unit) and (name := lab_ports.instance(p.name, n))}
         self.lateness = Lateness(self.devices)  # paced runs: per port, written how late
         bauds = {name: dev.settings["baud"] for name, dev in self.devices.items()}
@@ -227,18 +245,28 @@ class Emulation:
         # what the host writes to each port whose device reads it (the coordinators')
         self.inbounds = {name: Inbound(name, dev.line_device, ledger=self.ledger)
                          for name, dev in self.devices.items() if dev.port.host_writes}
+        # the loop's timers: each line's and inbound's next step (emulator.schedule)
+        self.line_deadlines = Deadlines(self.lines)
+        self.inbound_deadlines = Deadlines(self.inbounds)
+        self._line_order = {name: i for i, name in enumerate(self.lines)}  # delivery order
+        self._air_from: set[str] = set()  # coordinators the host made send since the last look
         line_faults = [(i, f) for i, f in enumerate(scenario.faults) if f.ACTS_ON == "line"]
         for n, (index, fault) in enumerate(line_faults):
             wrapper = fault.wrapper(stream(self.seed, f"faults.line.{n}"))
             wrapper.kind, wrapper.fault_index = fault.KIND, index
             self.wrap(fault.port, wrapper, fault.direction)
-        for n, (port, coordinator) in enumerate(self.coordinators.items(), 1):
-            coordinator.faults = tuple(acting_on(scenario.faults, "coordinator", vehicle=n))
+        for port, coordinator in self.coordinators.items():
+            coordinator.faults = tuple(acting_on(scenario.faults, "coordinator",
+                                                 vehicle=lab_ports.parse(port)[1]))
             for out in coordinator.power_up() + [o for f in coordinator.faults
                                                  for o in self._power_ups(f)]:
                 self.lines[port].put(out.t_ns, out.item)
         self.link_dir: LinkDir | None = None
         self.ports: dict[str, PtyPort] = {}
+        # the attached ports, waited on in one epoll set: a wake-up costs what is readable,
+        # not a select over every port (kept in step every CHECK_NS, and at a hang-up)
+        self._attached = select.epoll() if ports else None
+        self._watched: dict[int, PtyPort] = {}  # fd -> port, as registered
         self.views: dict[str, ClientView] = {}  # per port: what the client's UART reads
         self.links: dict[str, str] = {}
         self.control: ControlServer | None = None
@@ -261,6 +289,7 @@ class Emulation:
         except BaseException:
             self.close()
             raise
+        self._feed: Feed | None = None  # the world's events, from prepare()
         self.reached_ns = 0
         self.interrupted = False
         self.record_error: RecordingWriteError | None = None  # the write that ended the run
@@ -276,8 +305,10 @@ class Emulation:
                 raise RunError(f"{port} ignores what the host writes; wrap "
                                f"{' or '.join(self.inbounds)} to_device, or {port} to_host")
             self.inbounds[port].wrap(wrapper)
+            self.inbound_deadlines.touch(port)
         else:
             self.lines[port].wrap(wrapper)
+            self.line_deadlines.touch(port)
         wrapper.direction = direction
 
     def _record_fault(self, entry: dict) -> None:
@@ -309,7 +340,8 @@ class Emulation:
         routers = [Remote(identity_registers(r)) for r in sc.routers_for(self.seed)]
         alone = sc.units("coordinator") > 1
         out = {}
-        for n, (port, downlink) in enumerate(self.world.downlinks.items(), 1):
+        for port, downlink in self.world.downlinks.items():
+            n = lab_ports.parse(port)[1]
             radios = sc.radios_for(self.seed, n)  # the routers' MY, the network: from the seed
             coord = identity_registers(radios["coordinator"], CE=1)  # CE: see coordinator.py
             out[port] = Coordinator(coord, routers[n - 1:n] if alone else routers, downlink,
@@ -384,18 +416,15 @@ class Emulation:
         return {"timing": self.timing.name} if self.timing is not None else {}
 
     # -- the loop ---------------------------------------------------------------------------
-    def run(self, stop: threading.Event | None = None) -> dict:
-        """Play the timeline until the end or until *stop* is set; returns :meth:`summary`."""
+    def run(self, stop: threading.Event | None = None,
+            start_monotonic_ns: int | None = None) -> dict:
+        """Play the timeline until the end or until *stop* is set; returns :meth:`summary`.
+        *start_monotonic_ns*: scenario time 0 on CLOCK_MONOTONIC (default: once
+        :meth:`prepare` is done), so worker processes share one schedule."""
         stop = stop or threading.Event()
         paced = self.speed is not None
-        feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS,
-                    tuple(self.devices.values()))
-        for ev in feed.take(PREFILL_NS if paced else 0):  # before the clock starts
-            self._enqueue(ev)
-        if paced:  # what exists now lives for the run: keep full collections from walking it
-            gc.collect()
-            gc.freeze()
-        t0 = self.t0_monotonic_ns = time.monotonic_ns()
+        feed = self.prepare()
+        t0 = self.t0_monotonic_ns = start_monotonic_ns or time.monotonic_ns()
         next_check = t0 if self.ports else END
         next_progress = t0 + PROGRESS_NS if self.progress else END
         next_flush = t0 + FLUSH_NS if self.recorder is not None else END
@@ -406,6 +435,20 @@ class Emulation:
             self.record_error = e
             self.interrupted = True
         return self.summary()
+
+    def prepare(self) -> Feed:
+        """The world's events before the clock starts (paced: its first second), once; a
+        worker does it before its ready line, so the common start need not wait for it."""
+        if self._feed is None:
+            paced = self.speed is not None
+            self._feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS,
+                              tuple(self.devices.values()))
+            for ev in self._feed.take(PREFILL_NS if paced else 0):
+                self._enqueue(ev)
+            if paced:  # what exists now lives for the run: keep full collections from walking it
+                gc.collect()
+                gc.freeze()
+        return self._feed
 
     def _loop(self, stop, feed: Feed, paced: bool, t0: int, next_check: int,
               next_progress: int, next_flush: int) -> None:
@@ -425,8 +468,8 @@ class Emulation:
             if not paced:  # everything known so far, in one go
                 now = END if feed.exhausted else feed.known_ns
             delivered = False
-            for line in self.lines.values():
-                for chunk in line.poll(now, feed.known_ns, self.end_ns):
+            for name in sorted(self.line_deadlines.due(now), key=self._line_order.__getitem__):
+                for chunk in self.lines[name].poll(now, feed.known_ns, self.end_ns):
                     self._deliver(chunk, wall - t0 if paced else None)
                     delivered = True
             if delivered and paced and self.ports:
@@ -438,8 +481,8 @@ class Emulation:
             if wall >= next_progress:
                 self._report(wall - t0)
                 next_progress = wall + PROGRESS_NS
-            target = min((t for line in (*self.lines.values(), *self.inbounds.values())
-                          if (t := line.next_ns()) is not None), default=None)
+            target = min((t for t in (self.line_deadlines.next(), self.inbound_deadlines.next())
+                          if t is not None), default=None)
             if not feed.exhausted:
                 target = feed.known_ns if target is None else min(target, feed.known_ns)
             if target is None or (target >= self.end_ns
@@ -461,6 +504,12 @@ class Emulation:
                 for ev in feed.step():  # generate ahead while there is time to spare
                     self._enqueue(ev)
                 continue
+            # the world's next block, a step at a time: in an idle gap, or between
+            # writes once it is needed within a second (made at once it would hold up every
+            # write due meanwhile: a few hundred ms for fifty vehicles)
+            if ((feed.known_ns < now + LOOKAHEAD_NS // 2 or deadline - time.monotonic_ns()
+                 > 2 * feed.work_cost_ns + 2 * self.timing.spin_ns) and feed.work()):
+                continue
             self._wait(deadline, min(next_check, next_progress))
         else:
             self.interrupted = True
@@ -476,7 +525,7 @@ class Emulation:
     def _wait(self, deadline: int, check_at: int) -> None:
         """Sleep until *deadline* (monotonic ns) or a client writes; spin the last
         ``spin_ns`` of the timing mode, never longer (a SCHED_FIFO thread must sleep)."""
-        fds = [p.fd for p in self.ports.values() if p.attached]
+        fds = [self._attached.fileno()] if self.ports else []
         if self.control is not None:
             fds += self.control.fds() + self.tap.fds()
         now = time.monotonic_ns()
@@ -496,14 +545,14 @@ class Emulation:
         """Read what clients wrote (stamped *now*) and notice clients coming and going, and
         (every CHECK_NS) their termios settings."""
         ports = self.ports
-        attached = [p for p in ports.values() if p.attached]
-        control = self.control.fds() + self.tap.fds() if self.control is not None else []
-        readable = select.select(attached + control, [], [], 0)[0]
-        for port in readable:
-            if isinstance(port, PtyPort):
+        for fd, _ in self._attached.poll(0):
+            port = self._watched.get(fd)
+            if port is not None:
                 self._host_bytes(port, now)
-        if control:
-            sockets = [s for s in readable if not isinstance(s, PtyPort)]
+                if not port.attached:  # it read the hang-up
+                    self._unwatch(port)
+        if self.control is not None:
+            sockets = select.select(self.control.fds() + self.tap.fds(), [], [], 0)[0]
             self.control.serve(sockets)
             self.tap.serve(sockets)
         if check_detached:
@@ -516,6 +565,19 @@ class Emulation:
             for name, port in ports.items():
                 self.views[name].settle(*(port.client_framing() if port.attached
                                           else (None, 0)))
+                if port.attached and port.fd not in self._watched:
+                    self._watched[port.fd] = port
+                    self._attached.register(port.fd, select.EPOLLIN)
+                elif not port.attached and self._watched.get(port.fd) is port:
+                    self._unwatch(port)
+
+    def _unwatch(self, port: PtyPort) -> None:
+        """Stop waiting on *port* (detached, unplugged or replugged): a detached master is
+        readable forever."""
+        for fd in [fd for fd, p in self._watched.items() if p is port]:
+            del self._watched[fd]
+            with contextlib.suppress(OSError):  # closed: the kernel dropped it already
+                self._attached.unregister(fd)
 
     def _host_bytes(self, port: PtyPort, now: int) -> None:
         data = port.read()
@@ -523,22 +585,27 @@ class Emulation:
             self.tap.chunk(port.name, "to_device", now, data)
         if data and port.name in self.inbounds:
             self.inbounds[port.name].put(now, data)
+            self.inbound_deadlines.touch(port.name)
             self._to_device(now)
         # the SINS board and the nanoLOC gateway ignore what the host sends them
 
     def _to_device(self, now: int) -> None:
-        """Give each device what the host wrote, as its to_device faults let it through."""
-        for name, inbound in self.inbounds.items():
+        """Give each device what the host wrote, as its to_device faults let it through
+        (the inbounds due by *now*)."""
+        for name in self.inbound_deadlines.due(now):
             view, device, line = self.views.get(name), self.devices[name], self.lines[name]
-            for t, data in inbound.poll(now):
+            for t, data in self.inbounds[name].poll(now):
                 if view is not None:  # read by the device's UART at its rate
                     data = view.heard(t, data, Framing(device.line_device.baud))
                 for t_ns, item in device.host(t, data):
                     line.put(t_ns, item)
+                self.line_deadlines.touch(name)
+                self._air_from.add(name)
 
     def _enqueue(self, ev) -> None:
         t_ns, item = self.devices[ev.port].to_line(ev)
         self.lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
+        self.line_deadlines.touch(ev.port)
 
     def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
         if wall_ns is not None:
@@ -561,10 +628,13 @@ class Emulation:
         that is earlier than one handed out."""
         until_ns = min(until_ns, self.end_ns)
         mine = []
-        for coordinator in self.coordinators.values():
-            if coordinator.air:
-                mine += [f for f in coordinator.air if f.t_ns < until_ns]
-                coordinator.air = [f for f in coordinator.air if f.t_ns >= until_ns]
+        for port in [p for p in self.coordinators if p in self._air_from]:
+            coordinator = self.coordinators[port]  # only the host's requests put frames there
+            if not coordinator.air:
+                self._air_from.discard(port)
+                continue
+            mine += [f for f in coordinator.air if f.t_ns < until_ns]
+            coordinator.air = [f for f in coordinator.air if f.t_ns >= until_ns]
         for frame in sorted(self.world.air(until_ns) + mine, key=lambda f: f.t_ns):
             if self.recorder is not None:
                 self.recorder.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC).write(
@@ -631,10 +701,11 @@ class Emulation:
             wrapper.kind, wrapper.fault_index = fault.KIND, None  # live: in no [[faults]]
             self.wrap(fault.port, wrapper, fault.direction)
         elif fault.ACTS_ON == "coordinator":
-            port, coordinator = list(self.coordinators.items())[fault.vehicle - 1]
-            coordinator.faults += (fault,)
+            port = lab_ports.instance(lab_ports.XBEE.name, fault.vehicle)
+            self.coordinators[port].faults += (fault,)
             for out in self._power_ups(fault):
                 self.lines[port].put(out.t_ns, out.item)
+            self.line_deadlines.touch(port)
         else:
             self.world.inject(fault)
         self.live[self._live_ids] = (fault, wrapper)
@@ -656,7 +727,7 @@ class Emulation:
     def _power_ups(self, fault) -> list:
         """The coordinator's power-up at the end of each episode of coordinator fault *fault*
         (its first frame marked for the ledger)."""
-        coordinator = list(self.coordinators.values())[fault.vehicle - 1]
+        coordinator = self.coordinators[lab_ports.instance(lab_ports.XBEE.name, fault.vehicle)]
         out, t = [], fault.next_active(0)
         while t is not None and t < self.end_ns:
             up = fault.episode_end(t)
@@ -677,8 +748,9 @@ class Emulation:
     def _end_live(self, n: int) -> None:
         fault, wrapper = self.live.pop(n)
         if wrapper is not None:
-            (self.inbounds[fault.port] if wrapper.direction == "to_device" else
-             self.lines[fault.port]).wrappers.remove(wrapper)
+            to_device = wrapper.direction == "to_device"
+            (self.inbounds if to_device else self.lines)[fault.port].wrappers.remove(wrapper)
+            (self.inbound_deadlines if to_device else self.line_deadlines).touch(fault.port)
         elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
             self.world.remove(fault)
 
@@ -690,6 +762,7 @@ class Emulation:
 
     def _op_unplug(self, args) -> dict:
         port = self._port(args)
+        self._unwatch(port)
         port.unplug()
         self.link_dir.unlink(port.name)
         self.links.pop(port.name, None)
@@ -698,6 +771,7 @@ class Emulation:
     def _op_replug(self, args) -> dict:
         port = self._port(args)
         if not port.plugged:
+            self._unwatch(port)
             port.replug()
             self.links[port.name] = str(self.link_dir.link(port.name, port.pts))
         return {"port": port.name, "plugged": True, "pts": port.pts}
@@ -748,6 +822,8 @@ class Emulation:
             self.tap = None
         for port in self.ports.values():
             port.close()
+        if getattr(self, "_attached", None) is not None:
+            self._attached.close()
         if self.link_dir is not None:
             self.link_dir.close()
             self.link_dir = None

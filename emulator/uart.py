@@ -242,16 +242,17 @@ class Line(_Wrapped):
         return (start, what) if start < end_ns else (END, 0)
 
     def next_ns(self) -> int | None:
-        """When this line next has something to do: end of the chunk in progress or start
-        of the next one (an item's arrival in the buffer waits for that)."""
+        """When this line next has something to do: end of the chunk in progress, or on an
+        idle line the start of the next chunk: a piece, the buffer's next item, a wrapper's
+        release, or an item arriving, whichever comes first (a wrapper due later must not
+        hide an item due now: the loop polls a line only at this time, emulator.schedule).
+        An item that arrives while a chunk is on the wire waits for its end."""
         if self.current is not None:
             return self.current.end_ns
         start, _ = self._next_start(END)
-        if start < END:
-            return start
         if self._pending:
-            return max(self._pending[0][0], self.free_ns)
-        return None
+            start = min(start, max(self._pending[0][0], self.free_ns))
+        return start if start < END else None
 
     def poll(self, now_ns: int, known_ns: int, end_ns: int) -> list[Chunk]:
         """Chunks that have ended by *now_ns*; starts those due. An item enters the buffer

@@ -15,7 +15,11 @@ every event with t_ns < until_ns not returned before, each on its port instance 
 
 Routers that joined one coordinator share its channel (emulator.channel): one packet on the
 air at a time, a packet waiting while another is sent, dropped when its router's queue is
-full. Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
+full. ``work()`` makes a step of the next block ahead of ``advance`` (a paced run's loop does it
+between writes: a block of fifty vehicles takes a few hundred ms at once, a step a few ms);
+the events are the same however the block was made.
+
+Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
 (emulator.radio.AirFrame: every attempt, received or lost, and the coordinator's MAC ACK of
 each received one), in time order, once ``advance`` has reached *until_ns*.
 
@@ -29,6 +33,7 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass
+from operator import itemgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -114,13 +119,15 @@ class Vehicle:
     def _stream(self, seed: int, name: str):
         return stream(seed, vehicles_name(self.number, name))
 
-    def block(self, lo: int, hi: int, more: bool) -> tuple[list[Event], list[Offered]]:
+    def block(self, lo: int, hi: int, more: bool):
         """The board's SINS frames written in [lo, hi) and the RF packets they become (*more*:
         the run goes on after *hi*, so an open packet waits for the next bytes), each as it
         is offered to the channel (emulator.channel): its event at the coordinator (None when
         the link lost it) and its frames on the air (a packet the router sends while out of
-        the network is not offered)."""
+        the network is not offered). Made in two steps: a generator that yields once, after
+        the IMU's samples (half the cost), and returns ``(sins events, offered packets)``."""
         self.imu.generate(lo, hi)
+        yield
         t_sins, frames, marks = self.board.frames(lo, hi)
         events = [Event(t, self.sins_port, f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
@@ -167,80 +174,111 @@ class Vehicle:
 class World:
     BLOCK_NS = round(BLOCK_S * 1e9)  # the IMU's sample period is checked against it
 
-    def __init__(self, sc: Scenario, seed: int | None = None) -> None:
+    def __init__(self, sc: Scenario, seed: int | None = None, vehicles=None) -> None:
+        """*vehicles*: the numbers of the vehicles to build (default all); a subset needs a
+        network per vehicle (emulator.workers refuses the rest), and each vehicle's events equal the
+        whole world's, as every vehicle draws from streams of its own."""
         self.scenario = sc
         self.seed = sc.seed if seed is None else seed
         self.duration_ns = sc.duration_ns
         self.radios = sc.radios_for(self.seed)
+        every = range(1, len(sc.fleet) + 1)
+        hosted = set(every if vehicles is None else vehicles)
         self.vehicles = [Vehicle(sc, spec, router, n, self.seed) for n, (spec, router)
-                         in enumerate(zip(sc.fleet, sc.routers_for(self.seed)), 1)]
+                         in enumerate(zip(sc.fleet, sc.routers_for(self.seed)), 1) if n in hosted]
+        self._numbered = {v.number: v for v in self.vehicles}
         #: per coordinator's port, the host -> router direction (0x10, 0x17); each its own
         #: stream, so host activity never changes the device byte streams
         self.downlinks = {ports.instance(ports.XBEE.name, n): Link(sc.link, acting_on(sc.faults, "link"), stream(
             self.seed, vehicles_name(n, "xbee.link.coordinator")))
-            for n in range(1, sc.units("coordinator") + 1)}
+            for n in range(1, sc.units("coordinator") + 1) if n in hosted}
         #: per gateway's port, its network: one ranging every tag in turn, or one per vehicle
         gateways = sc.units("gateway")
-        groups = [self.vehicles] if gateways == 1 else [[v] for v in self.vehicles]
+        groups = {1: self.vehicles} if gateways == 1 else {v.number: [v] for v in self.vehicles}
         self.networks = {ports.instance(ports.NANOLOC.name, n): NanolocNetwork(
             sc, [v.spec.tag for v in group], [v.trajectory for v in group], self.seed,
-            vehicles_name(n, "")) for n, group in enumerate(groups, 1)}
-        self.nanoloc = self.networks[ports.NANOLOC.name]  # vehicle 1's
+            vehicles_name(n, "")) for n, group in groups.items()}
+        self.nanoloc = self.networks.get(ports.NANOLOC.name)  # vehicle 1's
         #: per coordinator's port that several routers joined, their shared channel
         self.channels = {port: Channel() for port in self.downlinks
                          if sum(v.xbee_port == port for v in self.vehicles) > 1}
-        names = [ports.instance(p, n) for p in EVENT_ORDER for n in range(1, len(self.vehicles) + 1)]
+        names = [ports.instance(p, n) for p in EVENT_ORDER for n in every]
         self._rank = {name: i for i, name in enumerate(names)}
         self._generated_ns = 0  # blocks before this are generated
-        self._pending: list[Event] = []  # generated, not yet returned, in order
-        self._times: list[int] = []  # their t_ns
+        self._pending: list[tuple[int, Event]] = []  # generated, not returned, keyed, in order
         self._returned_ns = 0
         self._air: list[AirFrame] = []  # generated, not yet returned, in order
+        self._making = None  # the block being made (a generator of _parts), or None
 
     # -- generation -------------------------------------------------------------------------
-    def _block(self) -> list[Event]:
+    def _parts(self):
+        """Make the next block a step at a time: each vehicle in two, each nanoLOC network,
+        and last the block sorted into the events that wait (the sort of fifty vehicles'
+        second is itself a step of several ms)."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
-        self._generated_ns = hi
-        sins, rf, air = [], [], []
+        keyed, air = [], []
         offered: dict[str, list[Offered]] = {}
         for vehicle in self.vehicles:
-            s, packets = vehicle.block(lo, hi, hi < self.duration_ns)
-            sins += s
-            offered.setdefault(vehicle.xbee_port, []).extend(packets)
-        for port, packets in offered.items():
+            s, packets = yield from vehicle.block(lo, hi, hi < self.duration_ns)
+            keyed += self._keyed(s)
+            offered.setdefault(vehicle.xbee_port, []).append(packets)
+            yield
+        for port, shares in offered.items():
             channel = self.channels.get(port)
             if channel is not None:  # routers that wait for each other
-                r, a = channel.share(packets)
+                r, a = channel.share([p for share in shares for p in share])
             else:  # a router alone on its channel: its link's own schedule
-                r = [p.event for p in packets if p.event is not None]
-                a = [f for p in packets for f in p.air]
-            rf += r
+                r = [p.event for share in shares for p in share if p.event is not None]
+                a = [f for share in shares for p in share for f in p.air]
+            keyed += self._keyed(r)
             air += a
         if air:
             self._air += [f for f in air if f.t_ns < self.duration_ns]
             self._air.sort(key=lambda f: f.t_ns)  # stable: an ACK stays after its frame
         for port, network in self.networks.items():
             t_nl, reports, marks = network.reports(lo, hi)
-            sins += [Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))]
-        return sins + rf
+            keyed += self._keyed([Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))])
+            yield
+        # a block's events are never earlier than the block (module doc), so those that wait
+        # can take it before they are asked for: advance() returns none before their time.
+        # A stable sort keeps generation order among equal keys (one port's events, made in
+        # its order); the keys are made with each part, so this step only compares ints
+        self._pending += keyed
+        self._pending.sort(key=itemgetter(0))
+        self._making, self._generated_ns = None, hi
+
+    def _keyed(self, events: list[Event]) -> list[tuple[int, Event]]:
+        """(order key, event) of *events* within the run: the key is (t_ns, port rank) as
+        one integer, the order :meth:`advance` returns them in."""
+        rank, ranks, end = self._rank, len(self._rank), self.duration_ns
+        return [(e.t_ns * ranks + rank[e.port], e) for e in events if e.t_ns < end]
+
+    def _step(self) -> None:
+        if self._making is None:
+            self._making = self._parts()
+        next(self._making, None)
+
+    def work(self) -> bool:
+        """Make one step of the next block ahead of ``advance`` (a vehicle's IMU samples, the
+        rest of its share, the networks', the sort); False when a block of events waits
+        beyond what ``advance`` returned (no more is made ahead) or the run is generated."""
+        if self._generated_ns >= self.duration_ns or (
+                self._making is None and self._generated_ns >= self._returned_ns + self.BLOCK_NS):
+            return False
+        self._step()
+        return True
 
     def advance(self, until_ns: int) -> list[Event]:
         """Events with t_ns < until_ns not returned before, in (t_ns, port) order."""
         until_ns = min(until_ns, self.duration_ns)
         if until_ns <= self._returned_ns:
             return []
-        fresh = []
         while self._generated_ns < until_ns:
-            fresh += [e for e in self._block() if e.t_ns < self.duration_ns]
-        if fresh:  # a stable sort keeps generation order among equal keys
-            self._pending += fresh
-            rank = self._rank
-            self._pending.sort(key=lambda e: (e.t_ns, rank[e.port]))
-            self._times = [e.t_ns for e in self._pending]
-        cut = bisect.bisect_left(self._times, until_ns)
-        out = self._pending[:cut]
-        del self._times[:cut], self._pending[:cut]
+            self._step()
+        cut = bisect.bisect_left(self._pending, until_ns * len(self._rank), key=itemgetter(0))
+        out = [e for _, e in self._pending[:cut]]
+        del self._pending[:cut]
         self._returned_ns = until_ns
         return out
 
@@ -266,7 +304,11 @@ class World:
 
     @property
     def generated_ns(self) -> int:
-        """Events before this are generated (and fixed): a live fault acts from here on."""
+        """Events before this are generated (and fixed): a live fault acts from here on.
+        A block that work() has begun is finished first, so no vehicle's share of it
+        misses the fault."""
+        while self._making is not None:
+            self._step()
         return self._generated_ns
 
     def inject(self, fault) -> None:
@@ -290,9 +332,9 @@ class World:
     def truth(self, t0_ns: int, t1_ns: int, vehicle: int = 1) -> np.ndarray:
         """Vehicle *vehicle*'s true state every millisecond in [t0_ns, t1_ns)
         (emulator.truth.FIELDS; truth.csv is vehicle 1's, truth<n>.csv vehicle n's)."""
-        return truth_arrays(self.vehicles[vehicle - 1].trajectory, t0_ns, t1_ns)
+        return truth_arrays(self._numbered[vehicle].trajectory, t0_ns, t1_ns)
 
     def device_truth(self, vehicle: int = 1) -> dict:
         """What vehicle *vehicle*'s devices drew at power-on and its router's join:
         evaluation only."""
-        return {"seed": self.seed, **self.vehicles[vehicle - 1].device_truth()}
+        return {"seed": self.seed, **self._numbered[vehicle].device_truth()}

@@ -110,3 +110,24 @@ def test_the_documented_vector():
     assert psdu.hex(" ").upper() == ("61 88 05 7C 3A 00 00 21 5B 48 00 00 00 21 5B 1E 05 00 E8 "
                                      "11 00 05 C1 E8 05 A5 5A 01 18 47 05")
     assert ieee802154.ack_frame(5).hex(" ").upper() == "02 00 05 15 E2"
+
+
+def test_the_fcs_is_crc16_kermit_bit_by_bit():
+    """fcs() against the CRC's definition, a bit at a time (reflected 0x1021, init 0)."""
+    import random
+
+    from navtwin.protocols.ieee802154 import fcs
+
+    def bitwise(data: bytes) -> int:
+        crc = 0
+        for byte in data:
+            crc ^= byte
+            for _ in range(8):
+                crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+        return crc
+
+    rng = random.Random(5)
+    for n in range(130):
+        data = bytes(rng.randrange(256) for _ in range(n))
+        assert fcs(data) == bitwise(data)
+    assert fcs(b"123456789") == 0x2189

@@ -1,0 +1,54 @@
+"""navtwin bench scale: its statistics on synthetic arrivals (exact numbers), and a short run
+(no timed assertion: the figures are whatever the machine gives)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from navtwin.emulator.bench_scale import (arrivals, late_share, meets_goal, period_errors,
+                                          port_figures, scale)
+
+
+def test_period_error_is_arrival_interval_against_device_interval():
+    assert period_errors([0, 10_500_000, 20_000_000], [0, 10_000_000, 20_000_000]).tolist() == \
+        [0.5, 0.5]
+
+
+def test_a_chunk_arrives_with_the_read_that_brings_its_last_byte():
+    # reads of 20, 40 and 30 bytes; chunks of 30 bytes end at 30, 60 and 90
+    t = arrivals(np.array([100, 200, 300]), np.array([20, 40, 30]), np.array([30, 60, 90]))
+    assert t.tolist() == [200, 200, 300]
+
+
+def test_port_figures_skip_what_was_written_before_the_reader_and_count_what_it_read():
+    sizes = np.array([30, 30, 30, 30])
+    ends = np.array([10, 20, 30, 40]) * 1_000_000
+    # the first chunk went before the reader came; the last never reached it
+    fig = port_figures(np.array([21_000_000, 31_500_000]), np.array([30, 30]), sizes, ends, 30)
+    assert fig == {"read": 2, "p50_ms": 0.5, "p99_ms": 0.5, "max_ms": 0.5, "drift_ms": 0.5}
+
+
+def test_the_goal_needs_every_figure():
+    row = {"p99_ratio_to_bare": 1.1, "frames_lost": 0, "cpu_per_vehicle": 0.015,
+           "late_1ms_share": 0.005}
+    assert meets_goal(row)
+    assert not meets_goal({**row, "frames_lost": 1})
+    assert not meets_goal({**row, "p99_ratio_to_bare": 1.3})
+    assert not meets_goal({**row, "cpu_per_vehicle": 0.03})
+    assert not meets_goal({**row, "late_1ms_share": 0.02})
+
+
+def test_the_late_share_counts_the_bins_from_1_ms():
+    late = {"<10us": 90, "<30us": 0, "<100us": 0, "<300us": 0, "<1ms": 5, "<3ms": 3,
+            "<10ms": 1, ">=10ms": 1}
+    assert late_share(late) == 0.05 and late_share({}) == 0.0
+
+
+@pytest.mark.pty
+def test_a_short_scale_run_reads_every_port(capsys):
+    out = scale([2], 3.0, workers="1", readers=1, ports=True)
+    (row,) = out["rows"]
+    assert set(row["ports"]) == {"sins", "xbee", "nanoloc", "sins2", "xbee2", "nanoloc2"}
+    assert row["status"] == 0 and row["workers"] == 1 and row["bare_pty"]["frames"] > 0
+    assert all(p["read"] > 0 for p in row["ports"].values())
+    assert out["largest_n_meeting_goal"] in (None, 2)
