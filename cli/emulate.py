@@ -158,7 +158,7 @@ def register(sub) -> None:
                         "auto: from the cost of one vehicle measured at start-up, at most the "
                         "CPU count. Needs --network per-vehicle; the ready line says how many "
                         "(\"workers\"); no --record, --expect or control socket with K > 1 "
-                        "(docs/emulator.md, Workers)")
+                        "(docs/emulator.md, The loop and worker processes)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_emulate)
 

@@ -507,9 +507,12 @@ class Emulation:
             # the world's next block, a step at a time: in an idle gap, or between
             # writes once it is needed within a second (made at once it would hold up every
             # write due meanwhile: a few hundred ms for fifty vehicles)
-            if ((feed.known_ns < now + LOOKAHEAD_NS // 2 or deadline - time.monotonic_ns()
-                 > 2 * feed.work_cost_ns + 2 * self.timing.spin_ns) and feed.work()):
-                continue
+            if feed.known_ns < now + LOOKAHEAD_NS // 2 or deadline - time.monotonic_ns() \
+                    > 2 * feed.work_cost_ns + 2 * self.timing.spin_ns:
+                with self.timing.ordinary():  # a real-time thread would starve the clients
+                    worked = feed.work()
+                if worked:
+                    continue
             self._wait(deadline, min(next_check, next_progress))
         else:
             self.interrupted = True

@@ -65,6 +65,13 @@ class Mode:
         """The mode on the calling thread while the block runs, undone after."""
         yield
 
+    @contextlib.contextmanager
+    def ordinary(self):
+        """Within :meth:`applied`: the thread's scheduling as an ordinary thread's while the
+        block runs (the loop's making of events: work that may wait, which under SCHED_FIFO
+        would keep the clients it writes to off the core for as long as it takes)."""
+        yield
+
 
 class Slack(Mode):
     """1 ns timer slack, so ``select`` wakes at the deadline asked and the spin is short."""
@@ -104,6 +111,15 @@ class Fifo(Slack):
                 yield
             finally:
                 os.sched_setscheduler(0, policy, param)
+
+    @contextlib.contextmanager
+    def ordinary(self):
+        os.sched_setscheduler(0, os.SCHED_OTHER | os.SCHED_RESET_ON_FORK, os.sched_param(0))
+        try:
+            yield
+        finally:
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK,
+                                  os.sched_param(PRIORITY))
 
 
 #: mode name -> its class, best first: the order ``auto`` tries them in

@@ -82,3 +82,30 @@ def test_lateness_bins_are_log_spaced_and_count_each_write():
         late.add("sins", ns)
     assert late.histograms() == {"sins": {"<10us": 3, "<30us": 1, "<100us": 0, "<300us": 1,
                                           "<1ms": 0, "<3ms": 1, "<10ms": 1, ">=10ms": 2}}
+
+
+@pytest.mark.parametrize("name", list(timing.MODES))
+def test_making_events_runs_as_an_ordinary_thread_and_the_mode_comes_back(name):
+    """World.work under the paced loop: never SCHED_FIFO (it would keep the clients off the
+    core while a block is made); the writes after it are real-time again."""
+    if name == "fifo" and not fifo_permitted():
+        pytest.skip("this process may not take SCHED_FIFO")
+    from navtwin.emulator.world import World
+
+    policies, work = [], World.work
+
+    def watched(self):
+        policies.append(os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK)
+        return work(self)
+
+    written = []
+    sink = lambda chunk: written.append(os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK)
+    World.work = watched
+    try:
+        with Emulation(load_scenario("office"), speed=25.0, ports=False, duration_s=3,
+                       timing=name, sink=sink) as emu:
+            emu.run()
+    finally:
+        World.work = work
+    assert policies and set(policies) == {os.SCHED_OTHER}
+    assert set(written) == {os.SCHED_FIFO if name == "fifo" else os.SCHED_OTHER}
