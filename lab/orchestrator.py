@@ -172,15 +172,9 @@ def run_lab(scenario: str = "office", *, seed: int | None = None, duration: floa
                 done = lab.stop()
                 # the emulator's ports are gone once it has ended: a host that has read all
                 # they held reports them down; then it is told to stop
-                for h in hosts:
-                    _wait_log(d / _files(h.number)["log"],
-                              lambda x: x.get("status", {}).get("event") == "port_down", 10.0)
+                hosts_read([d / _files(h.number)["log"] for h in hosts], 10.0)
             finally:
-                for p in procs:
-                    if p.poll() is None:
-                        p.send_signal(signal.SIGTERM)
-                for p in procs:
-                    p.wait(timeout=HOST_STOP_S)
+                stop_hosts(procs)
     except EmulatorError as e:
         raise LabError(f"the emulator failed: {str(e).strip().splitlines()[-1]}") from None
     summaries = []
@@ -246,6 +240,22 @@ def start_host(d: Path, h: Follower, lab, config: str | None, filters: str | Non
         cmd += ["--filters", filters]
     with open(d / f["log"], "wb") as log:
         return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log)
+
+
+def hosts_read(logs: list[Path], timeout: float) -> None:
+    """Once the emulator has ended and its ports are gone: wait (each up to *timeout*) until
+    every host's log says it read what they held (its ports down)."""
+    for log in logs:
+        _wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down", timeout)
+
+
+def stop_hosts(procs: list[subprocess.Popen]) -> None:
+    """SIGTERM to every host still running, then wait for each (HOST_STOP_S)."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    for p in procs:
+        p.wait(timeout=HOST_STOP_S)
 
 
 def _followed(d: Path, hosts: list[Follower]) -> dict[int, dict]:

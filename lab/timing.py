@@ -43,7 +43,6 @@ their threads) over the window, as fractions of a core (``host`` the hosts' sum,
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -59,8 +58,8 @@ from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
 
 from .fleet import Follower
-from .orchestrator import (HOST_STOP_S, LabError, _files, _wait_log, fleet_lab, start_host,
-                           write_fleet)
+from .orchestrator import (LabError, _files, _wait_log, fleet_lab, hosts_read, start_host,
+                           stop_hosts, write_fleet)
 
 STATUS_PERIOD_S = 2.0  # the hosts' status lines, as navtwin lab asks for them
 HOST_START_S = 60.0  # each host's started line comes within this (a loaded box is slow)
@@ -211,15 +210,9 @@ def _run(d: Path, seconds: float, scenario: str | Path, period_ns: int, mode: st
                                "to start); measure fewer seconds or run a longer scenario")
             done = lab.stop()
             # the emulator's ports are gone: each host reads what they held, then says so
-            for log in logs:
-                _wait_log(log, lambda x: x.get("status", {}).get("event") == "port_down",
-                          WAIT_READ_S)
+            hosts_read(logs, WAIT_READ_S)
         finally:
-            for p in procs:
-                if p.poll() is None:
-                    p.send_signal(signal.SIGTERM)
-            for p in procs:
-                p.wait(timeout=HOST_STOP_S)
+            stop_hosts(procs)
     cpu = [b - a for a, b in zip(cpu0, cpu1)]
     return {"t0_monotonic_ns": done["t0_monotonic_ns"], "timing": lab.info["timing"],
             "window": (w0, w1), "bare_pty": bare,

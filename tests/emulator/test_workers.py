@@ -80,12 +80,17 @@ def test_auto_is_one_worker_at_max_speed_and_when_vehicles_share_the_air():
     assert refusal(sc, 2) is None and refusal(convoy(load_scenario("office"), 2), 2)
 
 
-@pytest.mark.pty
-def test_a_worker_that_dies_ends_the_run_with_one_line(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "navtwin", "emulate", "--scenario", "office",
+def _two_workers(tmp_path, stderr) -> subprocess.Popen:
+    """`navtwin emulate` of two office cars on two workers, for a minute."""
+    return subprocess.Popen([sys.executable, "-m", "navtwin", "emulate", "--scenario", "office",
                              "--quiet", "--link-dir", str(tmp_path / "links"), "--vehicles", "2",
                              "--network", "per-vehicle", "--workers", "2", "--duration", "60"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=stderr, text=True)
+
+
+@pytest.mark.pty
+def test_a_worker_that_dies_ends_the_run_with_one_line(tmp_path):
+    proc = _two_workers(tmp_path, subprocess.PIPE)
     ready = json.loads(proc.stdout.readline())
     os.kill(ready["worker_pids"][1], signal.SIGKILL)
     out, err = proc.communicate(timeout=60)
@@ -97,10 +102,7 @@ def test_a_worker_that_dies_ends_the_run_with_one_line(tmp_path):
 
 @pytest.mark.pty
 def test_workers_end_when_their_parent_is_killed(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "navtwin", "emulate", "--scenario", "office",
-                             "--quiet", "--link-dir", str(tmp_path / "links"), "--vehicles", "2",
-                             "--network", "per-vehicle", "--workers", "2", "--duration", "60"],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    proc = _two_workers(tmp_path, subprocess.DEVNULL)
     ready = json.loads(proc.stdout.readline())
     proc.kill()
     proc.wait()
