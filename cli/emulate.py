@@ -17,12 +17,10 @@ MAX_WORKERS = 64  # processes; more than cores only slows the schedule down
 from .main import UsageError, flagged, number, stop_on_signals
 
 def scenario_help() -> str:
-    """--scenario's help: the shipped names (emulator/scenarios, read without importing the
-    scenario module: the CLI starts fast)."""
-    import navtwin.emulator
+    """--scenario's help: the shipped names (emulator.shipped: the CLI starts fast)."""
+    from navtwin.emulator.shipped import NAMES
 
-    names = sorted(p.stem for p in (Path(navtwin.emulator.__file__).parent / "scenarios").glob("*.toml"))
-    return f"a shipped scenario ({', '.join(names)}) or a TOML file"
+    return f"a shipped scenario ({', '.join(NAMES)}) or a TOML file"
 
 
 #: --seed and --duration, shared with ``navtwin lab``.

@@ -233,8 +233,7 @@ class Emulation:
         # every port instance of the scenario's vehicles (protocols.ports), vehicle by vehicle;
         # a device is given its instance as a declaration under the instance's name
         self.devices = {name: DEVICES.get(p.device)(self, dataclasses.replace(p, name=name))
-                        for n in (v.number for v in self.world.vehicles) for p in lab_ports.listed()
-                        if n <= scenario.units(p.unit) and (name := lab_ports.instance(p.name, n))}
+                        for name, p in scenario.instances(v.number for v in self.world.vehicles)}
         self.lateness = Lateness(self.devices)  # paced runs: per port, written how late
         bauds = {name: dev.settings["baud"] for name, dev in self.devices.items()}
         # a recorded run has its entries in faults.jsonl; others keep them in memory

@@ -36,7 +36,7 @@ from navtwin.common.limits import (ANCHOR_IDS, ELLIPSOID_HEIGHT_M, GRAVITY_M_S2,
                               MAX_COORD_M, MAX_DURATION_S, MAX_HEIGHT_M, RANGE_BIAS_M, RANGE_SCALE, NETWORKS, SEEDS, VEHICLES,
                               limit_problem)
 
-from . import trajectory as geometry
+from . import shipped, trajectory as geometry
 from .faults import Fault
 from .imu_errors import GRADES, ImuErrors, override_keys, profile
 from .imu_words import DEFAULT_WORDS, WORDS
@@ -46,8 +46,7 @@ from navtwin.common import tomlfile
 from navtwin.common.schema import (REQUIRED, Check, Invalid, between, build, dump, each, key, markdown_table,
                      non_negative, one_of, positive)
 
-SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
-SCENARIO_NAMES = tuple(sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")))
+SCENARIO_DIR, SCENARIO_NAMES = shipped.DIR, shipped.NAMES
 
 BAUDS = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400)
 
@@ -668,12 +667,16 @@ class Scenario:
         own = {SINS.name: lambda v: {"baud": v.board.baud},
                XBEE.name: lambda v: {"baud": baud_rate(c.BD), "api_mode": c.AP},
                NANOLOC.name: lambda v: {"baud": self.gateway.baud}}
-        out = {}
-        for n, v in enumerate(self.fleet, 1):
-            for name, settings in own.items():
-                if n <= self.units(ports.get(name).unit):
-                    out[ports.instance(name, n)] = settings(v)
-        return out
+        return {name: own[p.name](self.fleet[ports.parse(name)[1] - 1])
+                for name, p in self.instances() if p.name in own}
+
+    def instances(self, vehicles=None) -> list[tuple[str, ports.Port]]:
+        """(instance name, declaration) of every port of the cars *vehicles* (numbers; default
+        all), car by car in the lab's order: a car's own ports, and the coordinator's and
+        gateway's once, or once a car with networks of its own (:meth:`units`)."""
+        cars = range(1, len(self.fleet) + 1) if vehicles is None else vehicles
+        return [(ports.instance(p.name, n), p) for n in cars for p in ports.listed()
+                if n <= self.units(p.unit)]
 
     @property
     def radios(self) -> dict:

@@ -40,7 +40,6 @@ import tempfile
 import threading
 import time
 
-from navtwin.protocols import ports as lab_ports
 
 from .pty import LinkDir
 from .runner import SEC, RunError, speed_name
@@ -82,12 +81,6 @@ def auto(scenario, seed: int, speed: float | None) -> int:
     return max(1, min(math.ceil(need), os.cpu_count() or 1, n))
 
 
-def port_order(scenario) -> list[str]:
-    """Every port instance of *scenario*, vehicle by vehicle (as Emulation lists them)."""
-    return [lab_ports.instance(p.name, n) for n in range(1, len(scenario.fleet) + 1)
-            for p in lab_ports.listed() if n <= scenario.units(p.unit)]
-
-
 class Workers:
     """*scenario*'s vehicles on *workers* processes: :meth:`info` (the ready line),
     :meth:`run` (the done line), :meth:`close`. Arguments as for ``Emulation``."""
@@ -104,7 +97,7 @@ class Workers:
         n = len(scenario.fleet)
         k = min(workers, n)
         self.vehicles = [list(range(i, n + 1, k)) for i in range(1, k + 1)]
-        self.order = port_order(scenario)
+        self.order = [name for name, _ in scenario.instances()]  # as Emulation lists them
         self.link_dir = LinkDir(link_dir, self.order)
         self._private = tempfile.mkdtemp(prefix="navtwin-workers-")
         self._lines: queue.Queue = queue.Queue()  # (worker, parsed line or None at its end)
