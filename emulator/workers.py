@@ -40,7 +40,6 @@ import tempfile
 import threading
 import time
 
-
 from .pty import LinkDir
 from .runner import SEC, RunError, speed_name
 
