@@ -154,7 +154,6 @@ class Feed:
         self.block_ns = block_ns
         self.known_ns = 0  # every event with t < known_ns has been taken
         self.cost_ns = 0  # a decaying maximum of the wall time one block takes
-        self.work_cost_ns = 0  # ... and one step of the world's next block (World.work)
 
     @property
     def exhausted(self) -> bool:
@@ -171,14 +170,10 @@ class Feed:
         self.cost_ns = max(time.monotonic_ns() - t, self.cost_ns * 99 // 100)
         return events
 
-    def work(self) -> bool:
-        """Make one step of the world's next block ahead of :meth:`step` (World.work);
-        False when there is nothing to make."""
-        t = time.monotonic_ns()
-        if not self.world.work():
-            return False
-        self.work_cost_ns = max(time.monotonic_ns() - t, self.work_cost_ns * 99 // 100)
-        return True
+    @property
+    def ready(self) -> bool:
+        """The next block's events are made (World.ahead): :meth:`step` only takes them."""
+        return self.world.made_ns >= min(self.known_ns + self.block_ns, self.end_ns)
 
     def take(self, need_ns: int) -> list:
         """New events; afterwards ``known_ns > need_ns`` or the feed is exhausted."""
@@ -428,7 +423,9 @@ class Emulation:
         next_progress = t0 + PROGRESS_NS if self.progress else END
         next_flush = t0 + FLUSH_NS if self.recorder is not None else END
         try:
-            with self.timing.applied() if paced else contextlib.nullcontext():
+            # the maker thread first: it must not inherit the loop's real-time policy
+            with self.world.ahead() if paced else contextlib.nullcontext(), \
+                    self.timing.applied() if paced else contextlib.nullcontext():
                 self._loop(stop, feed, paced, t0, next_check, next_progress, next_flush)
         except RecordingWriteError as e:
             self.record_error = e
@@ -497,21 +494,12 @@ class Emulation:
                 vt = max(vt, min(now, target))
                 continue
             deadline = t0 + int(target / self.speed)
-            if (feed.known_ns < now + LOOKAHEAD_NS and not feed.exhausted
+            if (feed.known_ns < now + LOOKAHEAD_NS and not feed.exhausted and feed.ready
                     and deadline - time.monotonic_ns()
                     > 2 * feed.cost_ns + 2 * self.timing.spin_ns):
-                for ev in feed.step():  # generate ahead while there is time to spare
+                for ev in feed.step():  # take what the maker made while there is time to spare
                     self._enqueue(ev)
                 continue
-            # the world's next block, a step at a time: in an idle gap, or between
-            # writes once it is needed within a second (made at once it would hold up every
-            # write due meanwhile: a few hundred ms for fifty vehicles)
-            if feed.known_ns < now + LOOKAHEAD_NS // 2 or deadline - time.monotonic_ns() \
-                    > 2 * feed.work_cost_ns + 2 * self.timing.spin_ns:
-                with self.timing.ordinary():  # a real-time thread would starve the clients
-                    worked = feed.work()
-                if worked:
-                    continue
             self._wait(deadline, min(next_check, next_progress))
         else:
             self.interrupted = True
@@ -681,36 +669,37 @@ class Emulation:
         if {"start_s", "end_s"} & set(spec):
             raise ControlError('give "fault" as {"kind": ..., settings} without start_s/end_s '
                                '(a live fault starts now; "duration_s" sets its length)')
-        try:
-            kind = type(build(Fault, spec, (("fault", 0),)))  # the settings, checked
-            # a line or coordinator fault acts on what has not been sent: from now; the
-            # world's models on what they have not generated
-            start = self._now_ns if kind.ACTS_ON in ("line", "coordinator") \
-                else self.world.generated_ns
-            end = {} if duration is None else {"end_s": start / SEC + duration}
-            fault = build(Fault, {**spec, "start_s": start / SEC, **end}, (("fault", 0),))
-        except Invalid as e:
-            raise ControlError(str(e)) from None
-        if (problem := self.scenario.fault_problem(fault)) is not None:
-            raise ControlError(f"[fault] {problem[0]} {problem[1]}")
-        if fault.ACTS_ON == "coordinator" and duration is None:
-            raise ControlError("a live coordinator_reset needs duration_s: the radio powers up "
-                               "at its end")
-        self._live_ids += 1
-        wrapper = None
-        if isinstance(fault, LineFault):
-            wrapper = fault.wrapper(stream(self.seed, f"faults.live.{self._live_ids}"))
-            wrapper.kind, wrapper.fault_index = fault.KIND, None  # live: in no [[faults]]
-            self.wrap(fault.port, wrapper, fault.direction)
-        elif fault.ACTS_ON == "coordinator":
-            port = lab_ports.instance(lab_ports.XBEE.name, fault.vehicle)
-            self.coordinators[port].faults += (fault,)
-            for out in self._power_ups(fault):
-                self.lines[port].put(out.t_ns, out.item)
-            self.line_deadlines.touch(port)
-        else:
-            self.world.inject(fault)
-        self.live[self._live_ids] = (fault, wrapper)
+        # the world's models stay between two blocks until the fault is on them
+        with self.world.held() as made_ns:
+            try:
+                kind = type(build(Fault, spec, (("fault", 0),)))  # the settings, checked
+                # a line or coordinator fault acts on what has not been sent: from now; the
+                # world's models on what they have not generated
+                start = self._now_ns if kind.ACTS_ON in ("line", "coordinator") else made_ns
+                end = {} if duration is None else {"end_s": start / SEC + duration}
+                fault = build(Fault, {**spec, "start_s": start / SEC, **end}, (("fault", 0),))
+            except Invalid as e:
+                raise ControlError(str(e)) from None
+            if (problem := self.scenario.fault_problem(fault)) is not None:
+                raise ControlError(f"[fault] {problem[0]} {problem[1]}")
+            if fault.ACTS_ON == "coordinator" and duration is None:
+                raise ControlError("a live coordinator_reset needs duration_s: the radio powers up "
+                                   "at its end")
+            self._live_ids += 1
+            wrapper = None
+            if isinstance(fault, LineFault):
+                wrapper = fault.wrapper(stream(self.seed, f"faults.live.{self._live_ids}"))
+                wrapper.kind, wrapper.fault_index = fault.KIND, None  # live: in no [[faults]]
+                self.wrap(fault.port, wrapper, fault.direction)
+            elif fault.ACTS_ON == "coordinator":
+                port = lab_ports.instance(lab_ports.XBEE.name, fault.vehicle)
+                self.coordinators[port].faults += (fault,)
+                for out in self._power_ups(fault):
+                    self.lines[port].put(out.t_ns, out.item)
+                self.line_deadlines.touch(port)
+            else:
+                self.world.inject(fault)
+            self.live[self._live_ids] = (fault, wrapper)
         return self._live_entry(self._live_ids)
 
     #: ``reset``: the device -> the fault kind that power-cycles it
@@ -754,7 +743,8 @@ class Emulation:
             (self.inbounds if to_device else self.lines)[fault.port].wrappers.remove(wrapper)
             (self.inbound_deadlines if to_device else self.line_deadlines).touch(fault.port)
         elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then
-            self.world.remove(fault)
+            with self.world.held():
+                self.world.remove(fault)
 
     def _port(self, args) -> PtyPort:
         port = self.ports.get(args.port)

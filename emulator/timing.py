@@ -17,8 +17,9 @@ longer spin to cover it). ``auto`` takes the first the process is permitted: eac
 :meth:`Mode.check` tries its system calls and undoes them, so a mode refused
 (PermissionError, or no such call on this system) falls to the next. A mode is applied to the
 thread that runs the loop, for the run only (:meth:`Mode.applied`), and undone after:
-the process's other threads (the control socket's, an ``--expect`` watcher, RFC 2217
-servers) and its children stay ordinary (``SCHED_RESET_ON_FORK``).
+the process's other threads (the world's maker, emulator.world.World.ahead; the control
+socket's, an ``--expect`` watcher, RFC 2217 servers) and its children stay ordinary
+(``SCHED_RESET_ON_FORK``).
 
 Safety. A SCHED_FIFO thread that never sleeps starves every ordinary thread on its core; the
 loop spins at most ``spin_ns`` before a deadline and then writes, so it sleeps in every
@@ -65,13 +66,6 @@ class Mode:
         """The mode on the calling thread while the block runs, undone after."""
         yield
 
-    @contextlib.contextmanager
-    def ordinary(self):
-        """Within :meth:`applied`: the thread's scheduling as an ordinary thread's while the
-        block runs (the loop's making of events: work that may wait, which under SCHED_FIFO
-        would keep the clients it writes to off the core for as long as it takes)."""
-        yield
-
 
 class Slack(Mode):
     """1 ns timer slack, so ``select`` wakes at the deadline asked and the spin is short."""
@@ -111,15 +105,6 @@ class Fifo(Slack):
                 yield
             finally:
                 os.sched_setscheduler(0, policy, param)
-
-    @contextlib.contextmanager
-    def ordinary(self):
-        os.sched_setscheduler(0, os.SCHED_OTHER | os.SCHED_RESET_ON_FORK, os.sched_param(0))
-        try:
-            yield
-        finally:
-            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK,
-                                  os.sched_param(PRIORITY))
 
 
 #: mode name -> its class, best first: the order ``auto`` tries them in

@@ -15,9 +15,11 @@ every event with t_ns < until_ns not returned before, each on its port instance 
 
 Routers that joined one coordinator share its channel (emulator.channel): one packet on the
 air at a time, a packet waiting while another is sent, dropped when its router's queue is
-full. ``work()`` makes a step of the next block ahead of ``advance`` (a paced run's loop does it
-between writes: a block of fifty vehicles takes a few hundred ms at once, a step a few ms);
-the events are the same however the block was made.
+full. ``work()`` makes a step of the next block ahead of ``advance``, and :meth:`World.ahead`
+makes the blocks on a thread of its own while a paced run's loop writes (a block of fifty
+vehicles takes a few hundred ms, a step a few ms: made by the writing loop, a step would hold
+up every write due meanwhile); the events are the same however and wherever the block was
+made.
 
 Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
 (emulator.radio.AirFrame: every attempt, received or lost, and the coordinator's MAC ACK of
@@ -32,6 +34,9 @@ are dropped.
 from __future__ import annotations
 
 import bisect
+import contextlib
+import sys
+import threading
 from dataclasses import dataclass
 from operator import itemgetter
 from typing import NamedTuple
@@ -56,6 +61,10 @@ from .truth import truth_arrays
 #: events at the same t_ns come in this port order (then vehicle order), so the event list
 #: never depends on how the devices were generated
 EVENT_ORDER = (ports.SINS.name, ports.NANOLOC.name, ports.XBEE.name)
+#: the interpreter's switch interval while :meth:`World.ahead` makes blocks: how long the
+#: writing loop, woken at a deadline, may wait for the maker thread to hand over the GIL
+#: (CPython's default, 5 ms, would be a late write every time)
+SWITCH_S = 50e-6
 
 
 class RfPacket(NamedTuple):
@@ -209,6 +218,13 @@ class World:
         self._returned_ns = 0
         self._air: list[AirFrame] = []  # generated, not yet returned, in order
         self._making = None  # the block being made (a generator of _parts), or None
+        #: held while a step is made (by the maker thread or a caller that needs the block
+        #: now), and by held(): reentrant, so inject() and remove() may lock it again
+        self._step_lock = threading.RLock()
+        #: held while a made block joins the events that wait, or advance() takes them
+        self._pending_lock = threading.Lock()
+        self._room = threading.Event()  # advance() took events: the maker may make more
+        self._error: BaseException | None = None  # what a step raised (a dead generator)
 
     # -- generation -------------------------------------------------------------------------
     def _parts(self):
@@ -233,9 +249,6 @@ class World:
                 a = [f for share in shares for p in share for f in p.air]
             keyed += self._keyed(r)
             air += a
-        if air:
-            self._air += [f for f in air if f.t_ns < self.duration_ns]
-            self._air.sort(key=lambda f: f.t_ns)  # stable: an ACK stays after its frame
         for port, network in self.networks.items():
             t_nl, reports, marks = network.reports(lo, hi)
             keyed += self._keyed([Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))])
@@ -243,10 +256,17 @@ class World:
         # a block's events are never earlier than the block (module doc), so those that wait
         # can take it before they are asked for: advance() returns none before their time.
         # A stable sort keeps generation order among equal keys (one port's events, made in
-        # its order); the keys are made with each part, so this step only compares ints
-        self._pending += keyed
-        self._pending.sort(key=itemgetter(0))
-        self._making, self._generated_ns = None, hi
+        # its order); the keys are made with each part, so this step only compares ints.
+        # Sorted here, the block joins those that wait as a merge of two sorted runs: the
+        # lock advance() takes is held that short
+        keyed.sort(key=itemgetter(0))
+        with self._pending_lock:
+            self._pending += keyed
+            self._pending.sort(key=itemgetter(0))
+            if air:
+                self._air += [f for f in air if f.t_ns < self.duration_ns]
+                self._air.sort(key=lambda f: f.t_ns)  # stable: an ACK stays after its frame
+            self._making, self._generated_ns = None, hi
 
     def _keyed(self, events: list[Event]) -> list[tuple[int, Event]]:
         """(order key, event) of *events* within the run: the key is (t_ns, port rank) as
@@ -255,40 +275,94 @@ class World:
         return [(e.t_ns * ranks + rank[e.port], e) for e in events if e.t_ns < end]
 
     def _step(self) -> None:
+        """Make one step (the caller holds ``_step_lock``). A step that raised left its
+        generator dead: every later step raises the same, on whichever thread asks."""
+        if self._error is not None:
+            raise self._error
         if self._making is None:
             self._making = self._parts()
-        next(self._making, None)
+        try:
+            next(self._making, None)
+        except BaseException as e:
+            self._error = e
+            raise
 
     def work(self) -> bool:
         """Make one step of the next block ahead of ``advance`` (a vehicle's IMU samples, the
         rest of its share, the networks', the sort); False when a block of events waits
         beyond what ``advance`` returned (no more is made ahead) or the run is generated."""
-        if self._generated_ns >= self.duration_ns or (
-                self._making is None and self._generated_ns >= self._returned_ns + self.BLOCK_NS):
-            return False
-        self._step()
-        return True
+        with self._step_lock:
+            if self._generated_ns >= self.duration_ns or (
+                    self._making is None
+                    and self._generated_ns >= self._returned_ns + self.BLOCK_NS):
+                return False
+            self._step()
+            return True
+
+    @property
+    def made_ns(self) -> int:
+        """Blocks before this are made: ``advance`` up to it returns at once."""
+        return self._generated_ns
 
     def advance(self, until_ns: int) -> list[Event]:
-        """Events with t_ns < until_ns not returned before, in (t_ns, port) order."""
+        """Events with t_ns < until_ns not returned before, in (t_ns, port) order. Blocks
+        not made yet are made now (helping :meth:`ahead`'s thread, if it runs)."""
         until_ns = min(until_ns, self.duration_ns)
         if until_ns <= self._returned_ns:
             return []
         while self._generated_ns < until_ns:
-            self._step()
-        cut = bisect.bisect_left(self._pending, until_ns * len(self._rank), key=itemgetter(0))
-        out = [e for _, e in self._pending[:cut]]
-        del self._pending[:cut]
-        self._returned_ns = until_ns
+            with self._step_lock:
+                if self._generated_ns < until_ns:
+                    self._step()
+        with self._pending_lock:
+            cut = bisect.bisect_left(self._pending, until_ns * len(self._rank),
+                                     key=itemgetter(0))
+            out = [e for _, e in self._pending[:cut]]
+            del self._pending[:cut]
+            self._returned_ns = until_ns
+        self._room.set()
         return out
 
     def air(self, until_ns: int) -> list[AirFrame]:
         """The air's frames with t_ns < *until_ns* not returned before, in time order, of the
-        blocks generated so far (by ``advance``): a later block's are never earlier."""
-        until_ns = min(until_ns, self._generated_ns)
-        cut = bisect.bisect_left(self._air, until_ns, key=lambda f: f.t_ns)
-        out, self._air = self._air[:cut], self._air[cut:]
+        blocks made so far: a later block's are never earlier."""
+        with self._pending_lock:
+            until_ns = min(until_ns, self._generated_ns)
+            cut = bisect.bisect_left(self._air, until_ns, key=lambda f: f.t_ns)
+            out, self._air = self._air[:cut], self._air[cut:]
         return out
+
+    @contextlib.contextmanager
+    def ahead(self):
+        """While the block runs, a thread of its own makes the next block whenever
+        ``advance`` has taken the last (:meth:`work`, a step at a time), so a caller that
+        only takes made blocks never waits for one. Start it before the caller's thread
+        takes a real-time policy: the maker stays an ordinary thread, and the writes wait
+        for it no longer than the interpreter's switch interval (:data:`SWITCH_S`). What
+        a step raises is raised again by ``advance`` (on the caller's thread)."""
+        done = threading.Event()
+
+        def make() -> None:
+            while not done.is_set():
+                self._room.clear()
+                try:
+                    worked = self.work()
+                except BaseException:  # kept in _error: advance raises it
+                    return
+                if not worked:
+                    self._room.wait()
+
+        old = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_S)
+        maker = threading.Thread(target=make, name="navtwin-world-maker", daemon=True)
+        maker.start()
+        try:
+            yield self
+        finally:
+            done.set()
+            self._room.set()
+            maker.join()
+            sys.setswitchinterval(old)
 
     # -- live faults ------------------------------------------------------------------------
     def _holders(self):
@@ -302,27 +376,32 @@ class World:
         for link in [v.uplink for v in self.vehicles] + list(self.downlinks.values()):
             yield link, "link", {}
 
-    @property
-    def generated_ns(self) -> int:
-        """Events before this are generated (and fixed): a live fault acts from here on.
-        A block that work() has begun is finished first, so no vehicle's share of it
-        misses the fault."""
-        while self._making is not None:
-            self._step()
-        return self._generated_ns
+    @contextlib.contextmanager
+    def held(self):
+        """The models between two blocks while the block runs: a block that work() has
+        begun is finished first (so no vehicle's share of it misses a fault), and no step
+        is made meanwhile. Yields the time events before which are made (and fixed): a live
+        fault injected or removed within acts from there on."""
+        with self._step_lock:
+            while self._making is not None:
+                self._step()
+            yield self._generated_ns
 
     def inject(self, fault) -> None:
         """Add device fault *fault* during the run (live control); it acts on the blocks not
-        generated yet (from :attr:`generated_ns`): what is generated stays as it was. The
-        models it acts on: as for a scenario's faults (emulator.faults.acting_on)."""
-        for model, kind, which in self._holders():
-            if acting_on([fault], kind, **which):
-                model.faults = (*model.faults, fault)
+        generated yet (call it within :meth:`held`, which says from when): what is generated
+        stays as it was. The models it acts on: as for a scenario's faults
+        (emulator.faults.acting_on)."""
+        with self._step_lock:  # never between two steps of a block
+            for model, kind, which in self._holders():
+                if acting_on([fault], kind, **which):
+                    model.faults = (*model.faults, fault)
 
     def remove(self, fault) -> None:
-        """End live fault *fault* for the blocks not generated yet."""
-        for model, _, _ in self._holders():
-            model.faults = tuple(f for f in model.faults if f is not fault)
+        """End live fault *fault* for the blocks not generated yet (within :meth:`held`)."""
+        with self._step_lock:
+            for model, _, _ in self._holders():
+                model.faults = tuple(f for f in model.faults if f is not fault)
 
     @property
     def finished(self) -> bool:

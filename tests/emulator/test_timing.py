@@ -86,8 +86,8 @@ def test_lateness_bins_are_log_spaced_and_count_each_write():
 
 @pytest.mark.parametrize("name", list(timing.MODES))
 def test_making_events_runs_as_an_ordinary_thread_and_the_mode_comes_back(name):
-    """World.work under the paced loop: never SCHED_FIFO (it would keep the clients off the
-    core while a block is made); the writes after it are real-time again."""
+    """World.work on the maker thread of a paced run: never SCHED_FIFO (it would keep the
+    clients off the core while a block is made); the writes are real-time all the while."""
     if name == "fifo" and not fifo_permitted():
         pytest.skip("this process may not take SCHED_FIFO")
     from navtwin.emulator.world import World
