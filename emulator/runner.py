@@ -15,18 +15,17 @@ dropped whole. Times are integer nanoseconds since the run started.
 
 Speeds. ``realtime`` keeps an absolute schedule: the chunk that ends at virtual time t is
 written at wall time t0 + t (no drift; a late write never shifts later ones). The loop
-sleeps in ``select`` on the attached ports until shortly before the deadline and then spins;
-how short, and what the kernel is asked for (real-time priority, timer slack), is the run's
-timing mode (emulator.timing), chosen when the run is made and applied to the thread that
-runs it for the run only. A FACTOR runs the same schedule at FACTOR x real time; ``max``
-runs it as fast as the world can be generated. World events are generated in blocks: when
-paced, a second ahead before the clock starts and then, up to two seconds ahead, only in idle
-gaps longer than twice the slowest recent block, so generation does not delay a write (a thread
-would: it competes for the GIL exactly when a deadline is near); the world's own 1 s blocks
-are made a step at a time (World.work: a vehicle's IMU, the rest of its share, ...), in such
-gaps or, once needed within a second, between writes, so a write waits for one step at most. The loop wakes for
-the earliest line deadline (emulator.schedule: a heap, a line re-keyed when it gets an item
-or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
+sleeps in ``select`` on the attached ports until the deadline (or spins its last moments
+where nothing better exists); what the kernel is asked for (real-time priority, timer slack)
+is the run's timing mode (emulator.timing), chosen when the run is made and applied to the
+thread that runs it for the run only. A FACTOR runs the same schedule at FACTOR x real time;
+``max`` runs it as fast as the world can be generated. World events are generated in blocks:
+when paced, a second ahead before the clock starts, then by the world's maker thread
+(World.ahead: an ordinary thread, the interpreter's switch interval cut to 50 us so a write
+waits that long at most for the GIL) a block ahead of what the loop took; the loop takes made
+blocks, up to two seconds ahead, in idle gaps, and never makes one unless it is due now.
+The loop wakes for the earliest line deadline (emulator.schedule: a heap, a line re-keyed
+when it gets an item or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
 due and what is readable, not every port's line and file descriptor. After writing to the
 PTYs the loop yields the CPU once, so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their

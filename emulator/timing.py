@@ -2,7 +2,8 @@
 
 A paced run (``--speed realtime`` or a FACTOR) writes each chunk at an absolute deadline on
 CLOCK_MONOTONIC. Its loop sleeps in ``select`` (so a client's write or a control request wakes
-it) until ``spin_ns`` before the deadline and spins the rest. How late the sleep ends is what
+it) until the deadline, or, where nothing better exists (``spin``), until ``spin_ns`` before it
+and spins the rest. How late the sleep ends is what
 the kernel allows the thread:
 
 - ``timer slack``: the kernel may delay a sleeping thread's wake-up by its slack (50 us by
@@ -12,8 +13,8 @@ the kernel allows the thread:
   ordinary thread; under load the ordinary thread waits for its turn, often milliseconds.
 
 Modes, best first (:data:`MODES`): ``fifo`` (SCHED_FIFO at :data:`PRIORITY`, plus what
-``slack`` does), ``slack`` (1 ns timer slack), ``spin`` (neither: the default slack, and a
-longer spin to cover it). ``auto`` takes the first the process is permitted: each mode's
+``slack`` does), ``slack`` (1 ns timer slack), each sleeping to the deadline, and ``spin``
+(neither: the default slack, and a spin to cover it). ``auto`` takes the first the process is permitted: each mode's
 :meth:`Mode.check` tries its system calls and undoes them, so a mode refused
 (PermissionError, or no such call on this system) falls to the next. A mode is applied to the
 thread that runs the loop, for the run only (:meth:`Mode.applied`), and undone after:
@@ -22,8 +23,7 @@ socket's, an ``--expect`` watcher, RFC 2217 servers) and its children stay ordin
 (``SCHED_RESET_ON_FORK``).
 
 Safety. A SCHED_FIFO thread that never sleeps starves every ordinary thread on its core; the
-loop spins at most ``spin_ns`` before a deadline and then writes, so it sleeps in every
-period; the kernel's real-time throttling (``kernel.sched_rt_runtime_us``, 95 % by default)
+loop sleeps to each deadline and then writes, so it sleeps in every period; the kernel's real-time throttling (``kernel.sched_rt_runtime_us``, 95 % by default)
 bounds the rest. Memory is not locked (``mlockall``): it is process-wide and cannot be undone
 for a run alone, and the loop's memory is made before the clock starts (``gc.freeze``).
 
@@ -71,7 +71,9 @@ class Slack(Mode):
     """1 ns timer slack, so ``select`` wakes at the deadline asked and the spin is short."""
 
     name = "slack"
-    spin_ns = 100_000  # overshoot p50 ~40 us with 1 ns slack (docs/emulator.md, Timing)
+    #: none: the sleep ends within ~40 us of the deadline (p50) with 1 ns slack, and a spin
+    #: at every deadline cost a quarter of the loop's CPU at 25 vehicles (docs/emulator.md)
+    spin_ns = 0
 
     def check(self) -> None:
         with self.applied():

@@ -38,7 +38,7 @@ import contextlib
 import sys
 import threading
 from dataclasses import dataclass
-from operator import itemgetter
+from operator import attrgetter, itemgetter
 from typing import NamedTuple
 
 import numpy as np
@@ -65,6 +65,7 @@ EVENT_ORDER = (ports.SINS.name, ports.NANOLOC.name, ports.XBEE.name)
 #: writing loop, woken at a deadline, may wait for the maker thread to hand over the GIL
 #: (CPython's default, 5 ms, would be a late write every time)
 SWITCH_S = 50e-6
+_T_NS = attrgetter("t_ns")
 
 
 class RfPacket(NamedTuple):
@@ -216,7 +217,8 @@ class World:
         self._generated_ns = 0  # blocks before this are generated
         self._pending: list[tuple[int, Event]] = []  # generated, not returned, keyed, in order
         self._returned_ns = 0
-        self._air: list[AirFrame] = []  # generated, not yet returned, in order
+        self._air: list[AirFrame] = []  # generated, in order; those before _air_at returned
+        self._air_at = 0
         self._making = None  # the block being made (a generator of _parts), or None
         #: held while a step is made (by the maker thread or a caller that needs the block
         #: now), and by held(): reentrant, so inject() and remove() may lock it again
@@ -263,9 +265,11 @@ class World:
         with self._pending_lock:
             self._pending += keyed
             self._pending.sort(key=itemgetter(0))
-            if air:
-                self._air += [f for f in air if f.t_ns < self.duration_ns]
-                self._air.sort(key=lambda f: f.t_ns)  # stable: an ACK stays after its frame
+            if air:  # the returned dropped here, once a block: air() copies none
+                self._air = self._air[self._air_at:] + [f for f in air
+                                                        if f.t_ns < self.duration_ns]
+                self._air.sort(key=_T_NS)  # stable: an ACK stays after its frame
+                self._air_at = 0
             self._making, self._generated_ns = None, hi
 
     def _keyed(self, events: list[Event]) -> list[tuple[int, Event]]:
@@ -328,9 +332,12 @@ class World:
         blocks made so far: a later block's are never earlier."""
         with self._pending_lock:
             until_ns = min(until_ns, self._generated_ns)
-            cut = bisect.bisect_left(self._air, until_ns, key=lambda f: f.t_ns)
-            out, self._air = self._air[:cut], self._air[cut:]
-        return out
+            at = self._air_at
+            if at == len(self._air) or self._air[at].t_ns >= until_ns:
+                return []  # most calls: the loop asks at every wake-up
+            cut = bisect.bisect_left(self._air, until_ns, at, key=_T_NS)
+            self._air_at = cut
+            return self._air[at:cut]
 
     @contextlib.contextmanager
     def ahead(self):
