@@ -27,7 +27,7 @@ blocks, up to two seconds ahead, in idle gaps, and never makes one unless it is 
 The loop wakes for the earliest line deadline (emulator.schedule: a heap, a line re-keyed
 when it gets an item or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
 due and what is readable, not every port's line and file descriptor. After writing to the
-PTYs the loop yields the CPU once, so a client it woke runs first. Because chunk contents
+PTYs the loop yields the CPU once (but under SCHED_FIFO), so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
 device times, are identical in every mode and timing mode; only host commands (read from
 the PTYs when they arrive) add answers on the ``xbee`` line.
@@ -259,6 +259,8 @@ class Emulation:
         # the attached ports, waited on in one epoll set: a wake-up costs what is readable,
         # not a select over every port (kept in step every CHECK_NS, and at a hang-up)
         self._attached = select.epoll() if ports else None
+        #: what the loop's last sleep saw readable (None: not known, look at everything)
+        self._readable: list | None = None
         self._watched: dict[int, PtyPort] = {}  # fd -> port, as registered
         self.views: dict[str, ClientView] = {}  # per port: what the client's UART reads
         self.links: dict[str, str] = {}
@@ -467,10 +469,8 @@ class Emulation:
                 for chunk in self.lines[name].poll(now, feed.known_ns, self.end_ns):
                     self._deliver(chunk, wall - t0 if paced else None)
                     delivered = True
-            if delivered and paced and self.ports:
-                # let a client woken by these writes run before we go on (under SCHED_FIFO
-                # this gives way to nothing: the client runs on another core, or when the
-                # loop sleeps again)
+            if delivered and paced and self.ports and self.timing.yields:
+                # let a client woken by these writes run before we go on
                 os.sched_yield()
             self.reached_ns = max(self.reached_ns, min(now, self.end_ns))
             if wall >= next_progress:
@@ -523,6 +523,7 @@ class Emulation:
         if sleep_until > now:
             r, _, _ = select.select(fds, [], [], (sleep_until - now) / SEC)
             now = time.monotonic_ns()
+            self._readable = r
         else:
             r = []
         if r or now < spin_from:
@@ -532,16 +533,23 @@ class Emulation:
 
     def _service(self, now: int, check_detached: bool) -> None:
         """Read what clients wrote (stamped *now*) and notice clients coming and going, and
-        (every CHECK_NS) their termios settings."""
-        ports = self.ports
-        for fd, _ in self._attached.poll(0):
-            port = self._watched.get(fd)
-            if port is not None:
-                self._host_bytes(port, now)
-                if not port.attached:  # it read the hang-up
-                    self._unwatch(port)
+        (every CHECK_NS) their termios settings. A paced loop looks only at what its last
+        sleep saw readable: what comes later wakes the next sleep at once (each system call
+        here would also hand the GIL to the world's maker thread, for up to its switch
+        interval); at --speed max, which never sleeps, at everything."""
+        ports, readable = self.ports, self._readable
+        if self.speed is not None:
+            self._readable = []
+        if readable is None or self._attached.fileno() in readable:
+            for fd, _ in self._attached.poll(0):
+                port = self._watched.get(fd)
+                if port is not None:
+                    self._host_bytes(port, now)
+                    if not port.attached:  # it read the hang-up
+                        self._unwatch(port)
         if self.control is not None:
-            sockets = select.select(self.control.fds() + self.tap.fds(), [], [], 0)[0]
+            sockets = select.select(self.control.fds() + self.tap.fds(), [], [], 0)[0] \
+                if readable is None else readable
             self.control.serve(sockets)
             self.tap.serve(sockets)
         if check_detached:

@@ -54,6 +54,8 @@ class Mode:
     """Spin the last ``spin_ns`` before a deadline; ask the kernel for nothing."""
 
     name = "spin"
+    #: after its writes the loop yields the CPU, so a client they woke runs first
+    yields = True
     #: busy-wait this long before a deadline: ``select``'s wake-up with the default 50 us
     #: timer slack, plus the loop's own work (overshoot p50 ~0.1 ms here)
     spin_ns = 250_000
@@ -94,6 +96,7 @@ class Fifo(Slack):
     :class:`Slack`'s 1 ns timer slack."""
 
     name = "fifo"
+    yields = False  # a real-time thread's yield gives way to no ordinary thread
 
     @contextlib.contextmanager
     def applied(self):
