@@ -52,7 +52,7 @@ from navtwin.host.output import estimate_line
 from navtwin.host.replay import emulator_settings
 
 from . import evaluate, layouts
-from .evaluate import ci_text, mean_ci, paired
+from .evaluate import ALPHA, ci_text, decide, mean_ci, p_text, paired
 from .provenance import code_version
 from .run import run_in_memory, truth
 
@@ -400,7 +400,8 @@ def summarise(rows: list[dict], filters: Iterable[str], scenario: str | None = N
     """Per filter, over its seeds: the mean of each per-seed figure (FIGURES, TABLE_1's, the
     latitude/longitude ones) with its 95 % t half-width, the seeds and failures; and per pair
     of filters the per-seed difference of mean error (a - b) over the seeds both have, its
-    mean and 95 % t half-width, and which filter it decides for (the CI excludes 0) or None.
+    mean, 95 % t half-width, paired t test's p and Holm-adjusted p over every pair, and which
+    filter it decides for (the adjusted p below evaluate.ALPHA) or None (evaluate.decide).
     ``ranking``: the filters by mean error, each joined to the next by "<" (decided) or "~"
     (not). For a *scenario* whose paper has a layout of its own (lab.layouts: 003's latitude
     and longitude, 004's areas and outages), that layout's section under its name."""
@@ -415,10 +416,8 @@ def summarise(rows: list[dict], filters: Iterable[str], scenario: str | None = N
         for m in {**FIGURES, **dict.fromkeys(k for ks in TABLE_1.values() for k in ks),
                   **evaluate.LATLON}:
             per[f][m] = mean_ci([r[m] for r in cells if r.get(m) is not None])
-    pairs = []
-    for i, a in enumerate(filters):
-        for b in filters[i + 1:]:
-            pairs.append(paired(ok, a, b, "mean"))
+    pairs = [paired(ok, a, b, "mean") for i, a in enumerate(filters) for b in filters[i + 1:]]
+    decide(pairs)
     order = sorted((f for f in filters if per[f]["seeds"]), key=lambda f: per[f]["mean"][0])
     ranking = order[:1]
     for a, b in zip(order, order[1:]):
@@ -439,12 +438,13 @@ def table(summary: dict) -> str:
     rows += [[f, str(s["seeds"]), str(s["failed"]), *(ci_text(s[m]) for m in FIGURES)]
              for f, s in summary["filters"].items()]
     lines = _aligned(rows)
-    lines += ["", "paired difference of mean error (m, a - b, 95 % CI):"]
-    pairs = [(f"{p['a']} - {p['b']}", ci_text((p["diff"], p["half"]), 4),
-              f"{p['better']} better" if p["better"] else "not decided") for p in summary["pairs"]]
-    name_w = max((len(n) for n, _, _ in pairs), default=0)
-    ci_w = max((len(c) for _, c, _ in pairs), default=0)
-    lines += [f"  {n:<{name_w}}  {c:>{ci_w}}  {v}" for n, c, v in pairs]
+    lines += ["", f"paired difference of mean error (m, a - b, 95 % CI; Holm p over the "
+                  f"{len(summary['pairs'])} pairs, decided below {ALPHA:g}):"]
+    pairs = summary["pairs"]
+    cells = _aligned([[f"{p['a']} - {p['b']}", ci_text((p["diff"], p["half"]), 4),
+                       f"p {p_text(p['holm_p'])}"] for p in pairs]) if pairs else []
+    lines += [f"  {c}  {p['better'] + ' better' if p['better'] else 'not decided'}"
+              for c, p in zip(cells, pairs)]
     lines.append(f"ranking: {summary['ranking']}")
     for title, head, rows, left in layouts.grids(summary):
         lines += ["", title + ":", *_aligned([head, *rows], left)]
@@ -473,7 +473,8 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
         time = "" if meta["duration_s"] is None else f", first {meta['duration_s']:g} s"
         lines += [f"`{scenario}`, seeds {a}..{b}{time}; navtwin {meta['code_version']}, "
                   f"scenario sha256 {meta['scenario_hash'][:12]}; ± is the 95 % Student-t "
-                  "half-width over seeds.", ""]
+                  f"half-width over seeds; a pair decides where its paired t test's p, "
+                  f"Holm-adjusted over the table's pairs, is below {ALPHA:g}.", ""]
     lines += ["| filter | seeds | " + " | ".join(cols + extra) + " |",
              "|---|---:|" + "---:|" * (len(cols) + len(extra))]
     for f, s in summary["filters"].items():
@@ -483,17 +484,18 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
             cells += [_paper(fig.get("mean")), _paper(fig.get("max"))]
         failed = f" ({s['failed']} failed)" if s["failed"] else ""
         lines.append(f"| {f} | {s['seeds']}{failed} | " + " | ".join(cells) + " |")
-    lines += ["", "| a - b | seeds | mean error difference m (95 % CI) | decides |",
-              "|---|---:|---:|---|"]
+    lines += ["", "| a - b | seeds | mean error difference m (95 % CI) | Holm p | decides |",
+              "|---|---:|---:|---:|---|"]
     for p in summary["pairs"]:
         lines.append(f"| {p['a']} - {p['b']} | {p['seeds']} | {ci_text((p['diff'], p['half']), 4)} "
-                     f"| {p['better'] + ' better' if p['better'] else 'not decided'} |")
+                     f"| {p_text(p['holm_p'])} | {p['better'] + ' better' if p['better'] else 'not decided'} |")
     lines += _table_1(summary, paper)
     for title, head, rows, left in layouts.grids(summary):
         lines += ["", title + ".", "", "| " + " | ".join(head) + " |",
                   "|" + "---|" * left + "---:|" * (len(head) - left)]
         lines += ["| " + " | ".join(r) + " |" for r in rows]
-    rank = (f"Ranking by mean error (`<`: the paired 95 % CI excludes 0; `~`: it does not): "
+    rank = (f"Ranking by mean error (`<`: the pair is decided, its Holm-adjusted p below "
+            f"{ALPHA:g}; `~`: it is not): "
             f"`{summary['ranking']}`")
     means = {f: v["mean"] for f, v in paper["figures"].items() if "mean" in v} if paper else {}
     if means:
@@ -527,7 +529,6 @@ def _table_1(summary: dict, paper: dict | None) -> list[str]:
 
 def _paper(v: float | None) -> str:
     return "" if v is None else f"{v:.4g}"
-
 
 def check_block(path: str | Path) -> None:
     """Refuse, before any work, a *path* that :func:`write_block` could not rewrite: one it

@@ -17,10 +17,7 @@ from __future__ import annotations
 import math
 
 from .. import areas, evaluate
-from ..evaluate import WINDOW_FIGURES, ci_text, holm, mean_ci, paired, paired_differences, paired_p
-
-#: The family-wise level of the paired comparisons.
-ALPHA = 0.05
+from ..evaluate import ALPHA, WINDOW_FIGURES, ci_text, decide, mean_ci, p_text, paired
 #: 004's symbol and unit of each per-axis figure.
 HEADINGS = {"x_mean": "δ(δrx) m", "y_mean": "δ(δry) m", "vx_mean": "δ(δvx) m/s",
             "vy_mean": "δ(δvy) m/s"}
@@ -73,15 +70,12 @@ def summary(ok: dict, per: dict, scenario: str) -> dict | None:
                  "figures": {c: mean_ci(_finite(r.get(c) for r in ok[track].values())) for c in cols},
                  "paper": {c: paper["figures"].get(track, {}).get(c) for c in cols}}
                 for track, label in spec["rows"].items() if ok.get(track)]
-        pairs = [{**paired(ok, a, b, f"{w}_mean"), "window": w,
-                  "p": paired_p(paired_differences(ok, a, b, f"{w}_mean"))}
+        pairs = [{**paired(ok, a, b, f"{w}_mean"), "window": w}
                  for a, b in spec["pairs"] if ok.get(a) and ok.get(b) for w in windows]
         tables.append({"title": title, "what": spec["what"], "window": spec["window"],
                        "rows": rows, "pairs": pairs})
     family = [p for t in tables for p in t["pairs"]]
-    for p, adjusted in zip(family, holm([p["p"] for p in family])):
-        p["holm_p"] = adjusted
-        p["better"] = (p["a"] if p["diff"] < 0 else p["b"]) if adjusted < ALPHA else None
+    decide(family)
     first = next(cells for cells in ok.values() if cells)
     durations = {w: mean_ci(_finite(r.get(f"{w}_duration_s") for r in first.values()))
                  for w in areas.window_names(n)}
@@ -91,10 +85,6 @@ def summary(ok: dict, per: dict, scenario: str) -> dict | None:
 
 def _cell(ours: tuple[float, float], theirs: float | None) -> str:
     return ci_text(ours) + ("" if theirs is None else f" ({theirs:.4f})")
-
-
-def _p(v: float) -> str:
-    return "-" if math.isnan(v) else f"{v:.2g}"
 
 
 def grids(section: dict):
@@ -118,7 +108,7 @@ def grids(section: dict):
                         ["a - b", "window", "decides", "seeds", "difference m", "Holm p"],
                         [[f"{p['a']} - {p['b']}", _label(p["window"]),
                           f"{p['better']} better" if p["better"] else "not decided",
-                          str(p["seeds"]), ci_text((p["diff"], p["half"])), _p(p["holm_p"])]
+                          str(p["seeds"]), ci_text((p["diff"], p["half"])), p_text(p["holm_p"])]
                          for p in t["pairs"]], 3))
     out.append(("The windows' durations on the truth's clock (s), mean over seeds ± its 95 % "
                 "half-width", ["window", "duration s"],

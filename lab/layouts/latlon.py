@@ -4,7 +4,7 @@ lab.evaluate's (:data:`~navtwin.lab.evaluate.LATLON`, in every cell already)."""
 from __future__ import annotations
 
 from .. import evaluate
-from ..evaluate import ci_text, paired
+from ..evaluate import ALPHA, ci_text, decide, paired
 
 
 def columns(sc) -> tuple[str, ...]:
@@ -19,7 +19,8 @@ def summary(ok: dict, per: dict, scenario: str) -> dict | None:
     """003 Table 1's layout of a summary: ``rows``, per paper row (evaluate.latlon_rows) its
     label, our track, its seeds and each figure of evaluate.LATLON over seeds with the paper's
     beside it; ``pairs``, each row's track against every row above it (the weighted centroid
-    against the centroid, each against the SINS alone), the paired difference of each figure."""
+    against the centroid, each against the SINS alone), the paired difference of each figure,
+    decided with Holm over every pair and figure (evaluate.decide)."""
     table = evaluate.latlon_rows(scenario, tuple(per))
     if not table:
         return None
@@ -30,6 +31,7 @@ def summary(ok: dict, per: dict, scenario: str) -> dict | None:
     pairs = [{"a": a["track"], "b": b["track"],
               **{m: paired(ok, a["track"], b["track"], m) for m in evaluate.LATLON}}
              for i, a in reversed(list(enumerate(rows))) for b in reversed(rows[:i])]
+    decide([p[m] for p in pairs for m in evaluate.LATLON])
     return {"paper": evaluate.PAPER_FIGURES[scenario]["paper"], "rows": rows, "pairs": pairs}
 
 
@@ -52,7 +54,9 @@ def grids(ll: dict) -> tuple[tuple[str, list[str], list[list[str]], int], ...]:
               f"figure, ± its 95 % half-width; ({paper}'s published figure)", head, rows, 2)]
     if pair_rows:  # one row of the paper's present: nothing to pair
         grids.append(("Paired differences a - b over the seeds both have (m, ± the 95 % "
-                      "half-width); (name): the track the CI decides for, (~): not decided",
+                      "half-width); (name): the track it decides for, its paired t test's p "
+                      f"Holm-adjusted over the {len(ll['pairs']) * len(figs)} comparisons "
+                      f"below {ALPHA:g}; (~): not decided",
                       pair_head, pair_rows, 1))
     return tuple(grids)
 
