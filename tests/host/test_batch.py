@@ -9,10 +9,11 @@ left out of steps. The same steps go through KalmanFilter / ErrorStateFilter per
 seed's x and P agree to 1e-12 relative to its P's largest entry, and with numpy handing each
 seed's products to the same BLAS routines they are bit-identical (asserted apart, so a BLAS
 that rounds a stacked product differently shows as that alone). The KF is also checked
-against filterpy's KalmanFilter.
+against filterpy's KalmanFilter. ``navtwin bench batch``: its figures' shape, not its speed.
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -20,6 +21,7 @@ import pytest
 from filterpy.kalman import KalmanFilter as FpKF
 
 from navtwin.host.batch import BatchErrorStateFilter, BatchKalmanFilter
+from navtwin.host.batch.bench import GOAL, ONE_THREAD
 from navtwin.host.batch.linalg import inverse
 from navtwin.host.filters import ACCELERATION, ConstantAcceleration, KalmanFilter, Ranges, position_fix
 from navtwin.host.filters.errorstate import NAV, ErrorStateFilter
@@ -247,3 +249,38 @@ def test_the_kf_takes_linear_measurements_only():
     f = BatchKalmanFilter(np.zeros((2, 6)), np.tile(np.eye(6), (2, 1, 1)), MODEL)
     with pytest.raises(TypeError, match="needs a Linear measurement, got Ranges"):
         f.update(np.zeros((2, 1)), np.eye(1), Ranges(LAYOUT, (1,)))
+
+
+def test_bench_batch_times_both_paths_at_each_n_in_a_one_thread_child(capsys):
+    """The figures' shape and arithmetic (not the machine's speed): each N's ratio is its
+    rates' quotient, and the child saw the one-thread settings before numpy loaded."""
+    from navtwin.cli.main import main
+
+    assert main(["bench", "batch", "--quick", "--sizes", "1,3", "--repeats", "1",
+                 "--seconds", "0.001"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["threads_env"] == dict.fromkeys(ONE_THREAD, "1")
+    for step in ("kf_step", "errorstate_predict"):
+        by_n = out[step]["by_n"]
+        assert list(by_n) == ["1", "3"]
+        for r in by_n.values():
+            assert r["batch_steps_per_s"] > 0 and r["per_filter_steps_per_s"] > 0
+            assert r["ratio"] == pytest.approx(r["batch_steps_per_s"] / r["per_filter_steps_per_s"],
+                                               abs=0.01)
+        best = out[step]["best_n"]
+        assert out[step]["goal_met"] == (by_n[str(best)]["batch_steps_per_s"] >= GOAL)
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["--sizes", "0,16"], "--sizes must be counts 1..65536, comma-separated"),
+    (["--repeats", "0"], "--repeats must be in [1, 100]"),
+])
+def test_bench_batch_refuses_a_bad_setting_in_one_line(capsys, argv, line):
+    from navtwin.cli.main import main
+
+    try:
+        code = main(["bench", "batch", *argv])
+    except SystemExit as e:
+        code = e.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and line in err
