@@ -28,6 +28,7 @@ SETS = Registry("navtwin.benchmarks", "benchmark set", {
     "emulator": "navtwin.emulator.bench:benchmarks",
     "scale": "navtwin.emulator.bench_scale:benchmarks",
     "host": "navtwin.host.bench:benchmarks",
+    "batch": "navtwin.host.batch.bench:benchmarks",
     "lab": "navtwin.lab.bench:benchmarks",
 })
 #: where a setting's value waits in the parsed arguments (apart from bench's own options)

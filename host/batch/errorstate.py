@@ -1,0 +1,73 @@
+"""The closed-loop error-state filter of host.filters.errorstate for N seeds (001 sections 2
+and 4.2), each with its own specific force.
+
+Predict over one IMU interval T with seed s's nav-frame specific force f^n_s (001 eqs. 4-6,
+27)::
+
+    F_s = [[I, T I, -(f^n_s x)_h T^2/2], [0, I, -(f^n_s x)_h T], [0, 0, I]]   (+ I on the e_i)
+    P_s = F_s P_s F_s^T + G Q G^T
+
+G Q G^T is ``host.filters.errorstate.process_noise`` (the same for every seed of one T: the
+noise densities are the filter's). Update: the gated Joseph form (001 eqs. 28-30) of
+host.batch.innovation; ``take_nav`` resets the nav part after its feedback (closed loop).
+Each seed's P equals ErrorStateFilter's stepped alone, bit for bit (tests/host/test_batch.py).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from navtwin.host.filters.errorstate import NAV, process_noise
+
+from .base import BatchFilter
+from .innovation import BatchInnovation
+from .linalg import T
+from .seeds import by_dt, take
+
+
+class BatchErrorStateFilter(BatchFilter):
+    """x (N, n) = 0 and P (N, n, n) = *P0* of N seeds; ``extra`` random-walk states of
+    density ``extra_psd`` after the nav part."""
+
+    nav = NAV
+
+    def __init__(self, P0, *, gyro_psd: float, accel_psd: float, extra: int = 0,
+                 extra_psd: float = 0.0):
+        P0 = np.asarray(P0, float)
+        super().__init__(np.zeros(P0.shape[:2]), P0)
+        self.n = n = NAV + extra
+        if self.x.shape[1] != n:
+            raise ValueError(f"P0 must be (N, {n}, {n}) for {extra} extra states (got "
+                             f"{P0.shape}); give one row per seed")
+        self._noise = (float(gyro_psd), float(accel_psd), float(extra_psd), int(extra))
+        self._I = np.eye(n)
+
+    def predict(self, dt, f_n, active=None) -> None:
+        """Over dt (one value, or (N,) per seed) with each seed's specific force f_n (N, 3)
+        (or one (3,) for all), nav frame, for the *active* seeds (None: all)."""
+        idx = self.chosen(active)
+        dt = take(self.given(dt, 0, "dt"), 0, idx)
+        fx, fy, fz = np.moveaxis(take(self.given(f_n, 1, "f_n"), 1, idx), -1, 0)
+        x, P = self.rows(idx)
+        F = np.zeros_like(P)  # the identity, then -(f x) rows x and y: [[0, f_z, -f_y], [-f_z, 0, f_x]]
+        F[:, *np.diag_indices(self.n)] = 1.0
+        h = 0.5 * dt * dt
+        F[:, 0, 2] = F[:, 1, 3] = dt
+        F[:, 0, 5], F[:, 0, 6], F[:, 1, 4], F[:, 1, 6] = fz * h, -fy * h, -fz * h, fx * h
+        F[:, 2, 5], F[:, 2, 6], F[:, 3, 4], F[:, 3, 6] = fz * dt, -fy * dt, -fz * dt, fx * dt
+        Q = by_dt(dt, lambda d: process_noise(d, *self._noise))
+        self.store(idx, x, np.matmul(np.matmul(F, P), T(F)) + Q)
+
+    def update(self, z, H, R, gate=None, active=None) -> BatchInnovation:
+        """Correct the *active* seeds with z (N, m) = H x + v, v ~ N(0, R) (H (m, n) or
+        (N, m, n), R (m, m) or (N, m, m)); a seed whose NIS exceeds *gate* is unchanged."""
+        return self.correct(z, H, R, gate, active)
+
+    def take_nav(self, active=None) -> np.ndarray:
+        """The nav part of x (N, 7) of the *active* seeds (to feed back into their
+        strapdowns), reset to zero in x; zero rows for the others (theirs stays in x)."""
+        idx = self.chosen(active)
+        rows = slice(None) if idx is None else idx
+        dx = np.zeros((len(self.x), self.nav))
+        dx[rows] = self.x[rows, :self.nav]
+        self.x[rows, :self.nav] = 0.0
+        return dx

@@ -1,0 +1,55 @@
+"""The linear Kalman filter of host.filters.kf for N seeds along a leading axis.
+
+Predict (000 eq. 14), per seed::
+
+    x = F(dt) x,    P = F(dt) P F(dt)^T + Q(dt)
+
+with F and Q of the estimator's ConstantAcceleration model (its own ``F`` and ``Q``, one
+shared dt or a dt per seed). Update: the gated Joseph form of host.batch.innovation with a
+Linear measurement (z = H x, H shared by the seeds: the SINS acceleration, a WSN fix).
+Each seed's x and P equal KalmanFilter's stepped alone, bit for bit (tests/host/test_batch.py).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from navtwin.host.filters.model import ConstantAcceleration, Linear
+
+from .innovation import BatchInnovation
+from .linalg import T, mv
+from .base import BatchFilter
+from .seeds import by_dt, take
+
+
+class BatchKalmanFilter(BatchFilter):
+    """x (N, n) and P (N, n, n) of N seeds on one motion *model*."""
+
+    def __init__(self, x, P, model: ConstantAcceleration):
+        super().__init__(x, P)
+        self.model = model
+        self._I = np.eye(self.x.shape[1])
+        # F and Q by dt, stacked: the IMU period recurs (as the model's own cache)
+        self._transition = lru_cache(maxsize=32)(self._build)
+
+    def _build(self, dt: float) -> np.ndarray:
+        FQ = np.stack((self.model.F(dt), self.model.Q(dt)))
+        FQ.flags.writeable = False
+        return FQ
+
+    def predict(self, dt, active=None) -> None:
+        """Over dt (one value, or (N,) per seed) for the *active* seeds (None: all)."""
+        idx = self.chosen(active)
+        FQ = by_dt(take(self.given(dt, 0, "dt"), 0, idx), self._transition)
+        F, Q = FQ[..., 0, :, :], FQ[..., 1, :, :]
+        x, P = self.rows(idx)
+        self.store(idx, mv(F, x), np.matmul(np.matmul(F, P), T(F)) + Q)
+
+    def update(self, z, R, measurement: Linear, gate=None, active=None) -> BatchInnovation:
+        """Correct the *active* seeds with z (N, m) = H x + v, v ~ N(0, R) (R (m, m) or
+        (N, m, m)); a seed whose NIS exceeds *gate* (None, one value or (N,)) is unchanged."""
+        if not isinstance(measurement, Linear):
+            raise TypeError(f"BatchKalmanFilter needs a Linear measurement, got "
+                            f"{type(measurement).__name__}")
+        return self.correct(z, measurement.H, R, gate, active)
