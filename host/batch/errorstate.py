@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.filters.errorstate import NAV, process_noise
+from navtwin.host.filters.errorstate import NAV, process_noise, transition
 
 from .base import BatchFilter
 from .innovation import BatchInnovation
@@ -48,12 +48,9 @@ class BatchErrorStateFilter(BatchFilter):
         dt = take(self.given(dt, 0, "dt"), 0, idx)
         fx, fy, fz = np.moveaxis(take(self.given(f_n, 1, "f_n"), 1, idx), -1, 0)
         x, P = self.rows(idx)
-        F = np.zeros_like(P)  # the identity, then -(f x) rows x and y: [[0, f_z, -f_y], [-f_z, 0, f_x]]
+        F = np.zeros_like(P)
         F[:, *np.diag_indices(self.n)] = 1.0
-        h = 0.5 * dt * dt
-        F[:, 0, 2] = F[:, 1, 3] = dt
-        F[:, 0, 5], F[:, 0, 6], F[:, 1, 4], F[:, 1, 6] = fz * h, -fy * h, -fz * h, fx * h
-        F[:, 2, 5], F[:, 2, 6], F[:, 3, 4], F[:, 3, 6] = fz * dt, -fy * dt, -fz * dt, fx * dt
+        transition(F, dt, fx, fy, fz)
         Q = by_dt(dt, lambda d: process_noise(d, *self._noise))
         self.store(idx, x, np.matmul(np.matmul(F, P), T(F)) + Q)
 

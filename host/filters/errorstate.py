@@ -53,6 +53,17 @@ def process_noise(dt: float, gyro_psd: float, accel_psd: float, extra_psd: float
     return Q
 
 
+def transition(F: np.ndarray, dt, fx, fy, fz) -> None:
+    """Write the entries of F (001 eqs. 4-6) that depend on the interval dt and the specific
+    force (fx, fy, fz) into F, which holds the identity elsewhere: one filter's (n, n) with
+    scalars, or N seeds' (N, n, n) with (N,) arrays (host.batch), the same products each."""
+    # -(f x) rows x and y: [[0, f_z, -f_y], [-f_z, 0, f_x]]
+    h = 0.5 * dt * dt
+    F[..., 0, 2] = F[..., 1, 3] = dt
+    F[..., 0, 5], F[..., 0, 6], F[..., 1, 4], F[..., 1, 6] = fz * h, -fy * h, -fz * h, fx * h
+    F[..., 2, 5], F[..., 2, 6], F[..., 3, 4], F[..., 3, 6] = fz * dt, -fy * dt, -fz * dt, fx * dt
+
+
 class ClosedLoop:
     """What a closed-loop error-state filter does after its predict: the Joseph update and
     the feedback of its first ``nav`` states into the strapdown (here and host.filters.geodetic)."""
@@ -89,12 +100,7 @@ class ErrorStateFilter(ClosedLoop):
 
     def predict(self, dt: float, f_n) -> None:
         """Over one IMU interval dt with the specific force f_n = (f_x, f_y, f_z), nav frame."""
-        fx, fy, fz = f_n
         F = self._F
-        # -(f x) rows x and y: [[0, f_z, -f_y], [-f_z, 0, f_x]]
-        h = 0.5 * dt * dt
-        F[0, 2] = F[1, 3] = dt
-        F[0, 5], F[0, 6], F[1, 4], F[1, 6] = fz * h, -fy * h, -fz * h, fx * h
-        F[2, 5], F[2, 6], F[3, 4], F[3, 6] = fz * dt, -fy * dt, -fz * dt, fx * dt
+        transition(F, dt, *f_n)
         self.P = F.dot(self.P).dot(F.T) + process_noise(dt, *self._noise)
 
