@@ -64,6 +64,15 @@ def filter_names(text: str) -> tuple[str, ...]:
     return chosen
 
 
+def _vary(text: str):
+    from navtwin.lab.vary import Vary, VaryError
+
+    try:
+        return Vary.parse(text)
+    except VaryError as e:
+        raise argparse.ArgumentTypeError(str(e).removeprefix("vary: ")) from None
+
+
 def register(sub) -> None:
     p = sub.add_parser("sweep", help="Monte Carlo sweep of a scenario over seeds, on "
                        "dask.distributed, with confidence intervals", description=DESCRIPTION)
@@ -93,6 +102,11 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true",
                    help="print one JSON object (the summary, the output's path and metadata) "
                         "instead of the table")
+    p.add_argument("--vary", type=_vary, metavar="KEY=VALUES",
+                   help="a parameter sweep: the scenario's KEY (dotted, as in its TOML: "
+                        "ranging.sigma0_m, anchors.0.range_bias_m) over VALUES, a comma list "
+                        "(0.1,0.3,0.6) or a range A..B:STEP, crossed with the seeds: a table "
+                        "per value, then the values side by side (docs/sweeps.md)")
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run, extra="sweep")
 
@@ -100,6 +114,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from navtwin.emulator.scenario import ScenarioError, load_scenario
     from navtwin.lab import sweep
+    from navtwin.lab.vary import VaryError
 
     try:
         sc = load_scenario(args.scenario)
@@ -118,22 +133,28 @@ def run(args) -> int:
             out = args.out or tempfile.mkdtemp(prefix=f"navtwin-sweep-{sc.name}-")
             progress = stack.enter_context(_progress(args.quiet))
             result = sweep.run(sc, args.seeds, args.filters, duration=args.duration, out=out,
-                               client=client, serial=args.serial, progress=progress)
-    except sweep.SweepError as e:
+                               client=client, serial=args.serial, vary=args.vary,
+                               progress=progress)
+    except (sweep.SweepError, VaryError) as e:
         raise UsageError(str(e)) from None
-    summary = sweep.summarise(result.rows, result.filters, sc.name)
+    vary = result.meta["vary"]
+    summary = sweep.summarise(result.rows, result.filters, sc.name) if vary is None \
+        else sweep.summarise_values(result.rows, result.filters, sc.name)
     if args.json:
         print(json.dumps(_finite({"summary": summary, "out": str(result.out),
                                   "computed_tasks": result.tasks, "meta": result.meta})))
     else:
-        print(sweep.table(summary))
+        print(sweep.table(summary) if vary is None else sweep.values_table(vary, summary))
         print(f"\nParquet: {result.out} ({result.tasks} tasks computed)")
     if args.results:
         # a scenario file's block is named by the file (a variant of office keeps office's
         # paper and host config but has a table of its own)
         key = Path(args.scenario).stem if args.scenario.endswith(".toml") else sc.name
+        text = sweep.markdown(summary, sc.name, result.meta) if vary is None \
+            else sweep.values_markdown(summary, sc.name, result.meta)
         try:
-            sweep.write_block(args.results, key, sweep.markdown(summary, sc.name, result.meta))
+            sweep.write_block(args.results, key if vary is None else f"{key}:{vary['key']}",
+                              text)
         except sweep.SweepError as e:  # e.g. its file system went read-only during the run
             raise UsageError(f"{e}; the cells are kept in {result.out} (a re-run with that "
                              "--out computes none again)") from None

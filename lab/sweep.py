@@ -55,6 +55,7 @@ from . import evaluate, layouts
 from .evaluate import ALPHA, ci_text, decide, mean_ci, p_text, paired
 from .provenance import code_version
 from .run import run_in_memory, truth
+from .vary import Vary, label, overview, variant
 
 #: Scenario seconds a task holds at least (seeds chunked): 0.2-0.7 s of work here.
 MIN_TASK_VIRTUAL_S = 10.0
@@ -79,8 +80,8 @@ def _arrow_type(column: str) -> pa.DataType:
     return pa.int64() if column == "n" or column.endswith("_n") else pa.float64()
 
 
-SCHEMA = pa.schema([("scenario", pa.string()), ("seed", pa.int64()), ("filter", pa.string()),
-                    ("status", pa.string()), ("error", pa.string())] +
+SCHEMA = pa.schema([("scenario", pa.string()), ("variant", pa.string()), ("seed", pa.int64()),
+                    ("filter", pa.string()), ("status", pa.string()), ("error", pa.string())] +
                    [(m, _arrow_type(m)) for m in METRICS])
 #: The figures summarised over seeds, with their table headings.
 FIGURES = {"mean": "mean m", "max": "max m", "rms": "RMSE m", "nees_mean": "NEES"}
@@ -154,9 +155,10 @@ def _error_line(e: BaseException) -> str:
 
 
 def run_chunk(text: str, name: str, seeds: list[int], filters: tuple[str, ...],
-              duration: float | None) -> list[dict]:
-    """One task: the cells of *seeds*; a seed that raises is run once more, then its cells
-    are failed rows with the error's line."""
+              duration: float | None, variant: str | None = None) -> list[dict]:
+    """One task: the cells of *seeds* (of a parameter sweep's *variant*: its value's label,
+    lab.vary); a seed that raises is run once more, then its cells are failed rows with the
+    error's line."""
     sc = _scenario(text, name)
     rows = []
     for seed in seeds:
@@ -167,6 +169,8 @@ def run_chunk(text: str, name: str, seeds: list[int], filters: tuple[str, ...],
             except Exception as e:  # noqa: BLE001 - any failure of a cell is reported as a row
                 if attempt == 2:
                     rows += [_failed(name, seed, f, _error_line(e)) for f in filters]
+    for r in rows:
+        r["variant"] = variant
     return rows
 
 
@@ -273,7 +277,8 @@ def _check_out(out: Path) -> None:
 def _check_same(out: Path, metas: list[dict], meta: dict) -> None:
     for m in metas:
         for key, what in (("scenario_hash", "scenario hash"), ("code_version", "code version"),
-                          ("duration_s", "duration"), ("filters", "filter set")):
+                          ("duration_s", "duration"), ("filters", "filter set"),
+                          ("vary", "parameter sweep")):
             if m.get(key) != meta[key]:
                 raise SweepError(f"out: {out}: holds a sweep of another {what} ({m.get(key)} "
                                  f"there, {meta[key]} now); choose another directory or remove it")
@@ -281,29 +286,34 @@ def _check_same(out: Path, metas: list[dict], meta: dict) -> None:
 
 def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable[str] | None = None,
         *, duration: float | None = None, out: str | Path | None = None,
-        client: Client | None = None, serial: bool = False,
+        client: Client | None = None, serial: bool = False, vary: Vary | None = None,
         progress: Callable[[int, int], None] | None = None) -> Result:
-    """Sweep *scenario* over *seeds*: in this process if *serial*, else on *client* (a new
-    LocalCluster if None). Rows stream into *out*/part-NNNN.parquet when *out* is given, and
-    only the cells *out* lacks are computed. *progress(done, total)* counts seeds."""
+    """Sweep *scenario* over *seeds* (and, with *vary*, each of its values: lab.vary): in this
+    process if *serial*, else on *client* (a new LocalCluster if None). Rows stream into
+    *out*/part-NNNN.parquet when *out* is given, and only the cells *out* lacks are computed.
+    *progress(done, total)* counts (value, seed) runs."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     seeds = sorted(set(int(s) for s in seeds))
     filters = tuple(filters) if filters else default_filters(sc)
+    # each value's scenario made (and checked) before any work
+    variants = {None: sc} if vary is None else {
+        label(v): variant(sc, vary.key, v) for v in vary.values}
     meta = {"code_version": code_version(), "scenario": sc.name, "scenario_hash": scenario_hash(sc),
             "seeds": [seeds[0], seeds[-1]] if seeds else [], "filters": list(filters),
-            "duration_s": duration}
-    done: dict[tuple[int, str], dict] = {}
+            "duration_s": duration, "vary": None if vary is None else vary.as_meta()}
+    done: dict[tuple[str | None, int, str], dict] = {}
     if out is not None:
         out = Path(out)
         _check_out(out)
         metas, old = read_out(out)
         _check_same(out, metas, meta)
         for r in old:  # a later part's cell replaces an earlier (failed) one
-            done[(r["seed"], r["filter"])] = r
-    wanted = [(s, f) for s in seeds for f in filters]
-    todo = [s for s in seeds if any(done.get((s, f), {}).get("status") != "ok" for f in filters)]
-    tasks = chunk_seeds(todo, duration or sc.duration_s)
-    text, cells = sc.to_toml(), schema(sc)
+            done[(r["variant"], r["seed"], r["filter"])] = r
+    wanted = [(v, s, f) for v in variants for s in seeds for f in filters]
+    tasks = [(v, chunk) for v, vsc in variants.items() for chunk in chunk_seeds(
+        [s for s in seeds if any(done.get((v, s, f), {}).get("status") != "ok" for f in filters)],
+        duration or vsc.duration_s)]
+    texts, cells = {v: vsc.to_toml() for v, vsc in variants.items()}, schema(sc)
     writer = part = None
     if out is not None and tasks:
         n = max([int(m[1]) for p in out.iterdir() if (m := PART.fullmatch(p.name))] + [-1]) + 1
@@ -313,29 +323,30 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         except OSError as e:
             raise SweepError(f"out: {out}: cannot write {part.name} ({e}); choose a writable "
                              "directory") from None
-    finished = len(seeds) - len(todo)
+    total = len(variants) * len(seeds)
+    finished = total - sum(len(chunk) for _, chunk in tasks)
 
     def take(rows: list[dict]) -> None:
         nonlocal finished
         for r in rows:
-            done[(r["seed"], r["filter"])] = r
+            done[(r["variant"], r["seed"], r["filter"])] = r
         if writer is not None:
             writer.write_table(pa.Table.from_pylist(rows, schema=cells))
-        finished += len({r["seed"] for r in rows})
+        finished += len({(r["variant"], r["seed"]) for r in rows})
         if progress:
-            progress(finished, len(seeds))
+            progress(finished, total)
 
     if progress:
-        progress(finished, len(seeds))
+        progress(finished, total)
     try:
         if serial:
-            for chunk in tasks:
-                take(run_chunk(text, sc.name, chunk, filters, duration))
+            for v, chunk in tasks:
+                take(run_chunk(texts[v], sc.name, chunk, filters, duration, v))
         elif tasks:
             own = client is None
             client = client or Client()
             try:
-                _on_dask(client, tasks, text, sc.name, filters, duration, take)
+                _on_dask(client, tasks, texts, sc.name, filters, duration, take)
             finally:
                 if own:
                     client.__exit__()
@@ -346,13 +357,14 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
     return Result(rows, filters, meta, len(tasks), out, part)
 
 
-def _on_dask(client: Client, tasks, text, name, filters, duration, take) -> None:
+def _on_dask(client: Client, tasks, texts, name, filters, duration, take) -> None:
     from distributed import wait
 
     n = len(tasks)
-    futures = client.client.map(run_chunk, [text] * n, [name] * n, tasks, [filters] * n,
-                                [duration] * n, pure=False, retries=1)
-    chunk_of = {f.key: c for f, c in zip(futures, tasks)}
+    futures = client.client.map(run_chunk, [texts[v] for v, _ in tasks], [name] * n,
+                                [chunk for _, chunk in tasks], [filters] * n, [duration] * n,
+                                [v for v, _ in tasks], pure=False, retries=1)
+    task_of = {f.key: t for f, t in zip(futures, tasks)}
     pending, watch = set(futures), _Watch(client)
     while pending:
         try:
@@ -364,8 +376,9 @@ def _on_dask(client: Client, tasks, text, name, filters, duration, take) -> None
             if f.status == "finished":
                 take(f.result())
             else:  # lost twice (e.g. its worker died): its cells are failed rows
-                err = _error_line(f.exception())
-                take([_failed(name, s, flt, err) for s in chunk_of[f.key] for flt in filters])
+                err, (v, chunk) = _error_line(f.exception()), task_of[f.key]
+                take([{**_failed(name, s, flt, err), "variant": v} for s in chunk
+                      for flt in filters])
             f.release()
 
 
@@ -428,6 +441,23 @@ def summarise(rows: list[dict], filters: Iterable[str], scenario: str | None = N
     if layout and (section := layout[1].summary(ok, per, scenario)) is not None:
         out[layout[0]] = section
     return out
+
+
+def summarise_values(rows: list[dict], filters: Iterable[str], scenario: str | None = None) -> dict:
+    """A parameter sweep's rows (lab.vary) summarised per value: value label -> :func:`summarise`
+    of that value's cells, in the values' order."""
+    values = dict.fromkeys(r["variant"] for r in rows)
+    return {v: summarise([r for r in rows if r["variant"] == v], filters, scenario)
+            for v in values}
+
+
+def values_table(vary: dict, summaries: dict) -> str:
+    """A parameter sweep as text: each value's table under its name, then the mean error of
+    every filter at every value side by side (lab.vary.overview)."""
+    parts = [f"{vary['key']} = {v}:\n{table(s)}" for v, s in summaries.items()]
+    head, rows = overview(vary["key"], summaries)
+    return "\n\n".join(parts + [f"mean error (m) by {vary['key']}, ± the 95 % half-width over "
+                                 "seeds:\n" + "\n".join(_aligned([head, *rows]))])
 
 
 def table(summary: dict) -> str:
@@ -502,6 +532,19 @@ def markdown(summary: dict, scenario: str, meta: dict | None = None) -> str:
         published = sorted(means, key=means.get)
         rank += f"; {paper['paper']}'s by its published means: `{' < '.join(published)}`"
     lines += ["", rank]
+    return "\n".join(lines)
+
+
+def values_markdown(summaries: dict, scenario: str, meta: dict) -> str:
+    """A parameter sweep as Markdown: the mean error of every filter at every value side by
+    side, then each value's :func:`markdown` under a heading of its own."""
+    key = meta["vary"]["key"]
+    head, rows = overview(key, summaries)
+    lines = [f"Mean error (m) by `{key}`, ± the 95 % half-width over seeds:", "",
+             "| " + " | ".join(head) + " |", "|---|" + "---:|" * (len(head) - 1),
+             *("| " + " | ".join(r) + " |" for r in rows)]
+    for v, s in summaries.items():
+        lines += ["", f"#### `{key}` = {v}", "", markdown(s, scenario, meta)]
     return "\n".join(lines)
 
 
