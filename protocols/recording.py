@@ -237,17 +237,18 @@ class PortWriter:
               t_wall_ns: int | None = None, read: Read | None = None) -> None:
         """Buffer one chunk (*read*: its read columns, in a writer with ``reads``); may flush
         (and so raise :class:`RecordingWriteError`)."""
-        if not data or self._writer.error is not None:
+        writer = self._writer
+        if not data or writer.error is not None:
             return
-        if len(data) > MAX_CHUNK:
-            raise ValueError(f"a chunk of {len(data)} bytes is over MAX_CHUNK; write it in parts")
-        if read is not None and not self._writer.reads:
-            raise ValueError("read columns need a RecordingWriter made with reads=True")
         size = len(data)
+        if size > MAX_CHUNK:
+            raise ValueError(f"a chunk of {size} bytes is over MAX_CHUNK; write it in parts")
+        if read is not None and not writer.reads:
+            raise ValueError("read columns need a RecordingWriter made with reads=True")
         # an index line per chunk: f-strings, the cheapest text of a few integers (None: empty)
         line = (f"{self.offset},{size},{'' if t_device_ns is None else t_device_ns},"
                 f"{'' if t_wall_ns is None else t_wall_ns}")
-        if self._writer.reads:
+        if writer.reads:
             line += "".join("," if f is None else f",{f}" for f in read or (None,) * len(Read._fields))
         line = (line + "\n").encode()
         self._data_end += size
@@ -256,8 +257,8 @@ class PortWriter:
         self._bin.append(data)
         self._idx.append(line)
         self.offset += size
-        if self._writer.buffered >= FLUSH_BYTES:
-            self._writer.flush()
+        if writer.buffered >= FLUSH_BYTES:
+            writer.flush()
 
     def flush(self) -> None:
         ends, self._ends = self._ends, []
