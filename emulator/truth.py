@@ -109,7 +109,8 @@ def csv_rows(arr: np.ndarray) -> bytes:
     y = np.abs(values) * scale
     scaled = np.rint(y)
     with np.errstate(invalid="ignore"):  # nan and inf: unsure
-        unsure = ~(0.5 - np.abs(y - scaled) > np.spacing(y)) | ~(y < 2.0 ** 50)
+        # y 2^-52 >= ulp(y); 0.5 - |y - rint(y)| is exact where it is under 0.25
+        unsure = ~(0.5 - np.abs(y - scaled) > y * 2.0 ** -52) | ~(y < 2.0 ** 50)
     if unsure.any():
         rows = np.flatnonzero(unsure.any(axis=1))
         cuts = zip(np.r_[0, rows + 1], np.r_[rows, len(arr)])
