@@ -63,7 +63,7 @@ def _words() -> np.ndarray:
     """The 4-byte words truth.csv's text is made of, NUL-padded on the left (the NULs are
     deleted at the end), in sections of 1000 (one word per group g of three digits)."""
     sections = [b"%03d", b"%d", b"-%d", b".%03d", b"%03d,", b"%03d\n"]
-    words = [(f % g).rjust(4, b"\0") for f in sections for g in range(1000)] + [b",", b""]
+    words = [f % g for f in sections for g in range(1000)] + [b",", b""]
     return np.frombuffer(b"".join(w.rjust(4, b"\0") for w in words), np.uint32)
 
 
@@ -96,8 +96,8 @@ def csv_rows(arr: np.ndarray) -> bytes:
     binary fraction correctly rounded, halves to even), made with whole-array numpy steps
     rather than a format call per number: y = |x| 10^p is one rounding from the exact
     product, so rint(y) is printf's digits unless the exact product can be a half (y within
-    ulp(y) of one; rows holding such a value, or a value too large or not finite, are printed
-    by printf itself). Each number becomes 4-byte words of three digits (_WORDS), taken in
+    y 2^-52 >= ulp(y) of one; rows holding such a value, or a value too large or not finite,
+    are printed by printf itself). Each number becomes 4-byte words of three digits (_WORDS), taken in
     one step."""
     if len(arr) > _ROWS:
         return b"".join(csv_rows(arr[i:i + _ROWS]) for i in range(0, len(arr), _ROWS))
