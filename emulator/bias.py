@@ -76,9 +76,11 @@ def first_order(phi: np.ndarray, x: np.ndarray, before: np.ndarray) -> np.ndarra
     """y_j = phi y_j-1 + x_j along axis 1 of *x* (K, n, 3), one phi per term k, from
     y_-1 = *before* (K, 3): a prefix scan of log2(n) numpy steps."""
     y = x.copy()
-    step, power = 1, phi.copy()
-    while step < y.shape[1]:
-        y[:, step:] += power[:, None, None] * y[:, :-step]
+    scratch = np.empty_like(y)  # one buffer for every step's products, not one each
+    step, power, n = 1, phi.copy(), y.shape[1]
+    while step < n:
+        product = np.multiply(power[:, None, None], y[:, :-step], out=scratch[:, :n - step])
+        y[:, step:] += product
         step, power = 2 * step, power * power
     decay = phi[:, None] ** np.arange(1, y.shape[1] + 1)  # phi^(j+1)
     return y + decay[:, :, None] * before[:, None, :]

@@ -296,6 +296,9 @@ class Coordinator:
     ignored: int = field(default=0, init=False)  # host frames the firmware does not handle
     dropped_tx_buffer: int = field(default=0, init=False)  # RF packets the UART had no room for
     _prefix: dict = field(default_factory=dict, init=False)
+    #: the API frames of RF packets admitted and not yet rendered, by (AP 2, AO bit 0,
+    #: packet): the frame is a function of the three, so render takes what admit made
+    _framed: dict = field(default_factory=dict, init=False)
     #: the frames its transmit requests put on the air (emulator.radio.AirFrame), in the order
     #: sent, until the run takes them
     air: list = field(default_factory=list, init=False)
@@ -318,11 +321,12 @@ class Coordinator:
             return len(xbee.wrap(item.data, self.escaped))
         if t_ns < self.reset_until_ns or self.off(t_ns):
             return None
-        size = len(xbee.wrap(self._rx_prefix(item) + item.data, self.escaped))
-        if queued + size > SERIAL_TX_BUFFER:
+        frame = self._rx_frame(item)
+        if queued + len(frame) > SERIAL_TX_BUFFER:
             self.dropped_tx_buffer += 1
             return None
-        return size
+        self._framed[self._rx_key(item)] = frame
+        return len(frame)
 
     def render(self, t_ns: int, item) -> bytes:
         """The API frame bytes of an output item, in the current API mode; b"" = nothing."""
@@ -337,7 +341,15 @@ class Coordinator:
             return out
         if t_ns < self.reset_until_ns or self.off(t_ns):
             return b""  # the radio is rebooting: the packet is never reported
-        return xbee.wrap(self._rx_prefix(item) + item.data, self.escaped)
+        frame = self._framed.pop(self._rx_key(item), None)
+        return self._rx_frame(item) if frame is None else frame
+
+    def _rx_key(self, pkt) -> tuple:
+        return self.escaped, self.registers.values["AO"] & 1, pkt
+
+    def _rx_frame(self, pkt) -> bytes:
+        """The API frame reporting RF packet *pkt* (0x90 or 0x91), in the current modes."""
+        return xbee.wrap(self._rx_prefix(pkt) + pkt.data, self.escaped)
 
     def _rx_prefix(self, pkt) -> bytes:
         """Frame data of a 0x90 (or 0x91) up to the payload, built once per sender."""
@@ -372,7 +384,7 @@ class Coordinator:
 
     def off(self, t_ns: int) -> bool:
         """Whether a coordinator fault has the radio powered off at *t_ns*."""
-        return any(f.active(t_ns) for f in self.faults)
+        return bool(self.faults) and any(f.active(t_ns) for f in self.faults)
 
     def received(self, t_ns: int, packet) -> Output:
         """An RF packet the radio received at *t_ns*: reported as a 0x90/0x91 frame. The

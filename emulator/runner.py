@@ -632,10 +632,14 @@ class Emulation:
                 continue
             mine += [f for f in coordinator.air if f.t_ns < until_ns]
             coordinator.air = [f for f in coordinator.air if f.t_ns >= until_ns]
-        for frame in sorted(self.world.air(until_ns) + mine, key=lambda f: f.t_ns):
-            if self.recorder is not None:
-                self.recorder.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC).write(
-                    frame.psdu, frame.t_ns, wall_ns)
+        frames = self.world.air(until_ns) + mine
+        if mine:
+            frames.sort(key=lambda f: f.t_ns)  # the world's come in order
+        recorded = None if self.recorder is None else \
+            self.recorder.stream(AIR, LINKTYPE_IEEE802_15_4_WITHFCS, AIR_DOC)
+        for frame in frames:
+            if recorded is not None:
+                recorded.write(frame.psdu, frame.t_ns, wall_ns)
             if self.air_sink is not None:
                 self.air_sink(frame)
             if self.tap is not None and self.tap.clients:

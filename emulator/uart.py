@@ -293,31 +293,44 @@ class Line(_Wrapped):
                     self._release()
             elif what == -2:
                 _, data, baud = self._pieces.popleft()
-                end = t + wire_ns(len(data), baud)
-                self.current = Chunk(self.name, t, end, data, baud)
-                self.free_ns = end
-                self.chunks += 1
-                self.bytes += len(data)
+                self._start(t, data, baud)
             else:
                 baud = self.device.baud  # before rendering: a BD change applies to later chunks
                 marks = ()
+                offset = self.bytes + (sum(len(d) for _, d, _ in self._pieces) if self._pieces else 0)
                 if what == -1:
                     ready, item, size = queue.popleft()
                     self.queued -= size
                     if type(item) is Marked:
                         item, marks = item
                     data = self.device.render(ready, item)
-                    pieces = self._chain(0, t, ready, data, baud) if data and self.wrappers \
-                        else [(t, data)] if data else []
+                    if not self.wrappers:
+                        # its one piece starts now (t < end_ns, the line is free and no
+                        # arrival is due by t): the step a queued piece would take next
+                        sent = len(data)
+                        if data:
+                            self.queued += sent
+                            self._start(t, data, baud)
+                        pieces = None
+                    else:
+                        pieces = self._chain(0, t, ready, data, baud) if data else []
                 else:
                     pieces = self._chain(what, t, t, None, baud)
-                offset = self.bytes + sum(len(d) for _, d, _ in self._pieces)
-                sent = self._launch(pieces, baud, end_ns)
+                if pieces is not None:
+                    sent = self._launch(pieces, baud, end_ns)
                 if marks and sent and self.ledger is not None:
                     for m in marks:
                         self._enter({**m, "fault": self.ledger.index(m["fault"]),
                                      "port": self.name, "direction": "to_host",
                                      "start": offset, "end": offset + sent})
+
+    def _start(self, t: int, data: bytes, baud: int) -> None:
+        """Put *data* on the wire from *t*: the chunk in progress."""
+        end = t + wire_ns(len(data), baud)
+        self.current = Chunk(self.name, t, end, data, baud)
+        self.free_ns = end
+        self.chunks += 1
+        self.bytes += len(data)
 
     def _launch(self, pieces: list, baud: int, end_ns: int) -> int:
         """Queue the pieces of a chunk that will start before *end_ns* (each starts when

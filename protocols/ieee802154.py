@@ -114,5 +114,8 @@ def data_frame(seq: int, pan: int, dst: int, src: int, payload: bytes) -> bytes:
 
 def ack_frame(seq: int) -> bytes:
     """The PSDU of the ACK of the data frame with MAC sequence number *seq*."""
-    return with_fcs(ACK_FC + bytes((seq & 0xFF,)))
+    return _ACKS[seq & 0xFF]
+
+
+_ACKS = [with_fcs(ACK_FC + bytes((seq,))) for seq in range(256)]  # one per sequence number
 

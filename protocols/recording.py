@@ -231,31 +231,38 @@ class PortWriter:
         self._idx.flush()  # now: an index on disk always has its header
         self.offset = 0  # bytes written to this port so far (flushed or not)
         self._ends: list[tuple[int, int]] = []  # buffered chunks: (data end, index end)
+        self._data_end = self._index_end = 0  # ... the last one's
 
     def write(self, data: bytes, t_device_ns: int | None = None,
               t_wall_ns: int | None = None, read: Read | None = None) -> None:
         """Buffer one chunk (*read*: its read columns, in a writer with ``reads``); may flush
         (and so raise :class:`RecordingWriteError`)."""
-        if not data or self._writer.error is not None:
+        writer = self._writer
+        if not data or writer.error is not None:
             return
-        if len(data) > MAX_CHUNK:
-            raise ValueError(f"a chunk of {len(data)} bytes is over MAX_CHUNK; write it in parts")
-        if read is not None and not self._writer.reads:
+        size = len(data)
+        if size > MAX_CHUNK:
+            raise ValueError(f"a chunk of {size} bytes is over MAX_CHUNK; write it in parts")
+        if read is not None and not writer.reads:
             raise ValueError("read columns need a RecordingWriter made with reads=True")
-        fields = [self.offset, len(data), t_device_ns, t_wall_ns]
-        if self._writer.reads:
-            fields += read or (None,) * len(Read._fields)
-        line = (",".join("" if f is None else str(f) for f in fields) + "\n").encode()
-        data_end, index_end = self._ends[-1] if self._ends else (0, 0)
-        self._ends.append((data_end + len(data), index_end + len(line)))
+        # an index line per chunk: f-strings, the cheapest text of a few integers (None: empty)
+        line = (f"{self.offset},{size},{'' if t_device_ns is None else t_device_ns},"
+                f"{'' if t_wall_ns is None else t_wall_ns}")
+        if writer.reads:
+            line += "".join("," if f is None else f",{f}" for f in read or (None,) * len(Read._fields))
+        line = (line + "\n").encode()
+        self._data_end += size
+        self._index_end += len(line)
+        self._ends.append((self._data_end, self._index_end))
         self._bin.append(data)
         self._idx.append(line)
-        self.offset += len(data)
-        if self._writer.buffered >= FLUSH_BYTES:
-            self._writer.flush()
+        self.offset += size
+        if writer.buffered >= FLUSH_BYTES:
+            writer.flush()
 
     def flush(self) -> None:
         ends, self._ends = self._ends, []
+        self._data_end = self._index_end = 0
         try:
             self._bin.flush()  # the data first: the index never names bytes not on disk
         except RecordingWriteError as e:

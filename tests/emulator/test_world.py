@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from navtwin.emulator.scenario import SCENARIO_NAMES, load_scenario
-from navtwin.emulator.truth import FIELDS, read_truth_csv, write_truth_csv
+from navtwin.emulator.truth import DTYPE, FIELDS, PLACES, csv_rows, read_truth_csv, write_truth_csv
 from navtwin.emulator.world import EVENT_ORDER, Event, RfPacket, World
 
 from .world_helpers import port_bytes
@@ -102,6 +102,30 @@ def test_truth_csv_round_trip(tmp_path):
         assert np.allclose(back[f], truth[f], atol=1e-6), f
     part = tmp_path / "part.csv"
     assert write_truth_csv(part, w.truth(1_500_000, 5_000_000)) == 3  # 2, 3 and 4 ms
+
+
+def test_truth_text_is_printf_number_by_number():
+    """csv_rows' whole-array text equals printf's ("%d", "%.6f", "%.9f") for every number:
+    halves at the last place (rounded to even on the exact binary value), values just either
+    side of them, -0.0 and negatives that round to zero, every integer width, and what it
+    hands to printf (nan, inf, too large)."""
+    rng = np.random.default_rng(23)
+    arr = np.zeros(6000, DTYPE)
+    arr["t"] = rng.integers(-10**13, 10**13, len(arr))
+    arr["t"][:3] = 0, 7, -1
+    for f in FIELDS[1:]:
+        arr[f] = rng.standard_normal(len(arr)) * 10.0 ** rng.integers(-12, 12, len(arr))
+    halves = (np.arange(1000) - 500 + 0.5) / 1e6
+    arr["x"][:1000] = halves  # ties at six places, as the nearest doubles
+    arr["x"][1000:2000] = np.nextafter(halves, np.inf)
+    arr["yaw"][2000:3000] = (np.arange(1000) - 500 + 0.5) / 2**30  # exact halves at nine places
+    arr["yaw"][3000:4000] = (np.arange(1000) - 500) / 8  # exact binary fractions
+    arr["y"][4000:4004] = -0.0, -4e-7, -4e-10, 999.9999996
+    arr["z"][4004:4008] = np.nan, np.inf, -np.inf, 1e300
+    fmt = ["%d" if p == 0 else f"%.{p}f" for p in PLACES]
+    expect = "".join(",".join(f % v for f, v in zip(fmt, row)) + "\n" for row in arr.tolist())
+    assert csv_rows(arr).decode() == expect
+    assert b"".join(csv_rows(arr[i:i + 700]) for i in range(0, len(arr), 700)) == csv_rows(arr)
 
 
 def test_truth_slices_agree():
