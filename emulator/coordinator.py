@@ -339,9 +339,9 @@ class Coordinator:
             if item.reconfigure:
                 self._reconfigure()
             return out
+        frame = self._framed.pop(self._rx_key(item), None)  # first: kept for nothing else
         if t_ns < self.reset_until_ns or self.off(t_ns):
             return b""  # the radio is rebooting: the packet is never reported
-        frame = self._framed.pop(self._rx_key(item), None)
         return self._rx_frame(item) if frame is None else frame
 
     def _rx_key(self, pkt) -> tuple:
