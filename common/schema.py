@@ -65,6 +65,16 @@ def between(lo: float, hi: float, fix: str | None = None) -> Check:
                  fix or f"use a value from {_num(lo)} to {_num(hi)}")
 
 
+def counts(lo: int, hi: int, example: str) -> Check:
+    """A comma-separated list of whole numbers in [lo, hi] (a benchmark's sizes, as text)."""
+    def ok(text: str) -> bool:
+        try:
+            return all(lo <= int(v) <= hi for v in text.split(","))
+        except ValueError:
+            return False
+    return Check(ok, f"must be counts {lo}..{hi}, comma-separated", f"use e.g. {example}")
+
+
 def one_of(*allowed, fix: str | None = None) -> Check:
     names = ", ".join(repr(a) if isinstance(a, str) else _num(a) for a in allowed)
     return Check(lambda v: v in allowed, f"must be one of {names}", fix or f"use one of {names}")

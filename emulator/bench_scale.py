@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from navtwin.common.schema import Check, between, key, takes
+from navtwin.common.schema import Check, between, counts, key, takes
 from navtwin.protocols import ports as lab_ports
 
 from .bench import pty_floor
@@ -243,20 +243,12 @@ def scale(vehicles: list[int], seconds: float, seed: int = 1, workers: str = "au
             "rows": rows, "largest_n_meeting_goal": max(meeting, default=None)}
 
 
-def _counts(text: str) -> bool:
-    try:
-        return all(1 <= int(v) <= 500 for v in text.split(","))
-    except ValueError:
-        return False
-
-
 @dataclass(frozen=True)
 class Scale:
     """scale's settings."""
     vehicles: str | None = key(None, "", "the fleet sizes run one after another, comma-separated; "
                                "none = 1,10,25,50,75 (1,10 quick)",
-                               Check(_counts, "must be counts 1..500, comma-separated",
-                                     "use e.g. 1,10,50"))
+                               counts(1, 500, "1,10,50"))
     seconds: float | None = key(None, "s", "real time each fleet runs; none = 30 (5 quick)",
                                 between(3, 3600))
     workers: str = key("auto", "", "navtwin emulate --workers: auto or a count",

@@ -31,18 +31,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from navtwin.common.schema import Check, between, key, takes
+from navtwin.common.schema import between, counts, key, takes
 
 GOAL = 1_000_000  # seed-steps per CPU-second on one core (issue 23)
 ONE_THREAD = {v: "1" for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
 EXTRA = 4  # tc's NLOS states: the 11-state filter
-
-
-def _sizes(text: str) -> bool:
-    try:
-        return all(1 <= int(v) <= 65536 for v in text.split(","))
-    except ValueError:
-        return False
 
 
 @dataclass(frozen=True)
@@ -50,8 +43,7 @@ class Batch:
     """batch's settings."""
     sizes: str | None = key(None, "", "the batch sizes N, comma-separated; none = "
                             "1,16,256,1024,4096 (1,256 quick)",
-                            Check(_sizes, "must be counts 1..65536, comma-separated",
-                                  "use e.g. 1,256,4096"))
+                            counts(1, 65536, "1,256,4096"))
     repeats: int | None = key(None, "", "timings of each, the median given; none = 5 (3 quick)",
                               between(1, 100))
     seconds: float | None = key(None, "s", "CPU time of one timing; none = 0.2 (0.03 quick)",
