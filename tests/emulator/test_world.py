@@ -175,3 +175,29 @@ def test_device_truth_is_plain_data():
     info = json.loads(json.dumps(w.device_truth()))
     assert info["router_my"] == sc.radios_for(3)["router"]["MY"] == w.vehicles[0].src16
     assert len(info["imu"]["gyro"]["turn_on_bias"]) == 3 and len(info["imu"]["accel"]["matrix"]) == 3
+
+
+def test_blocks_made_ahead_on_a_thread_are_the_blocks_made_in_turn(office_events):
+    """World.ahead's maker thread makes the same events, whichever thread made each block,
+    and what a step raises there is raised by advance (never a loop waiting for a block that
+    a dead generator will not make)."""
+    sc, events = office_events
+    world = World(sc)
+    got = []
+    with world.ahead():
+        for k in range(1, 8):
+            got += world.advance(k * World.BLOCK_NS)
+    assert got == [e for e in events if e.t_ns < 7 * World.BLOCK_NS] and got
+
+    broken = World(sc)
+    imu = broken.vehicles[0].imu
+    generate = imu.generate
+
+    def failing(lo, hi):
+        if lo >= 2 * World.BLOCK_NS:
+            raise ArithmeticError("a model's step failed")
+        return generate(lo, hi)
+    imu.generate = failing
+    with broken.ahead(), pytest.raises(ArithmeticError, match="model's step"):
+        for k in range(1, 8):
+            broken.advance(k * World.BLOCK_NS)
