@@ -680,13 +680,16 @@ class Emulation:
         if {"start_s", "end_s"} & set(spec):
             raise ControlError('give "fault" as {"kind": ..., settings} without start_s/end_s '
                                '(a live fault starts now; "duration_s" sets its length)')
-        # the world's models stay between two blocks until the fault is on them
-        with self.world.held() as made_ns:
+        try:
+            kind = type(build(Fault, spec, (("fault", 0),)))  # the settings, checked
+        except Invalid as e:
+            raise ControlError(str(e)) from None
+        # a line or coordinator fault acts on what has not been sent: from now; a device
+        # fault on what the world's models have not made, and they stay between two blocks
+        # until it is on them (only they: holding the world finishes the block in progress)
+        on_world = kind.ACTS_ON not in ("line", "coordinator")
+        with self.world.held() if on_world else contextlib.nullcontext(self._now_ns) as start:
             try:
-                kind = type(build(Fault, spec, (("fault", 0),)))  # the settings, checked
-                # a line or coordinator fault acts on what has not been sent: from now; the
-                # world's models on what they have not generated
-                start = self._now_ns if kind.ACTS_ON in ("line", "coordinator") else made_ns
                 end = {} if duration is None else {"end_s": start / SEC + duration}
                 fault = build(Fault, {**spec, "start_s": start / SEC, **end}, (("fault", 0),))
             except Invalid as e:

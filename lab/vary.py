@@ -58,7 +58,7 @@ def label(value) -> str:
     """A value as the cells' ``variant`` column and the tables name it."""
     if isinstance(value, bool):
         return str(value).lower()
-    return f"{value:g}" if isinstance(value, float) else str(value)
+    return repr(value) if isinstance(value, float) else str(value)  # repr: never two alike
 
 
 def _value(text: str):

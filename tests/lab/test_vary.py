@@ -17,6 +17,7 @@ def test_values_are_toml_and_a_range_ends_where_it_says():
     assert v.key == "imu.grade" and v.values == ("adis16350", "tactical", "x y")
     assert Vary.parse("a.b=1,2.5,true").values == (1, 2.5, True)
     assert [label(x) for x in (1, 2.5, True, "s")] == ["1", "2.5", "true", "s"]
+    assert Vary.parse("k=0.1234567,0.1234568").values == (0.1234567, 0.1234568)  # two values
     for bad, what in (("ranging.sigma0_m", "not KEY=VALUES"), ("k=1,1", "twice"),
                       ("k=0.5..0.1:0.1", "A <= B"), ("k=0..1:0", "STEP > 0"),
                       ("k=0..1000:1", "at most 100"), ("k=1,,2", "empty value")):
