@@ -10,8 +10,8 @@ are plug-ins; the Estimator names none of them. It is composed of parts with one
 * host.ranging.Ranging: the exchanges' checks and correction, their TDMA cycles, each
   cycle's fix (the last two kept) or FixRefused, the Range (each exchange) and Tdoa (each
   cycle) products;
-* host.timebase.FilterTime: the filter time (the latest measurement's), the tracks with
-  ``predicts`` predicted to it lazily, all at once, and when an estimate is extrapolated;
+* host.timebase.FilterTime: the filter time (the latest measurement's), the output
+  instants, and when an estimate is extrapolated;
 * host.tracks.base.TrackContext: what the tracks may see of all this, read-only;
 
 and keeps the dispatch, device restarts, the output instants and the stats.
@@ -96,7 +96,6 @@ class Estimator:
                                     estimator=self)
         self.tracks: list[Track] = [cls(self.context, cfg.settings.get(n))
                                     for n, cls in zip(cfg.filters, classes)]
-        self.time.predicting = [track for track in self.tracks if track.predicts]
         # record or product type -> its takers: (track, its handler)
         self._takers: dict[type, list[tuple[Track, Callable]]] = {}
         for track in self.tracks:
@@ -112,6 +111,10 @@ class Estimator:
         self.on_innovation: Callable | None = None
         self.input_rejections: Counter = Counter()  # restarts, other records: the parts count their own
         self.emitted: Counter = Counter()
+
+    def takes(self) -> frozenset:
+        """The record and product types some track takes."""
+        return frozenset(self._takers)
 
     # ---------------------------------------------------------------- dispatch
 

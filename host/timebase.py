@@ -1,5 +1,5 @@
-"""The estimator's time base: the filter time, the tracks predicted to it lazily, the output
-instants, and when an estimate is extrapolated (docs/filters.md)."""
+"""The estimator's time base: the filter time, the output instants, and when an estimate is
+extrapolated (docs/filters.md)."""
 from __future__ import annotations
 
 import math
@@ -9,18 +9,14 @@ class FilterTime:
     """The fusion's clock, driven by the measurements alone (no wall clock).
 
     Owns ``t`` (the filter time: the latest measurement's), ``t_first`` (the first
-    measurement's: the configured start counts as aiding then), ``t_predicted`` (the
-    tracks with ``predicts``, ``predicting``, are predicted to here: :meth:`sync`) and
-    ``next_out``, the next output instant: k * output_period_s, the first one at or after
-    the first measurement."""
+    measurement's: the configured start counts as aiding then) and ``next_out``, the next
+    output instant: k * output_period_s, the first one at or after the first measurement."""
 
     def __init__(self, output_period_s: float, extrapolated_after_s: float) -> None:
         self.output_period_s = output_period_s
         self.extrapolated_after_s = extrapolated_after_s
         self.t: float | None = None
-        self.t_predicted: float | None = None
         self.t_first: float | None = None
-        self.predicting: list = []  # the tracks with predicts, in output order
         self._k_out = 0
         self.next_out = 0.0
 
@@ -30,7 +26,7 @@ class FilterTime:
 
     def start(self, t: float) -> None:
         """The first measurement, at t: every clock starts there."""
-        self.t = self.t_predicted = self.t_first = t
+        self.t = self.t_first = t
         self._k_out = math.ceil(t / self.output_period_s)
         self.next_out = self._k_out * self.output_period_s
 
@@ -38,15 +34,6 @@ class FilterTime:
         """The output instant ``next_out`` is done: the next one (k, not a running sum)."""
         self._k_out += 1
         self.next_out = self._k_out * self.output_period_s
-
-    def sync(self) -> None:
-        """Predict the tracks with ``predicts`` to the filter time. Lazily, before their next
-        update: over measurements that update none of them (most exchanges), F(dt1 + dt2) =
-        F(dt2) F(dt1) and the Q likewise make one predict the same as several."""
-        dt = self.t - self.t_predicted
-        for track in self.predicting:
-            track.predict(dt)
-        self.t_predicted = self.t
 
     def stale(self, b: float, t_aided: float | None) -> bool:
         """Whether an estimate at b, last aided at t_aided (None: never, only the configured

@@ -7,8 +7,6 @@ A track is a class with a ``name`` (its ``filter`` in the output and its section
 * :meth:`handlers`: which records (host.measurements: ImuSample, Exchange, ...) and shared
   products (host.measurements: Motion, Range, Tdoa, Fix, FixRefused) it takes, each with the
   method that takes it; the estimator calls these in time order;
-* :meth:`predict` (with ``predicts = True``): a state on the shared motion model, predicted
-  to the filter time with the other such tracks (:meth:`TrackContext.sync`);
 * :meth:`estimate`: what it emits at an output instant (an Estimate, or None before it has
   one), with ``extrapolated`` set from its last aiding;
 * :meth:`restart`: its reset when a device restarts, :meth:`gap` after a gap in the IMU
@@ -34,7 +32,7 @@ class TrackContext:
     """What a track may use of the estimator (``self.ctx``), and nothing more.
 
     Built by the estimator from its parts: the settings and models (fixed for the run), the
-    time base (host.timebase.FilterTime: ``t``, ``t_predicted``, ``sync``, ``stale``), the
+    time base (host.timebase.FilterTime: ``t``, ``stale``), the
     inertial part (host.inertial.Inertial: ``sins``, ``origin``, ``t_imu``, ``t_aligned``),
     the ranging part (host.ranging.Ranging: ``fixes``) and the estimator's
     ``on_innovation``. The dynamic members are read through at each access, so a track sees
@@ -49,8 +47,6 @@ class TrackContext:
         "layout": "The anchors (host.wsn.AnchorLayout: ids, positions, the tag height).",
         "calibration": "001's range calibration (host.calibration.Calibration: f, c_i, "
                        "sigma(d)), or None without one.",
-        "sync": "sync(): predict every track with ``predicts`` to the filter time ``t`` "
-                "(lazily: call it before an update when t_predicted < t).",
         "stale": "stale(b, t_aided) -> bool: whether an estimate at b, last aided at t_aided "
                  "(None: never, only the configured start), is extrapolated "
                  "(extrapolated_after_s).",
@@ -60,18 +56,13 @@ class TrackContext:
 
     def __init__(self, cfg, model, layout, calibration, *, time, inertial, ranging, estimator) -> None:
         self.cfg, self.model, self.layout, self.calibration = cfg, model, layout, calibration
-        self.sync, self.stale = time.sync, time.stale
+        self.stale = time.stale
         self._time, self._inertial, self._ranging, self._estimator = time, inertial, ranging, estimator
 
     @property
     def t(self) -> float | None:
         """The filter time (s): the latest measurement's; None before the first."""
         return self._time.t
-
-    @property
-    def t_predicted(self) -> float | None:
-        """The time (s) the tracks with ``predicts`` are predicted to (<= t; :meth:`sync`)."""
-        return self._time.t_predicted
 
     @property
     def on_innovation(self) -> Callable | None:
@@ -144,8 +135,6 @@ class Track:
     uses_strapdown: ClassVar[bool] = False
     #: Takes updates, so its stats report updates and rejections.
     aided: ClassVar[bool] = True
-    #: Has a state on the shared motion model: :meth:`predict` is called with the others.
-    predicts: ClassVar[bool] = False
     #: (module, extra) pairs of optional packages the track imports when it starts: checked
     #: when it is named (host.config.parse_filters), so a run without them never begins.
     requires: ClassVar[tuple[tuple[str, str], ...]] = ()
@@ -168,10 +157,6 @@ class Track:
 
     def start(self, t: float) -> None:
         """The first measurement of the run, at t."""
-
-    def predict(self, dt: float) -> None:
-        """Predict the state dt seconds on (only with ``predicts``; :meth:`TrackContext.sync`
-        calls it, dt >= 0)."""
 
     def restart(self, device: str, t: float) -> None:
         """``device`` restarted at t: what the track holds need not be where the vehicle is."""

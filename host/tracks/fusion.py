@@ -1,11 +1,13 @@
 """What the fusion tracks (kf, ekf, ukf) share: a filter on the constant-acceleration
 state x = [x, y, vx, vy, ax, ay] (host.filters), gated updates, re-initialisation.
 
-Time. The fusion tracks keep one predicted time, the estimator's (``ctx.t_predicted``):
-before an update a track has every fusion track predicted to the filter time at once
-(:meth:`TrackContext.sync`), so one predict spans the exchanges that updated none of them. A
-measurement older than the filter time is applied with its lag through the motion model
-if the lag is at most ``max_lag_s``, else rejected as ``late``.
+Time. A fusion track predicts lazily: before an update it predicts its state from the time
+it was predicted to (``t_predicted``) to the filter time, so one predict spans the records
+that updated nothing of it (F(dt1 + dt2) = F(dt2) F(dt1) and the Q likewise: one predict is
+several). Each track keeps its own time, so its numbers do not depend on which other tracks
+run beside it (the batch engine, host.batch, runs some of them apart). A measurement older
+than the filter time is applied with its lag through the motion model if the lag is at most
+``max_lag_s``, else rejected as ``late``.
 
 Gating (docs/filters.md). An update whose innovation fails the chi-square gate
 (``gate_probability``) is rejected; every acceleration update gated out for
@@ -33,11 +35,11 @@ POSITION_KINDS = frozenset(("fix", "tdoa", "range"))  # the updates that aid a t
 
 class FusionTrack(Track):
     uses_strapdown = True
-    predicts = True
 
     def __init__(self, ctx, settings=None) -> None:
         super().__init__(ctx, settings)
         self.filter = None
+        self.t_predicted: float | None = None  # the filter is predicted to here (<= ctx.t)
         self._aided: float | None = None  # time of its last position update
         self._gated_since: dict[str, float] = {}  # kind -> first rejection of a run of them
 
@@ -59,12 +61,17 @@ class FusionTrack(Track):
 
     def start(self, t: float) -> None:
         self._new_filter(np.array([*self.ctx.cfg.start, 0.0, 0.0, 0.0, 0.0]), self._p0())
+        self.t_predicted = t
 
-    def predict(self, dt: float) -> None:
-        try:
-            self.filter.predict(dt)
-        except np.linalg.LinAlgError:
-            self._reset()
+    def sync(self) -> None:
+        """Predict the filter to the filter time (module doc, "Time")."""
+        t = self.ctx.t
+        if self.t_predicted < t:
+            try:
+                self.filter.predict(t - self.t_predicted)
+            except np.linalg.LinAlgError:
+                self._reset()
+            self.t_predicted = t
 
     def _reset(self) -> None:
         """A covariance lost positive definiteness (never seen; rounding can do it): start
@@ -103,8 +110,7 @@ class FusionTrack(Track):
         if ctx.t - t > cfg.max_lag_s:
             self.rejections["late"] += 1
             return
-        if ctx.t_predicted < ctx.t:
-            ctx.sync()
+        self.sync()
         f = self.filter
         try:
             inn = f.update(z, R, meas, chi2_gate(meas.dim, cfg.gate_probability))
@@ -134,7 +140,7 @@ class FusionTrack(Track):
     # -- output -----------------------------------------------------------------------------
     def estimate(self, b: float, yaw: float):
         ctx = self.ctx
-        x, P = ctx.model.propagate(self.filter.x, self.filter.P, b - ctx.t_predicted)
+        x, P = ctx.model.propagate(self.filter.x, self.filter.P, b - self.t_predicted)
         stale = self.pending or ctx.stale(b, self._aided)  # waiting: off
         return estimate(b, self.name, x[:2], x[2:4], yaw, P[:4, :4], stale)
 

@@ -151,14 +151,6 @@ def test_an_imu_restart_realigns_at_the_mean_of_the_fixes_since():
 
 # -- the time base ------------------------------------------------------------------------
 
-class Counting:
-    def __init__(self) -> None:
-        self.dts: list[float] = []
-
-    def predict(self, dt: float) -> None:
-        self.dts.append(dt)
-
-
 def test_the_output_instants_are_k_periods_from_the_first_at_or_after_the_first_measurement():
     time = FilterTime(output_period_s=0.1, extrapolated_after_s=0.5)
     time.start(0.237)
@@ -168,15 +160,11 @@ def test_the_output_instants_are_k_periods_from_the_first_at_or_after_the_first_
     assert time.next_out == 7 * 0.1  # k times the period, not a running sum of it
 
 
-def test_the_tracks_are_predicted_lazily_once_to_the_filter_time_and_staleness():
+def test_the_filter_time_is_the_latest_measurement_and_staleness():
     time = FilterTime(output_period_s=0.1, extrapolated_after_s=0.5)
-    track = Counting()
-    time.predicting = [track]
     time.start(1.0)
     for t in (1.1, 1.05, 1.3):  # a late measurement leaves the filter time
         time.advance(t)
-    assert time.t == 1.3 and track.dts == []
-    time.sync()
-    assert track.dts == [pytest.approx(0.3)] and time.t_predicted == 1.3
+    assert time.t == 1.3
     assert not time.stale(1.5, None) and time.stale(1.6, None)  # from the first measurement
     assert not time.stale(2.0, 1.6) and time.stale(2.2, 1.6)

@@ -18,7 +18,7 @@ from navtwin.host.tracks.base import Track, TrackContext, estimate
 from ..helpers import GRAVITY, OFFICE_ANCHORS
 
 #: What a track may use: the declaration docs/architecture.md and docs/filters.md list.
-DECLARED = {"cfg", "model", "layout", "calibration", "t", "t_predicted", "sync", "stale", "on_innovation",
+DECLARED = {"cfg", "model", "layout", "calibration", "t", "stale", "on_innovation",
             "sins", "origin", "t_imu", "t_aligned", "fixes"}
 AT = (6.0, 3.0)  # where the vehicle stands (m)
 ALIGN_S = 1.0
@@ -51,25 +51,18 @@ class Reader(Track):
     """Written against the declared context only: every member, read."""
 
     name = "reader"
-    predicts = True
     uses_strapdown = True  # so the estimator aligns and runs its strapdown
 
     def __init__(self, ctx, settings=None) -> None:
         super().__init__(ctx, settings)
-        self.predicted = 0.0  # the sum of the dt it was predicted over
         self.seen: list[tuple] = []
 
     def handlers(self):
         return {Fix: self.fix, Motion: self.motion}
 
-    def predict(self, dt: float) -> None:
-        self.predicted += dt
-
     def motion(self, m: Motion) -> None:
         ctx = self.ctx
-        if ctx.t_predicted < ctx.t:
-            ctx.sync()
-        assert ctx.t_predicted == ctx.t == m.t
+        assert ctx.t == m.t
         self.seen.append(("motion", m.kind, ctx.sins is not None, ctx.t_aligned))
 
     def fix(self, fix: Fix) -> None:
@@ -118,8 +111,6 @@ def test_a_track_written_against_the_context_runs_and_sees_the_shared_state(regi
     out = [e for r in standing(3.0) for e in est.feed(r)]
     track = est.tracks[0]
     assert isinstance(track.ctx, TrackContext) and track.ctx is est.context
-    # predicted only through sync, over the whole run: from the first record to the last
-    assert track.predicted == pytest.approx(est.time.t_predicted - est.time.t_first)
     kinds = [s[1] for s in track.seen if s[0] == "motion"]
     assert kinds[0] == "stationary" and kinds[-1] == "accel"  # the alignment ended
     assert all(s[2] == (s[1] == "accel") for s in track.seen if s[0] == "motion")
@@ -136,22 +127,6 @@ def test_a_track_touching_an_undeclared_member_or_writing_one_fails_loudly(regis
                                              "property 't' of 'TrackContext' object has no setter"):
         for r in standing(1.0):
             est.feed(r)
-
-
-def test_a_track_without_predicts_is_never_predicted_even_with_a_predict_method(registered):
-    class Quiet(Reader):
-        name = "quiet"
-        predicts = False
-
-    tracks.register(Quiet)
-    try:
-        est = Estimator(cfg("quiet", "reader"))
-        for r in standing(0.5):
-            est.feed(r)
-        quiet, reader = est.tracks
-        assert quiet.predicted == 0.0 and reader.predicted > 0.4  # both called sync
-    finally:
-        tracks.unregister("quiet")
 
 
 class Waiter(Reader):
