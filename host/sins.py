@@ -163,6 +163,13 @@ class Alignment:
         self._gyro = np.zeros(3)
         self._accel = np.zeros(3)
 
+    @classmethod
+    def of(cls, samples: int, gyro_sum, accel_sum) -> Alignment:
+        """The alignment that added *samples* samples summing to these (host.batch's rows)."""
+        a = cls()
+        a.samples, a._gyro, a._accel = samples, np.array(gyro_sum, float), np.array(accel_sum, float)
+        return a
+
     def add(self, gyro: np.ndarray, accel: np.ndarray) -> None:
         self.samples += 1
         self._gyro += gyro

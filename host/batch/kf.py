@@ -20,7 +20,7 @@ from navtwin.host.filters.model import ConstantAcceleration, Linear
 from .innovation import BatchInnovation
 from .linalg import T, mv
 from .base import BatchFilter
-from .seeds import by_dt, take
+from .seeds import take
 
 
 class BatchKalmanFilter(BatchFilter):
@@ -30,19 +30,20 @@ class BatchKalmanFilter(BatchFilter):
         super().__init__(x, P)
         self.model = model
         self._I = np.eye(self.x.shape[1])
-        # F and Q by dt, stacked: the IMU period recurs (as the model's own cache)
+        # F and Q of a shared dt, cached: the IMU period recurs (as in the model itself)
         self._transition = lru_cache(maxsize=32)(self._build)
 
-    def _build(self, dt: float) -> np.ndarray:
-        FQ = np.stack((self.model.F(dt), self.model.Q(dt)))
-        FQ.flags.writeable = False
-        return FQ
+    def _build(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        return self.model.F(dt), self.model.Q(dt)
 
     def predict(self, dt, active=None) -> None:
         """Over dt (one value, or (N,) per seed) for the *active* seeds (None: all)."""
         idx = self.chosen(active)
-        FQ = by_dt(take(self.given(dt, 0, "dt"), 0, idx), self._transition)
-        F, Q = FQ[..., 0, :, :], FQ[..., 1, :, :]
+        dt = take(self.given(dt, 0, "dt"), 0, idx)
+        if dt.ndim:  # a dt per seed: every seed's F and Q at once (the same numbers)
+            F, Q = self.model.many(dt)
+        else:
+            F, Q = self._transition(float(dt))
         x, P = self.rows(idx)
         self.store(idx, mv(F, x), np.matmul(np.matmul(F, P), T(F)) + Q)
 

@@ -83,6 +83,18 @@ class ConstantAcceleration:
         powers = np.array((dt, d2 / 2, d3 / 3, d3 / 6, d2 * d2 / 8, d3 * d2 / 20))
         return (self.jerk_psd * powers).dot(_Q_BASIS).reshape(DIM_X, DIM_X)
 
+    def many(self, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """F and Q (n, 6, 6) for n values of dt at once (host.batch): the same numbers as
+        :meth:`F` and :meth:`Q` of each, since every entry of either is one term of its sum
+        (the blocks of the bases do not overlap), whatever order a product sums in."""
+        dt = np.asarray(dt, float)
+        d2 = dt * dt
+        d3 = d2 * dt
+        F = np.column_stack((np.ones_like(dt), dt, d2 / 2)).dot(_F_BASIS)
+        powers = np.column_stack((dt, d2 / 2, d3 / 3, d3 / 6, d2 * d2 / 8, d3 * d2 / 20))
+        Q = (self.jerk_psd * powers).dot(_Q_BASIS)
+        return F.reshape(-1, DIM_X, DIM_X), Q.reshape(-1, DIM_X, DIM_X)
+
     def _build(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         F, Q = self.F(dt), self.Q(dt)
         F.flags.writeable = Q.flags.writeable = False  # cached

@@ -1,0 +1,50 @@
+"""The interface of a batch track (host.tracks.base.Track for the rows of many seeds).
+
+A batch track is built with the batch estimator (its context: ``cfg``, the time base's
+arrays ``t`` and ``t_first``, the strapdown, the fixes) and the track's
+settings, and gives:
+
+* :meth:`handlers`: product type (host.measurements.Motion, Fix, FixRefused) -> the method
+  that takes a batch of them, ``fn(idx, batch)`` with the rows *idx* of the seeds that
+  have one (host.batch.estimator's MotionBatch, FixBatch);
+* :meth:`start`: as Track's, for the seeds *idx*;
+* :meth:`estimate`: the :class:`Columns` of the seeds *idx* at their output instants.
+
+A seed whose track would leave the common path (a discontinuity, a numerical reset, a
+gate reopened) is handed back with :meth:`BatchEstimator.eject`: the engine runs it again
+per seed, so a twin need not carry the rare branches.
+"""
+from __future__ import annotations
+
+from typing import Callable, ClassVar, NamedTuple
+
+import numpy as np
+
+
+class Columns(NamedTuple):
+    """Estimates of some seeds at their output instants (host.tracks.base.Estimate's fields,
+    one row each): ``valid`` says which rows have one (a track may have none yet)."""
+    valid: np.ndarray  # (n,) bool
+    x: np.ndarray  # (n, 2) position, m
+    v: np.ndarray  # (n, 2) velocity, m/s
+    cov: np.ndarray  # (n, 4, 4) of (x, y, vx, vy)
+    stale: np.ndarray  # (n,) bool: extrapolated
+    has_yaw: bool  # the track reports the strapdown's yaw (else None)
+
+
+class BatchTrack:
+    name: ClassVar[str]
+    uses_strapdown: ClassVar[bool] = False
+
+    def __init__(self, ctx, settings=None) -> None:
+        self.ctx = ctx
+        self.settings = settings
+
+    def handlers(self) -> dict[type, Callable]:
+        return {}
+
+    def start(self, idx: np.ndarray, t: np.ndarray) -> None:
+        """The first measurement of the seeds *idx*, at t."""
+
+    def estimate(self, idx: np.ndarray, b: np.ndarray) -> Columns:
+        raise NotImplementedError

@@ -1,0 +1,146 @@
+"""The batch engine (issue 23): many seeds of one scenario, their tracks stepped together,
+each seed's estimates equal to :func:`navtwin.lab.run.run_in_memory`'s.
+
+A seed's run has two halves, and this engine takes them apart:
+
+1. **Records.** The emulated lab's bytes, decoded and timed by the host's pipeline, become
+   the records each vehicle's estimator is given (host.measurements: IMU samples,
+   exchanges, ...). :func:`records` runs that half as the in-memory run does, the
+   estimator replaced by one that keeps what it is given, so the records are those of
+   the byte path by construction.
+2. **Tracks.** The tracks with a batch twin (host.batch.tracks) run for every seed of the
+   batch at once (host.batch.estimator.BatchEstimator); the others run per seed with the
+   estimator itself, on the same records. A seed that leaves the batch's common path (the
+   batch estimator's ``ejected``: a restart, a gap, a gate rejection) runs per seed with
+   every track. So every seed has every track's estimates, and a twin only makes them
+   faster.
+
+Equality: each seed's estimates equal run_in_memory's to 1e-9 (tests/lab/test_batch.py, on
+seeds of every shipped scenario). A track's numbers do not depend on the tracks beside it
+(each fusion track predicts to its own time), and a record that only the tracks run per
+seed take still moves the batch's filter time, as it moves the estimator's.
+
+Estimates come as columns (:func:`columns`), per track: ``t, x, y, vx, vy, yaw`` (NaN: the
+track reports none), ``cov`` (k, 16: the 4x4 of x, y, vx, vy, row-major) and
+``extrapolated``, what lab.evaluate scores.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from navtwin.emulator.scenario import Scenario
+from navtwin.host.batch.estimator import BatchEstimator, Unbatchable, stream
+from navtwin.host.batch.tracks import batchable
+from navtwin.host.estimator import Estimator
+from navtwin.host.pipeline import Pipeline
+from navtwin.host.replay import drive
+
+from .run import _scenario, lab_chunks
+
+#: The column names of one track's estimates (:func:`columns`).
+COLUMNS = ("t", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
+
+
+class Kept:
+    """An estimator that keeps the records the pipeline gives it and estimates nothing."""
+
+    def __init__(self, cfg) -> None:
+        self.cfg = cfg
+        self.records: list = []
+        self.on_innovation = None
+
+    def feed(self, record) -> list:
+        self.records.append(record)
+        return []
+
+    def stats(self) -> dict:
+        return {"records": len(self.records)}
+
+
+def records(scenario: str | Path | Scenario, seed: int | None = None, *,
+            filters: tuple[str, ...] | None = None, duration: float | None = None):
+    """The estimator settings of the host's vehicle 1 on *scenario*'s lab (run_in_memory's
+    host config and filters) and the records its estimator is given in the run of *seed*."""
+    kw, chunks = lab_chunks(_scenario(scenario), seed, duration=duration, filters=filters)
+    pipe = Pipeline(kw.pop("config"), kw.pop("filters"), make_estimator=Kept, **kw)
+    drive(pipe, chunks, lambda _: None)
+    kept = pipe.vehicles[0].estimator
+    return kept.cfg, kept.records
+
+
+def columns(estimates, filters) -> dict[str, dict[str, np.ndarray]]:
+    """Estimate objects (host.tracks.base.Estimate) as columns per track, *filters* first
+    (a track without estimates has empty columns)."""
+    rows: dict[str, list] = {f: [] for f in filters}
+    for e in estimates:
+        rows.setdefault(e.filter, []).append(
+            (e.t, e.x, e.y, e.vx, e.vy, np.nan if e.yaw is None else e.yaw, *e.cov, e.extrapolated))
+    out = {}
+    for name, r in rows.items():
+        a = np.array(r, dtype=float).reshape(len(r), 23)
+        out[name] = {"t": a[:, 0], "x": a[:, 1], "y": a[:, 2], "vx": a[:, 3], "vy": a[:, 4],
+                     "yaw": a[:, 5], "cov": a[:, 6:22], "extrapolated": a[:, 22].astype(bool)}
+    return out
+
+
+def per_seed(cfg, recs) -> list:
+    """The estimator fed *recs* alone: its estimates."""
+    est = Estimator(cfg)
+    out: list = []
+    for r in recs:
+        out += est.feed(r)
+    return out
+
+
+class Outcome:
+    """A batch's result: ``estimates`` (per seed, :func:`columns`' layout), ``batched`` (the
+    tracks run as a batch), ``ejected`` (seed -> why it ran per seed)."""
+
+    def __init__(self, estimates, batched, ejected) -> None:
+        self.estimates, self.batched, self.ejected = estimates, batched, ejected
+
+
+def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | None = None,
+        duration: float | None = None) -> Outcome:
+    """Every track's estimates for each of *seeds* (module doc)."""
+    sc = _scenario(scenario)
+    seeds = list(seeds)
+    taken = [records(sc, seed, filters=filters, duration=duration) for seed in seeds]
+    if not taken:
+        return Outcome([], (), {})
+    cfg = taken[0][0]
+    batched = batchable(cfg.filters)
+    rest = tuple(f for f in cfg.filters if f not in batched)
+    ejected: dict[int, str] = {}
+    streams, rows = [], []
+    if batched:
+        takes = BatchEstimator(replace(cfg, filters=batched), 0).takes()
+        others = Estimator(replace(cfg, filters=rest)).takes() if rest else frozenset()
+        for k, (_, recs) in enumerate(taken):
+            try:
+                streams.append(stream(recs, takes, others))
+                rows.append(k)
+            except Unbatchable as e:
+                ejected[seeds[k]] = str(e)
+    out: list[dict] = [{} for _ in seeds]
+    if rows:
+        engine = BatchEstimator(replace(cfg, filters=batched), len(rows))
+        for k, got in zip(rows, engine.run(streams)):
+            out[k] = got
+        for j, why in engine.ejected.items():
+            ejected[seeds[rows[j]]] = why
+    for k, (c, recs) in enumerate(taken):
+        if seeds[k] in ejected or not batched:
+            out[k] = columns(per_seed(c, recs), c.filters)
+            continue
+        if rest:
+            out[k].update(columns(per_seed(replace(c, filters=rest), recs), rest))
+        out[k] = {f: out[k].get(f) or _empty() for f in c.filters}
+    return Outcome(out, batched, ejected)
+
+
+def _empty() -> dict:
+    return columns([], ("_",))["_"]
