@@ -213,7 +213,9 @@ class Emulation:
         self.t0_monotonic_ns: int | None = None  # set when the clock starts
         #: the vehicles this run hosts (default all): a worker process hosts some of them
         #: (emulator.workers); each keeps its number, port names and bytes
-        self.world = World(scenario, self.seed, vehicles)
+        # the air's frames have takers only in a recording, a tap (live ports) or an air sink
+        self.world = World(scenario, self.seed, vehicles,
+                           air=ports or record is not None or air_sink is not None)
         full = self.world.duration_ns
         self.end_ns = full if duration_s is None else int(round(duration_s * SEC))
         if not 0 < self.end_ns <= full:

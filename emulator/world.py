@@ -100,8 +100,10 @@ class Vehicle:
     same names under "vehicle<n>.", so adding a vehicle never changes another's draws.
     """
 
-    def __init__(self, sc: Scenario, spec, router: dict, number: int, seed: int) -> None:
+    def __init__(self, sc: Scenario, spec, router: dict, number: int, seed: int,
+                 air: bool = True) -> None:
         self.number = number
+        self.air = air  # make its frames on the air (nobody may be there to take them)
         self.spec = spec
         self.sins_port = ports.instance(ports.SINS.name, number)
         #: the port of the coordinator its router joined (its own, or vehicle 1's)
@@ -160,7 +162,8 @@ class Vehicle:
             offered.append(Offered(
                 self.number, int(attempts.start_ns[i]), int(attempts.service[i]),
                 Event(t, self.xbee_port, RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p), marks)
-                if ok else None, self.sender.frames(attempts, i, self.src16, COORDINATOR16, p)))
+                if ok else None,
+                self.sender.frames(attempts, i, self.src16, COORDINATOR16, p) if self.air else []))
         return events, offered
 
     def _out_of_network(self, ready_ns):
@@ -184,17 +187,20 @@ class Vehicle:
 class World:
     BLOCK_NS = round(BLOCK_S * 1e9)  # the IMU's sample period is checked against it
 
-    def __init__(self, sc: Scenario, seed: int | None = None, vehicles=None) -> None:
+    def __init__(self, sc: Scenario, seed: int | None = None, vehicles=None,
+                 air: bool = True) -> None:
         """*vehicles*: the numbers of the vehicles to build (default all); a subset needs a
         network per vehicle (emulator.workers refuses the rest), and each vehicle's events equal the
-        whole world's, as every vehicle draws from streams of its own."""
+        whole world's, as every vehicle draws from streams of its own. *air*: False makes no
+        frames on the air (:meth:`air` returns none; the events are the same), for a run
+        with nothing to take them (a sixth of the world's work)."""
         self.scenario = sc
         self.seed = sc.seed if seed is None else seed
         self.duration_ns = sc.duration_ns
         self.radios = sc.radios_for(self.seed)
         every = range(1, len(sc.fleet) + 1)
         hosted = set(every if vehicles is None else vehicles)
-        self.vehicles = [Vehicle(sc, spec, router, n, self.seed) for n, (spec, router)
+        self.vehicles = [Vehicle(sc, spec, router, n, self.seed, air) for n, (spec, router)
                          in enumerate(zip(sc.fleet, sc.routers_for(self.seed)), 1) if n in hosted]
         self._numbered = {v.number: v for v in self.vehicles}
         #: per coordinator's port, the host -> router direction (0x10, 0x17); each its own
