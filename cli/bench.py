@@ -30,6 +30,7 @@ SETS = Registry("navtwin.benchmarks", "benchmark set", {
     "host": "navtwin.host.bench:benchmarks",
     "batch": "navtwin.host.batch.bench:benchmarks",
     "lab": "navtwin.lab.bench:benchmarks",
+    "sweep": "navtwin.lab.bench_sweep:benchmarks",
 })
 #: where a setting's value waits in the parsed arguments (apart from bench's own options)
 _DEST = "setting_"

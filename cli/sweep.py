@@ -107,6 +107,11 @@ def register(sub) -> None:
                         "ranging.sigma0_m, anchors.0.range_bias_m) over VALUES, a comma list "
                         "(0.1,0.3,0.6) or a range A..B:STEP, crossed with the seeds: a table "
                         "per value, then the values side by side (docs/sweeps.md)")
+    p.add_argument("--engine", choices=("batch", "bytes"), default="batch",
+                   help="batch (default): a task's seeds step their tracks together, the same "
+                        "estimates to 1e-9; bytes: each seed's in-memory run (docs/sweeps.md)")
+    p.add_argument("--batch-size", type=number(1, 4096, integer=True), metavar="N",
+                   help="seeds a batch-engine task holds at most (default 64)")
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run, extra="sweep")
 
@@ -134,7 +139,8 @@ def run(args) -> int:
             progress = stack.enter_context(_progress(args.quiet))
             result = sweep.run(sc, args.seeds, args.filters, duration=args.duration, out=out,
                                client=client, serial=args.serial, vary=args.vary,
-                               progress=progress)
+                               progress=progress, engine=args.engine,
+                               batch_size=args.batch_size or sweep.BATCH_SIZE)
     except (sweep.SweepError, VaryError) as e:
         raise UsageError(str(e)) from None
     vary = result.meta["vary"]

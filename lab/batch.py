@@ -26,7 +26,8 @@ track reports none), ``cov`` (k, 16: the 4x4 of x, y, vx, vy, row-major) and
 """
 from __future__ import annotations
 
-from dataclasses import replace
+import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -95,12 +96,18 @@ def per_seed(cfg, recs) -> list:
     return out
 
 
+@dataclass
 class Outcome:
     """A batch's result: ``estimates`` (per seed, :func:`columns`' layout), ``batched`` (the
-    tracks run as a batch), ``ejected`` (seed -> why it ran per seed)."""
-
-    def __init__(self, estimates, batched, ejected) -> None:
-        self.estimates, self.batched, self.ejected = estimates, batched, ejected
+    tracks run as a batch), ``ejected`` (seed -> why it ran per seed), and the CPU seconds of
+    each half: ``records_s`` (the byte path to the records), ``batch_s`` (the batched tracks),
+    ``per_seed_s`` (the tracks without a twin, and the ejected seeds)."""
+    estimates: list
+    batched: tuple
+    ejected: dict
+    records_s: float = 0.0
+    batch_s: float = 0.0
+    per_seed_s: float = 0.0
 
 
 def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | None = None,
@@ -108,7 +115,9 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
     """Every track's estimates for each of *seeds* (module doc)."""
     sc = _scenario(scenario)
     seeds = list(seeds)
+    clock = time.process_time()
     taken = [records(sc, seed, filters=filters, duration=duration) for seed in seeds]
+    records_s, clock = time.process_time() - clock, time.process_time()
     if not taken:
         return Outcome([], (), {})
     cfg = taken[0][0]
@@ -132,6 +141,7 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
             out[k] = got
         for j, why in engine.ejected.items():
             ejected[seeds[rows[j]]] = why
+    batch_s, clock = time.process_time() - clock, time.process_time()
     for k, (c, recs) in enumerate(taken):
         if seeds[k] in ejected or not batched:
             out[k] = columns(per_seed(c, recs), c.filters)
@@ -139,7 +149,7 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
         if rest:
             out[k].update(columns(per_seed(replace(c, filters=rest), recs), rest))
         out[k] = {f: out[k].get(f) or _empty() for f in c.filters}
-    return Outcome(out, batched, ejected)
+    return Outcome(out, batched, ejected, records_s, batch_s, time.process_time() - clock)
 
 
 def _empty() -> dict:

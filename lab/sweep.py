@@ -1,8 +1,12 @@
 """Monte Carlo sweeps: one scenario over many seeds, in virtual time, on dask.distributed.
 
-Each seed is one in-memory run (:func:`navtwin.lab.run.run_in_memory`: no PTY, no file) scored
-by :func:`navtwin.lab.evaluate.position_errors`; each (scenario, seed, filter) is one cell, a row
-of the Parquet output. A seed's randomness comes from the seed alone: every draw of the emulator
+Each seed's estimates come from one of two engines (:data:`ENGINES`), scored by
+:func:`navtwin.lab.evaluate.position_errors`; each (scenario, seed, filter) is one cell, a row
+of the Parquet output. The batch engine (lab.batch, the default) runs a task's seeds together:
+each seed's records as the byte path makes them, then the tracks that have a batch twin
+stepped for all of them at once and the others per seed; the byte engine runs each seed in
+memory (:func:`navtwin.lab.run.run_in_memory`: no PTY, no file). Their estimates, so their
+cells, agree to 1e-9 (tests/lab/test_batch.py). A seed's randomness comes from the seed alone: every draw of the emulator
 is from ``emulator.rng.stream(seed, name)``, a Generator on ``SeedSequence(seed,
 spawn_key=(crc32(name),))``, and the host draws nothing, so the worker that runs a seed, and the
 number of workers, change no cell::
@@ -11,9 +15,11 @@ number of workers, change no cell::
     result = sweep.run("office", range(1, 11), out="sweeps/office")   # a LocalCluster
     print(sweep.table(sweep.summarise(result.rows, result.filters, "office")))
 
-Tasks are chunks of seeds worth at least :data:`MIN_TASK_VIRTUAL_S` of scenario time (about
-0.2 s of work here; Dask's overhead is about 1 ms a task): one seed a task for the shipped
-scenarios, several for a short ``duration``. A seed that raises is run once more in its task; a
+Tasks are chunks of seeds: for the batch engine up to ``batch_size`` seeds (as many tasks as
+keep the workers busy); for the byte engine worth at least :data:`MIN_TASK_VIRTUAL_S` of
+scenario time (about 0.2 s of work here; Dask's overhead is about 1 ms a task): one seed a
+task for the shipped scenarios, several for a short ``duration``. A batch that raises is run
+again seed by seed by the byte engine; a seed that raises is run once more in its task; a
 task lost with its worker is resubmitted once by Dask (``retries=1``); a cell that fails twice
 is a row with ``status`` "failed" and the error's line, never dropped. While tasks are out,
 the scheduler is asked every :data:`WATCH_S` that no task finishes whether it still answers
@@ -23,11 +29,12 @@ rows done are in the parts, so the same command finishes it later.
 
 The output directory holds one Parquet file per run (``part-NNNN.parquet``, a row group per
 task as it completes) whose metadata (:data:`META_KEY`) names the code version, the scenario's
-hash (sha256 of its canonical TOML, :meth:`Scenario.to_toml`), the seeds, the filters and the
-duration. A run into a directory that holds a sweep computes only the cells it lacks (failed
-ones again); a directory holding a sweep of another scenario hash, code version, duration or
-filter set (the tracks of one run share the estimator, so a cell depends on its companions in
-the last bits) is refused (:class:`SweepError`).
+hash (sha256 of its canonical TOML, :meth:`Scenario.to_toml`), the seeds, the filters, the
+duration and the engine. A run into a directory that holds a sweep computes only the cells it
+lacks (failed ones again), by either engine; a directory holding a sweep of another scenario
+hash, code version, duration or filter set (a record that only some tracks take moves the
+filter time, so a cell depends on its companions in the last bits) is refused
+(:class:`SweepError`).
 """
 from __future__ import annotations
 
@@ -48,10 +55,9 @@ import pyarrow.parquet as pq
 
 from navtwin.common import tomlfile
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
-from navtwin.host.output import estimate_line
 from navtwin.host.replay import emulator_settings
 
-from . import evaluate, layouts
+from . import batch, evaluate, layouts
 from .evaluate import ALPHA, ci_text, decide, mean_ci, p_text, paired
 from .provenance import code_version
 from .run import run_in_memory, truth
@@ -121,11 +127,34 @@ def schema(sc: Scenario) -> pa.Schema:
 
 def seed_cells(sc: Scenario, seed: int, filters: tuple[str, ...],
                duration: float | None) -> list[dict]:
-    """The cells of one seed: one in-memory run, each filter's position_errors (with the
-    latitude/longitude figures in the scenario's frame) and the figures of its paper's layout
-    (lab.layouts: 004's windows)."""
+    """The cells of one seed by the byte engine: one in-memory run (:func:`cells`)."""
     estimates, _ = run_in_memory(sc, seed, filters=filters, duration=duration)
-    tr, est = truth(sc, seed), evaluate.load_estimates(map(estimate_line, estimates))
+    return cells(sc, seed, filters, batch.columns(estimates, filters))
+
+
+def batch_cells(sc: Scenario, seeds: list[int], filters: tuple[str, ...],
+                duration: float | None) -> list[dict]:
+    """The cells of *seeds* by the batch engine (lab.batch: :func:`cells` of each)."""
+    out = batch.run(sc, seeds, filters=filters, duration=duration)
+    return [row for seed, est in zip(seeds, out.estimates) for row in cells(sc, seed, filters, est)]
+
+
+#: The engines that make a task's cells: name -> fn(scenario, seeds, filters, duration).
+ENGINES = {"batch": batch_cells,
+           "bytes": lambda sc, seeds, filters, duration: [
+               row for seed in seeds for row in seed_cells(sc, seed, filters, duration)]}
+#: Seeds one batch-engine task holds at most (the tracks of a batch step together).
+BATCH_SIZE = 64
+
+
+def cells(sc: Scenario, seed: int, filters: tuple[str, ...], columns: dict) -> list[dict]:
+    """The cells of one seed from its estimates' *columns* (lab.batch.columns): each filter's
+    position_errors (with the latitude/longitude figures in the scenario's frame) and the
+    figures of its paper's layout (lab.layouts: 004's windows)."""
+    tr = truth(sc, seed)
+    est = {name: {"t": c["t"], "x": c["x"], "y": c["y"], "vx": c["vx"], "vy": c["vy"],
+                  "cov": c["cov"][:, [0, 1, 4, 5]].reshape(-1, 2, 2),
+                  "extrapolated": c["extrapolated"]} for name, c in columns.items()}
     errors = evaluate.position_errors(tr, est, frame=sc.frame)
     layout = layouts.of(sc.name)
     columns = layout[1].columns(sc) if layout else ()
@@ -155,12 +184,20 @@ def _error_line(e: BaseException) -> str:
 
 
 def run_chunk(text: str, name: str, seeds: list[int], filters: tuple[str, ...],
-              duration: float | None, variant: str | None = None) -> list[dict]:
+              duration: float | None, variant: str | None = None,
+              engine: str = "bytes") -> list[dict]:
     """One task: the cells of *seeds* (of a parameter sweep's *variant*: its value's label,
-    lab.vary); a seed that raises is run once more, then its cells are failed rows with the
-    error's line."""
+    lab.vary) by *engine* (:data:`ENGINES`); if that raises, each seed by the byte engine,
+    a seed that raises is run once more, then its cells are failed rows with the error's
+    line."""
     sc = _scenario(text, name)
     rows = []
+    if engine != "bytes":
+        try:
+            rows = ENGINES[engine](sc, seeds, filters, duration)
+            seeds = []
+        except Exception:  # noqa: BLE001 - the seeds go the byte engine's way, one by one
+            rows = []
     for seed in seeds:
         for attempt in (1, 2):
             try:
@@ -174,9 +211,15 @@ def run_chunk(text: str, name: str, seeds: list[int], filters: tuple[str, ...],
     return rows
 
 
-def chunk_seeds(seeds: list[int], scenario_s: float) -> list[list[int]]:
-    """*seeds* in tasks of at least MIN_TASK_VIRTUAL_S of scenario time each."""
-    per = max(1, math.ceil(MIN_TASK_VIRTUAL_S / scenario_s))
+def chunk_seeds(seeds: list[int], scenario_s: float, engine: str = "bytes",
+                workers: int = 1, batch_size: int = BATCH_SIZE) -> list[list[int]]:
+    """*seeds* in tasks: for the byte engine of at least MIN_TASK_VIRTUAL_S of scenario time
+    each; for the batch engine batches of at most *batch_size*, as many as keep *workers*
+    busy."""
+    if engine == "bytes":
+        per = max(1, math.ceil(MIN_TASK_VIRTUAL_S / scenario_s))
+    else:
+        per = max(1, min(batch_size, math.ceil(len(seeds) / max(1, workers))))
     return [seeds[i:i + per] for i in range(0, len(seeds), per)]
 
 
@@ -287,11 +330,16 @@ def _check_same(out: Path, metas: list[dict], meta: dict) -> None:
 def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable[str] | None = None,
         *, duration: float | None = None, out: str | Path | None = None,
         client: Client | None = None, serial: bool = False, vary: Vary | None = None,
-        progress: Callable[[int, int], None] | None = None) -> Result:
+        progress: Callable[[int, int], None] | None = None, engine: str = "batch",
+        batch_size: int = BATCH_SIZE) -> Result:
     """Sweep *scenario* over *seeds* (and, with *vary*, each of its values: lab.vary): in this
     process if *serial*, else on *client* (a new LocalCluster if None). Rows stream into
     *out*/part-NNNN.parquet when *out* is given, and only the cells *out* lacks are computed.
+    *engine*: "batch" (lab.batch: tasks of up to *batch_size* seeds whose tracks step
+    together) or "bytes" (each seed's in-memory run); their cells agree to 1e-9.
     *progress(done, total)* counts (value, seed) runs."""
+    if engine not in ENGINES:
+        raise SweepError(f"engine {engine!r}: use one of {', '.join(ENGINES)}")
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     seeds = sorted(set(int(s) for s in seeds))
     filters = tuple(filters) if filters else default_filters(sc)
@@ -300,7 +348,8 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         label(v): variant(sc, vary.key, v) for v in vary.values}
     meta = {"code_version": code_version(), "scenario": sc.name, "scenario_hash": scenario_hash(sc),
             "seeds": [seeds[0], seeds[-1]] if seeds else [], "filters": list(filters),
-            "duration_s": duration, "vary": None if vary is None else vary.as_meta()}
+            "duration_s": duration, "vary": None if vary is None else vary.as_meta(),
+            "engine": engine}
     done: dict[tuple[str | None, int, str], dict] = {}
     if out is not None:
         out = Path(out)
@@ -310,9 +359,10 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         for r in old:  # a later part's cell replaces an earlier (failed) one
             done[(r["variant"], r["seed"], r["filter"])] = r
     wanted = [(v, s, f) for v in variants for s in seeds for f in filters]
+    workers = 1 if serial else _workers(client)
     tasks = [(v, chunk) for v, vsc in variants.items() for chunk in chunk_seeds(
         [s for s in seeds if any(done.get((v, s, f), {}).get("status") != "ok" for f in filters)],
-        duration or vsc.duration_s)]
+        duration or vsc.duration_s, engine, workers, batch_size)]
     texts, cells = {v: vsc.to_toml() for v, vsc in variants.items()}, schema(sc)
     writer = part = None
     if out is not None and tasks:
@@ -341,12 +391,12 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
     try:
         if serial:
             for v, chunk in tasks:
-                take(run_chunk(texts[v], sc.name, chunk, filters, duration, v))
+                take(run_chunk(texts[v], sc.name, chunk, filters, duration, v, engine))
         elif tasks:
             own = client is None
             client = client or Client()
             try:
-                _on_dask(client, tasks, texts, sc.name, filters, duration, take)
+                _on_dask(client, tasks, texts, sc.name, filters, duration, engine, take)
             finally:
                 if own:
                     client.__exit__()
@@ -357,13 +407,24 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
     return Result(rows, filters, meta, len(tasks), out, part)
 
 
-def _on_dask(client: Client, tasks, texts, name, filters, duration, take) -> None:
+def _workers(client: Client | None) -> int:
+    """The workers a sweep's batches are shared among: the cluster's (a LocalCluster's to be,
+    the cores), 1 when its scheduler does not answer (the watch then says so)."""
+    if client is None:
+        return os.cpu_count() or 1
+    try:
+        return max(1, len(client.client.ncores(callback_timeout=WATCH_S)))
+    except (OSError, TimeoutError, RuntimeError):
+        return 1
+
+
+def _on_dask(client: Client, tasks, texts, name, filters, duration, engine, take) -> None:
     from distributed import wait
 
     n = len(tasks)
     futures = client.client.map(run_chunk, [texts[v] for v, _ in tasks], [name] * n,
                                 [chunk for _, chunk in tasks], [filters] * n, [duration] * n,
-                                [v for v, _ in tasks], pure=False, retries=1)
+                                [v for v, _ in tasks], [engine] * n, pure=False, retries=1)
     task_of = {f.key: t for f, t in zip(futures, tasks)}
     pending, watch = set(futures), _Watch(client)
     while pending:

@@ -13,6 +13,7 @@ import pytest
 from scipy.stats import ttest_1samp
 
 from navtwin.common.geodesy import LocalFrame
+from navtwin.host.tracks.base import Estimate
 from navtwin.lab import areas, evaluate, layouts, report, sweep
 
 #: Two boxes along the x axis: area 1 over x 0..10, area 2 over x 20..25.
@@ -211,8 +212,8 @@ def test_the_sweeps_cells_carry_the_windows_of_the_scenarios_anchor_grids(monkey
     the window columns, a Parquet part of the scenario's schema holds them, and the summary
     of the rows read back has 004's tables."""
     truth, lines = _run()
-    monkeypatch.setattr(sweep, "run_in_memory", lambda sc, seed, **kw: (lines, None))
-    monkeypatch.setattr(sweep, "estimate_line", lambda line: line)
+    estimates = [Estimate(yaw=None, **json.loads(line)) for line in lines]
+    monkeypatch.setattr(sweep, "run_in_memory", lambda sc, seed, **kw: (estimates, None))
     monkeypatch.setattr(sweep, "truth", lambda sc, seed: truth)
     sc, filters = _StandIn(), tuple(SCALE)
     rows = [r for seed in (1, 2, 3) for r in sweep.seed_cells(sc, seed, filters, None)]

@@ -30,7 +30,7 @@ def test_two_workers_give_the_serial_table_bit_for_bit(tmp_path):
         assert len(client.client.scheduler_info()["workers"]) == 2
         spread = sweep.run("office", range(1, 5), duration=SHORT, client=client,
                            out=tmp_path / "dask")
-    assert serial.tasks == spread.tasks == 2  # 4 seeds in chunks of 2
+    assert serial.tasks == 1 and spread.tasks == 2  # one batch, or one per worker
     assert all(r["status"] == "ok" for r in serial.rows)
     assert spread.rows == serial.rows  # every cell, float for float
     assert sweep.table(sweep.summarise(spread.rows, spread.filters)) == \
@@ -43,6 +43,34 @@ def test_two_workers_give_the_serial_table_bit_for_bit(tmp_path):
         assert meta["scenario_hash"] == sweep.scenario_hash(load_scenario("office"))
         assert meta["seeds"] == [1, 4] and meta["filters"] == list(serial.filters)
         assert meta["code_version"].startswith(__version__)
+
+
+def test_the_engines_give_the_same_cells_and_table():
+    """The batch engine's estimates equal the byte engine's to 1e-9 (tests/lab/test_batch.py),
+    so do the cells made of them, and the table is the same to the digit."""
+    filters = ("sins", "wsn", "kf", "ekf")
+    runs = {e: sweep.run("office", range(1, 4), filters, duration=SHORT, serial=True, engine=e)
+            for e in ("batch", "bytes")}
+    batch_rows, byte_rows = runs["batch"].rows, runs["bytes"].rows
+    assert [(r["seed"], r["filter"], r["status"]) for r in batch_rows] == \
+        [(r["seed"], r["filter"], r["status"]) for r in byte_rows]
+    for a, b in zip(batch_rows, byte_rows):
+        for m in sweep.METRICS:
+            assert a[m] == pytest.approx(b[m], rel=1e-9, abs=1e-12, nan_ok=True), (a["filter"], m)
+    assert sweep.table(sweep.summarise(batch_rows, filters)) == \
+        sweep.table(sweep.summarise(byte_rows, filters))
+
+
+def test_a_batch_that_raises_is_run_seed_by_seed_by_the_byte_engine(monkeypatch):
+    def broken(*args):
+        raise FloatingPointError("a batch gone wrong")
+
+    monkeypatch.setitem(sweep.ENGINES, "batch", broken)
+    text = load_scenario("office").to_toml()
+    rows = sweep.run_chunk(text, "office", [1, 2], ("sins", "kf"), SHORT, None, "batch")
+    assert [(r["seed"], r["filter"], r["status"]) for r in rows] == [
+        (1, "sins", "ok"), (1, "kf", "ok"), (2, "sins", "ok"), (2, "kf", "ok")]
+    assert rows == sweep.run_chunk(text, "office", [1, 2], ("sins", "kf"), SHORT, None, "bytes")
 
 
 def test_the_local_cluster_runs_no_work_for_a_client_without_its_credentials():
@@ -107,7 +135,8 @@ def test_a_sweep_whose_scheduler_dies_ends_with_one_line(monkeypatch):
 
 
 def _counting(monkeypatch, fail: set[int] = frozenset()) -> list[int]:
-    """Record the seeds sweep.seed_cells is called with; raise for those in *fail*."""
+    """Record the seeds sweep.seed_cells (the byte engine's) is called with; raise for those
+    in *fail*."""
     calls, real = [], sweep.seed_cells
 
     def seed_cells(sc, seed, filters, duration):
@@ -122,14 +151,17 @@ def _counting(monkeypatch, fail: set[int] = frozenset()) -> list[int]:
 
 def test_a_rerun_computes_only_the_cells_it_lacks(tmp_path, monkeypatch):
     calls = _counting(monkeypatch)
-    first = sweep.run("office", [1, 2], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path)
+    first = sweep.run("office", [1, 2], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path,
+                      engine="bytes")
     assert first.tasks == 1 and calls == [1, 2]  # 2 s a seed: both in one task
     calls.clear()
-    more = sweep.run("office", [1, 2, 3], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path)
+    more = sweep.run("office", [1, 2, 3], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path,
+                      engine="bytes")
     assert more.tasks == 1 and calls == [3]
     assert more.rows[:4] == first.rows
     calls.clear()
-    again = sweep.run("office", [1, 2, 3], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path)
+    again = sweep.run("office", [1, 2, 3], ("kf", "wsn"), duration=2.0, serial=True, out=tmp_path,
+                      engine="bytes")
     assert again.tasks == 0 and calls == [] and again.part is None
     assert again.rows == more.rows
     assert more.rows == sweep.run("office", [1, 2, 3], ("kf", "wsn"), duration=2.0,
@@ -139,7 +171,8 @@ def test_a_rerun_computes_only_the_cells_it_lacks(tmp_path, monkeypatch):
 
 def test_a_failing_cell_is_retried_once_then_kept_as_a_failed_row(tmp_path, monkeypatch):
     calls = _counting(monkeypatch, fail={2})
-    result = sweep.run("office", [1, 2, 3], ("kf", "ekf"), duration=2.0, serial=True, out=tmp_path)
+    result = sweep.run("office", [1, 2, 3], ("kf", "ekf"), duration=2.0, serial=True, out=tmp_path,
+                       engine="bytes")
     assert calls == [1, 2, 2, 3]
     failed = [r for r in result.rows if r["status"] == "failed"]
     assert [(r["seed"], r["filter"]) for r in failed] == [(2, "kf"), (2, "ekf")]
@@ -152,7 +185,8 @@ def test_a_failing_cell_is_retried_once_then_kept_as_a_failed_row(tmp_path, monk
         (r["seed"], r["filter"], r["status"]) for r in result.rows)
     monkeypatch.undo()  # the fault is gone: a re-run computes the failed seed
     calls = _counting(monkeypatch)
-    healed = sweep.run("office", [1, 2, 3], ("kf", "ekf"), duration=2.0, serial=True, out=tmp_path)
+    healed = sweep.run("office", [1, 2, 3], ("kf", "ekf"), duration=2.0, serial=True, out=tmp_path,
+                       engine="bytes")
     assert calls == [2] and all(r["status"] == "ok" for r in healed.rows)
 
 
