@@ -14,17 +14,10 @@ import math
 import numpy as np
 
 from navtwin.common.geodesy import meridian_radius, transverse_radius
-from navtwin.host.sins import area_from_enu, earth_rate_nav
-
-
-def qmul(p, q):
-    """host.sins.quat_multiply on tuples of (n,) arrays."""
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return (pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw)
+# the per-seed products are written for any numbers: on tuples of (n,) arrays they are these
+from navtwin.host.sins import area_from_enu, earth_rate_nav, mat_vec
+from navtwin.host.sins import quat_multiply as qmul
+from navtwin.host.sins import quat_to_dcm as dcm
 
 
 def from_rotvec(x, y, z):
@@ -34,21 +27,6 @@ def from_rotvec(x, y, z):
     with np.errstate(divide="ignore", invalid="ignore"):
         k = np.where(angle < 1e-4, 0.5 - angle * angle / 48.0, np.sin(half) / angle)
     return (np.cos(half), k * x, k * y, k * z)
-
-
-def dcm(q):
-    """host.sins.quat_to_dcm's rows, per seed."""
-    w, x, y, z = q
-    return ((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
-            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
-            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
-
-
-def mat_vec(m, v):
-    """host.sins.mat_vec: m given by rows (floats or arrays), v a 3-tuple of arrays."""
-    (a, b, c), (d, e, f), (g, h, i) = m
-    x, y, z = v
-    return (a * x + b * y + c * z, d * x + e * y + f * z, g * x + h * y + i * z)
 
 
 class BatchStrapdown:
