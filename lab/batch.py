@@ -112,44 +112,60 @@ class Outcome:
 
 def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | None = None,
         duration: float | None = None) -> Outcome:
-    """Every track's estimates for each of *seeds* (module doc)."""
+    """Every track's estimates for each of *seeds* (module doc). Each seed's records are
+    made, taken by the tracks run per seed and turned into a :class:`Stream` (arrays) at once,
+    so a batch holds about a megabyte a seed; a seed the batch ejects has its records made
+    again (they are the same) and runs per seed."""
     sc = _scenario(scenario)
     seeds = list(seeds)
-    clock = time.process_time()
-    taken = [records(sc, seed, filters=filters, duration=duration) for seed in seeds]
-    records_s, clock = time.process_time() - clock, time.process_time()
-    if not taken:
-        return Outcome([], (), {})
-    cfg = taken[0][0]
-    batched = batchable(cfg.filters)
-    rest = tuple(f for f in cfg.filters if f not in batched)
+    out: list[dict] = [{} for _ in seeds]
     ejected: dict[int, str] = {}
-    streams, rows = [], []
-    if batched:
-        takes = BatchEstimator(replace(cfg, filters=batched), 0).takes()
-        others = Estimator(replace(cfg, filters=rest)).takes() if rest else frozenset()
-        for k, (_, recs) in enumerate(taken):
+    cpu = dict.fromkeys(("records", "batch", "per_seed"), 0.0)
+    streams, rows, cfg, batched, rest = [], [], None, (), ()
+
+    def made(seed):
+        t = time.process_time()
+        got = records(sc, seed, filters=filters, duration=duration)
+        cpu["records"] += time.process_time() - t
+        return got
+
+    for k, seed in enumerate(seeds):
+        c, recs = made(seed)
+        t = time.process_time()
+        if cfg is None:
+            cfg, batched = c, batchable(c.filters)
+            rest = tuple(f for f in c.filters if f not in batched)
+            if batched:
+                takes = BatchEstimator(replace(cfg, filters=batched), 0).takes()
+                others = Estimator(replace(cfg, filters=rest)).takes() if rest else frozenset()
+        if batched:
             try:
                 streams.append(stream(recs, takes, others))
                 rows.append(k)
             except Unbatchable as e:
-                ejected[seeds[k]] = str(e)
-    out: list[dict] = [{} for _ in seeds]
-    if rows:
-        engine = BatchEstimator(replace(cfg, filters=batched), len(rows))
-        for k, got in zip(rows, engine.run(streams)):
-            out[k] = got
-        for j, why in engine.ejected.items():
-            ejected[seeds[rows[j]]] = why
-    batch_s, clock = time.process_time() - clock, time.process_time()
-    for k, (c, recs) in enumerate(taken):
-        if seeds[k] in ejected or not batched:
+                ejected[seed] = str(e)
+        if not batched or seed in ejected:
             out[k] = columns(per_seed(c, recs), c.filters)
-            continue
-        if rest:
-            out[k].update(columns(per_seed(replace(c, filters=rest), recs), rest))
-        out[k] = {f: out[k].get(f) or _empty() for f in c.filters}
-    return Outcome(out, batched, ejected, records_s, batch_s, time.process_time() - clock)
+        elif rest:
+            out[k] = columns(per_seed(replace(c, filters=rest), recs), rest)
+        cpu["per_seed"] += time.process_time() - t
+    if rows:
+        t = time.process_time()
+        engine = BatchEstimator(replace(cfg, filters=batched), len(rows))
+        got = engine.run(streams)
+        cpu["batch"] += time.process_time() - t
+        for j, k in enumerate(rows):
+            if j in engine.ejected:
+                ejected[seeds[k]] = engine.ejected[j]
+                c, recs = made(seeds[k])
+                t = time.process_time()
+                out[k] = columns(per_seed(c, recs), c.filters)
+                cpu["per_seed"] += time.process_time() - t
+            else:
+                out[k] = {**got[j], **out[k]}
+    if cfg is not None:
+        out = [{f: e.get(f) or _empty() for f in cfg.filters} for e in out]
+    return Outcome(out, batched, ejected, cpu["records"], cpu["batch"], cpu["per_seed"])
 
 
 def _empty() -> dict:

@@ -86,7 +86,8 @@ class Unbatchable(ValueError):
 
 class Stream(NamedTuple):
     """One seed's records as arrays: ``kind`` and ``t`` per record; the IMU samples' gyro,
-    accel (n, 3) and uptime (NaN: none) at their records; the exchanges themselves."""
+    accel (n, 3) and uptime (NaN: none) at their records; the exchanges themselves at theirs
+    in ``records`` (None elsewhere: a stream holds no other record object)."""
     kind: np.ndarray
     t: np.ndarray
     gyro: np.ndarray
@@ -105,6 +106,7 @@ def stream(records: list, takes: frozenset, taken: frozenset) -> Stream:
     gyro, accel = np.zeros((n, 3)), np.zeros((n, 3))
     uptime = np.full(n, np.nan)
     last = -math.inf
+    kept: list = [None] * n
     for i, r in enumerate(records):
         cls = type(r)
         if cls is ImuSample:
@@ -123,13 +125,13 @@ def stream(records: list, takes: frozenset, taken: frozenset) -> Stream:
             if r.uptime_s is not None:
                 uptime[i] = r.uptime_s
         elif cls is Exchange:
-            kind[i], t[i] = EXCHANGE, r.t
+            kind[i], t[i], kept[i] = EXCHANGE, r.t, r
         elif cls in IGNORED_UNTAKEN and cls not in takes:
             if cls in taken and math.isfinite(r.t):
                 kind[i], t[i] = TIMED, r.t
         else:
             raise Unbatchable(f"{cls.__name__} record")
-    return Stream(kind, t, gyro, accel, uptime, records)
+    return Stream(kind, t, gyro, accel, uptime, kept)
 
 
 class BatchEstimator:
