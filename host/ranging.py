@@ -78,9 +78,17 @@ class Ranging:
 
     def fix(self, cycle: Cycle) -> Fix | FixRefused:
         """The cycle's fix (kept in ``fixes``), or why the solver refused one."""
+        return self.took(cycle, self.solver.fix(*self.problem(cycle)))
+
+    def problem(self, cycle: Cycle) -> tuple:
+        """What the solver is asked of *cycle*: (t, anchors, ranges, near)."""
         # the previous fix tells TDOA mirror positions apart (three anchors: both fit exactly)
         near = self.fixes[-1].p if self.fixes else None
-        fix = self.solver.fix(cycle.t, cycle.valid_anchors, cycle.distances, near)
+        return cycle.t, cycle.valid_anchors, cycle.distances, near
+
+    def took(self, cycle: Cycle, fix: Fix | str) -> Fix | FixRefused:
+        """The solver's answer to :meth:`problem` (host.batch.wsn answers many at once): a
+        fix kept in ``fixes``, or why there is none."""
         if isinstance(fix, str):
             return FixRefused(cycle.t, fix)
         # two fixes with one time would give no velocity: keep the newer

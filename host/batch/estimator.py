@@ -16,8 +16,8 @@ not finite), is *ejected*: :attr:`ejected` names it, its rows are dropped, and t
 runs it per seed with the estimator itself (lab.batch). Everything the per-seed estimator
 does on that path therefore needs no twin here.
 
-Ranging (the exchanges' checks, TDMA cycles and fixes) runs per seed, with the per-seed
-host.ranging.Ranging: it is a few percent of the records.
+Ranging (the exchanges' checks and TDMA cycles) runs per seed, with the per-seed
+host.ranging.Ranging; the cycles' fixes of a round are solved at once (host.batch.wsn).
 """
 from __future__ import annotations
 
@@ -37,6 +37,7 @@ from ..settings import EstimatorConfig
 from ..sins import Alignment
 from ..wsn import AnchorLayout
 from . import tracks as batch_tracks
+from . import wsn
 from .strapdown import BatchStrapdown
 
 #: what a seed's next record is: an IMU sample, an exchange, a record only the tracks run per
@@ -169,6 +170,7 @@ class BatchEstimator:
         self._r_stationary = np.diag([sv**2, sv**2, sa**2, sa**2])
         # the ranging part, per seed; its last two fixes as arrays for the tracks
         self.ranging = [Ranging(cfg, self.layout) for _ in range(n)]
+        self.solver = Ranging(cfg, self.layout).solver  # stateless: one for every seed
         self.fix_t = np.full((n, 2), np.nan)  # oldest first; NaN: none
         self.fix_p = np.zeros((n, 2, 2))
         self.fix_cov = np.zeros((n, 2, 2, 2))
@@ -319,13 +321,18 @@ class BatchEstimator:
                     ta, np.array([distances[k] for k in has]),
                     self.layout.index([records[k].anchor for k in has]),
                     np.maximum(self.t[idx[has]] - ta, 0.0)))
-        results: list[list] = []  # per seed, what its cycles gave: (cycle, Fix | FixRefused)
-        for i, r, d in zip(idx.tolist(), records, distances):
-            ranging = self.ranging[i]
-            made = [(cycle, ranging.fix(cycle)) for cycle in ranging.add(r, d)]
-            results.append(made)
+        rows = idx.tolist()
+        cycles = [self.ranging[i].add(r, d) for i, r, d in zip(rows, records, distances)]
+        results: list[list] = [[] for _ in rows]  # per seed: (cycle, Fix | FixRefused)
+        for r in range(max(map(len, cycles), default=0)):  # a seed's cycles in their order,
+            # each round's fixes solved at once (host.batch.wsn)
+            ks = [k for k, c in enumerate(cycles) if len(c) > r]
+            answers = wsn.fixes(self.solver, [self.ranging[rows[k]].problem(cycles[k][r]) for k in ks])
+            for k, answer in zip(ks, answers):
+                results[k].append((cycles[k][r], self.ranging[rows[k]].took(cycles[k][r], answer)))
+        for i, made in zip(rows, results):
             if any(isinstance(f, Fix) for _, f in made):
-                fixes = ranging.fixes
+                fixes = self.ranging[i].fixes
                 self.fix_t[i] = np.nan
                 for slot, f in zip(range(2 - len(fixes), 2), fixes):
                     self.fix_t[i, slot], self.fix_p[i, slot], self.fix_cov[i, slot] = f.t, f.p, f.cov
