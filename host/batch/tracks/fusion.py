@@ -7,16 +7,19 @@ A twin names its filter's correction (:meth:`BatchFusionTrack.correct`: the Jose
 linearised at the prior, the KF's and the EKF's; the UKF's its own) and the products it
 takes; the measurements are host.batch.model's, each seed's rows its own.
 
-The common path only (host.batch.tracks.base): a position update gated out for
-``gate_reopen_s`` (the track starts again) and a numerical failure (a singular innovation
-covariance, a covariance not positive definite: the per-seed track's reset) hand the seeds
-back to be run per seed; a rejection, and an acceleration update re-opened, are here.
+A rejection, an acceleration update re-opened, and a position kind gated out for
+``gate_reopen_s`` are here: the last is the track's discontinuity (``gated``), which waits,
+taking its updates and reporting stale estimates, for the next WSN fix no older than it
+and starts again there (FusionTrack.reinit_at; the fix's cycle's other updates skipped),
+as common on some shipped scenarios as the rejections before it. A numerical failure (a
+singular innovation covariance, a covariance not positive definite: the per-seed track's
+reset) hands the seeds back to be run per seed (host.batch.tracks.base).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.measurements import Motion, Range, Tdoa
+from navtwin.host.measurements import Fix, Motion, Range, Tdoa
 from navtwin.host.tracks.fusion import POSITION_KINDS, TightSettings
 from navtwin.host.wsn import chi2_gate
 
@@ -39,9 +42,11 @@ class BatchFusionTrack(BatchTrack):
         self.t_predicted = np.full(n, np.nan)  # FusionTrack.t_predicted
         self._gates: dict[int, float] = {}
         self._gated_since: dict[str, np.ndarray] = {}  # kind -> first rejection of a run; NaN: none
+        self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
+        self.reinit_fix: list = [None] * n  # Track.reinit_fix: the fix it last started again at
 
     def handlers(self) -> dict:
-        return {Motion: self.motion}
+        return {Motion: self.motion, Fix: self.offer_fix}
 
     def correct(self, x, P, z, R, meas, gate):
         """The filter's update of the rows x (k, 6), P (k, 6, 6) with z (k, m) through *meas*
@@ -61,6 +66,29 @@ class BatchFusionTrack(BatchTrack):
         self.P[idx] = np.diag([sp**2, sp**2, sv**2, sv**2, sa**2, sa**2])
         self.aided[idx] = np.nan
         self.t_predicted[idx] = t
+
+    def offer_fix(self, idx, f) -> np.ndarray:
+        """Track.offer_fix: the seeds waiting since a discontinuity no later than the fix
+        start again at it (FusionTrack.reinit_at: its position and covariance, at rest with
+        ``reinit_sigma`` on velocity and acceleration, no run of rejections); which did."""
+        at = f.t >= self.reinit_since[idx]  # NaN: not waiting
+        if at.any():
+            rows = idx[at]
+            sv, sa = self.ctx.cfg.reinit_sigma
+            P0 = np.zeros((len(rows), 6, 6))
+            P0[:, 2, 2] = P0[:, 3, 3] = sv**2
+            P0[:, 4, 4] = P0[:, 5, 5] = sa**2
+            P0[:, :2, :2] = f.cov[at]
+            self.x[rows] = 0.0
+            self.x[rows, :2] = f.p[at]
+            self.P[rows] = P0
+            self.aided[rows] = f.t[at]
+            for since in self._gated_since.values():
+                since[rows] = np.nan
+            self.reinit_since[rows] = np.nan
+            for i, k in zip(rows.tolist(), np.flatnonzero(at).tolist()):
+                self.reinit_fix[i] = f.fixes[k]
+        return at
 
     def sync(self, idx) -> None:
         """FusionTrack.sync: the seeds *idx* predicted to their filter time."""
@@ -103,7 +131,7 @@ class BatchFusionTrack(BatchTrack):
             since[r] = np.where(np.isnan(since[r]), t[out], since[r])
             long = t[out] - since[r] > ctx.cfg.gate_reopen_s
             if kind in POSITION_KINDS:  # the track, not the WSN, is off: it starts again
-                ctx.eject(r[long], f"{self.name}: gated out")
+                self.reinit_since[r[long]] = t[out][long]  # at the next fix (Track.discontinuity)
             elif long.any():  # the acceleration is off: its update applies ungated
                 k = np.flatnonzero(out)[long]
                 rows = idx[k]
@@ -121,8 +149,8 @@ class BatchFusionTrack(BatchTrack):
     def estimate(self, idx, b) -> Columns:
         ctx = self.ctx
         x, P = self._propagate(idx, b - self.t_predicted[idx])
-        return Columns(np.ones(len(idx), bool), x[:, :2], x[:, 2:4], P[:, :4, :4],
-                       ctx.stale(idx, b, self.aided[idx]), True)
+        stale = ~np.isnan(self.reinit_since[idx]) | ctx.stale(idx, b, self.aided[idx])
+        return Columns(np.ones(len(idx), bool), x[:, :2], x[:, 2:4], P[:, :4, :4], stale, True)
 
 
 class BatchTightTrack(BatchFusionTrack):
@@ -146,11 +174,10 @@ class BatchTightTrack(BatchFusionTrack):
     def tdoa(self, idx, ms: list[Tdoa]) -> None:
         """Each seed's Tdoa of a cycle: one stacked update per group of seeds with the same
         anchors and reference (their R too: host.wsn.tdoa_covariance of the count); one with
-        too few differences updates nothing. (A Tdoa of the fix the track started again at
-        needs a re-initialisation, which runs per seed.)"""
+        too few differences updates nothing, nor one of the fix the seed started again at."""
         groups: dict[tuple, list[int]] = {}
         for k, m in enumerate(ms):
-            if m.meas is not None:
+            if m.meas is not None and (m.fix is None or m.fix is not self.reinit_fix[idx[k]]):
                 groups.setdefault((m.meas.anchors, m.meas.reference), []).append(k)
         for (anchors, reference), ks in groups.items():
             first = ms[ks[0]]

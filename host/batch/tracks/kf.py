@@ -18,5 +18,11 @@ class BatchKfTrack(BatchFusionTrack):
         return {**super().handlers(), Fix: self.fix}
 
     def fix(self, idx, f) -> None:
+        """The fix is offered first; a seed that started again at it takes nothing else of it."""
+        on = ~self.offer_fix(idx, f)
+        if not on.all():
+            idx = idx[on]
+            f = f._replace(t=f.t[on], p=f.p[on], cov=f.cov[on],
+                           fixes=[x for x, k in zip(f.fixes, on.tolist()) if k])
         lag = np.maximum(self.ctx.t[idx] - f.t, 0.0)
         self._update(idx, f.p, f.cov, position_fixes(lag), f.t, "fix")
