@@ -1,8 +1,9 @@
 """The tightly coupled tracks' batch twins (host.batch.tracks.ekf, ukf): each seed's
 estimates equal the per-seed tracks', with the ranges measured per cycle (tdoa) or each on
 its own (toa), on seeds of every shipped scenario, without a seed leaving the batch for
-them (a track gated out, as on rssi-centroid, starts again at a fix there too); and their parts (host.batch.model's
-ranges, host.batch.ukf's update) equal the per-seed ones seed by seed."""
+them (a track gated out, as on rssi-centroid, starts again at a fix there too); and their
+parts (host.batch.model's ranges, host.batch.ukf's update) equal the per-seed ones seed by
+seed."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -75,22 +76,24 @@ def test_both_range_measurements_equal_the_per_seed_tracks(scenario, tight):
         except Unbatchable:  # its records leave the common path (lab.batch runs it per seed)
             assert scenario != "office"
     engine = BatchEstimator(cfg, len(seeds))
-    for k, got in enumerate(engine.run(streams)):
-        if k not in engine.ejected:
-            recs = taken[SEEDS.index(seeds[k])][1]
-            assert_equal(batch.columns(batch.per_seed(cfg, recs), FILTERS), got,
-                         f"{scenario} {tight} seed {seeds[k]}")
+    estimates = engine.run(streams)
     assert engine.ejected == {}  # a track gated out starts again at a fix in the batch too
+    for seed, got in zip(seeds, estimates):
+        recs = taken[SEEDS.index(seed)][1]
+        assert_equal(batch.columns(batch.per_seed(cfg, recs), FILTERS), got,
+                     f"{scenario} {tight} seed {seed}")
     if scenario == "office":
         assert len(seeds) == len(SEEDS)
 
 
-LAYOUT = AnchorLayout({1: (0.0, 0.0, 2.5), 2: (12.0, 0.0, 2.4), 3: (12.0, 8.0, 2.6), 4: (0.0, 8.0, 2.5),
-                       5: (6.0, 4.0, 3.0)}, tag_height=0.3)
+LAYOUT = AnchorLayout({1: (0.0, 0.0, 2.5), 2: (12.0, 0.0, 2.4), 3: (12.0, 8.0, 2.6),
+                       4: (0.0, 8.0, 2.5), 5: (6.0, 4.0, 3.0)}, tag_height=0.3)
 
 
 def _seeds(rng, n):
-    x = np.column_stack((rng.uniform(1, 11, (n, 2)), rng.normal(0, 1, (n, 2)), rng.normal(0, 0.5, (n, 2))))
+    """n states (position, velocity, acceleration) and positive definite covariances."""
+    x = np.column_stack((rng.uniform(1, 11, (n, 2)), rng.normal(0, 1, (n, 2)),
+                         rng.normal(0, 0.5, (n, 2))))
     A = rng.normal(0, 0.3, (n, 6, 6))
     return x, np.matmul(A, np.swapaxes(A, 1, 2)) + 0.05 * np.eye(6)
 

@@ -10,10 +10,10 @@ takes; the measurements are host.batch.model's, each seed's rows its own.
 A rejection, an acceleration update re-opened, and a position kind gated out for
 ``gate_reopen_s`` are here: the last is the track's discontinuity (``gated``), which waits,
 taking its updates and reporting stale estimates, for the next WSN fix no older than it
-and starts again there (FusionTrack.reinit_at; the fix's cycle's other updates skipped),
-as common on some shipped scenarios as the rejections before it. A numerical failure (a
-singular innovation covariance, a covariance not positive definite: the per-seed track's
-reset) hands the seeds back to be run per seed (host.batch.tracks.base).
+and starts again there (FusionTrack.reinit_at; the fix's cycle's other updates skipped):
+every seed's ekf and ukf do it on rssi-centroid, so it is the common path. A numerical
+failure (a singular innovation covariance, a covariance not positive definite: the
+per-seed track's reset) hands the seeds back to be run per seed (host.batch.tracks.base).
 """
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ from navtwin.host.tracks.fusion import POSITION_KINDS, TightSettings
 from navtwin.host.wsn import chi2_gate
 
 from ..innovation import joseph_correct
-from ..model import BatchLinear, BatchRanges
 from ..linalg import T, mv
+from ..model import BatchLinear, BatchRanges
 from ..seeds import take
 from .base import BatchTrack, Columns
 

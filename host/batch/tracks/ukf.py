@@ -2,8 +2,8 @@
 Merwe scaled sigma points and the acceleration in closed form (host.batch.ukf)."""
 from __future__ import annotations
 
-from navtwin.host.filters.ukf import merwe_weights
 from navtwin.host.filters.model import DIM_X
+from navtwin.host.filters.ukf import merwe_weights
 from navtwin.host.tracks.ukf import UkfSettings
 
 from ..ukf import unscented_correct
