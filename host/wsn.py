@@ -110,9 +110,10 @@ class AnchorLayout:
         return self._offsets(p, idx)[1]
 
     def geometry(self, p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Ranges (m,) from a position (2,) (or one per anchor, (m, 2)) and d r / d p (m, 2)."""
+        """Ranges (m,) from a position (2,) (or one per anchor, (m, 2)) and d r / d p (m, 2);
+        stacked, (..., m) and (..., m, 2) from positions (..., m, 2) (host.batch.model)."""
         d, r = self._offsets(p, idx)
-        return r, d / r[:, None]
+        return r, d / r[..., None]
 
     def baseline(self, a: int, b: int) -> float:
         """3-D distance between anchors a and b (ids): the bound on |r_a - r_b|."""

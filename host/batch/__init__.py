@@ -13,7 +13,9 @@ per 6x6 product per seed (``navtwin bench batch``).
 base.py: BatchFilter (x, P, the active seeds of a step, the update); seeds.py: inputs per
 seed or shared, dt grouped by value; linalg.py: the stacked inverse and products;
 innovation.py: the gated Joseph update (BatchInnovation); kf.py: BatchKalmanFilter (host.filters.kf); errorstate.py:
-BatchErrorStateFilter (host.filters.errorstate); bench.py: ``navtwin bench batch``.
+BatchErrorStateFilter (host.filters.errorstate); model.py: the measurement models (a fix's
+lag, the ranges and their differences with each seed's lags: host.filters.model); ukf.py: the
+UKF's sigma-point update (host.filters.ukf); bench.py: ``navtwin bench batch``.
 """
 from .errorstate import BatchErrorStateFilter
 from .innovation import BatchInnovation

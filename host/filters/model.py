@@ -157,6 +157,8 @@ class Ranges:
         self.idx = layout.index(self.anchors)
         m = len(self.anchors)
         lags = [0.0] * m if lags is None else lags
+        self.lags = tuple(lags)  # read by host.batch.model, which stacks the seeds' lags
+        self.reference = reference
         self._c = np.array([lag_coefficients(lag) for lag in lags])  # (m, 3): C_i = c_i (x) I
         if reference is None:
             self._ref, self._others = None, None

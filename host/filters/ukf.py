@@ -38,6 +38,19 @@ from .linalg import inverse
 from .model import ConstantAcceleration, Linear
 
 
+def merwe_weights(n: int, alpha: float, beta: float,
+                  kappa: float | None) -> tuple[float, np.ndarray, np.ndarray]:
+    """n + lambda (the Cholesky factor's scale), Wm and Wc (2n+1,) of the Merwe scaled sigma
+    points (module doc; kappa None: 3 - n); shared with the batch twin (host.batch.ukf)."""
+    kappa = 3.0 - n if kappa is None else kappa
+    lam = alpha**2 * (n + kappa) - n
+    Wm = np.full(2 * n + 1, 0.5 / (n + lam))
+    Wc = Wm.copy()
+    Wm[0] = lam / (n + lam)
+    Wc[0] = lam / (n + lam) + 1.0 - alpha**2 + beta
+    return n + lam, Wm, Wc
+
+
 class UnscentedKalmanFilter:
     def __init__(self, x: np.ndarray, P: np.ndarray, model: ConstantAcceleration,
                  alpha: float = 1.0, beta: float = 2.0, kappa: float | None = None):
@@ -45,14 +58,8 @@ class UnscentedKalmanFilter:
         self.P = np.array(P, dtype=float)
         self.model = model
         n = self.n = len(self.x)
-        kappa = 3.0 - n if kappa is None else kappa
         self.alpha, self.beta, self.kappa = alpha, beta, kappa
-        lam = alpha**2 * (n + kappa) - n
-        self._scale = n + lam
-        self.Wm = np.full(2 * n + 1, 0.5 / (n + lam))
-        self.Wc = self.Wm.copy()
-        self.Wm[0] = lam / (n + lam)
-        self.Wc[0] = lam / (n + lam) + 1.0 - alpha**2 + beta
+        self._scale, self.Wm, self.Wc = merwe_weights(n, alpha, beta, kappa)
 
     def sigma_points(self) -> np.ndarray:
         """(2n+1, n) sigma points of the current (x, P)."""

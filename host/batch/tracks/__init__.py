@@ -19,6 +19,8 @@ BATCH_TRACKS: Registry[type[BatchTrack]] = Registry(GROUP, "batch track", {
     "sins": "navtwin.host.batch.tracks.sins:BatchSinsTrack",
     "wsn": "navtwin.host.batch.tracks.wsn:BatchWsnTrack",
     "kf": "navtwin.host.batch.tracks.kf:BatchKfTrack",
+    "ekf": "navtwin.host.batch.tracks.ekf:BatchEkfTrack",
+    "ukf": "navtwin.host.batch.tracks.ukf:BatchUkfTrack",
 })
 get = BATCH_TRACKS.get
 

@@ -1,0 +1,187 @@
+"""What the fusion tracks' twins (kf, ekf, ukf) share, as host.tracks.fusion's FusionTrack and
+TightTrack are shared per seed: the constant-acceleration state of each seed (x (n, 6),
+P (n, 6, 6)), predicted lazily to the filter time from its own ``t_predicted``, and the
+gated update with its runs of rejections, for the rows of the seeds a product reaches.
+
+A twin names its filter's correction (:meth:`BatchFusionTrack.correct`: the Joseph update
+linearised at the prior, the KF's and the EKF's; the UKF's its own) and the products it
+takes; the measurements are host.batch.model's, each seed's rows its own.
+
+A rejection, an acceleration update re-opened, and a position kind gated out for
+``gate_reopen_s`` are here: the last is the track's discontinuity (``gated``), which waits,
+taking its updates and reporting stale estimates, for the next WSN fix no older than it
+and starts again there (FusionTrack.reinit_at; the fix's cycle's other updates skipped):
+every seed's ekf and ukf do it on rssi-centroid, so it is the common path. A numerical
+failure (a singular innovation covariance, a covariance not positive definite: the
+per-seed track's reset) hands the seeds back to be run per seed (host.batch.tracks.base).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from navtwin.host.measurements import Fix, Motion, Range, Tdoa
+from navtwin.host.tracks.fusion import POSITION_KINDS, TightSettings
+from navtwin.host.wsn import chi2_gate
+
+from ..innovation import joseph_correct
+from ..linalg import T, mv
+from ..model import BatchLinear, BatchRanges
+from ..seeds import take
+from .base import BatchTrack, Columns
+
+
+class BatchFusionTrack(BatchTrack):
+    uses_strapdown = True
+
+    def __init__(self, ctx, settings=None) -> None:
+        super().__init__(ctx, settings)
+        n = ctx.n
+        self.x, self.P = np.zeros((n, 6)), np.zeros((n, 6, 6))
+        self._I = np.eye(6)
+        self.aided = np.full(n, np.nan)  # time of the last position update; NaN: none
+        self.t_predicted = np.full(n, np.nan)  # FusionTrack.t_predicted
+        self._gates: dict[int, float] = {}
+        self._gated_since: dict[str, np.ndarray] = {}  # kind -> first rejection of a run; NaN: none
+        self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
+        self.reinit_fix: list = [None] * n  # Track.reinit_fix: the fix it last started again at
+
+    def handlers(self) -> dict:
+        return {Motion: self.motion, Fix: self.offer_fix}
+
+    def correct(self, x, P, z, R, meas, gate):
+        """The filter's update of the rows x (k, 6), P (k, 6, 6) with z (k, m) through *meas*
+        (host.batch.model): (x, P, BatchInnovation). The Joseph form linearised at the prior
+        (host.filters.ekf; for a linear *meas*, host.filters.kf)."""
+        hx, H = meas.linearize(x)
+        return joseph_correct(x, P, self._I, z - hx, H, R, gate)
+
+    def _gate(self, dim: int) -> float:
+        if dim not in self._gates:
+            self._gates[dim] = chi2_gate(dim, self.ctx.cfg.gate_probability)
+        return self._gates[dim]
+
+    def start(self, idx, t) -> None:
+        sp, sv, sa = self.ctx.cfg.p0_sigma
+        self.x[idx] = [*self.ctx.cfg.start, 0.0, 0.0, 0.0, 0.0]
+        self.P[idx] = np.diag([sp**2, sp**2, sv**2, sv**2, sa**2, sa**2])
+        self.aided[idx] = np.nan
+        self.t_predicted[idx] = t
+
+    def offer_fix(self, idx, f) -> np.ndarray:
+        """Track.offer_fix: the seeds waiting since a discontinuity no later than the fix
+        start again at it (FusionTrack.reinit_at: its position and covariance, at rest with
+        ``reinit_sigma`` on velocity and acceleration, no run of rejections); which did."""
+        at = f.t >= self.reinit_since[idx]  # NaN: not waiting
+        if at.any():
+            rows = idx[at]
+            sv, sa = self.ctx.cfg.reinit_sigma
+            P0 = np.zeros((len(rows), 6, 6))
+            P0[:, 2, 2] = P0[:, 3, 3] = sv**2
+            P0[:, 4, 4] = P0[:, 5, 5] = sa**2
+            P0[:, :2, :2] = f.cov[at]
+            self.x[rows] = 0.0
+            self.x[rows, :2] = f.p[at]
+            self.P[rows] = P0
+            self.aided[rows] = f.t[at]
+            for since in self._gated_since.values():
+                since[rows] = np.nan
+            self.reinit_since[rows] = np.nan
+            for i, k in zip(rows.tolist(), np.flatnonzero(at).tolist()):
+                self.reinit_fix[i] = f.fixes[k]
+        return at
+
+    def sync(self, idx) -> None:
+        """FusionTrack.sync: the seeds *idx* predicted to their filter time."""
+        t = self.ctx.t[idx]
+        behind = self.t_predicted[idx] < t
+        if behind.any():
+            b = idx[behind]
+            self.x[b], self.P[b] = self._propagate(b, t[behind] - self.t_predicted[b])
+            self.t_predicted[b] = t[behind]
+
+    def _propagate(self, idx, dt):
+        """ConstantAcceleration.propagate of the seeds *idx*, each over its dt (the UKF's
+        predict too: its transform through the linear F is this, in closed form)."""
+        F, Q = self.ctx.model.many(dt)
+        return mv(F, self.x[idx]), np.matmul(np.matmul(F, self.P[idx]), T(F)) + Q
+
+    def motion(self, idx, m) -> None:
+        self._update(idx, m.z, m.R, BatchLinear(m.meas.H), m.t, m.kind)
+
+    def _update(self, idx, z, R, meas, t, kind: str) -> None:
+        """FusionTrack._update: the late ones left out, the rest synced and updated, the
+        gated-out ones' runs of rejections followed (module doc)."""
+        ctx = self.ctx
+        on = ctx.t[idx] - t <= ctx.cfg.max_lag_s
+        if not on.all():
+            idx, z, t, R, meas = idx[on], z[on], t[on], take(R, 2, on), meas.take(on)
+        if not idx.size:
+            return
+        self.sync(idx)
+        try:
+            x, P, inn = self.correct(self.x[idx], self.P[idx], z, R, meas, self._gate(meas.dim))
+        except np.linalg.LinAlgError:
+            ctx.eject(idx, f"{self.name}: numerical reset")
+            return
+        self.x[idx], self.P[idx] = x, P
+        since = self._gated_since.setdefault(kind, np.full(ctx.n, np.nan))
+        out = ~inn.accepted
+        if out.any():  # the run of rejections of this kind goes on, or starts now
+            r = idx[out]
+            since[r] = np.where(np.isnan(since[r]), t[out], since[r])
+            long = t[out] - since[r] > ctx.cfg.gate_reopen_s
+            if kind in POSITION_KINDS:  # the track, not the WSN, is off: it starts again
+                self.reinit_since[r[long]] = t[out][long]  # at the next fix (Track.discontinuity)
+            elif long.any():  # the acceleration is off: its update applies ungated
+                k = np.flatnonzero(out)[long]
+                rows = idx[k]
+                try:
+                    self.x[rows], self.P[rows], _ = self.correct(
+                        self.x[rows], self.P[rows], z[k], take(R, 2, k), meas.take(k), None)
+                except np.linalg.LinAlgError:
+                    ctx.eject(rows, f"{self.name}: numerical reset")
+                out[k] = False
+        taken = idx[~out]
+        since[taken] = np.nan
+        if kind in POSITION_KINDS:
+            self.aided[taken] = t[~out]
+
+    def estimate(self, idx, b) -> Columns:
+        ctx = self.ctx
+        x, P = self._propagate(idx, b - self.t_predicted[idx])
+        stale = ~np.isnan(self.reinit_since[idx]) | ctx.stale(idx, b, self.aided[idx])
+        return Columns(np.ones(len(idx), bool), x[:, :2], x[:, 2:4], P[:, :4, :4], stale, True)
+
+
+class BatchTightTrack(BatchFusionTrack):
+    """host.tracks.fusion.TightTrack: the ranges themselves, each cycle's differences to the
+    reference anchor (``tight = "tdoa"``) or each range at its own time (``"toa"``)."""
+
+    def __init__(self, ctx, settings=None) -> None:
+        super().__init__(ctx, TightSettings() if settings is None else settings)
+
+    def handlers(self) -> dict:
+        if self.settings.tight == "toa":
+            return {**super().handlers(), Range: self.range}
+        return {**super().handlers(), Tdoa: self.tdoa}
+
+    def range(self, idx, m) -> None:
+        """Each seed's range (host.batch.estimator.RangeBatch), R = range_sigma_m^2."""
+        R = np.array([[self.ctx.cfg.range_sigma_m**2]])
+        meas = BatchRanges.of(self.ctx.layout, m.row[:, None], m.lag[:, None])
+        self._update(idx, m.z[:, None], R, meas, m.t, "range")
+
+    def tdoa(self, idx, ms: list[Tdoa]) -> None:
+        """Each seed's Tdoa of a cycle: one stacked update per group of seeds with the same
+        anchors and reference (their R too: host.wsn.tdoa_covariance of the count); one with
+        too few differences updates nothing, nor one of the fix the seed started again at."""
+        groups: dict[tuple, list[int]] = {}
+        for k, m in enumerate(ms):
+            if m.meas is not None and (m.fix is None or m.fix is not self.reinit_fix[idx[k]]):
+                groups.setdefault((m.meas.anchors, m.meas.reference), []).append(k)
+        for (anchors, reference), ks in groups.items():
+            first = ms[ks[0]]
+            meas = BatchRanges.of(self.ctx.layout, first.meas.idx, [ms[k].meas.lags for k in ks],
+                                  anchors.index(reference))
+            self._update(idx[ks], np.array([ms[k].z for k in ks]), first.R, meas,
+                         np.array([ms[k].t for k in ks]), "tdoa")
