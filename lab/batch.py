@@ -11,7 +11,7 @@ A seed's run has two halves, and this engine takes them apart:
 2. **Tracks.** The tracks with a batch twin (host.batch.tracks) run for every seed of the
    batch at once (host.batch.estimator.BatchEstimator); the others run per seed with the
    estimator itself, on the same records. A seed that leaves the batch's common path (the
-   batch estimator's ``ejected``: a restart, a gap, a gate rejection) runs per seed with
+   batch estimator's ``ejected``: a restart, a gap, a numerical reset) runs per seed with
    every track. So every seed has every track's estimates, and a twin only makes them
    faster.
 

@@ -11,8 +11,8 @@ filters, host.batch.strapdown), so each seed's numbers are the per-seed estimato
 
 The common path only. A seed whose records hold anything else (a device restart, an IMU
 sample out of order, stale or with a gap beyond one period, a record type no twin takes),
-or whose tracks would leave it (a gate rejection, a numerical reset, an estimate that is
-not finite), is *ejected*: :attr:`ejected` names it, its rows are dropped, and the caller
+or whose tracks would take a branch their twins do not carry (a numerical reset, an
+estimate that is not finite), is *ejected*: :attr:`ejected` names it, its rows are dropped, and the caller
 runs it per seed with the estimator itself (lab.batch). Everything the per-seed estimator
 does on that path therefore needs no twin here.
 

@@ -10,9 +10,9 @@ settings, and gives:
 * :meth:`start`: as Track's, for the seeds *idx*;
 * :meth:`estimate`: the :class:`Columns` of the seeds *idx* at their output instants.
 
-A seed whose track would leave the common path (a discontinuity, a numerical reset, a
-gate reopened) is handed back with :meth:`BatchEstimator.eject`: the engine runs it again
-per seed, so a twin need not carry the rare branches.
+A seed whose track would take a branch the twin does not carry (a numerical reset, a
+discontinuity the twin does not follow) is handed back with :meth:`BatchEstimator.eject`: the
+engine runs it again per seed, so a twin need not carry the rare branches.
 """
 from __future__ import annotations
 
