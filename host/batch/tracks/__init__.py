@@ -19,6 +19,9 @@ BATCH_TRACKS: Registry[type[BatchTrack]] = Registry(GROUP, "batch track", {
     "sins": "navtwin.host.batch.tracks.sins:BatchSinsTrack",
     "wsn": "navtwin.host.batch.tracks.wsn:BatchWsnTrack",
     "kf": "navtwin.host.batch.tracks.kf:BatchKfTrack",
+    "lc": "navtwin.host.batch.tracks.lc:BatchLcTrack",
+    "tc": "navtwin.host.batch.tracks.tc:BatchTcTrack",
+    "fatci": "navtwin.host.batch.tracks.fatci:BatchFatciTrack",
 })
 get = BATCH_TRACKS.get
 
