@@ -53,7 +53,9 @@ def mat_vec(m, v):
 
 class BatchStrapdown:
     """p (N, 3), v (N, 3), q (N, 4) and the gyro bias (N, 3) of N strapdowns on one site;
-    a seed's row is set by :meth:`begin` (the alignment's result) before it steps."""
+    a seed's row is set by :meth:`begin` (the alignment's result), or :meth:`take` from
+    another's, before it steps. A track's own strapdown (an error-state track's) is also
+    corrected (:meth:`correct`) and placed (:meth:`place`)."""
 
     def __init__(self, n: int, *, latitude_deg: float, altitude_m: float = 0.0,
                  x_azimuth_deg: float = 90.0) -> None:

@@ -31,7 +31,7 @@ class BatchTcTrack(BatchErrorStateTrack):
         p, lead = self.position_at(idx, t)
         r, u = self.ctx.layout.geometry(p, row)  # one position per range: row k's anchor
         k = np.arange(len(idx))
-        H = np.zeros((len(idx), 1, self._I.shape[0]))
+        H = np.zeros((len(idx), 1, self.x.shape[1]))
         H[:, 0, 0:2] = u
         H[:, 0, 2:4] = lead[:, None] * u
         H[k, 0, NAV + (0 if self.settings.nlos_states == "shared" else row)] = -1.0
