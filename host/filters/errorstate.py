@@ -54,16 +54,23 @@ def process_noises(dt: np.ndarray, gyro_psd: float, accel_psd: float, extra_psd:
     dts = dt.tolist()
     d2, d3 = np.array([d**2 for d in dts]), np.array([d**3 for d in dts])
     n = NAV + extra
-    Q = np.zeros((len(dts), n, n))
-    for i in range(2):
-        Q[:, i, i] = accel_psd * d3 / 4
-        Q[:, i, i + 2] = Q[:, i + 2, i] = accel_psd * d2 / 2
-        Q[:, i + 2, i + 2] = accel_psd * dt
-    for i in range(A.start, A.stop):
-        Q[:, i, i] = gyro_psd * dt
-    for i in range(NAV, n):
-        Q[:, i, i] = extra_psd * dt
-    return Q
+    terms = np.column_stack((accel_psd * d3 / 4, accel_psd * d2 / 2, accel_psd * dt,
+                             gyro_psd * dt, extra_psd * dt))
+    Q = np.zeros((len(dts), n * n))
+    at, term = _noise_entries(n)
+    Q[:, at] = terms[:, term]
+    return Q.reshape(-1, n, n)
+
+
+@lru_cache(maxsize=8)
+def _noise_entries(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where the nonzero entries of G Q G^T (n x n) are, row-major, and which of
+    process_noises' terms (Q_pp, Q_pv, Q_vv, Q_AA, Q_ee) each is."""
+    entries = [((i, i), 0) for i in range(2)]
+    entries += [((i, i + 2), 1) for i in range(2)] + [((i + 2, i), 1) for i in range(2)]
+    entries += [((i, i), 2) for i in range(2, 4)] + [((i, i), 3) for i in range(A.start, A.stop)]
+    entries += [((i, i), 4) for i in range(NAV, n)]
+    return (np.array([r * n + c for (r, c), _ in entries]), np.array([k for _, k in entries]))
 
 
 def transition(F: np.ndarray, dt, fx, fy, fz) -> None:
