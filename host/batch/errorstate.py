@@ -7,21 +7,34 @@ Predict over one IMU interval T with seed s's nav-frame specific force f^n_s (00
     F_s = [[I, T I, -(f^n_s x)_h T^2/2], [0, I, -(f^n_s x)_h T], [0, 0, I]]   (+ I on the e_i)
     P_s = F_s P_s F_s^T + G Q G^T
 
-G Q G^T is ``host.filters.errorstate.process_noise`` (the same for every seed of one T: the
-noise densities are the filter's). Update: the gated Joseph form (001 eqs. 28-30) of
-host.batch.innovation; ``take_nav`` resets the nav part after its feedback (closed loop).
-Each seed's P equals ErrorStateFilter's stepped alone, bit for bit (tests/host/test_batch.py).
+G Q G^T is ``host.filters.errorstate.process_noise`` of each seed's T (``process_noises``:
+the seeds' intervals at once; the noise densities are the filter's). Update: the gated
+Joseph form (001 eqs. 28-30) of host.batch.innovation; ``take_nav`` resets the nav part
+after its feedback (closed loop). Each seed's P equals ErrorStateFilter's stepped alone,
+bit for bit (tests/host/test_batch.py).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.filters.errorstate import NAV, process_noise, transition
+from navtwin.host.filters.errorstate import NAV, process_noise, process_noises, transition
 
 from .base import BatchFilter
 from .innovation import BatchInnovation
 from .linalg import T
-from .seeds import by_dt, take
+from .seeds import take
+
+
+def propagate(P: np.ndarray, dt, f_n: np.ndarray, noise: tuple) -> np.ndarray:
+    """F P F^T + G Q G^T (module doc) of the seeds' P (k, n, n), over dt (one value, or (k,)
+    per seed) with each seed's specific force f_n (k, 3) (or one (3,)); *noise* is
+    process_noise's (gyro_psd, accel_psd, extra_psd, extra)."""
+    fx, fy, fz = np.moveaxis(f_n, -1, 0)
+    F = np.zeros_like(P)
+    F[:, *np.diag_indices(P.shape[-1])] = 1.0
+    transition(F, dt, fx, fy, fz)
+    Q = process_noise(float(dt), *noise) if np.ndim(dt) == 0 else process_noises(dt, *noise)
+    return np.matmul(np.matmul(F, P), T(F)) + Q
 
 
 class BatchErrorStateFilter(BatchFilter):
@@ -46,13 +59,8 @@ class BatchErrorStateFilter(BatchFilter):
         (or one (3,) for all), nav frame, for the *active* seeds (None: all)."""
         idx = self.chosen(active)
         dt = take(self.given(dt, 0, "dt"), 0, idx)
-        fx, fy, fz = np.moveaxis(take(self.given(f_n, 1, "f_n"), 1, idx), -1, 0)
         x, P = self.rows(idx)
-        F = np.zeros_like(P)
-        F[:, *np.diag_indices(self.n)] = 1.0
-        transition(F, dt, fx, fy, fz)
-        Q = by_dt(dt, lambda d: process_noise(d, *self._noise))
-        self.store(idx, x, np.matmul(np.matmul(F, P), T(F)) + Q)
+        self.store(idx, x, propagate(P, dt, take(self.given(f_n, 1, "f_n"), 1, idx), self._noise))
 
     def update(self, z, H, R, gate=None, active=None) -> BatchInnovation:
         """Correct the *active* seeds with z (N, m) = H x + v, v ~ N(0, R) (H (m, n) or

@@ -414,7 +414,8 @@ class BatchEstimator:
             cols = {"t": cat(lambda b, c, y: b),
                     "x": cat(lambda b, c, y: c.x[:, 0]), "y": cat(lambda b, c, y: c.x[:, 1]),
                     "vx": cat(lambda b, c, y: c.v[:, 0]), "vy": cat(lambda b, c, y: c.v[:, 1]),
-                    "yaw": cat(lambda b, c, y: y if c.has_yaw else np.full(len(b), np.nan)),
+                    "yaw": cat(lambda b, c, y: (y if c.yaw is None else c.yaw) if c.has_yaw
+                               else np.full(len(b), np.nan)),
                     "cov": cat(lambda b, c, y: c.cov.reshape(len(b), 16)),
                     "extrapolated": cat(lambda b, c, y: c.stale)}
             cuts = np.searchsorted(seed, np.arange(self.n + 1))

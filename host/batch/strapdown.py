@@ -31,7 +31,9 @@ def from_rotvec(x, y, z):
 
 class BatchStrapdown:
     """p (N, 3), v (N, 3), q (N, 4) and the gyro bias (N, 3) of N strapdowns on one site;
-    a seed's row is set by :meth:`begin` (the alignment's result) before it steps."""
+    a seed's row is set by :meth:`begin` (the alignment's result), or :meth:`take` from
+    another's, before it steps. A track's own strapdown (an error-state track's) is also
+    corrected (:meth:`correct`) and placed (:meth:`place`)."""
 
     def __init__(self, n: int, *, latitude_deg: float, altitude_m: float = 0.0,
                  x_azimuth_deg: float = 90.0) -> None:
@@ -41,6 +43,7 @@ class BatchStrapdown:
         self.gyro_bias = np.zeros((n, 3))
         self.prev = np.zeros((n, 6))  # the last sample, bias removed (gyro, accel)
         self.has_prev = np.zeros(n, bool)
+        self.f_n = np.full((n, 3), np.nan)  # the last step's specific force, nav frame (Strapdown.f_n)
         lat = math.radians(latitude_deg)
         self._w_ie = tuple(earth_rate_nav(lat, x_azimuth_deg).tolist())
         self._area_from_enu = area_from_enu(x_azimuth_deg).tolist()
@@ -87,7 +90,8 @@ class BatchStrapdown:
         norm = np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
         self.q[idx] = np.column_stack((qw / norm, qx / norm, qy / norm, qz / norm))
         wx, wy, wz = 2.0 * ie_x + en_x, 2.0 * ie_y + en_y, 2.0 * ie_z + en_z
-        fn_x, fn_y, _ = mat_vec(dcm(q_mid), f_b)
+        fn_x, fn_y, fn_z = mat_vec(dcm(q_mid), f_b)
+        self.f_n[idx] = np.column_stack((fn_x, fn_y, fn_z))
         ax = fn_x - (wy * vz - wz * vy)
         ay = fn_y - (wz * vx - wx * vz)
         s = 0.5 * dt * dt
@@ -95,6 +99,29 @@ class BatchStrapdown:
         self.p[idx] = np.column_stack((x + (vx * dt + ax * s), y + (vy * dt + ay * s), z + vz * dt))
         self.v[idx] = np.column_stack((vx + ax * dt, vy + ay * dt, vz))
         return np.column_stack((ax, ay))
+
+    def take(self, idx: np.ndarray, other: BatchStrapdown) -> None:
+        """Seeds *idx* in the state of *other*'s rows (host.sins.Strapdown.copy: a track's
+        own strapdown, taken from the estimator's on the same site)."""
+        for name in ("p", "v", "q", "gyro_bias", "prev", "has_prev", "f_n"):
+            getattr(self, name)[idx] = getattr(other, name)[idx]
+
+    def correct(self, idx: np.ndarray, dp: np.ndarray, dv: np.ndarray, da: np.ndarray) -> None:
+        """host.sins.Strapdown.correct for the seeds *idx*: remove the estimated errors dp,
+        dv (n, 2) of the horizontal position and velocity and da (n, 3) of the attitude
+        (C_computed = exp(da x) C_true)."""
+        self.p[idx, :2] = self.p[idx, :2] - dp
+        self.v[idx, :2] = self.v[idx, :2] - dv
+        dax, day, daz = da.T
+        qw, qx, qy, qz = qmul(from_rotvec(-dax, -day, -daz), tuple(self.q[idx].T))
+        norm = np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        self.q[idx] = np.column_stack((qw / norm, qx / norm, qy / norm, qz / norm))
+
+    def place(self, idx: np.ndarray, p: np.ndarray, v: np.ndarray) -> None:
+        """host.sins.Strapdown.place for the seeds *idx*: horizontal position and velocity
+        (n, 2) set (a re-initialisation), the attitude kept."""
+        self.p[idx, :2] = p
+        self.v[idx, :2] = v
 
     def yaw(self, idx: np.ndarray) -> np.ndarray:
         """host.sins.euler_from_quat's yaw of the seeds *idx*."""

@@ -41,16 +41,36 @@ P, V, A = slice(0, 2), slice(2, 4), slice(4, 7)
 @lru_cache(maxsize=32)
 def process_noise(dt: float, gyro_psd: float, accel_psd: float, extra_psd: float, extra: int) -> np.ndarray:
     """G Q G^T over dt (module doc); cached: the IMU period recurs. Read-only."""
-    n = NAV + extra
-    Q = np.zeros((n, n))
-    i2 = np.eye(2)
-    Q[P, P] = accel_psd * dt**3 / 4 * i2
-    Q[P, V] = Q[V, P] = accel_psd * dt**2 / 2 * i2
-    Q[V, V] = accel_psd * dt * i2
-    Q[A, A] = gyro_psd * dt * np.eye(3)
-    Q[NAV:, NAV:] = extra_psd * dt * np.eye(extra)
+    Q = process_noises(np.array([dt]), gyro_psd, accel_psd, extra_psd, extra)[0]
     Q.flags.writeable = False
     return Q
+
+
+def process_noises(dt: np.ndarray, gyro_psd: float, accel_psd: float, extra_psd: float,
+                   extra: int) -> np.ndarray:
+    """G Q G^T over each of the intervals dt (k,): (k, n, n) at once (host.batch, where each
+    seed has its own interval). dt^2 and dt^3 are Python's float powers, as one interval's
+    always were: numpy's power rounds a few percent of them otherwise in the last bit."""
+    dts = dt.tolist()
+    d2, d3 = np.array([d**2 for d in dts]), np.array([d**3 for d in dts])
+    n = NAV + extra
+    terms = np.column_stack((accel_psd * d3 / 4, accel_psd * d2 / 2, accel_psd * dt,
+                             gyro_psd * dt, extra_psd * dt))
+    Q = np.zeros((len(dts), n * n))
+    at, term = _noise_entries(n)
+    Q[:, at] = terms[:, term]
+    return Q.reshape(-1, n, n)
+
+
+@lru_cache(maxsize=8)
+def _noise_entries(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where the nonzero entries of G Q G^T (n x n) are, row-major, and which of
+    process_noises' terms (Q_pp, Q_pv, Q_vv, Q_AA, Q_ee) each is."""
+    entries = [((i, i), 0) for i in range(2)]
+    entries += [((i, i + 2), 1) for i in range(2)] + [((i + 2, i), 1) for i in range(2)]
+    entries += [((i, i), 2) for i in range(2, 4)] + [((i, i), 3) for i in range(A.start, A.stop)]
+    entries += [((i, i), 4) for i in range(NAV, n)]
+    return (np.array([r * n + c for (r, c), _ in entries]), np.array([k for _, k in entries]))
 
 
 def transition(F: np.ndarray, dt, fx, fy, fz) -> None:
@@ -97,6 +117,11 @@ class ErrorStateFilter(ClosedLoop):
         self._noise = (float(gyro_psd), float(accel_psd), float(extra_psd), int(extra))
         self._F = np.eye(n)
         self._I = np.eye(n)
+
+    @property
+    def noise(self) -> tuple:
+        """process_noise's densities: (gyro_psd, accel_psd, extra_psd, extra)."""
+        return self._noise
 
     def predict(self, dt: float, f_n) -> None:
         """Over one IMU interval dt with the specific force f_n = (f_x, f_y, f_z), nav frame."""

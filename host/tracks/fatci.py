@@ -106,4 +106,7 @@ class FatciTrack(TcTrack):
         self.sigma = calibration.sigma if calibration is not None else np.polynomial.Polynomial(s.sigma_poly_m)
 
     def range_variance(self, row: int, distance: float) -> float:
-        return float(np.interp(float(self.sigma(distance)), self._grid, self._table))
+        return float(self.variances(float(distance)))
+
+    def variances(self, distances):
+        return np.interp(self.sigma(distances), self._grid, self._table)

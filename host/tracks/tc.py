@@ -67,6 +67,10 @@ class TcTrack(ErrorStateTrack):
         """R of one range of anchor ``row`` (layout order) measuring ``distance``."""
         return self._sigma2
 
+    def variances(self, distances):
+        """R of the ranges measuring *distances* (an array; host.batch's twin takes many)."""
+        return np.full(np.shape(distances), self._sigma2)
+
     def range(self, m: Range) -> None:
         if not self.ready(m.t):
             return

@@ -21,6 +21,9 @@ BATCH_TRACKS: Registry[type[BatchTrack]] = Registry(GROUP, "batch track", {
     "kf": "navtwin.host.batch.tracks.kf:BatchKfTrack",
     "ekf": "navtwin.host.batch.tracks.ekf:BatchEkfTrack",
     "ukf": "navtwin.host.batch.tracks.ukf:BatchUkfTrack",
+    "lc": "navtwin.host.batch.tracks.lc:BatchLcTrack",
+    "tc": "navtwin.host.batch.tracks.tc:BatchTcTrack",
+    "fatci": "navtwin.host.batch.tracks.fatci:BatchFatciTrack",
 })
 get = BATCH_TRACKS.get
 

@@ -29,7 +29,8 @@ class Columns(NamedTuple):
     v: np.ndarray  # (n, 2) velocity, m/s
     cov: np.ndarray  # (n, 4, 4) of (x, y, vx, vy)
     stale: np.ndarray  # (n,) bool: extrapolated
-    has_yaw: bool  # the track reports the strapdown's yaw (else None)
+    has_yaw: bool  # the track reports a yaw (else None)
+    yaw: np.ndarray | None = None  # (n,) its own (a strapdown of its own); None: the estimator's
 
 
 class BatchTrack:
