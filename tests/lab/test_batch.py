@@ -74,10 +74,9 @@ def test_a_seed_off_the_common_path_runs_per_seed_and_still_equals():
     assert_equal(batch.columns(batch.per_seed(cfg, recs), cfg.filters), got, "office seed 1")
 
 
-def test_the_strapdown_twin_steps_each_seed_as_the_strapdown_alone():
-    rng = np.random.default_rng(5)
-    n, steps = 7, 400
-    site = dict(latitude_deg=52.2, altitude_m=70.0, x_azimuth_deg=60.0)
+def strapdowns(rng, n: int, site: dict):
+    """n strapdowns at random starts, attitudes and gyro biases: each alone, and a twin of
+    them all begun there."""
     q0 = rng.normal(size=(n, 4))
     q0 /= np.linalg.norm(q0, axis=1)[:, None]
     start, bias = rng.normal(size=(n, 2)), rng.normal(0, 1e-3, (n, 3))
@@ -85,6 +84,13 @@ def test_the_strapdown_twin_steps_each_seed_as_the_strapdown_alone():
              for i in range(n)]
     twin = BatchStrapdown(n, **site)
     twin.begin(np.arange(n), start, q0, bias)
+    return alone, twin
+
+
+def test_the_strapdown_twin_steps_each_seed_as_the_strapdown_alone():
+    rng = np.random.default_rng(5)
+    n, steps = 7, 400
+    alone, twin = strapdowns(rng, n, dict(latitude_deg=52.2, altitude_m=70.0, x_azimuth_deg=60.0))
     for _ in range(steps):
         idx = np.flatnonzero(rng.random(n) < 0.8)  # some seeds sit a step out
         dt = rng.uniform(0.0, 0.02, len(idx))

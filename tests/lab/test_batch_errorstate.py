@@ -14,11 +14,10 @@ from navtwin.host.batch.estimator import BatchEstimator, stream
 from navtwin.host.batch.strapdown import BatchStrapdown
 from navtwin.host.estimator import Estimator
 from navtwin.host.filters.errorstate import process_noise, process_noises
-from navtwin.host.sins import Strapdown
 from navtwin.lab import batch
 from navtwin.lab.run import run_in_memory
 
-from .test_batch import DURATION_S, SEEDS, assert_equal
+from .test_batch import DURATION_S, SEEDS, assert_equal, strapdowns
 
 TWINS = ("lc", "tc", "fatci")
 FILTERS = ("sins", "wsn", "kf", *TWINS)
@@ -54,13 +53,7 @@ def test_the_strapdown_twin_corrects_copies_and_places_as_the_strapdown():
     rng = np.random.default_rng(11)
     n = 6
     site = dict(latitude_deg=48.1, altitude_m=500.0, x_azimuth_deg=120.0)
-    q0 = rng.normal(size=(n, 4))
-    q0 /= np.linalg.norm(q0, axis=1)[:, None]
-    start, bias = rng.normal(size=(n, 2)), rng.normal(0, 1e-3, (n, 3))
-    alone = [Strapdown(position=start[i], q=q0[i], gyro_bias=bias[i], local_gravity=9.81, **site)
-             for i in range(n)]
-    source = BatchStrapdown(n, **site)
-    source.begin(np.arange(n), start, q0, bias)
+    alone, source = strapdowns(rng, n, site)
     twin = BatchStrapdown(n, **site)
     twin.take(np.arange(n), source)
     for step in range(300):
