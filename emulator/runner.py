@@ -26,7 +26,13 @@ waits that long at most for the GIL) a block ahead of what the loop took; the lo
 blocks, up to two seconds ahead, in idle gaps, and never makes one unless it is due now.
 The loop wakes for the earliest line deadline (emulator.schedule: a heap, a line re-keyed
 when it gets an item or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
-due and what is readable, not every port's line and file descriptor. After writing to the
+due and what is readable, not every port's line and file descriptor. A line's deadline is
+the end of its next chunk where the chunk is known beforehand (emulator.uart
+``Line.next_ns``): the poll then takes its start too, so the loop wakes to write, not to
+start a chunk; what could change the chunk meanwhile (what the host writes to its device, a
+live line fault) first takes the line's steps up to then (:meth:`Emulation._catch_up`). The
+lines due at one instant (the convoy's cars are copies: their chunks fall due together) are
+polled and written in one pass (:meth:`Emulation._write_due`). After writing to the
 PTYs the loop yields the CPU once (but under SCHED_FIFO), so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
 device times, are identical in every mode and timing mode; only host commands (read from
@@ -556,14 +562,17 @@ class Emulation:
                     # what a client wrote before it was noticed (it may even have gone
                     # again): a real line delivers it all the same
                     self._host_bytes(port, now)
+            views, watched = self.views, self._watched
             for name, port in ports.items():
-                self.views[name].settle(*(port.client_framing() if port.attached
-                                          else (None, 0)))
-                if port.attached and port.fd not in self._watched:
-                    self._watched[port.fd] = port
-                    self._attached.register(port.fd, select.EPOLLIN)
-                elif not port.attached and self._watched.get(port.fd) is port:
-                    self._unwatch(port)
+                if port.attached:
+                    views[name].settle(*port.client_framing())
+                    if port.fd not in watched:
+                        watched[port.fd] = port
+                        self._attached.register(port.fd, select.EPOLLIN)
+                else:
+                    views[name].settle(None, 0)
+                    if watched.get(port.fd) is port:
+                        self._unwatch(port)
 
     def _unwatch(self, port: PtyPort) -> None:
         """Stop waiting on *port* (detached, unplugged or replugged): a detached master is

@@ -7,7 +7,10 @@ and a chunk is delivered whole when its last byte would have arrived. The device
 transmit buffer may be bounded (the coordinator's ``admit``). Times are integer
 nanoseconds since the run started.
 
-A device is any object with ``.baud`` and the two calls of :class:`Wire`. Between the
+A device is any object with ``.baud`` and the calls of :class:`Wire`: ``admit`` and
+``render``, and optionally ``size`` (what ``render`` will make of an item, as the device
+stands now, without its effects; None where it cannot tell): with it, the loop is woken for
+a chunk's end only, its start taken by the same poll (:meth:`Line.next_ns`). Between the
 device and its line sit the line's wrappers (:class:`LineWrapper`, as pyserial's ``spy://``
 wraps a port): each sees every chunk the device hands the UART, with its start time and
 baud, and gives back the chunk to send, changed, shortened, lengthened, emptied (dropped),
