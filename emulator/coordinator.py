@@ -344,15 +344,6 @@ class Coordinator:
             return b""  # the radio is rebooting: the packet is never reported
         return self._rx_frame(item) if frame is None else frame
 
-    def size(self, t_ns: int, item) -> int | None:
-        """The bytes :meth:`render` will make of *item* (ready at *t_ns*) as the radio stands
-        now, without its effects (emulator.uart ``Line.next_ns``); None for an answer (one
-        may reset the registers) or a packet the radio is rebooting through."""
-        if isinstance(item, Reply) or t_ns < self.reset_until_ns or self.off(t_ns):
-            return None
-        frame = self._framed.get(self._rx_key(item))
-        return len(self._rx_frame(item) if frame is None else frame)
-
     def _rx_key(self, pkt) -> tuple:
         return self.escaped, self.registers.values["AO"] & 1, pkt
 

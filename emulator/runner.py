@@ -26,13 +26,9 @@ waits that long at most for the GIL) a block ahead of what the loop took; the lo
 blocks, up to two seconds ahead, in idle gaps, and never makes one unless it is due now.
 The loop wakes for the earliest line deadline (emulator.schedule: a heap, a line re-keyed
 when it gets an item or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
-due and what is readable, not every port's line and file descriptor. A line's deadline is
-the end of its next chunk where the chunk is known beforehand (emulator.uart
-``Line.next_ns``): the poll then takes its start too, so the loop wakes to write, not to
-start a chunk; what could change the chunk meanwhile (what the host writes to its device, a
-live line fault) first takes the line's steps up to then (:meth:`Emulation._catch_up`). The
-lines due at one instant (the convoy's cars are copies: their chunks fall due together) are
-polled and written in one pass (:meth:`Emulation._write_due`). After writing to the
+due and what is readable, not every port's line and file descriptor. The lines due at one
+instant (the convoy's cars are copies: their chunks fall due together) are polled and
+written in one pass (:meth:`Emulation._write_due`). After writing to the
 PTYs the loop yields the CPU once (but under SCHED_FIFO), so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
 device times, are identical in every mode and timing mode; only host commands (read from
@@ -248,9 +244,6 @@ class Emulation:
         self.line_deadlines = Deadlines(self.lines)
         self.inbound_deadlines = Deadlines(self.inbounds)
         self._line_order = {name: i for i, name in enumerate(self.lines)}  # delivery order
-        self._feed: Feed | None = None  # the world's events, from prepare()
-        self._now_ns = 0  # the loop's virtual time, for live control
-        self._wall_ns: int | None = None  # when paced, the loop's wake-up (ns since t0)
         self._air_from: set[str] = set()  # coordinators the host made send since the last look
         line_faults = [(i, f) for i, f in enumerate(scenario.faults) if f.ACTS_ON == "line"]
         for n, (index, fault) in enumerate(line_faults):
@@ -277,6 +270,7 @@ class Emulation:
         self.tap: TapServer | None = None  # every chunk to its clients (emulator.tap)
         self.live: dict[int, tuple[Fault, LineWrapper | None]] = {}  # id -> live fault
         self._live_ids = 0
+        self._now_ns = 0  # the loop's virtual time, for live control
         self.recorder: RecordingWriter | None = None
         try:
             if ports:
@@ -292,6 +286,7 @@ class Emulation:
         except BaseException:
             self.close()
             raise
+        self._feed: Feed | None = None  # the world's events, from prepare()
         self.reached_ns = 0
         self.interrupted = False
         self.record_error: RecordingWriteError | None = None  # the write that ended the run
@@ -309,7 +304,6 @@ class Emulation:
             self.inbounds[port].wrap(wrapper)
             self.inbound_deadlines.touch(port)
         else:
-            self._catch_up(port, self._now_ns)
             self.lines[port].wrap(wrapper)
             self.line_deadlines.touch(port)
         wrapper.direction = direction
@@ -459,7 +453,6 @@ class Emulation:
         vt = 0  # virtual time of the loop (max speed)
         while not stop.is_set():
             wall = time.monotonic_ns()
-            self._wall_ns = wall_ns = wall - t0 if paced else None  # this wake-up's writes
             now = int((wall - t0) * self.speed) if paced else vt
             if self.ports:
                 self._service(now, wall >= next_check)
@@ -468,10 +461,10 @@ class Emulation:
             self._enqueue(feed.take(now))
             self._now_ns = now
             self._to_device(now)
-            self._on_air(now, wall_ns)  # before host writes stamped now
+            self._on_air(now, wall - t0 if paced else None)  # before host writes stamped now
             if not paced:  # everything known so far, in one go
                 now = END if feed.exhausted else feed.known_ns
-            delivered = self._write_due(now, feed.known_ns, wall_ns)
+            delivered = self._write_due(now, feed.known_ns, wall - t0 if paced else None)
             if delivered and paced and self.ports and self.timing.yields:
                 # let a client woken by these writes run before we go on
                 os.sched_yield()
@@ -485,7 +478,7 @@ class Emulation:
             if not feed.exhausted:
                 target = feed.known_ns if target is None else min(target, feed.known_ns)
             if target is None or (target >= self.end_ns
-                                  and not any(l.busy(self.end_ns) for l in self.lines.values())):
+                                  and not any(l.busy() for l in self.lines.values())):
                 self.reached_ns = self.end_ns
                 break
             if self.recorder is not None and self._flush_due(wall, next_flush, t0, target):
@@ -600,21 +593,10 @@ class Emulation:
             for t, data in self.inbounds[name].poll(now):
                 if view is not None:  # read by the device's UART at its rate
                     data = view.heard(t, data, line_framing(device.line_device.baud))
-                self._catch_up(name, t)  # what its UART started before, as it was then
                 for t_ns, item in device.host(t, data):
                     line.put(t_ns, item)
                 self.line_deadlines.touch(name)
                 self._air_from.add(name)
-
-    def _catch_up(self, name: str, t_ns: int) -> None:
-        """Take *name*'s line's steps up to *t_ns*, delivering the chunks they end, before its
-        device or wrappers change at *t_ns*: a line is polled at the end of its next chunk,
-        not at its start (emulator.uart ``Line.next_ns``), so a chunk that started earlier
-        must be taken with the device and wrappers it started with."""
-        if self._feed is not None:  # before the run nothing has started
-            for chunk in self.lines[name].poll(t_ns, self._feed.known_ns, self.end_ns):
-                self._deliver(chunk, self._wall_ns)
-            self.line_deadlines.touch(name)
 
     def _enqueue(self, events: list) -> None:
         """Put the world's *events* on their ports' lines."""
@@ -792,8 +774,6 @@ class Emulation:
         fault, wrapper = self.live.pop(n)
         if wrapper is not None:
             to_device = wrapper.direction == "to_device"
-            if not to_device:
-                self._catch_up(fault.port, self._now_ns)
             (self.inbounds if to_device else self.lines)[fault.port].wrappers.remove(wrapper)
             (self.inbound_deadlines if to_device else self.line_deadlines).touch(fault.port)
         elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then

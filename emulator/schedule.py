@@ -6,10 +6,8 @@ wake-up makes a wake-up cost O(lines); :class:`Deadlines` keeps the earliest ste
 a heap, so a wake-up costs O(what is due) and O(log lines) per line that changed.
 
 A timer is any object with ``next_ns()`` (emulator.uart ``Line`` and ``Inbound``): when it
-next has something to do, or None; a line whose next chunk is known beforehand names that
-chunk's end, not its start (``Line.next_ns``), so a wake-up is a write. Its answer changes
-only when the timer is changed: an item put on the line, a poll, a wrapper added or
-removed, its device changed by what the host wrote. The caller says so with
+next has something to do, or None. Its answer changes only when the timer is changed: an
+item put on the line, a poll, a wrapper added or removed. The caller says so with
 :meth:`Deadlines.touch`; the timer is asked again (re-keyed) before the next :meth:`due` or
 :meth:`next`. A name that :meth:`due` hands out is touched, since the caller polls it.
 

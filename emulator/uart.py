@@ -7,10 +7,7 @@ and a chunk is delivered whole when its last byte would have arrived. The device
 transmit buffer may be bounded (the coordinator's ``admit``). Times are integer
 nanoseconds since the run started.
 
-A device is any object with ``.baud`` and the calls of :class:`Wire`: ``admit`` and
-``render``, and optionally ``size`` (what ``render`` will make of an item, as the device
-stands now, without its effects; None where it cannot tell): with it, the loop is woken for
-a chunk's end only, its start taken by the same poll (:meth:`Line.next_ns`). Between the
+A device is any object with ``.baud`` and the two calls of :class:`Wire`. Between the
 device and its line sit the line's wrappers (:class:`LineWrapper`, as pyserial's ``spy://``
 wraps a port): each sees every chunk the device hands the UART, with its start time and
 baud, and gives back the chunk to send, changed, shortened, lengthened, emptied (dropped),
@@ -76,10 +73,6 @@ class Wire:
     @staticmethod
     def render(t_ns: int, item: bytes) -> bytes:
         return item
-
-    @staticmethod
-    def size(t_ns: int, item: bytes) -> int:
-        return len(item)
 
 
 class LineWrapper:
@@ -216,7 +209,6 @@ class Line(_Wrapped):
     def __init__(self, name: str, device: Any, wrappers: Iterable[LineWrapper] = (),
                  ledger=None) -> None:
         self.device = device  # .baud, .admit(t_ns, item, queued) and .render(t_ns, item)
-        self._size = getattr(device, "size", None)  # optional: see next_ns
         self._pending: list = []  # heap of (ready, seq, item) not yet in the buffer
         self._queue: deque = deque()  # (ready, item, size) in the buffer, in ready order
         self._pieces: deque = deque()  # (start, data, baud) of the chunk being sent, not started
@@ -250,36 +242,17 @@ class Line(_Wrapped):
         return (start, what) if start < end_ns else (END, 0)
 
     def next_ns(self) -> int | None:
-        """When this line next has something to deliver, or else to do: the end of the
-        chunk in progress; on an idle line, the end of the next chunk where the device can
-        tell its size now (``size``) and no wrapper may change it: the buffer's next item,
-        or the item arriving next on an empty buffer (a poll then takes the arrivals and
-        the start before that end in time order, so the loop need not wake at the start:
-        emulator.schedule); otherwise the start of the next chunk: a piece, the buffer's
-        next item, a wrapper's release, or an item arriving, whichever comes first (a
-        wrapper due later must not hide an item due now: the loop polls a line only at
-        this time). An item that arrives while a chunk is on the wire waits for its end.
-        What the host changes in the device (an API mode, a rate) changes the answer: the
-        caller takes the line's steps up to then first (``Emulation._catch_up``)."""
+        """When this line next has something to do: end of the chunk in progress, or on an
+        idle line the start of the next chunk: a piece, the buffer's next item, a wrapper's
+        release, or an item arriving, whichever comes first (a wrapper due later must not
+        hide an item due now: the loop polls a line only at this time, emulator.schedule).
+        An item that arrives while a chunk is on the wire waits for its end."""
         if self.current is not None:
             return self.current.end_ns
-        start, what = self._next_start(END)
-        arrive = max(self._pending[0][0], self.free_ns) if self._pending else END
-        if not self.wrappers and self._size is not None:
-            if what == -1:  # arrivals before its start leave the buffer's order as it is
-                ready, item, _ = self._queue[0]
-                return self._end_of(start, ready, item)
-            if arrive < END and self._pending[0][0] >= self.free_ns:  # starts as it arrives
-                ready, _, item = self._pending[0]
-                return self._end_of(ready, ready, item)
-        start = min(start, arrive)
+        start, _ = self._next_start(END)
+        if self._pending:
+            start = min(start, max(self._pending[0][0], self.free_ns))
         return start if start < END else None
-
-    def _end_of(self, start: int, ready: int, item) -> int:
-        """When the chunk of *item* (ready at *ready*) starting at *start* ends, as its
-        device tells its size now; *start* where it cannot tell (None, or nothing sent)."""
-        size = self._size(ready, item.item if type(item) is Marked else item)
-        return start + wire_ns(size, self.device.baud) if size else start
 
     def poll(self, now_ns: int, known_ns: int, end_ns: int) -> list[Chunk]:
         """Chunks that have ended by *now_ns*; starts those due. An item enters the buffer
@@ -390,14 +363,8 @@ class Line(_Wrapped):
         for entry in held:
             self._enter(entry)
 
-    def busy(self, end_ns: int) -> bool:
-        """Whether a chunk is on the wire, or one may start before *end_ns* (its start
-        waits for a poll: :meth:`next_ns`)."""
-        if self.current is not None or self._pieces:
-            return True
-        start, _ = self._next_start(end_ns)
-        arrive = max(self._pending[0][0], self.free_ns) if self._pending else END
-        return min(start, arrive) < end_ns
+    def busy(self) -> bool:
+        return self.current is not None or bool(self._pieces)
 
 
 class Inbound(_Wrapped):

@@ -83,7 +83,7 @@ def test_nothing_starts_at_or_after_the_end():
     line.put(SEC, b"y")
     out = line.poll(2 * SEC, 2 * SEC, SEC)
     assert [c.data for c in out] == [b"x" * 30]  # started before the end, so it completes
-    assert line.next_ns() == SEC - 1 + wire_ns(30, 115200) and not line.busy(SEC)
+    assert line.next_ns() == SEC - 1 + wire_ns(30, 115200) and not line.busy()
 
 
 class _Rate(Wire):
@@ -239,34 +239,6 @@ def test_duration_beyond_the_scenario_is_one_line_with_the_fix(office):
     with pytest.raises(ValueError) as e:
         Emulation(office, speed=None, ports=False, duration_s=office.duration_s + 1)
     assert "\n" not in str(e.value) and str(e.value).startswith("duration: ") and "office" in str(e.value)
-
-
-def test_a_host_write_meets_the_chunk_its_line_started_before_it(office):
-    """A line is polled at the end of its next chunk (Line.next_ns), not at its start: a host
-    write that changes the device (FR: the radio reboots, and what it has not started is
-    never sent) first takes the line's steps up to it, so a chunk that started before it is
-    sent whole, as it was when it started."""
-    def emulation(sink):
-        """An emulation whose xbee line is idle at *idle*, its next chunk not started."""
-        emu = Emulation(office, 1, speed=None, ports=False, duration_s=2, sink=sink)
-        emu.prepare()
-        line = emu.lines["xbee"]
-        line.poll(SEC // 2, emu._feed.known_ns, emu.end_ns)  # past the power-up
-        line.poll(line.next_ns(), emu._feed.known_ns, emu.end_ns)  # the chunk it was sending
-        return emu, line.free_ns
-
-    emu, idle = emulation(None)
-    line = emu.lines["xbee"]
-    end = line.next_ns()
-    (chunk,) = line.poll(end, emu._feed.known_ns, emu.end_ns)
-    assert idle < chunk.start_ns < chunk.end_ns == end
-    got = []
-    emu, _ = emulation(got.append)
-    reboot = xbee.build(0x08, True, frame_id=1, command=b"FR", parameter=b"")
-    emu.inbounds["xbee"].put((chunk.start_ns + end) // 2, reboot)
-    emu._to_device(end - 1)
-    emu._catch_up("xbee", end)
-    assert [(c.start_ns, c.data) for c in got] == [(chunk.start_ns, chunk.data)]
 
 
 def test_host_answers_land_between_frames_never_inside(office):

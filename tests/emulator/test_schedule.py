@@ -7,7 +7,6 @@ from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.schedule import Deadlines
 from navtwin.emulator.uart import Line, Wire
 from navtwin.emulator.world import World
-from navtwin.protocols.serial import wire_ns
 
 
 class Timer:
@@ -47,44 +46,16 @@ def test_a_timer_is_rekeyed_when_touched_and_stale_entries_are_dropped():
     assert d.next() == 60  # b handed out and not polled: still due at 60
 
 
-def test_a_line_gets_a_deadline_when_it_gets_a_chunk_at_its_end():
-    """The loop wakes for what a line delivers: the poll at the chunk's end takes its start
-    too, in time order, so the start needs no wake-up of its own."""
+def test_a_line_gets_a_deadline_when_it_gets_a_chunk():
     line = Line("sins", Wire(115200))
     d = Deadlines({"sins": line})
     assert d.next() is None
     line.put(1_000, b"x" * 10)
     d.touch("sins")
-    end = 1_000 + wire_ns(10, 115200)
-    assert d.next() == end
-    assert d.due(end - 1) == [] and d.due(end) == ["sins"]
-    (chunk,) = line.poll(end, 10**9, 10**9)
-    assert (chunk.start_ns, chunk.end_ns, chunk.data) == (1_000, end, b"x" * 10)
-    assert d.next() is None
-    line.put(2 * end, b"a")  # the buffer's next item, behind one on the wire: its end too
-    line.put(2 * end + 1, b"bc")
-    line.poll(2 * end, 10**9, 10**9)
-    assert line.next_ns() == 2 * end + wire_ns(1, 115200)
-    line.poll(line.next_ns(), 10**9, 10**9)
-    assert line.next_ns() == 2 * end + wire_ns(3, 115200)
-
-
-def test_a_line_is_woken_at_the_start_where_its_chunk_is_not_known_yet():
-    """A device that cannot tell a chunk's size beforehand (no ``size``), or a wrapper that
-    may change the chunk, has the line polled at the chunk's start, as the wrapper or device
-    decides then."""
-    from navtwin.emulator.uart import LineWrapper
-
-    class Told(Wire):
-        size = None  # admit and render only
-
-    told = Line("sins", Told(115200))
-    wrapped = Line("sins", Wire(115200), [LineWrapper()])
-    for line in (told, wrapped):
-        line.put(1_000, b"x" * 10)
-        assert line.next_ns() == 1_000
-        line.poll(1_000, 10**9, 10**9)
-        assert line.next_ns() == 1_000 + wire_ns(10, 115200)
+    assert d.next() == 1_000  # the chunk starts
+    assert d.due(1_000) == ["sins"]
+    line.poll(1_000, 10**9, 10**9)
+    assert d.next() == line.next_ns() > 1_000  # now: its end
 
 
 def test_making_a_block_a_vehicle_at_a_time_gives_the_same_events():
