@@ -90,31 +90,30 @@ def loop_cost(n: int, seconds: float, seed: int) -> dict:
 def write_cost(ports: int, size: int, seconds: float = 3.0) -> float:
     """CPU us per ``os.write`` of *size* bytes to a PTY master, in bursts of one write to each
     of *ports* PTYs every PERIOD_NS, every slave read by a forked reader."""
-    pairs = [os.openpty() for _ in range(ports)]
+    masters, slaves = zip(*(os.openpty() for _ in range(ports)))
+    open_fds = [*masters, *slaves]
     try:
-        for master, slave in pairs:
+        for master, slave in zip(masters, slaves):
             tty.setraw(slave)
             os.set_blocking(master, False)
         with tempfile.TemporaryDirectory(prefix="navtwin-writes-") as tmp:
-            reader = _read_everything({str(i): os.ttyname(s) for i, (_, s) in enumerate(pairs)},
+            reader = _read_everything({str(i): os.ttyname(s) for i, s in enumerate(slaves)},
                                       seconds, os.path.join(tmp, "r.npz"))
             time.sleep(0.5)  # the reader's opens
             data, cpu, bursts = bytes(size), 0, int(seconds * 1e9 / PERIOD_NS)
             for _ in range(bursts):
                 t = time.thread_time_ns()
-                for master, _ in pairs:
+                for master in masters:
                     os.write(master, data)
                 cpu += time.thread_time_ns() - t
                 time.sleep(PERIOD_NS / 1e9)
-            for master, _ in pairs:  # the reader reads the hang-up and ends
+            open_fds = list(slaves)
+            for master in masters:  # the reader reads the hang-up and ends
                 os.close(master)
-            pairs = [(-1, s) for _, s in pairs]
             reader.join()
     finally:
-        for master, slave in pairs:
-            os.close(slave)
-            if master >= 0:
-                os.close(master)
+        for fd in open_fds:
+            os.close(fd)
     return cpu / 1e3 / (bursts * ports)
 
 

@@ -643,7 +643,8 @@ class Emulation:
         until_ns = min(until_ns, self.end_ns)
         mine = []
         # only the host's requests put frames on a coordinator's air (most wake-ups: none)
-        for port in [p for p in self.coordinators if p in self._air_from] if self._air_from else ():
+        asked = [p for p in self.coordinators if p in self._air_from] if self._air_from else ()
+        for port in asked:
             coordinator = self.coordinators[port]
             if not coordinator.air:
                 self._air_from.discard(port)
