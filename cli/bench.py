@@ -27,6 +27,7 @@ SETS = Registry("navtwin.benchmarks", "benchmark set", {
     "decode": "navtwin.protocols.bench:decode_benchmarks",
     "emulator": "navtwin.emulator.bench:benchmarks",
     "scale": "navtwin.emulator.bench_scale:benchmarks",
+    "writes": "navtwin.emulator.bench_writes:benchmarks",
     "host": "navtwin.host.bench:benchmarks",
     "batch": "navtwin.host.batch.bench:benchmarks",
     "lab": "navtwin.lab.bench:benchmarks",

@@ -235,6 +235,10 @@ class PtyPort:
         self.unplugs = 0
         self._pulled: tuple[int, int] | None = None  # unplugging: (when, a slave fd) until hung up
         self._quiet_since = 0
+        #: the client's termios (iflag, cflag, ispeeds) last read and what they gave: the
+        #: runner reads them every CHECK_NS, and they seldom change
+        self._termios: tuple | None = None
+        self._framing: tuple[Framing | None, int] = (None, 0)
         self._open()
 
     def _open(self) -> None:
@@ -319,20 +323,24 @@ class PtyPort:
 
     def client_framing(self) -> tuple[Framing | None, int]:
         """The client's (Framing, c_iflag) from the slave's termios; Framing None when
-        the rate is B0 (hang up) or unreadable."""
+        the rate is B0 (hang up) or unreadable. Settings read as before give the same
+        objects (the runner then has nothing to settle)."""
         try:
             iflag, _, cflag, _, ispeed, ospeed, _ = termios.tcgetattr(self.fd)
             speed = ispeed or ospeed  # an input speed of 0 means "as the output"
+            if (iflag, cflag, ispeed, ospeed) == self._termios:
+                return self._framing
             baud = SPEED_BAUD.get(speed)
-            if speed == BOTHER:
+            if speed == BOTHER:  # the rate is in termios2, not in what was compared
                 raw = fcntl.ioctl(self.fd, TCGETS2, bytes(TERMIOS2.size))
                 _, _, _, _, _, _, ibaud, obaud = TERMIOS2.unpack(raw)
                 baud = ibaud or obaud or None
         except OSError:
             return None, 0
-        if baud is None:
-            return None, iflag
-        return Framing.from_cflag(baud, cflag), iflag
+        framing = (None if baud is None else Framing.from_cflag(baud, cflag)), iflag
+        if speed != BOTHER:
+            self._termios, self._framing = (iflag, cflag, ispeed, ospeed), framing
+        return framing
 
     def _flush_stale(self) -> None:
         try:

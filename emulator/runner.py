@@ -26,7 +26,9 @@ waits that long at most for the GIL) a block ahead of what the loop took; the lo
 blocks, up to two seconds ahead, in idle gaps, and never makes one unless it is due now.
 The loop wakes for the earliest line deadline (emulator.schedule: a heap, a line re-keyed
 when it gets an item or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
-due and what is readable, not every port's line and file descriptor. After writing to the
+due and what is readable, not every port's line and file descriptor. The lines due at one
+instant (the convoy's cars are copies: their chunks fall due together) are polled and
+written in one pass (:meth:`Emulation._write_due`). After writing to the
 PTYs the loop yields the CPU once (but under SCHED_FIFO), so a client it woke runs first. Because chunk contents
 and times come from the world and the UART model only, the bytes of every port, and their
 device times, are identical in every mode and timing mode; only host commands (read from
@@ -101,7 +103,7 @@ from .tap import SOCKET as TAP_SOCKET, TapServer
 from .timing import Lateness, Mode, TimingError, choose as choose_timing
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows, file_name as truth_file
 from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked
-from .uart_rx import ClientView, Framing
+from .uart_rx import ClientView, line_framing
 
 SEC = 1_000_000_000
 CHECK_NS = 10_000_000  # how often detached ports are looked at for a new client
@@ -323,7 +325,7 @@ class Emulation:
                 raise RunError(f"cannot create a pseudo-terminal for {name} ({e.strerror}); "
                                f"close some terminals or raise kernel.pty.max") from None
             self.links[name] = str(self.link_dir.link(name, self.ports[name].pts))
-            self.views[name] = ClientView(name, Framing(self.lines[name].device.baud),
+            self.views[name] = ClientView(name, line_framing(self.lines[name].device.baud),
                                           notify=self.progress)
         self.control = ControlServer(self.link_dir.path / CONTROL_SOCKET, self._control)
         self.tap = TapServer(self.link_dir.path / TAP_SOCKET, self._tap_hello,
@@ -442,8 +444,7 @@ class Emulation:
             paced = self.speed is not None
             self._feed = Feed(self.world, self.end_ns, PACED_BLOCK_NS if paced else MAX_BLOCK_NS,
                               tuple(self.devices.values()))
-            for ev in self._feed.take(PREFILL_NS if paced else 0):
-                self._enqueue(ev)
+            self._enqueue(self._feed.take(PREFILL_NS if paced else 0))
             if paced:  # what exists now lives for the run: keep full collections from walking it
                 gc.collect()
                 gc.freeze()
@@ -459,18 +460,13 @@ class Emulation:
                 self._service(now, wall >= next_check)
                 if wall >= next_check:
                     next_check = wall + CHECK_NS
-            for ev in feed.take(now):
-                self._enqueue(ev)
+            self._enqueue(feed.take(now))
             self._now_ns = now
             self._to_device(now)
             self._on_air(now, wall - t0 if paced else None)  # before host writes stamped now
             if not paced:  # everything known so far, in one go
                 now = END if feed.exhausted else feed.known_ns
-            delivered = False
-            for name in sorted(self.line_deadlines.due(now), key=self._line_order.__getitem__):
-                for chunk in self.lines[name].poll(now, feed.known_ns, self.end_ns):
-                    self._deliver(chunk, wall - t0 if paced else None)
-                    delivered = True
+            delivered = self._write_due(now, feed.known_ns, wall - t0 if paced else None)
             if delivered and paced and self.ports and self.timing.yields:
                 # let a client woken by these writes run before we go on
                 os.sched_yield()
@@ -478,8 +474,9 @@ class Emulation:
             if wall >= next_progress:
                 self._report(wall - t0)
                 next_progress = wall + PROGRESS_NS
-            target = min((t for t in (self.line_deadlines.next(), self.inbound_deadlines.next())
-                          if t is not None), default=None)
+            target, inbound = self.line_deadlines.next(), self.inbound_deadlines.next()
+            if inbound is not None and (target is None or inbound < target):
+                target = inbound
             if not feed.exhausted:
                 target = feed.known_ns if target is None else min(target, feed.known_ns)
             if target is None or (target >= self.end_ns
@@ -498,8 +495,7 @@ class Emulation:
             if (feed.known_ns < now + LOOKAHEAD_NS and not feed.exhausted and feed.ready
                     and deadline - time.monotonic_ns()
                     > 2 * feed.cost_ns + 2 * self.timing.spin_ns):
-                for ev in feed.step():  # take what the maker made while there is time to spare
-                    self._enqueue(ev)
+                self._enqueue(feed.step())  # take what the maker made while there is time to spare
                 continue
             self._wait(deadline, min(next_check, next_progress))
         else:
@@ -561,14 +557,17 @@ class Emulation:
                     # what a client wrote before it was noticed (it may even have gone
                     # again): a real line delivers it all the same
                     self._host_bytes(port, now)
+            views, watched = self.views, self._watched
             for name, port in ports.items():
-                self.views[name].settle(*(port.client_framing() if port.attached
-                                          else (None, 0)))
-                if port.attached and port.fd not in self._watched:
-                    self._watched[port.fd] = port
-                    self._attached.register(port.fd, select.EPOLLIN)
-                elif not port.attached and self._watched.get(port.fd) is port:
-                    self._unwatch(port)
+                if port.attached:
+                    views[name].settle(*port.client_framing())
+                    if port.fd not in watched:
+                        watched[port.fd] = port
+                        self._attached.register(port.fd, select.EPOLLIN)
+                else:
+                    views[name].settle(None, 0)
+                    if watched.get(port.fd) is port:
+                        self._unwatch(port)
 
     def _unwatch(self, port: PtyPort) -> None:
         """Stop waiting on *port* (detached, unplugged or replugged): a detached master is
@@ -595,24 +594,42 @@ class Emulation:
             view, device, line = self.views.get(name), self.devices[name], self.lines[name]
             for t, data in self.inbounds[name].poll(now):
                 if view is not None:  # read by the device's UART at its rate
-                    data = view.heard(t, data, Framing(device.line_device.baud))
+                    data = view.heard(t, data, line_framing(device.line_device.baud))
                 for t_ns, item in device.host(t, data):
                     line.put(t_ns, item)
                 self.line_deadlines.touch(name)
                 self._air_from.add(name)
 
-    def _enqueue(self, ev) -> None:
-        t_ns, item = self.devices[ev.port].to_line(ev)
-        self.lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
-        self.line_deadlines.touch(ev.port)
+    def _enqueue(self, events: list) -> None:
+        """Put the world's *events* on their ports' lines."""
+        devices, lines, touch = self.devices, self.lines, self.line_deadlines.touch
+        for ev in events:
+            t_ns, item = devices[ev.port].to_line(ev)
+            lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
+            touch(ev.port)
+
+    def _write_due(self, now: int, known_ns: int, wall_ns: int | None) -> bool:
+        """Poll the lines due by *now*, in the lab's port order, and deliver the chunks they
+        end, each line's in its order; whether any was. The convoy's cars are copies, so
+        their lines fall due together: a burst of N writes, each costing what is written
+        (the lookups are made once a burst)."""
+        due = self.line_deadlines.due(now)
+        if len(due) > 1:
+            due.sort(key=self._line_order.__getitem__)
+        lines, end_ns, deliver, delivered = self.lines, self.end_ns, self._deliver, False
+        for name in due:
+            for chunk in lines[name].poll(now, known_ns, end_ns):
+                deliver(chunk, wall_ns)
+                delivered = True
+        return delivered
 
     def _deliver(self, chunk: Chunk, wall_ns: int | None) -> None:
+        name = chunk.port
         if wall_ns is not None:
-            self.lateness.add(chunk.port, wall_ns - int(chunk.end_ns / self.speed))
-        port = self.ports.get(chunk.port)
+            self.lateness.add(name, wall_ns - int(chunk.end_ns / self.speed))
+        port = self.ports.get(name)
         if port is not None:  # the recording below keeps the device's bytes, not this view
-            port.write(self.views[chunk.port].view(chunk.start_ns, chunk.data,
-                                                   Framing(chunk.baud)))
+            port.write(self.views[name].view(chunk.start_ns, chunk.data, line_framing(chunk.baud)))
         if self.recorder is not None:
             self.recorder.port(chunk.port).write(chunk.data, chunk.start_ns, wall_ns)
         if self.sink is not None:
@@ -627,14 +644,18 @@ class Emulation:
         that is earlier than one handed out."""
         until_ns = min(until_ns, self.end_ns)
         mine = []
-        for port in [p for p in self.coordinators if p in self._air_from]:
-            coordinator = self.coordinators[port]  # only the host's requests put frames there
+        # only the host's requests put frames on a coordinator's air (most wake-ups: none)
+        asked = [p for p in self.coordinators if p in self._air_from] if self._air_from else ()
+        for port in asked:
+            coordinator = self.coordinators[port]
             if not coordinator.air:
                 self._air_from.discard(port)
                 continue
             mine += [f for f in coordinator.air if f.t_ns < until_ns]
             coordinator.air = [f for f in coordinator.air if f.t_ns >= until_ns]
         frames = self.world.air(until_ns) + mine
+        if not frames:
+            return
         if mine:
             frames.sort(key=lambda f: f.t_ns)  # the world's come in order
         recorded = None if self.recorder is None else \

@@ -34,6 +34,7 @@ bytes.
 """
 from __future__ import annotations
 
+import functools
 import termios
 from dataclasses import dataclass
 
@@ -76,6 +77,13 @@ class Framing:
         """Whether a receiver at *other* reads anything but what this transmitter sent
         (stop bits do not count: a receiver checks the first one only)."""
         return (self.baud, self.bits, self.parity) != (other.baud, other.bits, other.parity)
+
+
+@functools.cache
+def line_framing(baud: int) -> Framing:
+    """A device's line at *baud* (8N1), one object per rate: the write path compares a
+    chunk's with its port's by identity first (:meth:`ClientView.view`), at every write."""
+    return Framing(baud)
 
 
 def waveform(data: bytes, tx: Framing) -> np.ndarray:
@@ -269,6 +277,8 @@ class ClientView:
 
     def settle(self, seen: Framing | None, iflag: int, device: Framing | None = None) -> None:
         """Take the client's settings as read from its termios (None: detached)."""
+        if device is None and seen is self.seen and iflag == self.iflag:
+            return  # as before (the port gives the same objects): nothing changes
         before = self.client
         self.seen, self.iflag = seen, iflag
         self.device = device or self.device
@@ -306,7 +316,7 @@ class ClientView:
 
     def view(self, start_ns: int, data: bytes, device: Framing) -> bytes:
         """The bytes to give the client for a chunk the device sent at *device*."""
-        if device != self.device:  # the device changed rate (BD) since the last chunk
+        if device is not self.device and device != self.device:  # the device's BD changed
             self.settle(self.seen, self.iflag, device)
         if self.receiver is None:
             return data

@@ -287,8 +287,7 @@ def drive(emu, host, step_ns=1_000_000):
     t = 0
     while t < END:
         t = t + step_ns if t < emu.end_ns else END  # then what is still on the wire
-        for ev in emu.world.advance(min(t, emu.end_ns)):
-            emu._enqueue(ev)
+        emu._enqueue(emu.world.advance(min(t, emu.end_ns)))
         while host and host[0][0] <= t:
             for out in emu.coordinators["xbee"].host(*host.pop(0)):
                 emu.lines["xbee"].put(out.t_ns, out.item)

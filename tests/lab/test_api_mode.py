@@ -21,8 +21,7 @@ def test_a_second_clients_atap1_is_seen_by_an_api2_host():
     events, t, step = [], 0, 1_000_000
     while t < emu.end_ns:
         t += step
-        for ev in emu.world.advance(t):
-            emu._enqueue(ev)
+        emu._enqueue(emu.world.advance(t))
         for out in coord.host(t, second.pop(t, b"")):
             line.put(out.t_ns, out.item)
         for chunk in line.poll(t, t, emu.end_ns):
