@@ -11,11 +11,14 @@ rows it accepts is fed back into their strapdowns (``take_nav`` then ``correct``
 2, closed loop) and the nav part of x reset. An estimate is the strapdown extrapolated to
 the output instant, its covariance F P F^T with F = [[I, lead I], [0, I]] on (p, v).
 
-The common path only (host.batch.tracks.base): every update gated out for ``gate_reopen_s``
-(the per-seed track starts again at the next fix) and a singular innovation covariance (a
-numerical reset) hand the seed back; a rejection, and a measurement too late, are here. A
-restart, a gap or anything else that re-initialises never reaches a twin (the engine ejects
-the seed first), so the twin has no re-initialisation.
+The common path, with the track's own discontinuity: every update gated out for
+``gate_reopen_s`` turns the track off (``gated``) until the next WSN fix no older than that,
+at which it starts again (ErrorStateTrack.reinit_at: the strapdown placed at the fix, at
+rest, the attitude kept; P of position and velocity from the fix and ``reinit_sigma``, the
+attitude's and the extra states' kept), taking no other update of that fix; meanwhile its
+strapdown runs on and its estimates are extrapolated. A singular innovation covariance (a
+numerical reset) hands the seed back (host.batch.tracks.base); a restart or a gap never
+reaches a twin (the engine ejects the seed first).
 
 The constants (noise densities, P0, the extra states, R of a range) are the per-seed
 track's own: the twin builds one (``one``) from the same settings and reads them there.
@@ -28,7 +31,7 @@ from typing import ClassVar
 import numpy as np
 
 from navtwin.host.filters.errorstate import NAV
-from navtwin.host.measurements import ImuSample
+from navtwin.host.measurements import Fix, ImuSample
 from navtwin.host.tracks.errorstate import ErrorStateTrack
 from navtwin.host.wsn import chi2_gate
 
@@ -63,10 +66,33 @@ class BatchErrorStateTrack(BatchTrack):
         self._I = np.eye(m)
         self.aided = np.full(n, np.nan)  # the last accepted update; NaN: none
         self.gated_since = np.full(n, np.nan)  # the first rejection of a run; NaN: none
+        self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
+        self.reinit_fix: list = [None] * n  # Track.reinit_fix: the fix it last started again at
         self._gates: dict[int, float] = {}
 
     def handlers(self) -> dict:
-        return {ImuSample: self.imu}
+        return {ImuSample: self.imu, Fix: self.offer_fix}
+
+    def offer_fix(self, idx, f) -> np.ndarray:
+        """Track.offer_fix with ErrorStateTrack.reinit_at: the seeds waiting since a
+        discontinuity no later than the fix start again at it (module doc); which did."""
+        at = (f.t >= self.reinit_since[idx]) & self.on[idx]  # NaN: not waiting
+        if at.any():
+            rows, k = idx[at], np.flatnonzero(at)
+            sv, _ = self.ctx.cfg.reinit_sigma
+            self.nav.place(rows, f.p[at], np.zeros((len(rows), 2)))
+            P = np.zeros(self.P[rows].shape)
+            P[:, :2, :2] = f.cov[at]
+            P[:, 2, 2] = P[:, 3, 3] = sv**2
+            P[:, 4:, 4:] = self.P[rows, 4:, 4:]
+            self.P[rows] = P
+            self.x[rows, :NAV] = 0.0
+            self.gated_since[rows] = np.nan
+            self.aided[rows] = f.t[at]
+            self.reinit_since[rows] = np.nan
+            for j, i in zip(k.tolist(), rows.tolist()):
+                self.reinit_fix[i] = f.fixes[j]
+        return at
 
     # -- the strapdown and the predict --------------------------------------------------------
     def imu(self, idx, b) -> None:
@@ -94,7 +120,8 @@ class BatchErrorStateTrack(BatchTrack):
     def ready(self, idx, t) -> np.ndarray:
         """ClosedLoopTrack.ready of the seeds *idx* for measurements at t: whether each can
         update (a late one is counted there, and changes nothing)."""
-        return self.on[idx] & ~(self.t_nav[idx] - t > self.ctx.cfg.max_lag_s)
+        return self.on[idx] & np.isnan(self.reinit_since[idx]) & \
+            ~(self.t_nav[idx] - t > self.ctx.cfg.max_lag_s)
 
     def position_at(self, idx, t) -> tuple[np.ndarray, np.ndarray]:
         """The strapdowns' horizontal positions extrapolated to t (n, 2), and t - t_nav (n,)."""
@@ -121,7 +148,8 @@ class BatchErrorStateTrack(BatchTrack):
             r = idx[out]
             since = self.gated_since[r] = np.where(np.isnan(self.gated_since[r]), t[out],
                                                    self.gated_since[r])
-            ctx.eject(r[t[out] - since > ctx.cfg.gate_reopen_s], f"{self.name}: gated out")
+            off = t[out] - since > ctx.cfg.gate_reopen_s  # Track.discontinuity("gated", t)
+            self.reinit_since[r[off]] = t[out][off]
         a = ~out
         if not a.any():
             return
@@ -153,4 +181,5 @@ class BatchErrorStateTrack(BatchTrack):
             F[:, 0, 2] = F[:, 1, 3] = lead
             cov[on] = np.matmul(np.matmul(F, self.P[s, :4, :4]), T(F))
             yaw[on] = self.nav.yaw(s)
-        return Columns(np.ones(n, bool), p, v, cov, ctx.stale(idx, b, self.aided[idx]), True, yaw)
+        stale = ~np.isnan(self.reinit_since[idx]) | ctx.stale(idx, b, self.aided[idx])
+        return Columns(np.ones(n, bool), p, v, cov, stale, True, yaw)

@@ -20,7 +20,9 @@ class BatchLcTrack(BatchErrorStateTrack):
         return {**super().handlers(), Fix: self.fix}
 
     def fix(self, idx, f) -> None:
-        ok = self.ready(idx, f.t)
+        """LcTrack.fix, after the fix is offered (a track that started again at it takes no
+        update from it)."""
+        ok = self.ready(idx, f.t) & ~self.offer_fix(idx, f)
         idx, t = idx[ok], f.t[ok]
         if not idx.size:
             return
