@@ -140,7 +140,7 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
                 others = Estimator(replace(cfg, filters=rest)).takes() if rest else frozenset()
         if batched:
             try:
-                streams.append(stream(recs, takes, others))
+                streams.append(stream(recs, takes, others, cfg.imu_gap_s))
                 rows.append(k)
             except Unbatchable as e:
                 ejected[seed] = str(e)

@@ -10,7 +10,8 @@ of the seeds concerned, in the same order and with the same arithmetic (host.bat
 filters, host.batch.strapdown), so each seed's numbers are the per-seed estimator's.
 
 The common path only. A seed whose records hold anything else (a device restart, an IMU
-sample out of order, stale or with a gap beyond one period, a record type no twin takes),
+sample out of order or stale, a gap in the IMU stream too long to bridge, a record type no
+twin takes),
 or whose tracks would take a branch their twins do not carry (a numerical reset, an
 estimate that is not finite), is *ejected*: :attr:`ejected` names it, its rows are dropped, and the caller
 runs it per seed with the estimator itself (lab.batch). Everything the per-seed estimator
@@ -26,7 +27,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from navtwin.protocols import sins as sins_format
 
 from ..estimator import IGNORED_UNTAKEN
 from ..filters import ACCELERATION, ConstantAcceleration
@@ -97,10 +97,12 @@ class Stream(NamedTuple):
     records: list
 
 
-def stream(records: list, takes: frozenset, taken: frozenset) -> Stream:
+def stream(records: list, takes: frozenset, taken: frozenset, gap_s: float) -> Stream:
     """*records* as a :class:`Stream`; :class:`Unbatchable` when one leaves the common path.
     *takes*: the types the batch's tracks take (:meth:`BatchEstimator.takes`); *taken*: those
-    the tracks run per seed beside it take (host.estimator.Estimator.takes)."""
+    the tracks run per seed beside it take (host.estimator.Estimator.takes); *gap_s*: the
+    estimator's ``imu_gap_s`` (a shorter gap is bridged: the next step spans it, nothing
+    else changes; a longer one restarts the tracks)."""
     n = len(records)
     kind = np.full(n, SKIP, np.int8)
     t = np.zeros(n)
@@ -118,7 +120,7 @@ def stream(records: list, takes: frozenset, taken: frozenset) -> Stream:
                 raise Unbatchable("IMU sample stale")
             if r.t <= last:
                 raise Unbatchable("IMU sample out of order")
-            if r.t - last > 1.5 * sins_format.PERIOD_S and last > -math.inf:
+            if last > -math.inf and r.t - last > gap_s:  # Inertial.gap: the tracks start again
                 raise Unbatchable("IMU gap")
             if r.uptime_s is not None and i and last > -math.inf:
                 raise Unbatchable("IMU uptime after the first sample")

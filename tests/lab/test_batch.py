@@ -62,16 +62,19 @@ def test_office_runs_as_a_batch():
     assert all(len(e["kf"]["t"]) > 100 for e in out.estimates)
 
 
-def test_a_seed_off_the_common_path_runs_per_seed_and_still_equals():
+def test_a_gap_is_bridged_in_the_batch_and_a_longer_one_leaves_it():
     cfg, recs = batch.records("office", 1, filters=("sins", "kf"), duration=DURATION_S)
     imu = [k for k, r in enumerate(recs) if type(r).__name__ == "ImuSample"]
-    gapped = recs[:imu[900]] + recs[imu[905]:]  # five samples lost: a gap the batch leaves out
     takes = BatchEstimator(cfg, 0).takes()
+    long_gap = recs[:imu[900]] + recs[imu[960]:]  # 0.6 s lost: the tracks would start again
     with pytest.raises(Unbatchable, match="gap"):
-        stream(gapped, takes, frozenset())
-    engine = BatchEstimator(cfg, 1)
-    got = engine.run([stream(recs, takes, frozenset())])[0]
-    assert_equal(batch.columns(batch.per_seed(cfg, recs), cfg.filters), got, "office seed 1")
+        stream(long_gap, takes, frozenset(), cfg.imu_gap_s)
+    short = recs[:imu[900]] + recs[imu[905]:]  # 50 ms lost: bridged, the next step spans it
+    engine = BatchEstimator(cfg, 2)
+    got = engine.run([stream(r, takes, frozenset(), cfg.imu_gap_s) for r in (recs, short)])
+    assert engine.ejected == {}
+    for r, g in zip((recs, short), got):
+        assert_equal(batch.columns(batch.per_seed(cfg, r), cfg.filters), g, "office seed 1")
 
 
 def strapdowns(rng, n: int, site: dict):

@@ -109,7 +109,7 @@ def test_a_track_gated_out_starts_again_at_the_next_fix_as_the_per_seed_one(name
     want = batch.columns([e for r in recs for e in alone.feed(r)], cfg.filters)
     assert alone.stats()["reinit"][name] == {"gated": 1}
     engine = BatchEstimator(cfg, 2)
-    stream_ = stream(recs, engine.takes(), frozenset())
+    stream_ = stream(recs, engine.takes(), frozenset(), cfg.imu_gap_s)
     got = engine.run([stream_, stream_])
     assert engine.ejected == {}
     for g in got:

@@ -71,7 +71,7 @@ def test_both_range_measurements_equal_the_per_seed_tracks(scenario, tight):
     streams, seeds = [], []
     for seed, (_, recs) in zip(SEEDS, taken):
         try:
-            streams.append(stream(recs, takes, frozenset()))
+            streams.append(stream(recs, takes, frozenset(), cfg.imu_gap_s))
             seeds.append(seed)
         except Unbatchable:  # its records leave the common path (lab.batch runs it per seed)
             assert scenario != "office"
