@@ -39,7 +39,7 @@ from navtwin.host.estimator import Estimator
 from navtwin.host.pipeline import Pipeline
 from navtwin.host.replay import drive
 
-from .run import _scenario, lab_chunks
+from .run import lab_chunks, scenario_of
 
 #: The column names of one track's estimates (:func:`columns`).
 COLUMNS = ("t", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
@@ -65,7 +65,7 @@ def records(scenario: str | Path | Scenario, seed: int | None = None, *,
             filters: tuple[str, ...] | None = None, duration: float | None = None):
     """The estimator settings of the host's vehicle 1 on *scenario*'s lab (run_in_memory's
     host config and filters) and the records its estimator is given in the run of *seed*."""
-    kw, chunks = lab_chunks(_scenario(scenario), seed, duration=duration, filters=filters)
+    kw, chunks = lab_chunks(scenario_of(scenario), seed, duration=duration, filters=filters)
     pipe = Pipeline(kw.pop("config"), kw.pop("filters"), make_estimator=Kept, **kw)
     drive(pipe, chunks, lambda _: None)
     kept = pipe.vehicles[0].estimator
@@ -116,7 +116,7 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
     made, taken by the tracks run per seed and turned into a :class:`Stream` (arrays) at once,
     so a batch holds about a megabyte a seed; a seed the batch ejects has its records made
     again (they are the same) and runs per seed."""
-    sc = _scenario(scenario)
+    sc = scenario_of(scenario)
     seeds = list(seeds)
     out: list[dict] = [{} for _ in seeds]
     ejected: dict[int, str] = {}

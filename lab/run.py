@@ -33,7 +33,8 @@ from navtwin.host.replay import config_for, drive, emulator_settings
 from .fleet import Follower, followers
 
 
-def _scenario(scenario: str | Path | Scenario) -> Scenario:
+def scenario_of(scenario: str | Path | Scenario) -> Scenario:
+    """*scenario* itself, or the scenario a name or a file gives."""
     return scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
 
 
@@ -46,7 +47,7 @@ def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,
     vehicles, *follower* (lab.fleet) says which ports a host reads as its inputs, and its
     config; without one, the host follows vehicle 1 (its config's vehicle 1 given vehicle 1's
     tag and router), so a sweep of a scenario with several cars scores car 1."""
-    sc = _scenario(scenario)
+    sc = scenario_of(scenario)
     if follower is None and len(sc.fleet) > 1:
         config = overrides.get("config") or host_config.load(config_for(sc.name))
         follower = followers(sc, config, (1,))[0]
@@ -88,6 +89,6 @@ def truth(scenario: str | Path | Scenario, seed: int | None = None, vehicle: int
     """Vehicle *vehicle*'s true ``t`` (s), ``x``, ``y`` (m), ``vx``, ``vy`` (m/s), one row per
     millisecond, as :func:`navtwin.lab.evaluate.load_truth` reads them from the emulator's
     ``truth.csv`` (``truth<n>.csv``)."""
-    w = World(_scenario(scenario), seed)
+    w = World(scenario_of(scenario), seed)
     tr = w.truth(0, w.duration_ns, vehicle)
     return {"t": tr["t"] / 1e9, "x": tr["x"], "y": tr["y"], "vx": tr["vx"], "vy": tr["vy"]}
