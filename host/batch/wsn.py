@@ -18,7 +18,7 @@ import numpy as np
 from navtwin.host.filters.linalg import solve
 from navtwin.host.measurements import Fix
 from navtwin.host.wsn import (GN_ITERATIONS, GN_SETTLED_M, GN_TOLERANCE_M, MIN_RANGES, MIRROR_CHI2,
-                              Solver, _sx_geometry, tdoa_whitening)
+                              Solver, _sx_geometry, chi2_gate, tdoa_whitening)
 
 from .linalg import T, dot, mv
 
@@ -98,7 +98,7 @@ def _tdoa(solver: Solver, anchors: tuple[int, ...], r: np.ndarray):
             ok[k] = False
     rss = np.zeros(n)
     rss[rows] = dot(ew, ew)
-    ok &= _inside(solver, p) & _passes(solver, m, rss)
+    ok &= solver.inside(p) & _passes(solver, m, rss)
     return ok, p, cov, rss
 
 
@@ -141,16 +141,6 @@ def _misfit(layout, idx, ref, d, w_sqrt, q) -> np.ndarray:
     return dot(e, e)
 
 
-def _inside(solver: Solver, p: np.ndarray) -> np.ndarray:
-    if solver.margin_m is None:
-        return np.ones(len(p), bool)
-    (x0, y0), (x1, y1) = solver.layout.xy.min(axis=0), solver.layout.xy.max(axis=0)
-    m = solver.margin_m
-    return (x0 - m <= p[:, 0]) & (p[:, 0] <= x1 + m) & (y0 - m <= p[:, 1]) & (p[:, 1] <= y1 + m)
-
-
 def _passes(solver: Solver, m: int, rss: np.ndarray) -> np.ndarray:
-    from navtwin.host.wsn import chi2_gate
-
     dof = m - 3
     return np.ones(len(rss), bool) if dof < 1 else rss <= chi2_gate(dof, solver.gate_probability)

@@ -68,7 +68,6 @@ class BatchErrorStateTrack(BatchTrack):
         self.gated_since = np.full(n, np.nan)  # the first rejection of a run; NaN: none
         self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
         self.reinit_fix: list = [None] * n  # Track.reinit_fix: the fix it last started again at
-        self._gates: dict[int, float] = {}
 
     def handlers(self) -> dict:
         return {ImuSample: self.imu, Fix: self.offer_fix}
@@ -128,18 +127,14 @@ class BatchErrorStateTrack(BatchTrack):
         lead = t - self.t_nav[idx]
         return self.nav.p[idx, :2] + lead[:, None] * self.nav.v[idx, :2], lead
 
-    def _gate(self, dof: int) -> float:
-        if dof not in self._gates:
-            self._gates[dof] = chi2_gate(dof, self.ctx.cfg.gate_probability)
-        return self._gates[dof]
-
     def update(self, idx, t, z, H, R, dof: int) -> None:
         """ClosedLoopTrack._update of the seeds *idx*: z (n, dof), H (n, dof, m), R (n, dof,
         dof); the accepted ones fed back into their strapdowns (ErrorStateTrack.feed_back)."""
         ctx = self.ctx
         x = self.x[idx]
         try:
-            x, P, inn = joseph_correct(x, self.P[idx], self._I, z - mv(H, x), H, R, self._gate(dof))
+            x, P, inn = joseph_correct(x, self.P[idx], self._I, z - mv(H, x), H, R,
+                                       chi2_gate(dof, ctx.cfg.gate_probability))
         except np.linalg.LinAlgError:
             ctx.eject(idx, f"{self.name}: singular innovation covariance")
             return

@@ -40,7 +40,6 @@ class BatchFusionTrack(BatchTrack):
         self._I = np.eye(6)
         self.aided = np.full(n, np.nan)  # time of the last position update; NaN: none
         self.t_predicted = np.full(n, np.nan)  # FusionTrack.t_predicted
-        self._gates: dict[int, float] = {}
         self._gated_since: dict[str, np.ndarray] = {}  # kind -> first rejection of a run; NaN: none
         self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
         self.reinit_fix: list = [None] * n  # Track.reinit_fix: the fix it last started again at
@@ -54,11 +53,6 @@ class BatchFusionTrack(BatchTrack):
         (host.filters.ekf; for a linear *meas*, host.filters.kf)."""
         hx, H = meas.linearize(x)
         return joseph_correct(x, P, self._I, z - hx, H, R, gate)
-
-    def _gate(self, dim: int) -> float:
-        if dim not in self._gates:
-            self._gates[dim] = chi2_gate(dim, self.ctx.cfg.gate_probability)
-        return self._gates[dim]
 
     def start(self, idx, t) -> None:
         sp, sv, sa = self.ctx.cfg.p0_sigma
@@ -119,7 +113,8 @@ class BatchFusionTrack(BatchTrack):
             return
         self.sync(idx)
         try:
-            x, P, inn = self.correct(self.x[idx], self.P[idx], z, R, meas, self._gate(meas.dim))
+            x, P, inn = self.correct(self.x[idx], self.P[idx], z, R, meas,
+                                     chi2_gate(meas.dim, ctx.cfg.gate_probability))
         except np.linalg.LinAlgError:
             ctx.eject(idx, f"{self.name}: numerical reset")
             return
