@@ -6,7 +6,7 @@ cars copies with one board clock, so their chunks fall due in bursts of N) runs 
 process at ``--speed realtime`` on one loop (one worker, the run's timing mode ``auto``),
 every one of its 3N ports read from before the clock starts by an epoll reader process
 (``bench scale``'s). The loop's cost is its thread's CPU time (``time.thread_time``: the
-world's maker thread and the reader are not in it) from the clock's start to the run's end,
+world's maker process and the reader are not in it) from the clock's start to the run's end,
 over the chunks it wrote: ``loop_us_per_write``. Everything the loop does is in it (waking,
 the ports' checks every ``CHECK_NS``, taking the world's blocks), as the loop's share of a
 vehicle's cost is.

@@ -20,10 +20,10 @@ where nothing better exists); what the kernel is asked for (real-time priority, 
 is the run's timing mode (emulator.timing), chosen when the run is made and applied to the
 thread that runs it for the run only. A FACTOR runs the same schedule at FACTOR x real time;
 ``max`` runs it as fast as the world can be generated. World events are generated in blocks:
-when paced, a second ahead before the clock starts, then by the world's maker thread
-(World.ahead: an ordinary thread, the interpreter's switch interval cut to 50 us so a write
-waits that long at most for the GIL) a block ahead of what the loop took; the loop takes made
-blocks, up to two seconds ahead, in idle gaps, and never makes one unless it is due now.
+when paced, a second ahead before the clock starts, then by the world's maker process
+(World.ahead, emulator.maker: an ordinary process, so no write waits for it to hand over the
+GIL) a block ahead of what the loop took; the loop takes made blocks, up to two seconds
+ahead, in idle gaps, and waits for one only if it is due now.
 The loop wakes for the earliest line deadline (emulator.schedule: a heap, a line re-keyed
 when it gets an item or is polled) and waits on the attached ports in one epoll set, so a wake-up costs what is
 due and what is readable, not every port's line and file descriptor. The lines due at one
@@ -428,7 +428,7 @@ class Emulation:
         next_progress = t0 + PROGRESS_NS if self.progress else END
         next_flush = t0 + FLUSH_NS if self.recorder is not None else END
         try:
-            # the maker thread first: it must not inherit the loop's real-time policy
+            # the maker process first: it must not inherit the loop's real-time policy
             with self.world.ahead() if paced else contextlib.nullcontext(), \
                     self.timing.applied() if paced else contextlib.nullcontext():
                 self._loop(stop, feed, paced, t0, next_check, next_progress, next_flush)
@@ -533,8 +533,7 @@ class Emulation:
         """Read what clients wrote (stamped *now*) and notice clients coming and going, and
         (every CHECK_NS) their termios settings. A paced loop looks only at what its last
         sleep saw readable: what comes later wakes the next sleep at once (each system call
-        here would also hand the GIL to the world's maker thread, for up to its switch
-        interval); at --speed max, which never sleeps, at everything."""
+        here costs the loop's time); at --speed max, which never sleeps, at everything."""
         ports, readable = self.ports, self._readable
         if self.speed is not None:
             self._readable = []

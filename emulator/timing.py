@@ -18,9 +18,9 @@ Modes, best first (:data:`MODES`): ``fifo`` (SCHED_FIFO at :data:`PRIORITY`, plu
 :meth:`Mode.check` tries its system calls and undoes them, so a mode refused
 (PermissionError, or no such call on this system) falls to the next. A mode is applied to the
 thread that runs the loop, for the run only (:meth:`Mode.applied`), and undone after:
-the process's other threads (the world's maker, emulator.world.World.ahead; the control
-socket's, an ``--expect`` watcher, RFC 2217 servers) and its children stay ordinary
-(``SCHED_RESET_ON_FORK``).
+the process's other threads (the control socket's, an ``--expect`` watcher, RFC 2217
+servers) and its children (the world's maker process, emulator.maker, forked before the
+mode is applied) stay ordinary (``SCHED_RESET_ON_FORK``).
 
 Safety. A SCHED_FIFO thread that never sleeps starves every ordinary thread on its core; the
 loop sleeps to each deadline and then writes, so it sleeps in every period; the kernel's real-time throttling (``kernel.sched_rt_runtime_us``, 95 % by default)
@@ -42,7 +42,7 @@ import functools
 import os
 
 PRIORITY = 10  # SCHED_FIFO priority: above ordinary threads, below the kernel's own (50)
-PR_SET_TIMERSLACK, PR_GET_TIMERSLACK = 29, 30  # <linux/prctl.h>
+PR_SET_PDEATHSIG, PR_SET_TIMERSLACK, PR_GET_TIMERSLACK = 1, 29, 30  # <linux/prctl.h>
 SLACK_NS = 1  # the least timer slack the kernel takes (0 would mean "the default")
 
 
@@ -140,6 +140,13 @@ def _checked(cls: type[Mode]) -> Mode:
     mode = cls()
     mode.check()
     return mode
+
+
+def die_with_parent(parent: int, sig: int) -> bool:
+    """Ask the kernel for *sig* when this process's parent dies (``PR_SET_PDEATHSIG``: a
+    parent killed outright cannot stop its children); False when *parent* already died."""
+    _prctl(PR_SET_PDEATHSIG, sig)
+    return os.getppid() == parent
 
 
 def _prctl(option: int, value: int = 0) -> int:

@@ -28,7 +28,6 @@ times the speed, against BUDGET of a core per worker, at most ``os.cpu_count()``
 """
 from __future__ import annotations
 
-import ctypes
 import json
 import math
 import os
@@ -42,10 +41,10 @@ import time
 
 from .pty import LinkDir
 from .runner import SEC, RunError, speed_name
+from .timing import die_with_parent
 
 LOOP_FACTOR = 2.5  # a paced vehicle's CPU over the CPU of making its events (N=50: 8.8 / 3.8)
 BUDGET = 0.5  # of a core per worker: the rest is headroom for keeping the schedule
-PR_SET_PDEATHSIG = 1  # <linux/prctl.h>: a signal for this process when its parent dies
 START_NS = SEC // 5  # from the ready line to scenario time 0 (each worker made its first
 #                      second before its ready line)
 
@@ -260,8 +259,7 @@ def main() -> int:
         signal.signal(sig, lambda *_: stop.set())
     spec = json.loads(sys.stdin.readline())
     # a parent killed outright (SIGKILL) cannot stop its workers: the kernel does, as SIGTERM
-    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-    if os.getppid() != spec["parent"]:
+    if not die_with_parent(spec["parent"], signal.SIGTERM):
         return 0  # it died before that was asked
     prefix = spec["progress"]
     try:

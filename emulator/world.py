@@ -15,11 +15,10 @@ every event with t_ns < until_ns not returned before, each on its port instance 
 
 Routers that joined one coordinator share its channel (emulator.channel): one packet on the
 air at a time, a packet waiting while another is sent, dropped when its router's queue is
-full. ``work()`` makes a step of the next block ahead of ``advance``, and :meth:`World.ahead`
-makes the blocks on a thread of its own while a paced run's loop writes (a block of fifty
-vehicles takes a few hundred ms, a step a few ms: made by the writing loop, a step would hold
-up every write due meanwhile); the events are the same however and wherever the block was
-made.
+full. :meth:`World.ahead` makes the blocks in a process of its own while a paced run's loop
+writes (emulator.maker: a block of fifty vehicles takes a few hundred ms of CPU, which must
+not hold up the writes due meanwhile, nor hold their interpreter's lock); the events are the
+same wherever the blocks were made.
 
 Beside the events, ``air(until_ns)`` returns the frames the routers' packets put on the air
 (emulator.radio.AirFrame: every attempt, received or lost, and the coordinator's MAC ACK of
@@ -35,11 +34,8 @@ from __future__ import annotations
 
 import bisect
 import contextlib
-import sys
-import threading
 from dataclasses import dataclass
 from operator import attrgetter, itemgetter
-from typing import NamedTuple
 
 import numpy as np
 
@@ -48,6 +44,7 @@ from navtwin.protocols.zigbee import COORDINATOR16
 
 from .board import Board
 from .channel import Channel, Offered
+from .events import Event, RfPacket
 from .faults import acting_on
 from .imu import Adis16350
 from .magnetometer import Magnetometer
@@ -61,18 +58,7 @@ from .truth import truth_arrays
 #: events at the same t_ns come in this port order (then vehicle order), so the event list
 #: never depends on how the devices were generated
 EVENT_ORDER = (ports.SINS.name, ports.NANOLOC.name, ports.XBEE.name)
-#: the interpreter's switch interval while :meth:`World.ahead` makes blocks: how long the
-#: writing loop, woken at a deadline, may wait for the maker thread to hand over the GIL
-#: (CPython's default, 5 ms, would be a late write every time)
-SWITCH_S = 50e-6
 _T_NS = attrgetter("t_ns")
-
-
-class RfPacket(NamedTuple):
-    src64: int
-    src16: int
-    options: int
-    data: bytes
 
 
 @dataclass(slots=True)
@@ -80,13 +66,6 @@ class RouterEffects:
     """What router faults change in a block's packets: ``absent`` (bool per packet)."""
 
     absent: np.ndarray
-
-
-class Event(NamedTuple):
-    t_ns: int
-    port: str
-    data: bytes | RfPacket
-    marks: tuple = ()  # ledger marks of the device faults that changed it (emulator.uart.Marked)
 
 
 class Vehicle:
@@ -136,10 +115,8 @@ class Vehicle:
         the run goes on after *hi*, so an open packet waits for the next bytes), each as it
         is offered to the channel (emulator.channel): its event at the coordinator (None when
         the link lost it) and its frames on the air (a packet the router sends while out of
-        the network is not offered). Made in two steps: a generator that yields once, after
-        the IMU's samples (half the cost), and returns ``(sins events, offered packets)``."""
+        the network is not offered): ``(sins events, offered packets)``."""
         self.imu.generate(lo, hi)
-        yield
         t_sins, frames, marks = self.board.frames(lo, hi)
         events = [Event(t, self.sins_port, f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
@@ -225,29 +202,22 @@ class World:
         self._returned_ns = 0
         self._air: list[AirFrame] = []  # generated, in order; those before _air_at returned
         self._air_at = 0
-        self._making = None  # the block being made (a generator of _parts), or None
-        #: held while a step is made (by the maker thread or a caller that needs the block
-        #: now), and by held(): reentrant, so inject() and remove() may lock it again
-        self._step_lock = threading.RLock()
-        #: held while a made block joins the events that wait, or advance() takes them
-        self._pending_lock = threading.Lock()
-        self._room = threading.Event()  # advance() took events: the maker may make more
-        self._error: BaseException | None = None  # what a step raised (a dead generator)
+        #: while :meth:`ahead` runs, and after: the process that makes the blocks
+        #: (emulator.maker), whose blocks advance, air, made_ns and held give
+        self._maker = None
 
     # -- generation -------------------------------------------------------------------------
-    def _parts(self):
-        """Make the next block a step at a time: each vehicle in two, each nanoLOC network,
-        and last the block sorted into the events that wait (the sort of fifty vehicles'
-        second is itself a step of several ms)."""
+    def _make(self) -> None:
+        """Make the next block: each vehicle, each nanoLOC network, and last the block sorted
+        into the events that wait."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
         keyed, air = [], []
         offered: dict[str, list[Offered]] = {}
         for vehicle in self.vehicles:
-            s, packets = yield from vehicle.block(lo, hi, hi < self.duration_ns)
+            s, packets = vehicle.block(lo, hi, hi < self.duration_ns)
             keyed += self._keyed(s)
             offered.setdefault(vehicle.xbee_port, []).append(packets)
-            yield
         for port, shares in offered.items():
             channel = self.channels.get(port)
             if channel is not None:  # routers that wait for each other
@@ -260,23 +230,18 @@ class World:
         for port, network in self.networks.items():
             t_nl, reports, marks = network.reports(lo, hi)
             keyed += self._keyed([Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))])
-            yield
         # a block's events are never earlier than the block (module doc), so those that wait
         # can take it before they are asked for: advance() returns none before their time.
         # A stable sort keeps generation order among equal keys (one port's events, made in
-        # its order); the keys are made with each part, so this step only compares ints.
-        # Sorted here, the block joins those that wait as a merge of two sorted runs: the
-        # lock advance() takes is held that short
+        # its order); sorted here, the block joins those that wait as a merge of two sorted runs
         keyed.sort(key=itemgetter(0))
-        with self._pending_lock:
-            self._pending += keyed
-            self._pending.sort(key=itemgetter(0))
-            if air:  # the returned dropped here, once a block: air() copies none
-                self._air = self._air[self._air_at:] + [f for f in air
-                                                        if f.t_ns < self.duration_ns]
-                self._air.sort(key=_T_NS)  # stable: an ACK stays after its frame
-                self._air_at = 0
-            self._making, self._generated_ns = None, hi
+        self._pending += keyed
+        self._pending.sort(key=itemgetter(0))
+        if air:  # the returned dropped here, once a block: air() copies none
+            self._air = self._air[self._air_at:] + [f for f in air if f.t_ns < self.duration_ns]
+            self._air.sort(key=_T_NS)  # stable: an ACK stays after its frame
+            self._air_at = 0
+        self._generated_ns = hi
 
     def _keyed(self, events: list[Event]) -> list[tuple[int, Event]]:
         """(order key, event) of *events* within the run: the key is (t_ns, port rank) as
@@ -284,98 +249,57 @@ class World:
         rank, ranks, end = self._rank, len(self._rank), self.duration_ns
         return [(e.t_ns * ranks + rank[e.port], e) for e in events if e.t_ns < end]
 
-    def _step(self) -> None:
-        """Make one step (the caller holds ``_step_lock``). A step that raised left its
-        generator dead: every later step raises the same, on whichever thread asks."""
-        if self._error is not None:
-            raise self._error
-        if self._making is None:
-            self._making = self._parts()
-        try:
-            next(self._making, None)
-        except BaseException as e:
-            self._error = e
-            raise
-
-    def work(self) -> bool:
-        """Make one step of the next block ahead of ``advance`` (a vehicle's IMU samples, the
-        rest of its share, the networks', the sort); False when a block of events waits
-        beyond what ``advance`` returned (no more is made ahead) or the run is generated."""
-        with self._step_lock:
-            if self._generated_ns >= self.duration_ns or (
-                    self._making is None
-                    and self._generated_ns >= self._returned_ns + self.BLOCK_NS):
-                return False
-            self._step()
-            return True
-
     @property
     def made_ns(self) -> int:
         """Blocks before this are made: ``advance`` up to it returns at once."""
-        return self._generated_ns
+        return self._generated_ns if self._maker is None else self._maker.poll()
 
     def advance(self, until_ns: int) -> list[Event]:
         """Events with t_ns < until_ns not returned before, in (t_ns, port) order. Blocks
-        not made yet are made now (helping :meth:`ahead`'s thread, if it runs)."""
+        not made yet are made now (or, while :meth:`ahead` runs, waited for)."""
+        if self._maker is not None:
+            return self._maker.advance(until_ns)
         until_ns = min(until_ns, self.duration_ns)
         if until_ns <= self._returned_ns:
             return []
         while self._generated_ns < until_ns:
-            with self._step_lock:
-                if self._generated_ns < until_ns:
-                    self._step()
-        with self._pending_lock:
-            cut = bisect.bisect_left(self._pending, until_ns * len(self._rank),
-                                     key=itemgetter(0))
-            out = [e for _, e in self._pending[:cut]]
-            del self._pending[:cut]
-            self._returned_ns = until_ns
-        self._room.set()
+            self._make()
+        cut = bisect.bisect_left(self._pending, until_ns * len(self._rank), key=itemgetter(0))
+        out = [e for _, e in self._pending[:cut]]
+        del self._pending[:cut]
+        self._returned_ns = until_ns
         return out
 
     def air(self, until_ns: int) -> list[AirFrame]:
         """The air's frames with t_ns < *until_ns* not returned before, in time order, of the
         blocks made so far: a later block's are never earlier."""
-        with self._pending_lock:
-            until_ns = min(until_ns, self._generated_ns)
-            at = self._air_at
-            if at == len(self._air) or self._air[at].t_ns >= until_ns:
-                return []  # most calls: the loop asks at every wake-up
-            cut = bisect.bisect_left(self._air, until_ns, at, key=_T_NS)
-            self._air_at = cut
-            return self._air[at:cut]
+        if self._maker is not None:
+            return self._maker.air(until_ns)
+        until_ns = min(until_ns, self._generated_ns)
+        at = self._air_at
+        if at == len(self._air) or self._air[at].t_ns >= until_ns:
+            return []  # most calls: the loop asks at every wake-up
+        cut = bisect.bisect_left(self._air, until_ns, at, key=_T_NS)
+        self._air_at = cut
+        return self._air[at:cut]
 
     @contextlib.contextmanager
     def ahead(self):
-        """While the block runs, a thread of its own makes the next block whenever
-        ``advance`` has taken the last (:meth:`work`, a step at a time), so a caller that
-        only takes made blocks never waits for one. Start it before the caller's thread
-        takes a real-time policy: the maker stays an ordinary thread, and the writes wait
-        for it no longer than the interpreter's switch interval (:data:`SWITCH_S`). What
-        a step raises is raised again by ``advance`` (on the caller's thread)."""
-        done = threading.Event()
+        """While the block runs, a process of its own (emulator.maker) makes the blocks, at
+        most one beyond what ``advance`` has taken, so a caller that only takes made blocks
+        never waits for one, and nothing of their making runs in the caller's process.
+        Enter it before the caller's thread takes a real-time policy: the maker stays an
+        ordinary process. From then on the blocks are the maker's: what it made stays
+        readable after the block, and what it raised is raised by ``advance``."""
+        from .maker import MakerProcess
 
-        def make() -> None:
-            while not done.is_set():
-                self._room.clear()
-                try:
-                    worked = self.work()
-                except BaseException:  # kept in _error: advance raises it
-                    return
-                if not worked:
-                    self._room.wait()
-
-        old = sys.getswitchinterval()
-        sys.setswitchinterval(SWITCH_S)
-        maker = threading.Thread(target=make, name="navtwin-world-maker", daemon=True)
-        maker.start()
+        if self._maker is not None:
+            raise RuntimeError("World.ahead runs once: its maker made the blocks from then on")
+        self._maker = MakerProcess(self)
         try:
             yield self
         finally:
-            done.set()
-            self._room.set()
-            maker.join()
-            sys.setswitchinterval(old)
+            self._maker.stop()
 
     # -- live faults ------------------------------------------------------------------------
     def _holders(self):
@@ -391,30 +315,34 @@ class World:
 
     @contextlib.contextmanager
     def held(self):
-        """The models between two blocks while the block runs: a block that work() has
-        begun is finished first (so no vehicle's share of it misses a fault), and no step
-        is made meanwhile. Yields the time events before which are made (and fixed): a live
-        fault injected or removed within acts from there on."""
-        with self._step_lock:
-            while self._making is not None:
-                self._step()
+        """The models between two blocks while the block runs (the maker's, while
+        :meth:`ahead` runs, stops making). Yields the time events before which are made
+        (and fixed): a live fault injected or removed within acts from there on."""
+        if self._maker is None:
             yield self._generated_ns
+        else:
+            with self._maker.held() as made:
+                yield made
 
     def inject(self, fault) -> None:
         """Add device fault *fault* during the run (live control); it acts on the blocks not
         generated yet (call it within :meth:`held`, which says from when): what is generated
         stays as it was. The models it acts on: as for a scenario's faults
         (emulator.faults.acting_on)."""
-        with self._step_lock:  # never between two steps of a block
-            for model, kind, which in self._holders():
-                if acting_on([fault], kind, **which):
-                    model.faults = (*model.faults, fault)
+        if self._maker is not None:
+            self._maker.inject(fault)
+            return
+        for model, kind, which in self._holders():
+            if acting_on([fault], kind, **which):
+                model.faults = (*model.faults, fault)
 
     def remove(self, fault) -> None:
         """End live fault *fault* for the blocks not generated yet (within :meth:`held`)."""
-        with self._step_lock:
-            for model, _, _ in self._holders():
-                model.faults = tuple(f for f in model.faults if f is not fault)
+        if self._maker is not None:
+            self._maker.remove(fault)
+            return
+        for model, _, _ in self._holders():
+            model.faults = tuple(f for f in model.faults if f is not fault)
 
     @property
     def finished(self) -> bool:

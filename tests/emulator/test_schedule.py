@@ -1,5 +1,5 @@
-"""The paced loop's timers (emulator.schedule) and the world's block made a vehicle at a time
-(World.work): deadlines in order, a timer re-keyed when it changes, the same events."""
+"""The paced loop's timers (emulator.schedule): deadlines in order, a timer re-keyed when it
+changes."""
 from __future__ import annotations
 
 from navtwin.emulator.fleet import convoy
@@ -56,21 +56,6 @@ def test_a_line_gets_a_deadline_when_it_gets_a_chunk():
     assert d.due(1_000) == ["sins"]
     line.poll(1_000, 10**9, 10**9)
     assert d.next() == line.next_ns() > 1_000  # now: its end
-
-
-def test_making_a_block_a_vehicle_at_a_time_gives_the_same_events():
-    sc = convoy(load_scenario("office"), 3, network="per-vehicle")
-    whole = World(sc, 7)
-    expect = whole.advance(2_500_000_000)
-    sliced = World(sc, 7)
-    got, steps = [], 0
-    for until in (700_000_000, 2_500_000_000):
-        while sliced.work():
-            steps += 1
-        got += sliced.advance(until)
-    # per block: each vehicle in two steps, each network, the sort
-    assert got == expect and steps == 2 * (3 * 2 + 3 + 1)
-    assert whole.air(2_500_000_000) == sliced.air(2_500_000_000)
 
 
 def test_a_wrapper_due_later_does_not_hide_an_item_due_now():

@@ -85,27 +85,31 @@ def test_lateness_bins_are_log_spaced_and_count_each_write():
 
 
 @pytest.mark.parametrize("name", list(timing.MODES))
-def test_making_events_runs_as_an_ordinary_thread_and_the_mode_comes_back(name):
-    """World.work on the maker thread of a paced run: never SCHED_FIFO (it would keep the
-    clients off the core while a block is made); the writes are real-time all the while."""
+def test_making_events_runs_as_an_ordinary_process_and_the_mode_comes_back(name, tmp_path):
+    """The world's blocks of a paced run, made by its maker process (emulator.maker): never
+    SCHED_FIFO (it would keep the clients off the core while a block is made); the writes
+    are real-time all the while."""
     if name == "fifo" and not fifo_permitted():
         pytest.skip("this process may not take SCHED_FIFO")
     from navtwin.emulator.world import World
 
-    policies, work = [], World.work
+    seen, make = tmp_path / "policies", World._make
 
-    def watched(self):
-        policies.append(os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK)
-        return work(self)
+    def watched(self):  # in the maker process: its policy, to a file
+        with open(seen, "a") as f:
+            f.write(f"{os.getpid()} {os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK}\n")
+        return make(self)
 
     written = []
     sink = lambda chunk: written.append(os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK)
-    World.work = watched
+    World._make = watched
     try:
         with Emulation(load_scenario("office"), speed=25.0, ports=False, duration_s=3,
                        timing=name, sink=sink) as emu:
             emu.run()
     finally:
-        World.work = work
-    assert policies and set(policies) == {os.SCHED_OTHER}
+        World._make = make
+    made = [line.split() for line in seen.read_text().splitlines()]
+    assert {int(p) for p, _ in made if int(p) != os.getpid()}  # the maker made blocks
+    assert {int(policy) for _, policy in made} == {os.SCHED_OTHER}
     assert set(written) == {os.SCHED_FIFO if name == "fifo" else os.SCHED_OTHER}

@@ -5,6 +5,7 @@ import pytest
 
 from navtwin.emulator.scenario import SCENARIO_NAMES, load_scenario
 from navtwin.emulator.truth import DTYPE, FIELDS, PLACES, csv_rows, read_truth_csv, write_truth_csv
+from navtwin.emulator.maker import MakerError
 from navtwin.emulator.world import EVENT_ORDER, Event, RfPacket, World
 
 from .world_helpers import port_bytes
@@ -177,16 +178,16 @@ def test_device_truth_is_plain_data():
     assert len(info["imu"]["gyro"]["turn_on_bias"]) == 3 and len(info["imu"]["accel"]["matrix"]) == 3
 
 
-def test_blocks_made_ahead_on_a_thread_are_the_blocks_made_in_turn(office_events):
-    """World.ahead's maker thread makes the same events, whichever thread made each block,
-    and what a step raises there is raised by advance (never a loop waiting for a block that
-    a dead generator will not make)."""
+def test_blocks_made_ahead_by_the_maker_process_are_the_blocks_made_in_turn(office_events):
+    """World.ahead's maker process makes the same events and air frames as the World alone,
+    taken in slices that do not fall on blocks, and what a step raises there is raised by
+    advance with the child's traceback (never a loop waiting for a block that will not come)."""
     sc, events = office_events
     world = World(sc)
-    got = []
+    got = world.advance(World.BLOCK_NS // 3)  # made here, before the fork: not sent twice
     with world.ahead():
-        for k in range(1, 8):
-            got += world.advance(k * World.BLOCK_NS)
+        for k in range(1, 22):
+            got += world.advance(k * World.BLOCK_NS // 3)
     assert got == [e for e in events if e.t_ns < 7 * World.BLOCK_NS] and got
 
     broken = World(sc)
@@ -198,6 +199,6 @@ def test_blocks_made_ahead_on_a_thread_are_the_blocks_made_in_turn(office_events
             raise ArithmeticError("a model's step failed")
         return generate(lo, hi)
     imu.generate = failing
-    with broken.ahead(), pytest.raises(ArithmeticError, match="model's step"):
+    with broken.ahead(), pytest.raises(MakerError, match="ArithmeticError: a model's step failed"):
         for k in range(1, 8):
             broken.advance(k * World.BLOCK_NS)
