@@ -111,9 +111,15 @@ class AnchorLayout:
 
     def geometry(self, p: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Ranges (m,) from a position (2,) (or one per anchor, (m, 2)) and d r / d p (m, 2);
-        stacked, (..., m) and (..., m, 2) from positions (..., m, 2) (host.batch.model)."""
+        stacked, (..., m) and (..., m, 2) from positions (..., m, 2) (host.batch.model).
+        At an anchor of the tag's height (r = 0, the apex of the range's cone, where it has
+        no gradient) d r / d p is its subgradient 0: that range says nothing of the
+        direction there, where 0/0 made a filter's state NaN (a track linearised at a start
+        put on an anchor, as outage-bridging's is)."""
         d, r = self._offsets(p, idx)
-        return r, d / r[..., None]
+        if r.all():
+            return r, d / r[..., None]
+        return r, np.divide(d, r[..., None], out=np.zeros_like(d), where=r[..., None] > 0)
 
     def baseline(self, a: int, b: int) -> float:
         """3-D distance between anchors a and b (ids): the bound on |r_a - r_b|."""

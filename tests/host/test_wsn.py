@@ -34,6 +34,21 @@ def crlb_tdoa(layout, p, sigma):
     return math.sqrt(np.trace(np.linalg.inv(H.T @ np.linalg.inv(tdoa_covariance(sigma, 3)) @ H)))
 
 
+def test_at_an_anchor_of_the_tags_height_a_range_has_the_subgradient_zero():
+    """A position on an anchor of the tag's height (r = 0): the other ranges' directions as
+    anywhere, that anchor's d r / d p zero (it was 0/0, NaN, in a filter's Jacobian); on a
+    raised anchor (r = its height above the tag) the direction is the ordinary one, 0."""
+    a = np.asarray(OFFICE_ANCHORS[min(OFFICE_ANCHORS)][:2], float)
+    near = a + 1e-9
+    r, u = PLANAR.geometry(a, np.arange(4))
+    r_near, u_near = PLANAR.geometry(near, np.arange(4))
+    assert r[0] == 0.0 and np.array_equal(u[0], [0.0, 0.0]) and np.isfinite(u).all()
+    np.testing.assert_allclose(u[1:], u_near[1:], atol=1e-9)
+    assert np.linalg.norm(u_near[0]) == pytest.approx(1.0)  # a unit vector anywhere else
+    r, u = RAISED.geometry(a, np.arange(4))
+    assert r[0] > 0 and np.array_equal(u[0], [0.0, 0.0])
+
+
 @pytest.mark.parametrize("layout", [PLANAR, RAISED], ids=["planar", "raised"])
 @pytest.mark.parametrize("p", POINTS)
 def test_closed_forms_are_exact_on_exact_ranges(layout, p):
