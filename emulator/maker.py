@@ -18,24 +18,26 @@ gives what the child sends (``advance``, ``air``, ``made_ns``, ``held``, ``injec
 ``remove``). So the events are those the World makes in one process, in the same order
 (tests/emulator/test_maker.py); only where they are made moves.
 
-Transport. Each block's events and air frames go to a file of a private directory (on
-/dev/shm where there is one): the fixed fields as arrays, the payloads as one blob, the
-ledger marks as JSON with each fault as its number (the scenario's ``[[faults]]`` in order,
-then the live ones in the order the parent injected them). A 16-byte note on a pipe says a
-block is ready; the parent reads it in the loop's idle time (``made_ns``) or when it needs
+Transport. Parent and child share a Unix socket pair (SOCK_SEQPACKET: one message a note
+or a command). Each block's events and air frames go to a memory file of the child's
+(``memfd_create``: nothing on a file system, nothing left behind by a process killed
+outright): the fixed fields as arrays, the payloads as one blob, the ledger marks as JSON
+with each fault as its number (the scenario's ``[[faults]]`` in order, then the live ones in
+the order the parent injected them). A 16-byte note carries the file's descriptor to the
+parent (SCM_RIGHTS), which reads it in the loop's idle time (``made_ns``) or when it needs
 it, and makes Event objects only for what ``advance`` returns (a second of fifty vehicles
 is 12 000 events: made at once, a 15 ms pause of the loop). The child makes at most one
 block beyond what the parent has taken, as the thread did; the parent says how far it has
-taken on a command pipe.
+taken.
 
 Live device faults: ``held`` asks the child to stop between two blocks and says from when
 the models are not made yet; ``inject`` and ``remove`` pass the fault (its settings, which
 build it again) and are applied by the child before it makes the next block.
 
-The child closes every inherited descriptor but its two pipes (a PTY master left open there
+The child closes every inherited descriptor but its socket (a PTY master left open there
 would keep a client from ever seeing its port hang up), ignores SIGINT (the terminal's
-Ctrl-C is the parent's to handle), dies with its parent (``PR_SET_PDEATHSIG``) and ends at
-the command pipe's end of file. The channels' counts of dropped packets, kept by the
+Ctrl-C is the parent's to handle), dies with its parent (``PR_SET_PDEATHSIG``) and ends
+when the parent closes its end. The channels' counts of dropped packets, kept by the
 child's models, come with each block.
 """
 from __future__ import annotations
@@ -45,10 +47,9 @@ import contextlib
 import json
 import os
 import select
-import shutil
 import signal
+import socket
 import struct
-import tempfile
 import time
 import traceback
 
@@ -61,7 +62,7 @@ from .faults import Fault
 from .radio import AirFrame
 from .timing import die_with_parent
 
-_NOTE = struct.Struct("<qq")  # (what, value): both pipes carry these
+_NOTE = struct.Struct("<qq")  # (what, value): every message starts with one
 MORE, HOLD, RELEASE, INJECT, REMOVE = 1, 2, 3, 4, 5  # commands: parent -> child
 BLOCK, HELD, FAILED = 1, 2, 3  # notes: child -> parent
 _EVENT = np.dtype([("t", "<i8"), ("rank", "<i8"), ("packet", "<i8"), ("src64", "<u8"),
@@ -74,38 +75,29 @@ class MakerError(RuntimeError):
     """The maker process failed (what it raised, as text) or has stopped."""
 
 
-def _shm() -> str | None:
-    return "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os.W_OK) else None
-
-
 class MakerProcess:
     """The parent's side: the blocks the child makes, as the World's methods give them."""
 
     def __init__(self, world) -> None:
         self.world = world
-        self.dir = tempfile.mkdtemp(prefix="navtwin-maker-", dir=_shm())  # mode 0700
         self._names = list(world._rank)  # rank -> port name
         self._faults = list(world.scenario.faults)  # number -> fault, live ones appended
         self.made_ns = world._returned_ns  # the child sends from here
         self._events: collections.deque = collections.deque()  # received blocks not all returned
         self._air: collections.deque = collections.deque()
         self._held_at: int | None = None
-        self._notes = b""
-        cmd_r, cmd_w = os.pipe()
-        note_r, note_w = os.pipe()
+        mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         parent = os.getpid()
         pid = os.fork()
         if pid == 0:  # the child: never returns
             code = 1
             try:
-                os.close(cmd_w)
-                os.close(note_r)
-                code = _child(world, parent, cmd_r, note_w, self.dir)
+                mine.close()
+                code = _child(world, parent, theirs)
             finally:
                 os._exit(code)
-        os.close(cmd_r)
-        os.close(note_w)
-        self.pid, self._cmd, self._note = pid, cmd_w, note_r
+        theirs.close()
+        self.pid, self._sock = pid, mine
         self.stopped = False
 
     # -- the World's methods ----------------------------------------------------------------
@@ -166,11 +158,11 @@ class MakerProcess:
         self._send(REMOVE, next(n for n, f in enumerate(self._faults) if f is fault))
 
     def stop(self) -> None:
-        """End the child (what it sent stays readable); remove its directory."""
+        """End the child (what it sent and the parent took stays readable)."""
         if self.stopped:
             return
         self.stopped = True
-        os.close(self._cmd)
+        self._sock.close()  # the child's end of file; blocks it sent and nobody took go too
         deadline = time.monotonic() + STOP_S
         while os.waitpid(self.pid, os.WNOHANG) == (0, 0):
             if time.monotonic() > deadline:
@@ -178,14 +170,12 @@ class MakerProcess:
                 os.waitpid(self.pid, 0)
                 break
             time.sleep(0.01)
-        os.close(self._note)
-        shutil.rmtree(self.dir, ignore_errors=True)
 
     # -- transport --------------------------------------------------------------------------
     def _send(self, what: int, value: int, payload: bytes = b"") -> None:
         if self.stopped:
             raise MakerError("the world's maker process has stopped")
-        os.write(self._cmd, _NOTE.pack(what, value) + payload)
+        self._sock.send(_NOTE.pack(what, value) + payload)
 
     def _receive(self, wait: bool) -> None:
         """Take the notes that have come (*wait*: at least one)."""
@@ -194,27 +184,21 @@ class MakerProcess:
                 raise MakerError("the world's maker process has stopped before making the "
                                  "events asked for")
             return
-        while True:
-            if wait or select.select([self._note], [], [], 0)[0]:
-                data = os.read(self._note, 4096)
-                if not data:
-                    raise MakerError("the world's maker process ended unexpectedly")
-                self._notes += data
-            n = len(self._notes) // _NOTE.size * _NOTE.size
-            for what, value in _NOTE.iter_unpack(self._notes[:n]):
-                self._note_of(what, value)
-            self._notes = self._notes[n:]
-            if n or not wait:
-                return
+        while wait or select.select([self._sock], [], [], 0)[0]:
+            note, fds, _, _ = socket.recv_fds(self._sock, _NOTE.size, 1)
+            if not note:
+                raise MakerError("the world's maker process ended unexpectedly")
+            self._note_of(*_NOTE.unpack(note), *fds)
+            wait = False
 
-    def _note_of(self, what: int, value: int) -> None:
+    def _note_of(self, what: int, value: int, fd: int | None = None) -> None:
         if what == HELD:
             self._held_at = value
             return
-        path = os.path.join(self.dir, str(value))
-        with open(path, "rb") as f:
-            data = f.read()
-        os.unlink(path)
+        try:
+            data = os.pread(fd, os.fstat(fd).st_size, 0)
+        finally:
+            os.close(fd)
         if what == FAILED:
             raise MakerError("the world's maker process failed:\n" + data.decode(errors="replace"))
         head, events, air = _Block.parse(data)
@@ -279,7 +263,7 @@ class _Block:
     fields, the air frames' fields, the events' payloads, the air frames' PSDUs."""
 
     @staticmethod
-    def write(path: str, lo: int, hi: int, events: list, air: list, rank: dict, number: dict,
+    def write(f, lo: int, hi: int, events: list, air: list, rank: dict, number: dict,
               channels: dict) -> None:
         fields = np.zeros(len(events), _EVENT)
         payloads, marks, end = [], {}, 0
@@ -302,13 +286,11 @@ class _Block:
             air_fields["end"] = np.cumsum([len(a.psdu) for a in air])
         head = {"from": lo, "to": hi, "events": len(events), "air": len(air), "marks": marks,
                 "dropped": {p: c.dropped for p, c in channels.items()}}
-        with open(path + ".part", "wb") as f:
-            f.write(json.dumps(head).encode() + b"\n")
-            f.write(fields.tobytes())
-            f.write(air_fields.tobytes())
-            f.write(b"".join(payloads))
-            f.write(b"".join(a.psdu for a in air))
-        os.rename(path + ".part", path)
+        f.write(json.dumps(head).encode() + b"\n")
+        f.write(fields.tobytes())
+        f.write(air_fields.tobytes())
+        f.write(b"".join(payloads))
+        f.write(b"".join(a.psdu for a in air))
 
     @staticmethod
     def parse(data: bytes) -> tuple[dict, _Events, _Air]:
@@ -325,63 +307,59 @@ class _Block:
         return head, _Events(fields, blob, marks), _Air(air, data[at + size:])
 
 
-def _child(world, parent: int, cmd: int, note: int, directory: str) -> int:
+def _child(world, parent: int, sock: socket.socket) -> int:
     """The maker: make and send blocks, one beyond what the parent has taken; serve its
-    commands; end at their end of file. Returns the exit status."""
+    commands; end at their end. Returns the exit status."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if not die_with_parent(parent, signal.SIGKILL):
         return 0
-    keep = sorted((cmd, note))
-    os.closerange(3, keep[0])
-    os.closerange(keep[0] + 1, keep[1])
-    os.closerange(keep[1] + 1, os.sysconf("SC_OPEN_MAX"))
+    keep = sock.fileno()
+    os.closerange(3, keep)
+    os.closerange(keep + 1, os.sysconf("SC_OPEN_MAX"))
     number = {id(f): n for n, f in enumerate(world.scenario.faults)}
     live: dict[int, object] = {}
     returned = sent = world._returned_ns
-    held, k, buf, failed = False, 0, b"", False
+    held, k, failed = False, 0, False
     end = world.duration_ns
     while True:
         making = not held and not failed and sent < end and (
             world._generated_ns > sent or world._generated_ns < returned + world.BLOCK_NS)
-        if not making or select.select([cmd], [], [], 0)[0]:
-            data = os.read(cmd, 65536)
-            if not data:
+        if not making or select.select([sock], [], [], 0)[0]:
+            command = sock.recv(65536)
+            if not command:
                 return 0
-            buf += data
-            while len(buf) >= _NOTE.size:
-                what, value = _NOTE.unpack_from(buf)
-                if what == INJECT and len(buf) < _NOTE.size + value:
-                    break  # the rest of its settings is still on the way
-                buf = buf[_NOTE.size:]
-                if what == MORE:
-                    returned = max(returned, value)
-                elif what == HOLD:
-                    held = True
-                    os.write(note, _NOTE.pack(HELD, world._generated_ns))
-                elif what == RELEASE:
-                    held = False
-                elif what == INJECT:
-                    spec, buf = json.loads(buf[:value]), buf[value:]
-                    fault = build(Fault, spec["fault"], (("fault", 0),))
-                    world.inject(fault)
-                    number[id(fault)] = spec["n"]
-                    live[spec["n"]] = fault
-                elif what == REMOVE:
-                    world.remove(live.pop(value))
+            what, value = _NOTE.unpack_from(command)
+            if what == MORE:
+                returned = max(returned, value)
+            elif what == HOLD:
+                held = True
+                sock.send(_NOTE.pack(HELD, world._generated_ns))
+            elif what == RELEASE:
+                held = False
+            elif what == INJECT:
+                spec = json.loads(command[_NOTE.size:])
+                fault = build(Fault, spec["fault"], (("fault", 0),))
+                world.inject(fault)
+                number[id(fault)] = spec["n"]
+                live[spec["n"]] = fault
+            elif what == REMOVE:
+                world.remove(live.pop(value))
             continue
         target = world._generated_ns if world._generated_ns > sent else min(
             world._generated_ns + world.BLOCK_NS, end)
-        path = os.path.join(directory, str(k))
-        try:
-            events = world.advance(target)
-            _Block.write(path, sent, target, events, world.air(target), world._rank, number,
-                         world.channels)
-        except BaseException:  # the parent raises it where it asks for the events
-            with open(path, "w") as f:
-                f.write(traceback.format_exc())
-            os.write(note, _NOTE.pack(FAILED, k))
-            failed = True
-            continue
-        os.write(note, _NOTE.pack(BLOCK, k))
+        fd = os.memfd_create(f"navtwin-block-{k}", os.MFD_CLOEXEC)
+        with open(fd, "wb") as f:
+            try:
+                events = world.advance(target)
+                _Block.write(f, sent, target, events, world.air(target), world._rank, number,
+                             world.channels)
+                what = BLOCK
+            except BaseException:  # the parent raises it where it asks for the events
+                f.seek(0)
+                f.truncate()
+                f.write(traceback.format_exc().encode())
+                what, failed = FAILED, True
+            f.flush()
+            socket.send_fds(sock, [_NOTE.pack(what, k)], [f.fileno()])
         sent, k = target, k + 1
