@@ -175,7 +175,11 @@ class MakerProcess:
     def _send(self, what: int, value: int, payload: bytes = b"") -> None:
         if self.stopped:
             raise MakerError("the world's maker process has stopped")
-        self._sock.send(_NOTE.pack(what, value) + payload)
+        try:
+            self._sock.send(_NOTE.pack(what, value) + payload)
+        except OSError as e:  # it died: what it said last, if it said why, is in _receive
+            self._receive(wait=False)
+            raise MakerError(f"the world's maker process ended unexpectedly ({e})") from None
 
     def _receive(self, wait: bool) -> None:
         """Take the notes that have come (*wait*: at least one)."""
