@@ -5,11 +5,11 @@ A paced run's loop writes each chunk at its deadline under the best timing mode 
 vehicle-second: the IMU's draws, the radio hop, the networks). Made by a thread of the same
 process, they shared the interpreter's lock with the loop: an ordinary thread that the kernel
 preempts while it holds the GIL holds up the loop woken at a deadline by up to a time slice,
-whatever the loop's priority. Measured with every block made before the clock started in
-place of the thread (office convoy, ``--network per-vehicle``, 30 s, ``fifo``, load 1-2):
-the writes 1 ms late or more fell from 0.7 % to 0.04 % at 25 cars, and at 50 cars the
-median port's p99 from 2.7 and 1.4x the bare PTY pair's to 0.42 and 0.84x. A process has an
-interpreter lock of its own.
+whatever the loop's priority. A process has an interpreter lock of its own: with it the
+emulator's writes 1 ms late or more fell 25-80x, and at 50 cars the median port's p99 from
+1.4-1.55x the bare PTY pair's to 0.84-1.04x (``navtwin bench scale`` and ``bench
+emulator-writes``, the thread and the process run alternately: docs/performance.md, "The
+world's blocks in a process of their own").
 
 :class:`MakerProcess` forks when the paced run starts (:meth:`World.ahead`). The child is the
 world as it stands, its models, random streams and the events made so far, and from then on
