@@ -67,7 +67,8 @@ class BatchErrorStateTrack(BatchTrack):
         self.aided = np.full(n, np.nan)  # the last accepted update; NaN: none
         self.gated_since = np.full(n, np.nan)  # the first rejection of a run; NaN: none
         self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
-        self.reinit_fix: list = [None] * n  # Track.reinit_fix: the fix it last started again at
+        self.reinit_fix = np.zeros(n, np.int64)  # Track.reinit_fix: the number of the fix it
+        # last started again at (host.batch.ranging; 0: none)
 
     def handlers(self) -> dict:
         return {ImuSample: self.imu, Fix: self.offer_fix}
@@ -77,7 +78,7 @@ class BatchErrorStateTrack(BatchTrack):
         discontinuity no later than the fix start again at it (module doc); which did."""
         at = (f.t >= self.reinit_since[idx]) & self.on[idx]  # NaN: not waiting
         if at.any():
-            rows, k = idx[at], np.flatnonzero(at)
+            rows = idx[at]
             sv, _ = self.ctx.cfg.reinit_sigma
             self.nav.place(rows, f.p[at], np.zeros((len(rows), 2)))
             P = np.zeros(self.P[rows].shape)
@@ -89,8 +90,7 @@ class BatchErrorStateTrack(BatchTrack):
             self.gated_since[rows] = np.nan
             self.aided[rows] = f.t[at]
             self.reinit_since[rows] = np.nan
-            for j, i in zip(k.tolist(), rows.tolist()):
-                self.reinit_fix[i] = f.fixes[j]
+            self.reinit_fix[rows] = f.number[at]
         return at
 
     # -- the strapdown and the predict --------------------------------------------------------
