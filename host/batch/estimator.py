@@ -168,8 +168,14 @@ class BatchEstimator:
         self.align_gyro, self.align_accel = np.zeros((n, 3)), np.zeros((n, 3))
         self.last = np.zeros((n, 6))  # the alignment's last sample
         self.has_last = np.zeros(n, bool)
-        self.sins = BatchStrapdown(n, latitude_deg=cfg.latitude_deg, altitude_m=cfg.altitude_m,
-                                   x_azimuth_deg=cfg.x_azimuth_deg)
+        # every strapdown of the batch in one stack, stepped by one call a sample: the
+        # estimator's rows, then those of each track with a strapdown of its own
+        self._owners = [track for track in self.tracks if track.own_strapdown]
+        self._strapdowns = BatchStrapdown(n * (1 + len(self._owners)), latitude_deg=cfg.latitude_deg,
+                                          altitude_m=cfg.altitude_m, x_azimuth_deg=cfg.x_azimuth_deg)
+        self.sins = self._strapdowns.part(0, n)
+        for k, track in enumerate(self._owners, 1):
+            track.nav = self._strapdowns.part(k * n, n)
         self._tilt_growth = (cfg.tilt_inflation * cfg.local_gravity * cfg.tilt_rate_sigma) ** 2
         self._accel_var = cfg.accel_sigma_m_s2 ** 2
         sv, sa = cfg.stationary_sigma
@@ -277,7 +283,7 @@ class BatchEstimator:
         acceleration = None
         if moving.any():
             m = idx[moving]
-            acceleration = self.sins.step(m, t[moving] - self.t_imu[m], gyro[moving], accel[moving])
+            acceleration = self._step(idx, t, gyro, accel, moving)
         self.t_imu[idx] = t
         if Motion in self._takers:
             if aligning.any():
@@ -291,6 +297,23 @@ class BatchEstimator:
                 self._give(Motion, m, MotionBatch("accel", t[moving], acceleration, R, ACCELERATION))
         self._give(ImuSample, idx, ImuBatch(t, gyro, accel))
         self._emit(idx, t, through=True)
+
+    def _step(self, idx, t, gyro, accel, moving) -> np.ndarray:
+        """Strapdown.step of the seeds *idx* whose strapdown is ``moving``, and of the tracks'
+        own that step with the sample (BatchTrack.own_step), in one call; the estimator's
+        horizontal dv/dt (host.batch.strapdown)."""
+        m = idx[moving]
+        rows, dt, of = [m], [t[moving] - self.t_imu[m]], [np.flatnonzero(moving)]
+        for k, track in enumerate(self._owners, 1):
+            on, own_dt = track.own_step(idx, t)
+            rows.append(idx[on] + k * self.n)
+            dt.append(own_dt)
+            of.append(np.flatnonzero(on))
+        if len(rows) > 1:
+            of = np.concatenate(of)
+            return self._strapdowns.step(np.concatenate(rows), np.concatenate(dt), gyro[of],
+                                         accel[of])[:len(m)]
+        return self._strapdowns.step(m, dt[0], gyro[moving], accel[moving])
 
     def _start_strapdown(self, idx: np.ndarray) -> None:
         """Inertial._start_strapdown for the seeds *idx*: the alignment's result (per seed:
