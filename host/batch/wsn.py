@@ -4,7 +4,8 @@ The common path of :meth:`host.wsn.Solver.fix` with ``method = "tdoa"``, for the
 one anchor set stacked: the spherical-intersection start (000 eqs. 12-13's closed form, its
 root that fits best), Gauss-Newton from there, the CRLB covariance, the plausible region and
 the chi-square test of the residual. Each step is the per-cycle one on stacked operands
-(stacked ``np.matmul`` for the products, LAPACK's gesv per cycle for the 2x2 solves), so a
+(stacked ``np.matmul`` for the products, LAPACK's gesv for the 2x2 solves:
+host.batch.linalg.solve_each), so a
 fix equals Solver.fix's. A cycle off that path (mirror positions that fit alike, a
 degenerate quadratic, a Gauss-Newton that diverges or does not settle, a residual that fails
 the test and needs the outlier search) is solved by Solver.fix itself: the fixes are the
@@ -16,12 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.filters.linalg import solve
 from navtwin.host.measurements import Fix
 from navtwin.host.wsn import (GN_ITERATIONS, GN_SETTLED_M, GN_TOLERANCE_M, MIN_RANGES, MIRROR_CHI2,
                               Solver, _sx_geometry, chi2_gate, tdoa_whitening)
 
-from .linalg import T, dot, mv
+from .linalg import T, dot, mv, solve_each
 
 _ONES2 = np.ones(2)
 _I2 = np.eye(2)
@@ -109,12 +109,8 @@ def _tdoa(solver: Solver, anchors: tuple[int, ...], r: np.ndarray):
             break
         e, J = rj(p[going], going)
         ew, Jw = mv(w_sqrt, e), np.matmul(w_sqrt, J)
-        A, b = np.matmul(T(Jw), Jw), -mv(T(Jw), ew)
-        for j, k in enumerate(going.tolist()):
-            try:
-                step[k] = solve(A[j], b[j])
-            except np.linalg.LinAlgError:
-                ok[k] = False
+        step[going], singular = solve_each(np.matmul(T(Jw), Jw), -mv(T(Jw), ew))
+        ok[going[singular]] = False
         p[going] += step[going]
         ok &= np.isfinite(p).all(1)
         going = going[ok[going] & (dot(step[going], step[going]) >= GN_TOLERANCE_M ** 2)]
@@ -125,11 +121,8 @@ def _tdoa(solver: Solver, anchors: tuple[int, ...], r: np.ndarray):
     ew, Jw = mv(w_sqrt, e), np.matmul(w_sqrt, J)
     A = np.matmul(T(Jw), Jw)
     cov = np.zeros((n, 2, 2))
-    for j, k in enumerate(rows.tolist()):
-        try:
-            cov[k] = solve(A[j], _I2)
-        except np.linalg.LinAlgError:
-            ok[k] = False
+    cov[rows], singular = solve_each(A, np.broadcast_to(_I2, A.shape))
+    ok[rows[singular]] = False
     rss = np.zeros(n)
     rss[rows] = dot(ew, ew)
     ok &= solver.inside(p) & _passes(solver, m, rss)
