@@ -51,7 +51,8 @@ def inverse(S: np.ndarray) -> np.ndarray:
         elif m == 2:
             a, b, c, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 0], S[:, 1, 1]
             det = a * d - b * c
-            SI = np.stack((np.stack((d / det, -b / det), -1), np.stack((-c / det, a / det), -1)), -2)
+            SI = np.empty(S.shape)
+            SI[:, 0, 0], SI[:, 0, 1], SI[:, 1, 0], SI[:, 1, 1] = d / det, -b / det, -c / det, a / det
             singular = det == 0.0
         else:
             SI, singular = _solved(S)
