@@ -36,6 +36,7 @@ from ..settings import EstimatorConfig
 from ..sins import Alignment
 from ..wsn import AnchorLayout
 from . import tracks as batch_tracks
+from .kf import propagate
 from .ranging import BatchRanging
 from .strapdown import BatchStrapdown
 
@@ -176,6 +177,13 @@ class BatchEstimator:
         self.sins = self._strapdowns.part(0, n)
         for k, track in enumerate(self._owners, 1):
             track.nav = self._strapdowns.part(k * n, n)
+        # the constant-acceleration tracks' states in one stack too, predicted in one call
+        self._ca = [track for track in self.tracks if track.ca_state]
+        self._ca_x, self._ca_P = np.zeros((len(self._ca) * n, 6)), np.zeros((len(self._ca) * n, 6, 6))
+        self._ca_t = np.full(len(self._ca) * n, np.nan)
+        for k, track in enumerate(self._ca):
+            track.x, track.P, track.t_predicted = (a[k * n:(k + 1) * n] for a in
+                                                   (self._ca_x, self._ca_P, self._ca_t))
         self._tilt_growth = (cfg.tilt_inflation * cfg.local_gravity * cfg.tilt_rate_sigma) ** 2
         self._accel_var = cfg.accel_sigma_m_s2 ** 2
         sv, sa = cfg.stationary_sigma
@@ -286,6 +294,8 @@ class BatchEstimator:
             acceleration = self._step(idx, t, gyro, accel, moving)
         self.t_imu[idx] = t
         if Motion in self._takers:
+            if self._ca:
+                self._sync(idx, t)
             if aligning.any():
                 a = idx[aligning]
                 self._give(Motion, a, MotionBatch("stationary", t[aligning], np.zeros((len(a), 4)),
@@ -314,6 +324,19 @@ class BatchEstimator:
             return self._strapdowns.step(np.concatenate(rows), np.concatenate(dt), gyro[of],
                                          accel[of])[:len(m)]
         return self._strapdowns.step(m, dt[0], gyro[moving], accel[moving])
+
+    def _sync(self, idx, t) -> None:
+        """FusionTrack.sync of every constant-acceleration track's seeds *idx* that take the
+        Motion at t (its _update leaves a late one out), in one call."""
+        idx = idx[self.t[idx] - t <= self.cfg.max_lag_s]
+        rows = np.concatenate([idx + k * self.n for k in range(len(self._ca))])
+        to = np.tile(self.t[idx], len(self._ca))
+        behind = self._ca_t[rows] < to
+        if behind.any():
+            b, to = rows[behind], to[behind]
+            self._ca_x[b], self._ca_P[b] = propagate(self._ca_x[b], self._ca_P[b],
+                                                     *self.model.many(to - self._ca_t[b]))
+            self._ca_t[b] = to
 
     def _start_strapdown(self, idx: np.ndarray) -> None:
         """Inertial._start_strapdown for the seeds *idx*: the alignment's result (per seed:

@@ -15,6 +15,11 @@ A track with a strapdown of its own (``own_strapdown``) is given it by the estim
 each IMU sample in one call for all the strapdowns of the batch; :meth:`own_step` tells it
 which seeds' own strapdown steps with the sample and over what dt.
 
+A track whose state is the constant-acceleration model's (``ca_state``: ``x`` (n, 6), ``P``
+(n, 6, 6) and ``t_predicted`` (n,), host.batch.tracks.fusion's) has them as rows of one stack
+the estimator gives it, which predicts every such track's seeds to the filter time in one
+call before it gives them a Motion product (what each track's sync would do).
+
 A seed whose track would take a branch the twin does not carry (a numerical reset, a
 discontinuity the twin does not follow) is handed back with :meth:`BatchEstimator.eject`: the
 engine runs it again per seed, so a twin need not carry the rare branches.
@@ -42,6 +47,7 @@ class BatchTrack:
     name: ClassVar[str]
     uses_strapdown: ClassVar[bool] = False
     own_strapdown: ClassVar[bool] = False
+    ca_state: ClassVar[bool] = False
 
     def __init__(self, ctx, settings=None) -> None:
         self.ctx = ctx

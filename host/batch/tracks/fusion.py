@@ -24,14 +24,14 @@ from navtwin.host.tracks.fusion import POSITION_KINDS, TightSettings
 from navtwin.host.wsn import chi2_gate
 
 from ..innovation import joseph_correct
-from ..linalg import T, mv
+from ..kf import propagate
 from ..model import BatchLinear, BatchRanges
 from ..seeds import take
 from .base import BatchTrack, Columns
 
 
 class BatchFusionTrack(BatchTrack):
-    uses_strapdown = True
+    uses_strapdown = ca_state = True
 
     def __init__(self, ctx, settings=None) -> None:
         super().__init__(ctx, settings)
@@ -96,8 +96,7 @@ class BatchFusionTrack(BatchTrack):
     def _propagate(self, idx, dt):
         """ConstantAcceleration.propagate of the seeds *idx*, each over its dt (the UKF's
         predict too: its transform through the linear F is this, in closed form)."""
-        F, Q = self.ctx.model.many(dt)
-        return mv(F, self.x[idx]), np.matmul(np.matmul(F, self.P[idx]), T(F)) + Q
+        return propagate(self.x[idx], self.P[idx], *self.ctx.model.many(dt))
 
     def motion(self, idx, m) -> None:
         self._update(idx, m.z, m.R, BatchLinear(m.meas.H), m.t, m.kind)
