@@ -121,3 +121,45 @@ def test_the_batched_ranging_is_each_seeds_own(scenario):
                 assert b.lags[j].tolist() == list(wd.meas.lags) and b.t[j] == wd.t, where
                 assert b.fix[j] == (fixes if wd.fix is not None else 0), where
     assert cycles and (tdoas or cfg.wsn_method != "tdoa")
+
+
+def test_cycles_of_more_anchors_than_the_first_width_and_toa_are_each_seeds_own():
+    """A field-like layout (12 anchors, a cycle of up to 12 usable exchanges: the cycle
+    arrays widen), exchanges dropped at random so cycles differ in their anchor sets and
+    close on a repeat or the window, and the TOA solver (each cycle by Solver.fix)."""
+    cfg, _ = batch.records("office", 1, filters=("wsn",), duration=1.0)
+    grid = {10 + k: (3.0 * (k % 4), 4.0 * (k // 4), 2.5) for k in range(12)}
+    rng = np.random.default_rng(5)
+    streams = []
+    for seed in range(6):
+        out, t = [], 0.0
+        for _ in range(40):
+            p = rng.uniform([0, 0], [9, 8])
+            for a in rng.permutation(list(grid)).tolist():
+                t += rng.uniform(0.002, 0.012)
+                d = float(np.hypot(np.hypot(*(p - grid[a][:2])), grid[a][2]) + rng.normal(0, 0.05))
+                if rng.uniform() < 0.9:
+                    out.append(Exchange(t, a, d if rng.uniform() < 0.9 else None))
+            t += rng.uniform(0.0, 0.15)
+        streams.append(out)
+    for method in ("tdoa", "toa"):
+        c = replace(cfg, anchors=grid, reference_anchor=12, wsn_method=method)
+        layout = AnchorLayout(c.anchors, c.tag_height)
+        got = batched(c, layout, streams)
+        for exchanges, mine in zip(streams, got):
+            want = alone(c, layout, exchanges)
+            assert len(want) == len(mine)
+            assert sum(len(w[1]) for w in want) > 20
+            for w, g in zip(want, mine):
+                assert g[0] == w[0] or w[0] is None and np.isnan(g[0])
+                for (wt, wf, wd), (gt, gf, gd) in zip(w[1], g[1], strict=True):
+                    assert wt == gt
+                    if isinstance(wf, FixRefused):
+                        assert gf == wf.reason
+                    else:
+                        assert np.array_equal(wf.p, gf[1]) and np.array_equal(wf.cov, gf[2])
+                    assert (gd is None) == (wd.meas is None)
+                    if gd is not None:
+                        b, j = gd
+                        assert b.rows.tolist() == wd.meas.idx.tolist()
+                        assert np.array_equal(b.z[j], wd.z) and b.lags[j].tolist() == list(wd.meas.lags)
