@@ -32,14 +32,17 @@ from .base import BatchTrack, Columns
 
 class BatchFusionTrack(BatchTrack):
     uses_strapdown = ca_state = True
+    # x (n, 6), P (n, 6, 6) and FusionTrack.t_predicted (n,): rows of the estimator's stack,
+    # given by it (host.batch.tracks.base)
+    x: np.ndarray
+    P: np.ndarray
+    t_predicted: np.ndarray
 
     def __init__(self, ctx, settings=None) -> None:
         super().__init__(ctx, settings)
         n = ctx.n
-        self.x, self.P = np.zeros((n, 6)), np.zeros((n, 6, 6))
         self._I = np.eye(6)
         self.aided = np.full(n, np.nan)  # time of the last position update; NaN: none
-        self.t_predicted = np.full(n, np.nan)  # FusionTrack.t_predicted
         self._gated_since: dict[str, np.ndarray] = {}  # kind -> first rejection of a run; NaN: none
         self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
         self.reinit_fix = np.zeros(n, np.int64)  # Track.reinit_fix: the number of the fix it
