@@ -45,6 +45,11 @@ class Ranging:
         self.exchanges = 0
         self.rejections: Counter = Counter()
 
+    def correction(self) -> tuple[dict[int, float], float]:
+        """The range correction d = (reported - c_i) / f: c_i by anchor id (absent: 0) and f
+        (host.batch.ranging applies it to many seeds' exchanges at once)."""
+        return dict(self._bias), self._scale
+
     def accept(self, rec: Exchange) -> bool:
         """Whether the exchange counts in its cycle (else rejected whole, counted)."""
         self.exchanges += 1

@@ -17,8 +17,8 @@ estimate that is not finite), is *ejected*: :attr:`ejected` names it, its rows a
 runs it per seed with the estimator itself (lab.batch). Everything the per-seed estimator
 does on that path therefore needs no twin here.
 
-Ranging (the exchanges' checks and TDMA cycles) runs per seed, with the per-seed
-host.ranging.Ranging; the cycles' fixes of a round are solved at once (host.batch.wsn).
+Ranging (the exchanges' checks, TDMA cycles, fixes and Tdoa products) is batched too:
+host.batch.ranging, each seed's open cycle and last fixes in arrays.
 """
 from __future__ import annotations
 
@@ -32,12 +32,12 @@ from ..estimator import IGNORED_UNTAKEN
 from ..filters import ACCELERATION, ConstantAcceleration
 from ..inertial import STATIONARY
 from ..measurements import Exchange, Fix, FixRefused, ImuSample, Motion, Range, Tdoa
-from ..ranging import Ranging
 from ..settings import EstimatorConfig
 from ..sins import Alignment
 from ..wsn import AnchorLayout
 from . import tracks as batch_tracks
-from . import wsn
+from .kf import propagate
+from .ranging import BatchRanging
 from .strapdown import BatchStrapdown
 
 #: what a seed's next record is: an IMU sample, an exchange, a record only the tracks run per
@@ -56,12 +56,13 @@ class MotionBatch(NamedTuple):
 
 
 class FixBatch(NamedTuple):
-    """host.measurements.Fix of the seeds ``idx``: t (n,), p (n, 2), cov (n, 2, 2), and the
-    Fix objects (a track that started again at one takes no other update of its cycle)."""
+    """host.measurements.Fix of the seeds ``idx``: t (n,), p (n, 2), cov (n, 2, 2), and each
+    fix's number in its seed (host.batch.ranging: a track that started again at one takes no
+    other update of its cycle)."""
     t: np.ndarray
     p: np.ndarray
     cov: np.ndarray
-    fixes: list
+    number: np.ndarray
 
 
 class ImuBatch(NamedTuple):
@@ -87,14 +88,16 @@ class Unbatchable(ValueError):
 
 class Stream(NamedTuple):
     """One seed's records as arrays: ``kind`` and ``t`` per record; the IMU samples' gyro,
-    accel (n, 3) and uptime (NaN: none) at their records; the exchanges themselves at theirs
-    in ``records`` (None elsewhere: a stream holds no other record object)."""
+    accel (n, 3) and uptime (NaN: none) at their records; the exchanges' anchor ids, reported
+    distances (NaN: none) and statuses at theirs."""
     kind: np.ndarray
     t: np.ndarray
     gyro: np.ndarray
     accel: np.ndarray
     uptime: np.ndarray
-    records: list
+    anchor: np.ndarray
+    distance: np.ndarray
+    status: np.ndarray
 
 
 def stream(records: list, takes: frozenset, taken: frozenset, gap_s: float) -> Stream:
@@ -108,8 +111,8 @@ def stream(records: list, takes: frozenset, taken: frozenset, gap_s: float) -> S
     t = np.zeros(n)
     gyro, accel = np.zeros((n, 3)), np.zeros((n, 3))
     uptime = np.full(n, np.nan)
+    anchor, distance, status = np.zeros(n, np.int64), np.full(n, np.nan), np.zeros(n, np.int64)
     last = -math.inf
-    kept: list = [None] * n
     for i, r in enumerate(records):
         cls = type(r)
         if cls is ImuSample:
@@ -128,13 +131,15 @@ def stream(records: list, takes: frozenset, taken: frozenset, gap_s: float) -> S
             if r.uptime_s is not None:
                 uptime[i] = r.uptime_s
         elif cls is Exchange:
-            kind[i], t[i], kept[i] = EXCHANGE, r.t, r
+            kind[i], t[i], anchor[i], status[i] = EXCHANGE, r.t, r.anchor, r.status
+            if r.distance is not None:
+                distance[i] = r.distance
         elif cls in IGNORED_UNTAKEN and cls not in takes:
             if cls in taken and math.isfinite(r.t):
                 kind[i], t[i] = TIMED, r.t
         else:
             raise Unbatchable(f"{cls.__name__} record")
-    return Stream(kind, t, gyro, accel, uptime, kept)
+    return Stream(kind, t, gyro, accel, uptime, anchor, distance, status)
 
 
 class BatchEstimator:
@@ -164,18 +169,26 @@ class BatchEstimator:
         self.align_gyro, self.align_accel = np.zeros((n, 3)), np.zeros((n, 3))
         self.last = np.zeros((n, 6))  # the alignment's last sample
         self.has_last = np.zeros(n, bool)
-        self.sins = BatchStrapdown(n, latitude_deg=cfg.latitude_deg, altitude_m=cfg.altitude_m,
-                                   x_azimuth_deg=cfg.x_azimuth_deg)
+        # every strapdown of the batch in one stack, stepped by one call a sample: the
+        # estimator's rows, then those of each track with a strapdown of its own
+        self._owners = [track for track in self.tracks if track.own_strapdown]
+        self._strapdowns = BatchStrapdown(n * (1 + len(self._owners)), latitude_deg=cfg.latitude_deg,
+                                          altitude_m=cfg.altitude_m, x_azimuth_deg=cfg.x_azimuth_deg)
+        self.sins = self._strapdowns.part(0, n)
+        for k, track in enumerate(self._owners, 1):
+            track.nav = self._strapdowns.part(k * n, n)
+        # the constant-acceleration tracks' states in one stack too, predicted in one call
+        self._ca = [track for track in self.tracks if track.ca_state]
+        self._ca_x, self._ca_P = np.zeros((len(self._ca) * n, 6)), np.zeros((len(self._ca) * n, 6, 6))
+        self._ca_t = np.full(len(self._ca) * n, np.nan)
+        for k, track in enumerate(self._ca):
+            track.x, track.P, track.t_predicted = (a[k * n:(k + 1) * n] for a in
+                                                   (self._ca_x, self._ca_P, self._ca_t))
         self._tilt_growth = (cfg.tilt_inflation * cfg.local_gravity * cfg.tilt_rate_sigma) ** 2
         self._accel_var = cfg.accel_sigma_m_s2 ** 2
         sv, sa = cfg.stationary_sigma
         self._r_stationary = np.diag([sv**2, sv**2, sa**2, sa**2])
-        # the ranging part, per seed; its last two fixes as arrays for the tracks
-        self.ranging = [Ranging(cfg, self.layout) for _ in range(n)]
-        self.solver = Ranging(cfg, self.layout).solver  # stateless: one for every seed
-        self.fix_t = np.full((n, 2), np.nan)  # oldest first; NaN: none
-        self.fix_p = np.zeros((n, 2, 2))
-        self.fix_cov = np.zeros((n, 2, 2, 2))
+        self.ranging = BatchRanging(cfg, self.layout, n)  # its last two fixes for the tracks
         self.ejected: dict[int, str] = {}
         self._alive = np.ones(n, bool)
         self._out: dict[str, list] = {track.name: [] for track in self.tracks}
@@ -193,10 +206,13 @@ class BatchEstimator:
         t = np.zeros((self.n, width + 1))
         gyro, accel = np.zeros((self.n, width + 1, 3)), np.zeros((self.n, width + 1, 3))
         uptime = np.full((self.n, width + 1), np.nan)
+        row, distance = np.zeros((self.n, width + 1), np.intp), np.zeros((self.n, width + 1))
+        status = np.zeros((self.n, width + 1), np.int64)
         for i, s in enumerate(streams):
             m = len(s.kind)
             kind[i, :m], t[i, :m], gyro[i, :m], accel[i, :m], uptime[i, :m] = \
                 s.kind, s.t, s.gyro, s.accel, s.uptime
+            row[i, :m], distance[i, :m], status[i, :m] = self.ranging.rows_of(s.anchor), s.distance, s.status
         at = np.zeros(self.n, np.int64)
         rows = np.arange(self.n)
         while True:
@@ -210,7 +226,9 @@ class BatchEstimator:
                 self._imu(imu, t[imu, j], gyro[imu, j], accel[imu, j], uptime[imu, j])
             exchanges = live[k == EXCHANGE]
             if exchanges.size:
-                self._exchanges(exchanges, [streams[i].records[at[i]] for i in exchanges])
+                j = at[exchanges]
+                self._exchanges(exchanges, t[exchanges, j], row[exchanges, j],
+                                distance[exchanges, j], status[exchanges, j])
             timed = live[k == TIMED]
             if timed.size:
                 self._timed(timed, t[timed, at[timed]])
@@ -273,9 +291,11 @@ class BatchEstimator:
         acceleration = None
         if moving.any():
             m = idx[moving]
-            acceleration = self.sins.step(m, t[moving] - self.t_imu[m], gyro[moving], accel[moving])
+            acceleration = self._step(idx, t, gyro, accel, moving)
         self.t_imu[idx] = t
         if Motion in self._takers:
+            if self._ca:
+                self._sync(idx, t)
             if aligning.any():
                 a = idx[aligning]
                 self._give(Motion, a, MotionBatch("stationary", t[aligning], np.zeros((len(a), 4)),
@@ -287,6 +307,36 @@ class BatchEstimator:
                 self._give(Motion, m, MotionBatch("accel", t[moving], acceleration, R, ACCELERATION))
         self._give(ImuSample, idx, ImuBatch(t, gyro, accel))
         self._emit(idx, t, through=True)
+
+    def _step(self, idx, t, gyro, accel, moving) -> np.ndarray:
+        """Strapdown.step of the seeds *idx* whose strapdown is ``moving``, and of the tracks'
+        own that step with the sample (BatchTrack.own_step), in one call; the estimator's
+        horizontal dv/dt (host.batch.strapdown)."""
+        m = idx[moving]
+        rows, dt, of = [m], [t[moving] - self.t_imu[m]], [np.flatnonzero(moving)]
+        for k, track in enumerate(self._owners, 1):
+            on, own_dt = track.own_step(idx, t)
+            rows.append(idx[on] + k * self.n)
+            dt.append(own_dt)
+            of.append(np.flatnonzero(on))
+        if len(rows) > 1:
+            of = np.concatenate(of)
+            return self._strapdowns.step(np.concatenate(rows), np.concatenate(dt), gyro[of],
+                                         accel[of])[:len(m)]
+        return self._strapdowns.step(m, dt[0], gyro[moving], accel[moving])
+
+    def _sync(self, idx, t) -> None:
+        """FusionTrack.sync of every constant-acceleration track's seeds *idx* that take the
+        Motion at t (its _update leaves a late one out), in one call."""
+        idx = idx[self.t[idx] - t <= self.cfg.max_lag_s]
+        rows = np.concatenate([idx + k * self.n for k in range(len(self._ca))])
+        to = np.tile(self.t[idx], len(self._ca))
+        behind = self._ca_t[rows] < to
+        if behind.any():
+            b, to = rows[behind], to[behind]
+            self._ca_x[b], self._ca_P[b] = propagate(self._ca_x[b], self._ca_P[b],
+                                                     *self.model.many(to - self._ca_t[b]))
+            self._ca_t[b] = to
 
     def _start_strapdown(self, idx: np.ndarray) -> None:
         """Inertial._start_strapdown for the seeds *idx*: the alignment's result (per seed:
@@ -302,58 +352,36 @@ class BatchEstimator:
         self.t_aligned[idx] = self.t_imu[idx]
         self.aligned[idx] = True
 
-    def _exchanges(self, idx: np.ndarray, records: list) -> None:
-        """Estimator.feed of one Exchange per seed: the checks and the ranging per seed, the
-        time base and the tracks' products batched."""
-        taken = np.array([self.ranging[i].accept(r) for i, r in zip(idx.tolist(), records)], bool)
-        if not taken.any():
+    def _exchanges(self, idx, t, row, reported, status) -> None:
+        """Estimator.feed of one Exchange per seed (its anchor's row, -1: unknown; its
+        reported distance, NaN: none): the ranging (host.batch.ranging), the time base and
+        the products, batched."""
+        ranging = self.ranging
+        taken = ranging.accept(row, t)
+        if not taken.all():
+            idx, t, row, reported, status = idx[taken], t[taken], row[taken], reported[taken], status[taken]
+        if not idx.size:
             return
-        idx = idx[taken]
-        records = [r for r, k in zip(records, taken) if k]
-        t = np.array([r.t for r in records])
         self._begin(idx, t)
         self._emit(idx, t, through=False)
         self.t[idx] = np.fmax(self.t[idx], t)
-        distances = [self.ranging[i].distance(r) for i, r in zip(idx.tolist(), records)]
-        if Range in self._takers:  # Estimator._exchange: each distance, before its cycles
-            has = [k for k, d in enumerate(distances) if d is not None]
-            if has:
-                ta = t[has]
-                self._give(Range, idx[has], RangeBatch(
-                    ta, np.array([distances[k] for k in has]),
-                    self.layout.index([records[k].anchor for k in has]),
-                    np.maximum(self.t[idx[has]] - ta, 0.0)))
-        rows = idx.tolist()
-        cycles = [self.ranging[i].add(r, d) for i, r, d in zip(rows, records, distances)]
-        results: list[list] = [[] for _ in rows]  # per seed: (cycle, Fix | FixRefused)
-        for r in range(max(map(len, cycles), default=0)):  # a seed's cycles in their order,
-            # each round's fixes solved at once (host.batch.wsn)
-            ks = [k for k, c in enumerate(cycles) if len(c) > r]
-            answers = wsn.fixes(self.solver, [self.ranging[rows[k]].problem(cycles[k][r]) for k in ks])
-            for k, answer in zip(ks, answers):
-                results[k].append((cycles[k][r], self.ranging[rows[k]].took(cycles[k][r], answer)))
-        for i, made in zip(rows, results):
-            if any(isinstance(f, Fix) for _, f in made):
-                fixes = self.ranging[i].fixes
-                self.fix_t[i] = np.nan
-                for slot, f in zip(range(2 - len(fixes), 2), fixes):
-                    self.fix_t[i, slot], self.fix_p[i, slot], self.fix_cov[i, slot] = f.t, f.p, f.cov
-        for r in range(max(map(len, results), default=0)):  # a seed's cycles in their order
-            nth = [(k, *made[r]) for k, made in enumerate(results) if len(made) > r]
-            refused = [(k, f) for k, _, f in nth if isinstance(f, FixRefused)]
+        d = ranging.distance(row, reported, status)
+        if Range in self._takers:  # Estimator._exchange: each distance, before its cycle
+            has = ~np.isnan(d)
+            if has.any():
+                self._give(Range, idx[has], RangeBatch(t[has], d[has], row[has],
+                                                       np.maximum(self.t[idx[has]] - t[has], 0.0)))
+        c = ranging.add(idx, row, t, d)
+        if c.idx.size:  # Estimator._cycle: the fix or why none, then the Tdoa
+            fixed, p, cov, refused = ranging.fix(c)
             if refused:
-                self._give(FixRefused, idx[[k for k, _ in refused]], [f.reason for _, f in refused])
-            fixed = [(k, f) for k, _, f in nth if isinstance(f, Fix)]
-            if fixed:
-                rows = idx[[k for k, _ in fixed]]
-                self._give(Fix, rows, FixBatch(np.array([f.t for _, f in fixed]),
-                                               np.array([f.p for _, f in fixed]),
-                                               np.array([f.cov for _, f in fixed]),
-                                               [f for _, f in fixed]))
-            if Tdoa in self._takers:  # each cycle's differences, after its fix
-                self._give(Tdoa, idx[[k for k, _, _ in nth]], [
-                    self.ranging[idx[k]].tdoa(cycle, f if isinstance(f, Fix) else None, self.t[idx[k]])
-                    for k, cycle, f in nth])
+                self._give(FixRefused, c.idx[list(refused)], list(refused.values()))
+            if fixed.any():
+                s = c.idx[fixed]
+                self._give(Fix, s, FixBatch(c.t[fixed], p[fixed], cov[fixed], ranging.fixes[s]))
+            if Tdoa in self._takers:
+                for j, batch in ranging.tdoa(c, fixed, self.t[c.idx]):
+                    self._give(Tdoa, c.idx[j], batch)
         self._emit(idx, t, through=True)
 
     def _timed(self, idx: np.ndarray, t: np.ndarray) -> None:

@@ -23,6 +23,11 @@ from .base import BatchFilter
 from .seeds import take
 
 
+def propagate(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray):
+    """F x and F P F^T + Q of the seeds' x (k, n), P (k, n, n); F, Q shared or per seed."""
+    return mv(F, x), np.matmul(np.matmul(F, P), T(F)) + Q
+
+
 class BatchKalmanFilter(BatchFilter):
     """x (N, n) and P (N, n, n) of N seeds on one motion *model*."""
 
@@ -45,7 +50,7 @@ class BatchKalmanFilter(BatchFilter):
         else:
             F, Q = self._transition(float(dt))
         x, P = self.rows(idx)
-        self.store(idx, mv(F, x), np.matmul(np.matmul(F, P), T(F)) + Q)
+        self.store(idx, *propagate(x, P, F, Q))
 
     def update(self, z, R, measurement: Linear, gate=None, active=None) -> BatchInnovation:
         """Correct the *active* seeds with z (N, m) = H x + v, v ~ N(0, R) (R (m, m) or

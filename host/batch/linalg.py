@@ -5,14 +5,20 @@ for matrix x matrix, gemv for a matrix times an (n, 1) column, dot for a row tim
 column): the routines ``ndarray.dot`` calls for one filter. ``x @ A.T`` on an (N, n) stack
 would be one gemm whose rounding differs from gemv's in the last bit, so vectors go through
 :func:`mv` as columns. The inverse is host.filters.linalg.inverse's: 1x1 and 2x2 in closed
-form (the same float operations elementwise), larger ones by the same LAPACK gesv seed by
-seed.
+form (the same float operations elementwise), larger ones by LAPACK's gesv
+(:func:`solve_each`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.filters.linalg import inverse as one_inverse
+from navtwin.host.filters.linalg import solve as one_solve
+
+#: The largest systems numpy's stacked solve (its own LAPACK build's gesv) gives the per-filter
+#: solve's (scipy's gesv) numbers for, bit for bit: every one of 20 000 random SPD systems of
+#: each size 2 to 5 alike, about one in ten 6x6 and one in three 7x7 not (numpy 2.4.6, scipy
+#: 1.17.1; tests/host/test_batch.py checks the builds installed). Larger ones go seed by seed.
+STACKED_UP_TO = 5
 
 
 def mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -45,7 +51,8 @@ def inverse(S: np.ndarray) -> np.ndarray:
         elif m == 2:
             a, b, c, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 0], S[:, 1, 1]
             det = a * d - b * c
-            SI = np.stack((np.stack((d / det, -b / det), -1), np.stack((-c / det, a / det), -1)), -2)
+            SI = np.empty(S.shape)
+            SI[:, 0, 0], SI[:, 0, 1], SI[:, 1, 0], SI[:, 1, 1] = d / det, -b / det, -c / det, a / det
             singular = det == 0.0
         else:
             SI, singular = _solved(S)
@@ -57,15 +64,29 @@ def inverse(S: np.ndarray) -> np.ndarray:
 
 
 def _solved(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """3x3 and larger (a TDOA cycle, several ranges at once: one update a cycle) seed by seed
-    with the per-filter gesv: numpy's batched solve is another LAPACK build, whose pivoted
-    LU rounds differently from 6x6 on, and gesv's result is column-major, which decides the
-    gemv that later products of S^-1 take (so each seed's slice is column-major here too)."""
-    SI = np.zeros(S.shape)
-    singular = np.zeros(len(S), bool)
-    for k, s in enumerate(S):
+    """3x3 and larger (a TDOA cycle, several ranges at once: one update a cycle): gesv's
+    result is column-major, which decides the gemv that later products of S^-1 take, so
+    each seed's slice is column-major here too."""
+    SI, singular = solve_each(S, np.broadcast_to(np.eye(S.shape[-1]), S.shape))
+    return T(np.ascontiguousarray(T(SI))), singular
+
+
+def solve_each(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """host.filters.linalg.solve of each seed's A (N, m, m) and B (N, m) or (N, m, k): the
+    numbers its gesv gives (in one stacked call up to :data:`STACKED_UP_TO`, else seed by
+    seed), and which seeds' A is singular (their rows of the answer: zeros)."""
+    if A.shape[-1] <= STACKED_UP_TO:
         try:
-            SI[k] = one_inverse(s).T
+            if B.ndim == 2:
+                return np.linalg.solve(A, B[..., None])[..., 0], np.zeros(len(A), bool)
+            return np.linalg.solve(A, B), np.zeros(len(A), bool)
+        except np.linalg.LinAlgError:
+            pass  # some seed's A is singular: seed by seed, to tell which
+    X = np.zeros(B.shape)
+    singular = np.zeros(len(A), bool)
+    for k in range(len(A)):
+        try:
+            X[k] = one_solve(A[k], B[k])
         except np.linalg.LinAlgError:
             singular[k] = True
-    return T(SI), singular
+    return X, singular

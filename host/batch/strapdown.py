@@ -9,6 +9,7 @@ their own dt and samples.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -51,6 +52,14 @@ class BatchStrapdown:
         self._r_m = float(meridian_radius(lat)) + altitude_m
         self._r_n = float(transverse_radius(lat)) + altitude_m
         self._tan_lat = math.tan(lat)
+
+    def part(self, start: int, n: int) -> BatchStrapdown:
+        """Rows start to start + n as the strapdowns of n seeds of their own: views, so a step
+        of this stack's rows steps them (several strapdowns stepped in one call)."""
+        part = copy.copy(self)
+        for name in ("p", "v", "q", "gyro_bias", "prev", "has_prev", "f_n"):
+            setattr(part, name, getattr(self, name)[start:start + n])
+        return part
 
     def begin(self, idx: np.ndarray, position: np.ndarray, q: np.ndarray, gyro_bias: np.ndarray) -> None:
         """Seeds *idx* start at *position* (n, 2) at rest with attitude *q* (n, 4) and *gyro_bias*."""

@@ -4,23 +4,24 @@ The common path of :meth:`host.wsn.Solver.fix` with ``method = "tdoa"``, for the
 one anchor set stacked: the spherical-intersection start (000 eqs. 12-13's closed form, its
 root that fits best), Gauss-Newton from there, the CRLB covariance, the plausible region and
 the chi-square test of the residual. Each step is the per-cycle one on stacked operands
-(stacked ``np.matmul`` for the products, LAPACK's gesv per cycle for the 2x2 solves), so a
+(stacked ``np.matmul`` for the products, LAPACK's gesv for the 2x2 solves:
+host.batch.linalg.solve_each), so a
 fix equals Solver.fix's. A cycle off that path (mirror positions that fit alike, a
 degenerate quadratic, a Gauss-Newton that diverges or does not settle, a residual that fails
 the test and needs the outlier search) is solved by Solver.fix itself: the fixes are the
 solver's in every case, the batch only makes the usual ones cheaper. TOA fixes (004's
-``wsn_method = "toa"``) go to Solver.fix one by one.
+``wsn_method = "toa"``) go to Solver.fix one by one. :func:`solved` takes the cycles as
+arrays (host.batch.ranging's), :func:`fixes` as Solver.fix's arguments.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from navtwin.host.filters.linalg import solve
 from navtwin.host.measurements import Fix
 from navtwin.host.wsn import (GN_ITERATIONS, GN_SETTLED_M, GN_TOLERANCE_M, MIN_RANGES, MIRROR_CHI2,
                               Solver, _sx_geometry, chi2_gate, tdoa_whitening)
 
-from .linalg import T, dot, mv
+from .linalg import T, dot, mv, solve_each
 
 _ONES2 = np.ones(2)
 _I2 = np.eye(2)
@@ -29,21 +30,54 @@ _I2 = np.eye(2)
 def fixes(solver: Solver, cycles: list) -> list:
     """Solver.fix of each ``(t, anchors, ranges, near)`` in *cycles*: a Fix or the reason
     there is none, in order."""
-    out: list = [None] * len(cycles)
-    groups: dict[tuple[int, ...], list] = {}
-    for k, (t, anchors, ranges, near) in enumerate(cycles):
-        order = sorted(range(len(anchors)), key=anchors.__getitem__)
-        key = tuple(int(anchors[j]) for j in order)
-        if solver.method != "tdoa" or len(key) < MIN_RANGES:
-            out[k] = solver.fix(t, anchors, ranges, near)
-        else:
-            groups.setdefault(key, []).append((k, [float(ranges[j]) for j in order]))
-    for anchors, members in groups.items():
-        ok, p, cov, rss = _tdoa(solver, anchors, np.array([r for _, r in members]))
-        for j, (k, _) in enumerate(members):
-            out[k] = Fix(cycles[k][0], p[j].copy(), cov[j].copy(), anchors, float(rss[j])) \
-                if ok[j] else solver.fix(*cycles[k])
-    return out
+    layout = solver.layout
+    w = max((len(c[1]) for c in cycles), default=0)
+    rows, r = np.zeros((len(cycles), w), np.intp), np.zeros((len(cycles), w))
+    count = np.array([len(c[1]) for c in cycles], np.intp)
+    near = np.full((len(cycles), 2), np.nan)
+    for k, (_, anchors, ranges, p) in enumerate(cycles):
+        rows[k, :count[k]], r[k, :count[k]] = layout.index(anchors), ranges
+        if p is not None:
+            near[k] = p
+    t = np.array([c[0] for c in cycles], float)
+    p, cov, rss, answers = solved(solver, t, rows, r, count, near)
+    return [answers[k] if k in answers else
+            Fix(cycles[k][0], p[k].copy(), cov[k].copy(),
+                tuple(sorted(int(a) for a in cycles[k][1])), float(rss[k]))
+            for k in range(len(cycles))]
+
+
+def solved(solver: Solver, t: np.ndarray, rows: np.ndarray, ranges: np.ndarray, count: np.ndarray,
+           near: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """Solver.fix of k cycles given as arrays: cycle j's anchors are the layout rows
+    ``rows[j, :count[j]]`` (any order, no repeat), its ranges ``ranges[j, :count[j]]``, its
+    time t[j], the previous fix ``near[j]`` (NaN: none). Returns p (k, 2), cov (k, 2, 2)
+    and the weighted RSS (k,) of the cycles that took the common path, and Solver.fix's
+    answer (a Fix or the reason there is none) for each other cycle j, as ``{j: answer}``."""
+    k = len(t)
+    p, cov, rss = np.zeros((k, 2)), np.zeros((k, 2, 2)), np.zeros(k)
+    answers: dict = {}
+    common = count >= MIN_RANGES if solver.method == "tdoa" else np.zeros(k, bool)
+    if common.any():  # grouped by anchor set: the anchors sorted, as Solver.fix sorts them
+        j = np.flatnonzero(common)
+        n_anchors = len(solver.layout.ids)
+        padded = np.where(np.arange(rows.shape[1]) < count[j, None], rows[j], n_anchors)
+        order = np.argsort(padded, 1, kind="stable")
+        sets, group = np.unique(np.take_along_axis(padded, order, 1), axis=0, return_inverse=True)
+        group = group.ravel()
+        for g, s in enumerate(sets):
+            m = int((s < n_anchors).sum())
+            members = j[group == g]
+            r = np.take_along_axis(ranges[members], order[group == g, :m], 1)
+            anchors = tuple(solver.layout.ids[a] for a in s[:m].tolist())
+            ok, p[members], cov[members], rss[members] = _tdoa(solver, anchors, r)
+            common[members[~ok]] = False
+    ids = np.asarray(solver.layout.ids)
+    for j in np.flatnonzero(~common).tolist():
+        m = count[j]
+        answers[j] = solver.fix(float(t[j]), tuple(ids[rows[j, :m]].tolist()), ranges[j, :m].tolist(),
+                                None if np.isnan(near[j, 0]) else near[j])
+    return p, cov, rss, answers
 
 
 def _tdoa(solver: Solver, anchors: tuple[int, ...], r: np.ndarray):
@@ -75,12 +109,8 @@ def _tdoa(solver: Solver, anchors: tuple[int, ...], r: np.ndarray):
             break
         e, J = rj(p[going], going)
         ew, Jw = mv(w_sqrt, e), np.matmul(w_sqrt, J)
-        A, b = np.matmul(T(Jw), Jw), -mv(T(Jw), ew)
-        for j, k in enumerate(going.tolist()):
-            try:
-                step[k] = solve(A[j], b[j])
-            except np.linalg.LinAlgError:
-                ok[k] = False
+        step[going], singular = solve_each(np.matmul(T(Jw), Jw), -mv(T(Jw), ew))
+        ok[going[singular]] = False
         p[going] += step[going]
         ok &= np.isfinite(p).all(1)
         going = going[ok[going] & (dot(step[going], step[going]) >= GN_TOLERANCE_M ** 2)]
@@ -91,11 +121,8 @@ def _tdoa(solver: Solver, anchors: tuple[int, ...], r: np.ndarray):
     ew, Jw = mv(w_sqrt, e), np.matmul(w_sqrt, J)
     A = np.matmul(T(Jw), Jw)
     cov = np.zeros((n, 2, 2))
-    for j, k in enumerate(rows.tolist()):
-        try:
-            cov[k] = solve(A[j], _I2)
-        except np.linalg.LinAlgError:
-            ok[k] = False
+    cov[rows], singular = solve_each(A, np.broadcast_to(_I2, A.shape))
+    ok[rows[singular]] = False
     rss = np.zeros(n)
     rss[rows] = dot(ew, ew)
     ok &= solver.inside(p) & _passes(solver, m, rss)

@@ -22,7 +22,7 @@ from filterpy.kalman import KalmanFilter as FpKF
 
 from navtwin.host.batch import BatchErrorStateFilter, BatchKalmanFilter
 from navtwin.host.batch.bench import GOAL, ONE_THREAD
-from navtwin.host.batch.linalg import inverse
+from navtwin.host.batch.linalg import STACKED_UP_TO, inverse, solve_each
 from navtwin.host.filters import ACCELERATION, ConstantAcceleration, KalmanFilter, Ranges, position_fix
 from navtwin.host.filters.errorstate import NAV, ErrorStateFilter
 from navtwin.host.wsn import chi2_gate
@@ -235,6 +235,28 @@ def test_the_inverse_is_the_per_filter_one_and_names_singular_seeds():
         with pytest.raises(np.linalg.LinAlgError, match=r"singular innovation covariance at "
                                                         r"seeds \[2, 5\]; leave them out"):
             inverse(S)
+
+
+@pytest.mark.parametrize("m", range(2, STACKED_UP_TO + 3))
+def test_the_stacked_solves_are_the_per_filter_gesv_bit_for_bit(m):
+    """solve_each (the stacked LAPACK call up to STACKED_UP_TO, seed by seed past it) gives
+    each seed host.filters.linalg.solve's numbers, on SPD systems over 12 decades and general
+    ones, a vector or a matrix on the right, and names the singular seeds: the installed
+    numpy's LAPACK build must round as scipy's for the sizes it is trusted with."""
+    from navtwin.host.filters.linalg import solve as one
+
+    rng = np.random.default_rng(m)
+    A = rng.normal(size=(2000, m, m))
+    A[::2] = np.matmul(A[::2], np.swapaxes(A[::2], 1, 2)) + 0.01 * np.eye(m)
+    A *= 10.0 ** rng.uniform(-6, 6, (len(A), 1, 1))
+    for B in (rng.normal(size=(len(A), m)), np.broadcast_to(np.eye(m), A.shape)):
+        X, singular = solve_each(A, B)
+        assert not singular.any()
+        assert all(np.array_equal(X[k], one(A[k], B[k])) for k in range(len(A)))
+    A[[3, 7]] = 0.0
+    X, singular = solve_each(A[:10], B[:10])
+    assert np.flatnonzero(singular).tolist() == [3, 7]
+    assert all(np.array_equal(X[k], one(A[k], B[k])) for k in (0, 1, 2, 4, 5, 6, 8, 9))
 
 
 @pytest.mark.parametrize("make, message", [

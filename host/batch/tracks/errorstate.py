@@ -1,10 +1,11 @@
 """What the twins of 001's tracks (lc, tc, fatci) share: host.tracks.errorstate's
 ErrorStateTrack (with ClosedLoopTrack and OwnStrapdown) for the rows of many seeds.
 
-Each seed has a strapdown of its own (host.batch.strapdown.BatchStrapdown rows): its row is
-taken from the estimator's at the IMU sample that ends the alignment, then stepped with every
-sample (the same samples, the same integration) and the error state predicted over each
-step with that step's specific force f_n (001 eq. 27; host.batch.errorstate.propagate, each
+Each seed has a strapdown of its own (host.batch.strapdown.BatchStrapdown rows, ``nav``): its
+row is taken from the estimator's at the IMU sample that ends the alignment, then stepped
+with every sample (the same samples, the same integration; the estimator steps it, with its
+own and the other tracks', in one call: :meth:`own_step`) and the error state predicted over
+each step with that step's specific force f_n (001 eq. 27; host.batch.errorstate.propagate, each
 seed over its own interval). A measurement at t is compared with the strapdown extrapolated
 over t - t_nav (``position_at``); the gated Joseph update (host.batch.innovation) of the
 rows it accepts is fed back into their strapdowns (``take_nav`` then ``correct``: 001 sect.
@@ -45,7 +46,8 @@ from .base import BatchTrack, Columns
 class BatchErrorStateTrack(BatchTrack):
     """The twin of ``Track`` (an ErrorStateTrack) for the rows of ``ctx.n`` seeds."""
 
-    uses_strapdown = True
+    uses_strapdown = own_strapdown = True
+    nav: BatchStrapdown  # given by the estimator (host.batch.tracks.base)
     Track: ClassVar[type[ErrorStateTrack]]
 
     def __init__(self, ctx, settings=None) -> None:
@@ -58,8 +60,6 @@ class BatchErrorStateTrack(BatchTrack):
         self._P0 = one.filter.P
         self._noise = one.filter.noise
         n, m = ctx.n, NAV + one.extra
-        self.nav = BatchStrapdown(n, latitude_deg=cfg.latitude_deg, altitude_m=cfg.altitude_m,
-                                  x_azimuth_deg=cfg.x_azimuth_deg)
         self.on = np.zeros(n, bool)  # has its strapdown (the alignment ended)
         self.t_nav = np.full(n, np.nan)
         self.x, self.P = np.zeros((n, m)), np.zeros((n, m, m))
@@ -67,7 +67,8 @@ class BatchErrorStateTrack(BatchTrack):
         self.aided = np.full(n, np.nan)  # the last accepted update; NaN: none
         self.gated_since = np.full(n, np.nan)  # the first rejection of a run; NaN: none
         self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
-        self.reinit_fix: list = [None] * n  # Track.reinit_fix: the fix it last started again at
+        self.reinit_fix = np.zeros(n, np.int64)  # Track.reinit_fix: the number of the fix it
+        # last started again at (host.batch.ranging; 0: none)
 
     def handlers(self) -> dict:
         return {ImuSample: self.imu, Fix: self.offer_fix}
@@ -77,7 +78,7 @@ class BatchErrorStateTrack(BatchTrack):
         discontinuity no later than the fix start again at it (module doc); which did."""
         at = (f.t >= self.reinit_since[idx]) & self.on[idx]  # NaN: not waiting
         if at.any():
-            rows, k = idx[at], np.flatnonzero(at)
+            rows = idx[at]
             sv, _ = self.ctx.cfg.reinit_sigma
             self.nav.place(rows, f.p[at], np.zeros((len(rows), 2)))
             P = np.zeros(self.P[rows].shape)
@@ -89,13 +90,19 @@ class BatchErrorStateTrack(BatchTrack):
             self.gated_since[rows] = np.nan
             self.aided[rows] = f.t[at]
             self.reinit_since[rows] = np.nan
-            for j, i in zip(k.tolist(), rows.tolist()):
-                self.reinit_fix[i] = f.fixes[j]
+            self.reinit_fix[rows] = f.number[at]
         return at
 
     # -- the strapdown and the predict --------------------------------------------------------
+    def own_step(self, idx, t) -> tuple[np.ndarray, np.ndarray]:
+        """OwnStrapdown.imu's step: the seeds whose strapdown started before this sample; the
+        stream's samples are strictly in order, so dt > 0 on every one."""
+        on = self.on[idx]
+        return on, t[on] - self.t_nav[idx[on]]
+
     def imu(self, idx, b) -> None:
-        """OwnStrapdown.imu and ErrorStateTrack.stepped for the seeds *idx* (an ImuBatch)."""
+        """OwnStrapdown.imu and ErrorStateTrack.stepped for the seeds *idx* (an ImuBatch),
+        their strapdowns stepped with the sample already (:meth:`own_step`)."""
         aligned = self.ctx.aligned[idx]
         if not aligned.any():
             return
@@ -108,10 +115,9 @@ class BatchErrorStateTrack(BatchTrack):
             self.on[s] = True
             self.x[s], self.P[s] = 0.0, self._P0
         old = ~new
-        if old.any():  # the stream's samples are strictly in order: dt > 0 on every row
+        if old.any():
             s = idx[old]
             dt = t[old] - self.t_nav[s]
-            self.nav.step(s, dt, gyro[old], accel[old])
             self.t_nav[s] = t[old]
             self.P[s] = propagate(self.P[s], dt, self.nav.f_n[s], self._noise)
 

@@ -24,25 +24,29 @@ from navtwin.host.tracks.fusion import POSITION_KINDS, TightSettings
 from navtwin.host.wsn import chi2_gate
 
 from ..innovation import joseph_correct
-from ..linalg import T, mv
+from ..kf import propagate
 from ..model import BatchLinear, BatchRanges
 from ..seeds import take
 from .base import BatchTrack, Columns
 
 
 class BatchFusionTrack(BatchTrack):
-    uses_strapdown = True
+    uses_strapdown = ca_state = True
+    # x (n, 6), P (n, 6, 6) and FusionTrack.t_predicted (n,): rows of the estimator's stack,
+    # given by it (host.batch.tracks.base)
+    x: np.ndarray
+    P: np.ndarray
+    t_predicted: np.ndarray
 
     def __init__(self, ctx, settings=None) -> None:
         super().__init__(ctx, settings)
         n = ctx.n
-        self.x, self.P = np.zeros((n, 6)), np.zeros((n, 6, 6))
         self._I = np.eye(6)
         self.aided = np.full(n, np.nan)  # time of the last position update; NaN: none
-        self.t_predicted = np.full(n, np.nan)  # FusionTrack.t_predicted
         self._gated_since: dict[str, np.ndarray] = {}  # kind -> first rejection of a run; NaN: none
         self.reinit_since = np.full(n, np.nan)  # Track.reinit_since; NaN: running
-        self.reinit_fix: list = [None] * n  # Track.reinit_fix: the fix it last started again at
+        self.reinit_fix = np.zeros(n, np.int64)  # Track.reinit_fix: the number of the fix it
+        # last started again at (host.batch.ranging; 0: none)
 
     def handlers(self) -> dict:
         return {Motion: self.motion, Fix: self.offer_fix}
@@ -80,8 +84,7 @@ class BatchFusionTrack(BatchTrack):
             for since in self._gated_since.values():
                 since[rows] = np.nan
             self.reinit_since[rows] = np.nan
-            for i, k in zip(rows.tolist(), np.flatnonzero(at).tolist()):
-                self.reinit_fix[i] = f.fixes[k]
+            self.reinit_fix[rows] = f.number[at]
         return at
 
     def sync(self, idx) -> None:
@@ -96,8 +99,7 @@ class BatchFusionTrack(BatchTrack):
     def _propagate(self, idx, dt):
         """ConstantAcceleration.propagate of the seeds *idx*, each over its dt (the UKF's
         predict too: its transform through the linear F is this, in closed form)."""
-        F, Q = self.ctx.model.many(dt)
-        return mv(F, self.x[idx]), np.matmul(np.matmul(F, self.P[idx]), T(F)) + Q
+        return propagate(self.x[idx], self.P[idx], *self.ctx.model.many(dt))
 
     def motion(self, idx, m) -> None:
         self._update(idx, m.z, m.R, BatchLinear(m.meas.H), m.t, m.kind)
@@ -166,17 +168,12 @@ class BatchTightTrack(BatchFusionTrack):
         meas = BatchRanges.of(self.ctx.layout, m.row[:, None], m.lag[:, None])
         self._update(idx, m.z[:, None], R, meas, m.t, "range")
 
-    def tdoa(self, idx, ms: list[Tdoa]) -> None:
-        """Each seed's Tdoa of a cycle: one stacked update per group of seeds with the same
-        anchors and reference (their R too: host.wsn.tdoa_covariance of the count); one with
-        too few differences updates nothing, nor one of the fix the seed started again at."""
-        groups: dict[tuple, list[int]] = {}
-        for k, m in enumerate(ms):
-            if m.meas is not None and (m.fix is None or m.fix is not self.reinit_fix[idx[k]]):
-                groups.setdefault((m.meas.anchors, m.meas.reference), []).append(k)
-        for (anchors, reference), ks in groups.items():
-            first = ms[ks[0]]
-            meas = BatchRanges.of(self.ctx.layout, first.meas.idx, [ms[k].meas.lags for k in ks],
-                                  anchors.index(reference))
-            self._update(idx[ks], np.array([ms[k].z for k in ks]), first.R, meas,
-                         np.array([ms[k].t for k in ks]), "tdoa")
+    def tdoa(self, idx, b) -> None:
+        """The Tdoa of a cycle of the seeds *idx*, all with the same anchors, the reference
+        first (host.batch.ranging.TdoaBatch): one stacked update, but for the seeds that
+        started again at the cycle's fix."""
+        on = (b.fix == 0) | (b.fix != self.reinit_fix[idx])
+        if not on.all():
+            idx, b = idx[on], b.take(on)
+        if idx.size:
+            self._update(idx, b.z, b.R, BatchRanges.of(self.ctx.layout, b.rows, b.lags, 0), b.t, "tdoa")

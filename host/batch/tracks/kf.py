@@ -22,7 +22,6 @@ class BatchKfTrack(BatchFusionTrack):
         on = ~self.offer_fix(idx, f)
         if not on.all():
             idx = idx[on]
-            f = f._replace(t=f.t[on], p=f.p[on], cov=f.cov[on],
-                           fixes=[x for x, k in zip(f.fixes, on.tolist()) if k])
+            f = f._replace(t=f.t[on], p=f.p[on], cov=f.cov[on], number=f.number[on])
         lag = np.maximum(self.ctx.t[idx] - f.t, 0.0)
         self._update(idx, f.p, f.cov, position_fixes(lag), f.t, "fix")
