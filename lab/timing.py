@@ -36,7 +36,7 @@ intervals is then off by a whole period, so under stalls longer than a period th
 error's p99 saturates at the period (10 ms on ``sins``'s schedule) while the lateness still
 tells the stalls apart.
 
-``cpu_cores``: the emulator's and the hosts' CPU time (user + system, ``/proc/PID/stat``, all
+``cpu_cores``: the emulator's (its maker process included) and the hosts' CPU time (user + system, ``/proc/PID/stat``, all
 their threads) over the window, as fractions of a core (``host`` the hosts' sum,
 ``per_host`` each, host 1 first): their cost in steady state, without their start-up.
 """
@@ -70,9 +70,25 @@ RESYNC_BYTES = 4096
 
 
 def cpu_s(pid: int) -> float:
-    """CPU seconds (user + system) process *pid* has used so far, its threads included."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    """CPU seconds (user + system) process *pid* has used so far, its threads and its
+    descendants included (the emulator's maker process, its workers): each live one's own
+    and what its children that ended had used, so a child that ends between two readings
+    still counts once."""
+    ticks, children = {}, {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:  # it ended meanwhile
+                continue
+            ticks[int(entry)] = sum(int(f) for f in fields[11:15])  # utime stime cutime cstime
+            children.setdefault(int(fields[1]), []).append(int(entry))
+    total, todo = 0, [pid]
+    while todo:
+        p = todo.pop()
+        total += ticks.get(p, 0)
+        todo += children.get(p, [])
+    return total / os.sysconf("SC_CLK_TCK")
 
 
 def _last_line(path: Path) -> str:

@@ -2,12 +2,17 @@
 out by hand), the chunk search, the per-port row and the hosts' ports mapped to the
 emulator's on recordings made here, and short real-time runs with the host and with a host
 per car (counts that add up, no timed assertion)."""
+import os
+import subprocess
+import sys
+import time
+
 import pytest
 
 from navtwin.cli.bench import available, settings
 from navtwin.cli.main import UsageError
 from navtwin.emulator.bench import arrivals, lateness, period_error
-from navtwin.lab.timing import fleet_rows, found_ends, port_row, timing
+from navtwin.lab.timing import cpu_s, fleet_rows, found_ends, port_row, timing
 from navtwin.protocols.ports import host_inputs
 from navtwin.protocols.recording import Read, Recording, RecordingWriter
 from navtwin.protocols.serial import wire_ns
@@ -200,3 +205,32 @@ def test_a_host_that_dies_in_the_run_is_one_line_and_exit_status_2(monkeypatch, 
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1] == ("navtwin bench: error: timing failed: the host exited during the run "
                        "(status 1): ValueError: math domain error")
+
+
+def test_cpu_time_counts_the_descendants():
+    """A process's CPU in the timing bench counts its descendants' (the emulator's maker
+    process): a parent that only waits for a busy grandchild has used what the grandchild
+    has, not the few ms of its own start."""
+    parent = subprocess.Popen([sys.executable, "-c", "import subprocess, sys; subprocess.run("
+                               "[sys.executable, '-c', 'while True: pass'])"])
+    busy: list[int] = []
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            busy = [int(p) for p in os.listdir("/proc") if p.isdigit() and _ppid(p) == parent.pid]
+            if busy and cpu_s(busy[0]) >= 0.5:
+                break
+            assert time.monotonic() < deadline, "the busy grandchild never ran"
+            time.sleep(0.05)
+        assert cpu_s(parent.pid) >= 0.5
+    finally:
+        for p in busy:
+            os.kill(p, 9)
+        parent.wait()
+
+
+def _ppid(pid: str) -> int | None:
+    try:
+        return int(open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[1])
+    except OSError:
+        return None
