@@ -122,7 +122,7 @@ class MakerProcess:
         return out
 
     def air(self, until_ns: int) -> list:
-        self._receive(wait=False)
+        # of the blocks taken so far (the loop asks at every wake-up: no system call here)
         until_ns = min(until_ns, self.made_ns)
         out: list = []
         q = self._air
