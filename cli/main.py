@@ -21,6 +21,7 @@ from contextlib import contextmanager
 
 from navtwin.common.extras import MissingExtra, install_line
 from navtwin.common.limits import span
+from navtwin.common.signals import stopper
 from navtwin.protocols.plugins import Registry
 from navtwin.protocols import __version__
 from navtwin.protocols.ports import DEFAULT_BAUD
@@ -119,7 +120,8 @@ def stop_on_signals(stop: threading.Event, signals=(signal.SIGINT, signal.SIGTER
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = {s: signal.signal(s, lambda *_: stop.set()) for s in signals}
+    handler = stopper(stop)
+    old = {s: signal.signal(s, handler) for s in signals}
     try:
         yield
     finally:

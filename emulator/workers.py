@@ -39,6 +39,8 @@ import tempfile
 import threading
 import time
 
+from navtwin.common.signals import stopper
+
 from .pty import LinkDir
 from .runner import SEC, RunError, speed_name
 from .timing import die_with_parent
@@ -255,8 +257,9 @@ def main() -> int:
         sys.stdout.flush()
 
     stop = threading.Event()
+    handler = stopper(stop)
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, handler)
     spec = json.loads(sys.stdin.readline())
     # a parent killed outright (SIGKILL) cannot stop its workers: the kernel does, as SIGTERM
     if not die_with_parent(spec["parent"], signal.SIGTERM):
