@@ -14,7 +14,7 @@ world's blocks in a process of their own").
 :class:`MakerProcess` forks when the paced run starts (:meth:`World.ahead`). The child is the
 world as it stands, its models, random streams and the events made so far, and from then on
 it makes every block, each with the World's own ``advance`` and ``air``; the parent's World
-gives what the child sends (``advance``, ``air``, ``made_ns``, ``held``, ``inject``,
+gives what the child sends (``advance``, ``air``, ``made``, ``held``, ``inject``,
 ``remove``). So the events are those the World makes in one process, in the same order
 (tests/emulator/test_maker.py); only where they are made moves.
 
@@ -24,7 +24,7 @@ or a command). Each block's events and air frames go to a memory file of the chi
 outright): the fixed fields as arrays, the payloads as one blob, the ledger marks as JSON
 with each fault as its number (the scenario's ``[[faults]]`` in order, then the live ones in
 the order the parent injected them). A 16-byte note carries the file's descriptor to the
-parent (SCM_RIGHTS), which reads it in the loop's idle time (``made_ns``) or when it needs
+parent (SCM_RIGHTS), which reads it in the loop's idle time (``made``) or when it needs
 it, and makes Event objects only for what ``advance`` returns (a second of fifty vehicles
 is 12 000 events: made at once, a 15 ms pause of the loop). The child makes at most one
 block beyond what the parent has taken, as the thread did; the parent says how far it has
@@ -42,6 +42,7 @@ child's models, come with each block.
 """
 from __future__ import annotations
 
+import bisect
 import collections
 import contextlib
 import itertools
@@ -121,13 +122,13 @@ class MakerProcess:
         self._send(MORE, until_ns)
         return out
 
-    def air(self, until_ns: int) -> list:
+    def air(self, until_ns: int, keep: bool = True) -> list:
         # of the blocks taken so far (the loop asks at every wake-up: no system call here)
         until_ns = min(until_ns, self.made_ns)
         out: list = []
         q = self._air
         while q:
-            out += q[0].frames(until_ns)
+            out += q[0].frames(until_ns, keep)
             if not q[0].left:
                 q.popleft()
             else:
@@ -252,15 +253,18 @@ class _Air:
 
     def __init__(self, fields: np.ndarray, blob: bytes) -> None:
         self.fields, self.blob, self.at = fields, blob, 0
+        self.t = fields["t"].tolist()
 
     @property
     def left(self) -> bool:
         return self.at < len(self.fields)
 
-    def frames(self, until_ns: int) -> list:
+    def frames(self, until_ns: int, keep: bool = True) -> list:
         lo = self.at
-        hi = lo + int(np.searchsorted(self.fields["t"][lo:], until_ns))
+        hi = bisect.bisect_left(self.t, until_ns, lo)  # a list: asked at every wake-up
         self.at = hi
+        if hi == lo or not keep:
+            return []
         start = [int(self.fields["end"][lo - 1]) if lo else 0] + self.fields["end"][lo:hi - 1].tolist()
         return [AirFrame(t, self.blob[s:e]) for (t, e), s in zip(self.fields[lo:hi].tolist(), start)]
 

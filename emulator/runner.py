@@ -34,7 +34,8 @@ and times come from the world and the UART model only, the bytes of every port, 
 device times, are identical in every mode and timing mode; only host commands (read from
 the PTYs when they arrive) add answers on the ``xbee`` line.
 
-Clients' settings. Every CHECK_NS the attached ports' termios are read; while a client's
+Clients' settings. Every CHECK_NS each attached port's termios are read (the ports in
+turns, a few at each wake-up: emulator.schedule.Turns); while a client's
 rate, data bits or parity differ from its device's line, the port writes what the client's
 UART would read (``uart_rx.ClientView``), with one progress line when that starts or stops.
 The recording and the sink get the device's bytes, whatever the clients' settings.
@@ -98,7 +99,7 @@ from .ledger import Ledger
 from .pty import LinkDir, PtyPort
 from .radio import AirFrame
 from .rng import stream, vehicles_name
-from .schedule import Deadlines
+from .schedule import Deadlines, Turns
 from .tap import SOCKET as TAP_SOCKET, TapServer
 from .timing import Lateness, Mode, TimingError, choose as choose_timing
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows, file_name as truth_file
@@ -106,7 +107,7 @@ from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked
 from .uart_rx import ClientView, line_framing
 
 SEC = 1_000_000_000
-CHECK_NS = 10_000_000  # how often detached ports are looked at for a new client
+CHECK_NS = 10_000_000  # how often each port is looked at: a new client, its termios
 PROGRESS_NS = 3 * SEC  # wall time between progress reports
 PACED_BLOCK_NS = 100_000_000  # world generation step when paced, done in idle gaps ...
 LOOKAHEAD_NS = 2 * SEC  # ... up to this far ahead of the clock
@@ -174,7 +175,7 @@ class Feed:
     @property
     def ready(self) -> bool:
         """The next block's events are made (World.ahead): :meth:`step` only takes them."""
-        return self.world.made_ns >= min(self.known_ns + self.block_ns, self.end_ns)
+        return self.world.made(min(self.known_ns + self.block_ns, self.end_ns))
 
     def take(self, need_ns: int) -> list:
         """New events; afterwards ``known_ns > need_ns`` or the feed is exhausted."""
@@ -424,14 +425,14 @@ class Emulation:
         paced = self.speed is not None
         feed = self.prepare()
         t0 = self.t0_monotonic_ns = start_monotonic_ns or time.monotonic_ns()
-        next_check = t0 if self.ports else END
+        self._turns = Turns(self.ports.values(), CHECK_NS, time.monotonic_ns())
         next_progress = t0 + PROGRESS_NS if self.progress else END
         next_flush = t0 + FLUSH_NS if self.recorder is not None else END
         try:
             # the maker process first: it must not inherit the loop's real-time policy
             with self.world.ahead() if paced else contextlib.nullcontext(), \
                     self.timing.applied() if paced else contextlib.nullcontext():
-                self._loop(stop, feed, paced, t0, next_check, next_progress, next_flush)
+                self._loop(stop, feed, paced, t0, next_progress, next_flush)
         except RecordingWriteError as e:
             self.record_error = e
             self.interrupted = True
@@ -450,16 +451,14 @@ class Emulation:
                 gc.freeze()
         return self._feed
 
-    def _loop(self, stop, feed: Feed, paced: bool, t0: int, next_check: int,
-              next_progress: int, next_flush: int) -> None:
+    def _loop(self, stop, feed: Feed, paced: bool, t0: int, next_progress: int,
+              next_flush: int) -> None:
         vt = 0  # virtual time of the loop (max speed)
         while not stop.is_set():
             wall = time.monotonic_ns()
             now = int((wall - t0) * self.speed) if paced else vt
             if self.ports:
-                self._service(now, wall >= next_check)
-                if wall >= next_check:
-                    next_check = wall + CHECK_NS
+                self._service(now, wall)
             self._enqueue(feed.take(now))
             self._now_ns = now
             self._to_device(now)
@@ -497,7 +496,7 @@ class Emulation:
                     > 2 * feed.cost_ns + 2 * self.timing.spin_ns):
                 self._enqueue(feed.step())  # take what the maker made while there is time to spare
                 continue
-            self._wait(deadline, min(next_check, next_progress))
+            self._wait(deadline, min(self._turns.next_ns if self.ports else END, next_progress))
         else:
             self.interrupted = True
 
@@ -529,12 +528,13 @@ class Emulation:
         while time.monotonic_ns() < deadline:
             pass
 
-    def _service(self, now: int, check_detached: bool) -> None:
+    def _service(self, now: int, wall: int) -> None:
         """Read what clients wrote (stamped *now*) and notice clients coming and going, and
-        (every CHECK_NS) their termios settings. A paced loop looks only at what its last
-        sleep saw readable: what comes later wakes the next sleep at once (each system call
-        here costs the loop's time); at --speed max, which never sleeps, at everything."""
-        ports, readable = self.ports, self._readable
+        (each port every CHECK_NS, in turns: emulator.schedule.Turns) their termios settings.
+        A paced loop looks only at what its last sleep saw readable: what comes later wakes
+        the next sleep at once (each system call here costs the loop's time); at --speed max,
+        which never sleeps, at everything."""
+        readable = self._readable
         if self.speed is not None:
             self._readable = []
         if readable is None or self._attached.fileno() in readable:
@@ -549,24 +549,22 @@ class Emulation:
                 if readable is None else readable
             self.control.serve(sockets)
             self.tap.serve(sockets)
-        if check_detached:
-            for port in ports.values():
-                if not port.attached:
-                    port.check()
-                    # what a client wrote before it was noticed (it may even have gone
-                    # again): a real line delivers it all the same
-                    self._host_bytes(port, now)
-            views, watched = self.views, self._watched
-            for name, port in ports.items():
-                if port.attached:
-                    views[name].settle(*port.client_framing())
-                    if port.fd not in watched:
-                        watched[port.fd] = port
-                        self._attached.register(port.fd, select.EPOLLIN)
-                else:
-                    views[name].settle(None, 0)
-                    if watched.get(port.fd) is port:
-                        self._unwatch(port)
+        views, watched = self.views, self._watched
+        for port in self._turns.due(wall):
+            if not port.attached:
+                port.check()
+                # what a client wrote before it was noticed (it may even have gone again):
+                # a real line delivers it all the same
+                self._host_bytes(port, now)
+            if port.attached:
+                views[port.name].settle(*port.client_framing())
+                if port.fd not in watched:
+                    watched[port.fd] = port
+                    self._attached.register(port.fd, select.EPOLLIN)
+            else:
+                views[port.name].settle(None, 0)
+                if watched.get(port.fd) is port:
+                    self._unwatch(port)
 
     def _unwatch(self, port: PtyPort) -> None:
         """Stop waiting on *port* (detached, unplugged or replugged): a detached master is
@@ -640,7 +638,8 @@ class Emulation:
         """Hand the air's frames before *until_ns* (and the run's end), the world's and the
         coordinator's, to the recording and the air sink in time order. *until_ns* is the
         loop's time, before which no host write comes any more, so no frame comes later
-        that is earlier than one handed out."""
+        that is earlier than one handed out. With none of them taking frames (no tap client
+        now), the world's go by unmade."""
         until_ns = min(until_ns, self.end_ns)
         mine = []
         # only the host's requests put frames on a coordinator's air (most wake-ups: none)
@@ -652,7 +651,9 @@ class Emulation:
                 continue
             mine += [f for f in coordinator.air if f.t_ns < until_ns]
             coordinator.air = [f for f in coordinator.air if f.t_ns >= until_ns]
-        frames = self.world.air(until_ns) + mine
+        taken = self.recorder is not None or self.air_sink is not None or bool(
+            self.tap is not None and self.tap.clients)
+        frames = self.world.air(until_ns, taken) + mine
         if not frames:
             return
         if mine:

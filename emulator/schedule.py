@@ -63,3 +63,40 @@ class Deadlines:
         while heap and key[heap[0][1]] != heap[0][0]:
             heapq.heappop(heap)  # stale
         return heap[0][0] if heap else None
+
+
+class Turns:
+    """Items looked at in turns, each once every *period_ns*: the first round all at
+    *start_ns*, then turn k (k >= n) at ``start + (k - n + 1) period / n``, and :meth:`due`
+    gives those whose slot has come. So the looks are spread over the wake-ups the loop has
+    anyway, a few at each: the ports' ``tcgetattr``, every port's at once every 10 ms, held
+    up the writes due meanwhile (0.4 ms of the loop at 25 cars)."""
+
+    def __init__(self, items, period_ns: int, start_ns: int) -> None:
+        self.items = list(items)
+        self.period_ns = period_ns
+        self._start = start_ns
+        self._taken = 0  # turns taken (the slots of turns before this have been served)
+
+    def _slot(self, k: int) -> int:
+        n = len(self.items)
+        return self._start + max(k - n + 1, 0) * self.period_ns // n
+
+    def due(self, now_ns: int) -> list:
+        """The items whose turn has come by *now_ns* and has not been taken, each at most
+        once (a loop that stalled for several periods looks at each once, not each time)."""
+        n = len(self.items)
+        if not n or now_ns < self._start:
+            return []
+        came = n + (now_ns - self._start) * n // self.period_ns
+        first = max(self._taken, came - n)
+        self._taken = max(self._taken, came)
+        return [self.items[k % n] for k in range(first, came)]
+
+    @property
+    def next_ns(self) -> int:
+        """The latest wake-up that keeps every item within a period of its slot (a loop
+        woken more often takes the turns as their slots come)."""
+        if not self.items:
+            return self._start
+        return self._slot(self._taken) + (self.period_ns if self._taken >= len(self.items) else 0)

@@ -203,7 +203,7 @@ class World:
         self._air: list[AirFrame] = []  # generated, in order; those before _air_at returned
         self._air_at = 0
         #: while :meth:`ahead` runs, and after: the process that makes the blocks
-        #: (emulator.maker), whose blocks advance, air, made_ns and held give
+        #: (emulator.maker), whose blocks advance, air, made and held give
         self._maker = None
 
     # -- generation -------------------------------------------------------------------------
@@ -249,10 +249,12 @@ class World:
         rank, ranks, end = self._rank, len(self._rank), self.duration_ns
         return [(e.t_ns * ranks + rank[e.port], e) for e in events if e.t_ns < end]
 
-    @property
-    def made_ns(self) -> int:
-        """Blocks before this are made: ``advance`` up to it returns at once."""
-        return self._generated_ns if self._maker is None else self._maker.poll()
+    def made(self, until_ns: int) -> bool:
+        """Whether the blocks before *until_ns* are made, so ``advance`` up to it returns at
+        once (under the maker, a look at its socket only while they are not known to be)."""
+        if self._maker is None:
+            return self._generated_ns >= until_ns
+        return self._maker.made_ns >= until_ns or self._maker.poll() >= until_ns
 
     def advance(self, until_ns: int) -> list[Event]:
         """Events with t_ns < until_ns not returned before, in (t_ns, port) order. Blocks
@@ -270,18 +272,20 @@ class World:
         self._returned_ns = until_ns
         return out
 
-    def air(self, until_ns: int) -> list[AirFrame]:
+    def air(self, until_ns: int, keep: bool = True) -> list[AirFrame]:
         """The air's frames with t_ns < *until_ns* not returned before, in time order, of the
-        blocks made so far: a later block's are never earlier."""
+        blocks made so far: a later block's are never earlier. *keep* False: they go by
+        and none is returned (nothing in the run takes them now; under the maker none is
+        made into an object)."""
         if self._maker is not None:
-            return self._maker.air(until_ns)
+            return self._maker.air(until_ns, keep)
         until_ns = min(until_ns, self._generated_ns)
         at = self._air_at
         if at == len(self._air) or self._air[at].t_ns >= until_ns:
             return []  # most calls: the loop asks at every wake-up
         cut = bisect.bisect_left(self._air, until_ns, at, key=_T_NS)
         self._air_at = cut
-        return self._air[at:cut]
+        return self._air[at:cut] if keep else []
 
     @contextlib.contextmanager
     def ahead(self):

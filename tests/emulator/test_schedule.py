@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from navtwin.emulator.fleet import convoy
 from navtwin.emulator.scenario import load_scenario
-from navtwin.emulator.schedule import Deadlines
+from navtwin.emulator.schedule import Deadlines, Turns
 from navtwin.emulator.uart import Line, Wire
 from navtwin.emulator.world import World
 
@@ -71,3 +71,24 @@ def test_a_wrapper_due_later_does_not_hide_an_item_due_now():
     assert line.next_ns() == 5_000_000_000
     line.put(1_000, b"reply")
     assert line.next_ns() == 1_000
+
+
+def test_turns_spread_each_item_once_a_period():
+    """Each of 4 items once every 100 ns, the first round at once, then one item every 25
+    ns of the wake-ups' times; a stalled loop looks at each item once, not once a period
+    missed; next_ns keeps every item within a period of its slot."""
+    t = Turns("abcd", 100, 1000)
+    assert t.due(999) == []
+    assert t.due(1000) == list("abcd")  # the first round before anything else
+    assert t.next_ns == 1125  # a's next slot (1025) plus a period
+    assert t.due(1010) == []
+    assert t.due(1025) == ["a"]
+    assert t.due(1074) == ["b"]
+    assert t.next_ns == 1175  # c's slot (1075) plus a period
+    looked = []
+    for now in range(1075, 1500, 7):  # wake-ups every 7 ns: a, b, c, d in turn, in time
+        looked += t.due(now)
+    assert looked == list("cd" + "abcd" * 3 + "abc")
+    assert t.due(5000) == list("abcd")  # a stall of 35 periods: each once
+    assert t.due(5000) == []
+    assert Turns([], 100, 0).due(10**9) == []
