@@ -320,13 +320,24 @@ class Coordinator:
         if isinstance(item, Reply):
             return len(xbee.wrap(item.data, self.escaped))
         if t_ns < self.reset_until_ns or self.off(t_ns):
+            self._framed.pop(self._rx_key(item), None)  # sized ahead, never sent
             return None
-        frame = self._rx_frame(item)
+        frame = self._frame_of(item)
         if queued + len(frame) > SERIAL_TX_BUFFER:
+            self._framed.pop(self._rx_key(item))
             self.dropped_tx_buffer += 1
             return None
-        self._framed[self._rx_key(item)] = frame
         return len(frame)
+
+    def size(self, t_ns: int, item) -> int | None:
+        """The bytes :meth:`render` will give for RF packet *item* reaching an empty buffer
+        at *t_ns* and starting then, if the host changes nothing before (emulator.uart.Line
+        looks ahead with it); None for a reply (its rendering may reconfigure the radio) or
+        a packet that is not sent."""
+        if isinstance(item, Reply) or t_ns < self.reset_until_ns or self.off(t_ns):
+            return None
+        n = len(self._frame_of(item))
+        return n if n <= SERIAL_TX_BUFFER else None
 
     def render(self, t_ns: int, item) -> bytes:
         """The API frame bytes of an output item, in the current API mode; b"" = nothing."""
@@ -346,6 +357,15 @@ class Coordinator:
 
     def _rx_key(self, pkt) -> tuple:
         return self.escaped, self.registers.values["AO"] & 1, pkt
+
+    def _frame_of(self, pkt) -> bytes:
+        """The API frame of RF packet *pkt* in the current modes, built once: kept for
+        admit and render (render takes it)."""
+        key = self._rx_key(pkt)
+        frame = self._framed.get(key)
+        if frame is None:
+            frame = self._framed[key] = self._rx_frame(pkt)
+        return frame
 
     def _rx_frame(self, pkt) -> bytes:
         """The API frame reporting RF packet *pkt* (0x90 or 0x91), in the current modes."""

@@ -479,7 +479,7 @@ class Emulation:
             if not feed.exhausted:
                 target = feed.known_ns if target is None else min(target, feed.known_ns)
             if target is None or (target >= self.end_ns
-                                  and not any(l.busy() for l in self.lines.values())):
+                                  and not any(l.busy(self.end_ns) for l in self.lines.values())):
                 self.reached_ns = self.end_ns
                 break
             if self.recorder is not None and self._flush_due(wall, next_flush, t0, target):
@@ -592,10 +592,17 @@ class Emulation:
             for t, data in self.inbounds[name].poll(now):
                 if view is not None:  # read by the device's UART at its rate
                     data = view.heard(t, data, line_framing(device.line_device.baud))
+                self._catch_up(name, t)
                 for t_ns, item in device.host(t, data):
                     line.put(t_ns, item)
                 self.line_deadlines.touch(name)
                 self._air_from.add(name)
+
+    def _catch_up(self, port: str, t_ns: int) -> None:
+        """Line *port*'s steps due by *t_ns* taken before a change at *t_ns* from outside
+        the timeline (emulator.uart.Line: the loop does not wake when a chunk starts)."""
+        self.lines[port].catch_up(t_ns, self._feed.known_ns if self._feed else 0, self.end_ns)
+        self.line_deadlines.touch(port)
 
     def _enqueue(self, events: list) -> None:
         """Put the world's *events* on their ports' lines."""
@@ -727,9 +734,12 @@ class Emulation:
             if isinstance(fault, LineFault):
                 wrapper = fault.wrapper(stream(self.seed, f"faults.live.{self._live_ids}"))
                 wrapper.kind, wrapper.fault_index = fault.KIND, None  # live: in no [[faults]]
+                if fault.direction == "to_host":
+                    self._catch_up(fault.port, start)
                 self.wrap(fault.port, wrapper, fault.direction)
             elif fault.ACTS_ON == "coordinator":
                 port = lab_ports.instance(lab_ports.XBEE.name, fault.vehicle)
+                self._catch_up(port, start)
                 self.coordinators[port].faults += (fault,)
                 for out in self._power_ups(fault):
                     self.lines[port].put(out.t_ns, out.item)
@@ -777,6 +787,8 @@ class Emulation:
         fault, wrapper = self.live.pop(n)
         if wrapper is not None:
             to_device = wrapper.direction == "to_device"
+            if not to_device:
+                self._catch_up(fault.port, self._now_ns)
             (self.inbounds if to_device else self.lines)[fault.port].wrappers.remove(wrapper)
             (self.inbound_deadlines if to_device else self.line_deadlines).touch(fault.port)
         elif fault.ACTS_ON != "coordinator":  # that one ends at its end: it powers up then

@@ -74,6 +74,10 @@ class Wire:
     def render(t_ns: int, item: bytes) -> bytes:
         return item
 
+    @staticmethod
+    def size(t_ns: int, item: bytes) -> int:
+        return len(item)
+
 
 class LineWrapper:
     """A filter between a device and its line; the base passes every chunk through.
@@ -204,6 +208,14 @@ class Line(_Wrapped):
     which gives its size or None to drop it (the coordinator's bounded buffer); every step
     is taken in time order, so what is dropped depends on the timeline only, not on when
     the loop polls.
+
+    So the loop need not wake when a chunk starts, only when one ends: on an idle line
+    without wrappers, :meth:`next_ns` is the end of the chunk the next item will be, where
+    the device can say now how many bytes it will render then (``device.size(t, item)``,
+    None: it cannot), and the poll at that end takes the item's arrival, its start and its
+    end in order. What changes a line or its device from outside the timeline (the host's
+    bytes at the device, a live fault) comes after :meth:`catch_up` to its time, so it finds
+    the line as a poll at every step would have left it.
     """
 
     def __init__(self, name: str, device: Any, wrappers: Iterable[LineWrapper] = (),
@@ -219,6 +231,8 @@ class Line(_Wrapped):
         self.chunks = 0
         self.delivered = 0  # bytes of the chunks delivered: the stream as recorded so far
         self._held: list[dict] = []  # ledger entries naming bytes not delivered yet
+        self._ended: list[Chunk] = []  # ended in a catch_up, for the next poll to give
+        self._size = getattr(device, "size", None)  # a device without it: no look-ahead
         # device -> wrappers[0] -> ... -> wrappers[-1] -> line; .bytes: bytes sent so far
         super().__init__(name, wrappers, ledger)
 
@@ -247,18 +261,34 @@ class Line(_Wrapped):
         release, or an item arriving, whichever comes first (a wrapper due later must not
         hide an item due now: the loop polls a line only at this time, emulator.schedule).
         An item that arrives while a chunk is on the wire waits for its end."""
+        if self._ended:
+            return self._ended[0].end_ns
         if self.current is not None:
             return self.current.end_ns
         start, _ = self._next_start(END)
         if self._pending:
-            start = min(start, max(self._pending[0][0], self.free_ns))
+            arrive = max(self._pending[0][0], self.free_ns)
+            if arrive < start:
+                start = self._end_of(arrive) if start == END and not self.wrappers else arrive
         return start if start < END else None
+
+    def _end_of(self, t: int) -> int:
+        """When the chunk of the next item, arriving at *t* on an idle line with nothing
+        else to send, ends (*t* itself when the device cannot tell its size now)."""
+        item = self._pending[0][2]
+        size = None if self._size is None or type(item) is Marked else self._size(t, item)
+        return t + wire_ns(size, self.device.baud) if size else t
+
+    def catch_up(self, now_ns: int, known_ns: int, end_ns: int) -> None:
+        """Take every step due by *now_ns* now; the chunks that ended wait for the next
+        :meth:`poll`. Call it before a change from outside the timeline at *now_ns*."""
+        self._ended = self.poll(now_ns, known_ns, end_ns)  # those it kept before, then these
 
     def poll(self, now_ns: int, known_ns: int, end_ns: int) -> list[Chunk]:
         """Chunks that have ended by *now_ns*; starts those due. An item enters the buffer
         only when all items that could precede it are known (ready < *known_ns*), and
         starts before *end_ns*."""
-        out = []
+        out, self._ended = self._ended, []
         pending, queue = self._pending, self._queue
         limit = min(known_ns, end_ns)
         while True:
@@ -363,8 +393,11 @@ class Line(_Wrapped):
         for entry in held:
             self._enter(entry)
 
-    def busy(self) -> bool:
-        return self.current is not None or bool(self._pieces)
+    def busy(self, end_ns: int) -> bool:
+        """Whether the line still has work: a chunk on the wire or ended and not given, or
+        an item that starts before *end_ns* (its deadline may be its end, after it)."""
+        return (self.current is not None or bool(self._pieces) or bool(self._ended)
+                or bool(self._pending) and max(self._pending[0][0], self.free_ns) < end_ns)
 
 
 class Inbound(_Wrapped):

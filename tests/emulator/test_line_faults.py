@@ -18,7 +18,7 @@ from navtwin.emulator.ledger import Ledger
 from navtwin.emulator.rng import stream
 from navtwin.emulator.runner import Emulation, RunError
 from navtwin.emulator.scenario import ScenarioError
-from navtwin.emulator.uart import Inbound, Line, LineWrapper, Wire
+from navtwin.emulator.uart import END, Inbound, Line, LineWrapper, Wire
 from navtwin.protocols.ports import names
 from navtwin.protocols.recording import FAULTS, Recording, RecordingError
 from navtwin.protocols.serial import wire_ns
@@ -330,7 +330,7 @@ def test_a_release_goes_ahead_of_a_chunk_due_at_the_same_time_and_through_later_
     assert [(c.start_ns, c.data) for c in out] == [
         (0, b"CD"), (5 * MS, b"!"), (5 * MS + wire_ns(1, BAUD), b"AB")]
     assert [(e["kind"], e["start"], e["t_ns"]) for e in ledger.entries] == [("x", 2, 5 * MS)]
-    assert not line.busy() and line.next_ns() is None
+    assert not line.busy(END) and line.next_ns() is None
 
 
 def test_pieces_held_past_the_end_of_the_run_are_not_sent():
@@ -342,7 +342,7 @@ def test_pieces_held_past_the_end_of_the_run_are_not_sent():
     line.put(SEC - 1, bytes(30))
     line.put(SEC + 1, bytes(30))  # after the end: never starts, no entry
     assert [len(c.data) for c in line.poll(5 * SEC, 5 * SEC, SEC)] == [10]
-    assert not line.busy() and line.queued == 0
+    assert not line.busy(SEC) and line.queued == 0
     (e,) = ledger.entries  # the range is what was sent
     assert (e["start"], e["end"], e["pieces"]) == (0, 10, [10, 10, 10])
 

@@ -2,10 +2,13 @@
 changes."""
 from __future__ import annotations
 
+import numpy as np
+
 from navtwin.emulator.fleet import convoy
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.schedule import Deadlines, Turns
-from navtwin.emulator.uart import Line, Wire
+from navtwin.emulator.uart import Line, Marked, Wire
+from navtwin.protocols.serial import wire_ns
 from navtwin.emulator.world import World
 
 
@@ -52,10 +55,43 @@ def test_a_line_gets_a_deadline_when_it_gets_a_chunk():
     assert d.next() is None
     line.put(1_000, b"x" * 10)
     d.touch("sins")
-    assert d.next() == 1_000  # the chunk starts
-    assert d.due(1_000) == ["sins"]
-    line.poll(1_000, 10**9, 10**9)
-    assert d.next() == line.next_ns() > 1_000  # now: its end
+    end = 1_000 + wire_ns(10, 115200)
+    assert d.next() == end  # not its start: the poll at its end takes the start too
+    assert d.due(end - 1) == []
+    assert d.due(end) == ["sins"]
+    assert [c.end_ns for c in line.poll(end, 10**9, 10**9)] == [end]
+    assert d.next() is None
+
+
+def test_a_line_without_its_devices_size_wakes_at_the_start():
+    """A device that cannot say what it will render (a reply that may reconfigure it, a
+    marked item, a device without size) gets the deadline of the chunk's start."""
+    class Unsized(Wire):
+        size = None
+
+    line = Line("xbee", Unsized(115200))
+    line.put(1_000, b"x" * 10)
+    assert line.next_ns() == 1_000
+    line = Line("sins", Wire(115200))
+    line.put(1_000, Marked(b"x" * 10, ({"kind": "k"},)))
+    assert line.next_ns() == 1_000
+
+
+def test_catch_up_takes_the_steps_and_keeps_the_chunks_for_the_poll():
+    """A change from outside the timeline at t finds the line as a poll at every step
+    would: the chunk that started before t is on the wire, and the chunks that ended are
+    given by the next poll, in order."""
+    line = Line("sins", Wire(115200))
+    line.put(0, b"a" * 10)
+    line.put(10, b"b" * 10)
+    a_end = wire_ns(10, 115200)
+    line.catch_up(a_end + 1, 10**9, 10**9)
+    assert line.current is not None and line.current.data == b"b" * 10  # started at a's end
+    assert line.next_ns() == a_end  # the ended chunk waits: due at once
+    assert line.busy(10**9)
+    out = line.poll(2 * a_end, 10**9, 10**9)
+    assert [c.data for c in out] == [b"a" * 10, b"b" * 10]
+    assert not line.busy(10**9)
 
 
 def test_a_wrapper_due_later_does_not_hide_an_item_due_now():
@@ -92,3 +128,65 @@ def test_turns_spread_each_item_once_a_period():
     assert t.due(5000) == list("abcd")  # a stall of 35 periods: each once
     assert t.due(5000) == []
     assert Turns([], 100, 0).due(10**9) == []
+
+
+class _Moody(Wire):
+    """A device whose frames depend on a mode the host sets (as the coordinator's AO does)."""
+
+    def __init__(self):
+        super().__init__(115200)
+        self.mode = 0
+
+    def render(self, t, item):
+        return bytes([self.mode]) * self.mode + item
+
+    def size(self, t, item):
+        return len(self.render(t, item))
+
+
+def _played(lazy: bool, items, changes) -> list:
+    """Chunks of a line given *items* (t, bytes), the host setting the mode at *changes*
+    (t, mode); lazy: polled only at next_ns, caught up before each change; else polled at
+    every instant anything happens (an arrival, a chunk's end, a change), as the loop did
+    when it woke at every chunk's start."""
+    device = _Moody()
+    line = Line("xbee", device)
+    for t, data in items:
+        line.put(t, data)
+    out, changes, known = [], list(changes), 10**12
+    arrivals = sorted({t for t, _ in items})
+    while True:
+        if lazy:
+            t = line.next_ns()
+        else:
+            ahead = arrivals[:1] + ([line.current.end_ns] if line.current is not None else [])
+            t = min(ahead) if ahead else None
+        if changes and (t is None or changes[0][0] <= t):
+            at, mode = changes.pop(0)
+            if lazy:
+                line.catch_up(at, known, known)
+            else:
+                out += line.poll(at, known, known)
+            device.mode = mode
+            continue
+        if t is None:
+            return out
+        out += line.poll(t, known, known)
+        arrivals = [a for a in arrivals if a > t]
+
+
+def test_looking_ahead_gives_the_chunks_of_a_poll_at_every_step():
+    """The loop that wakes only at chunks' ends, catching the line up before each change
+    from the host, writes what a loop polling at every instant writes: the same bytes at
+    the same times, whatever the changes' times (before, during or after a chunk)."""
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        t = np.cumsum(rng.integers(1, 3_000_000, 30))
+        items = [(int(a), bytes(rng.integers(0, 256, int(n)).astype(np.uint8)))
+                 for a, n in zip(t, rng.integers(1, 40, 30))]
+        changes = sorted((int(c), int(m)) for c, m in zip(
+            rng.integers(0, int(t[-1]) + 5_000_000, 6), rng.integers(0, 5, 6)))
+        lazy, eager = _played(True, items, changes), _played(False, items, changes)
+        assert [(c.start_ns, c.end_ns, c.data) for c in lazy] == \
+            [(c.start_ns, c.end_ns, c.data) for c in eager]
+        assert len(lazy) == len(items)
