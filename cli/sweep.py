@@ -111,7 +111,7 @@ def register(sub) -> None:
                    help="batch (default): a task's seeds step their tracks together, the same "
                         "estimates to 1e-9; bytes: each seed's in-memory run (docs/sweeps.md)")
     p.add_argument("--batch-size", type=number(1, 4096, integer=True), metavar="N",
-                   help="seeds a batch-engine task holds at most (default 64)")
+                   help="seeds a batch-engine task holds at most (default 128)")
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run, extra="sweep")
 

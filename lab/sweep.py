@@ -144,7 +144,7 @@ ENGINES = {"batch": batch_cells,
            "bytes": lambda sc, seeds, filters, duration: [
                row for seed in seeds for row in seed_cells(sc, seed, filters, duration)]}
 #: Seeds one batch-engine task holds at most (the tracks of a batch step together).
-BATCH_SIZE = 64
+BATCH_SIZE = 128
 
 
 def cells(sc: Scenario, seed: int, filters: tuple[str, ...], columns: dict) -> list[dict]:
