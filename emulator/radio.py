@@ -32,6 +32,7 @@ from navtwin.protocols import ieee802154, zigbee
 from navtwin.protocols.ieee802154 import ACK_NS, BYTE_NS, TURNAROUND_NS
 
 from .clock import serial_queue
+from .events import rows
 
 RF_OVERHEAD_BYTES = zigbee.OVERHEAD_BYTES  # PHY 6 + MAC 9 + NWK 8 + APS 8 + FCS 2
 OPT_ACKNOWLEDGED = 0x01  # 0x90 receive option: unicast, acknowledged
@@ -212,14 +213,39 @@ class Sender:
         *dst16* carrying *data* (*radius*: when not the radio's; *aps*: endpoints, cluster
         and profile when not Digi's data endpoints, zigbee.data_packet): each attempt, and
         the ACK of the one received."""
-        seq, self.sent = self.sent & 0xFF, self.sent + 1
-        psdu = ieee802154.data_frame(seq, self.pan, dst16, src16, zigbee.data_packet(
-            dst16, src16, self.radius if radius is None else radius, seq, seq, data, **aps))
-        out = []
-        for k in range(int(attempts.count[i])):
-            t = int(attempts.on_air_ns[i, k])
-            out.append(AirFrame(t, psdu))
-            if not attempts.lost[i, k]:
-                out.append(AirFrame(t + int(attempts.air_ns[i]) + TURNAROUND_NS,
-                                    ieee802154.ack_frame(seq)))
-        return out
+        return self.block(attempts, np.array([i]), [src16], dst16, [data], radius, **aps)[0]
+
+    def block(self, attempts: Attempts, which: np.ndarray, src16, dst16: int,
+              payloads: list[bytes], radius: int | None = None, **aps) -> list[list[AirFrame]]:
+        """:meth:`frames` of the packets *which* of *attempts*, in order, from *src16* (one
+        per packet) carrying *payloads*: a block's air at once. Each data frame is built on
+        its own: struct and crc_hqx make one in about 1 us, what numpy's calls on rows of a
+        block's 100 packets cost as well (measured: 110 us against 107), while the attempts
+        and ACKs are numpy's (:meth:`_air`)."""
+        seqs = [(self.sent + j) & 0xFF for j in range(len(payloads))]
+        self.sent += len(payloads)
+        radius = self.radius if radius is None else radius
+        psdus = [ieee802154.data_frame(seq, self.pan, dst16, my, zigbee.data_packet(
+            dst16, my, radius, seq, seq, data, **aps)) for seq, my, data in zip(seqs, src16, payloads)]
+        return self._air(attempts, which, psdus, seqs)
+
+    @staticmethod
+    def _air(attempts: Attempts, which: np.ndarray, psdus: list[bytes], seqs) -> list[list[AirFrame]]:
+        """Per packet *which[j]* (carrying *psdus[j]*, MAC sequence number *seqs[j]*), its
+        frames on the air in time order: each attempt it made, and after the last one, when
+        it was received, the ACK (the attempts before it were lost: Link stops at the first
+        received). A table of (packet, attempt or ACK) cells, taken row by row where made."""
+        count, tries = attempts.count[which], attempts.on_air_ns.shape[1]
+        m = len(which)
+        times = np.empty((m, tries + 1), dtype=np.int64)
+        times[:, :tries] = attempts.on_air_ns[which]
+        times[:, tries] = times[np.arange(m), count - 1] + attempts.air_ns[which] + TURNAROUND_NS
+        made = np.empty((m, tries + 1), dtype=bool)
+        made[:, :tries] = np.arange(tries) < count[:, None]
+        made[:, tries] = attempts.delivered[which]
+        # each cell's frame in psdus + acks: packet j's data frame j, its ACK m + j
+        cell = np.arange(m)[:, None] + np.where(np.arange(tries + 1) < tries, 0, m)
+        pool = psdus + [ieee802154.ack_frame(s) for s in seqs]
+        flat = rows(AirFrame, times[made].tolist(), map(pool.__getitem__, cell[made].tolist()))
+        ends = np.cumsum(made.sum(axis=1)).tolist()
+        return [flat[a:b] for a, b in zip([0] + ends[:-1], ends)]

@@ -122,26 +122,41 @@ class Vehicle:
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
         times = self.board.byte_times(t_sins, [len(f) for f in frames])
         packets = self.router.packetise(b"".join(frames), times, next_byte)
-        arrival, delivered, lost, attempts = self.uplink.transmit(
+        arrival, delivered, marks, attempts = self.uplink.transmit(
             packets.ready_ns, [len(p) for p in packets.payloads])
-        offered, (absent, cause) = [], self._out_of_network(packets.ready_ns)
-        for i, (t, p, ok) in enumerate(zip(arrival.tolist(), packets.payloads, delivered.tolist())):
-            marks = lost.get(i, ())
-            if absent is not None:
-                if absent[i]:
-                    self._absent = self._absent or {"kind": cause.KIND, "fault": cause,
-                                                    "t_ns": int(packets.ready_ns[i]), "lost": 0}
-                    self._absent["lost"] += 1
-                    continue
-                if self._absent is not None:  # back in the network, under a new address
-                    self.src16 = int(self._rejoin_rng.integers(1, 0xFFF8))
-                    marks, self._absent = marks + ({**self._absent, "my": self.src16},), None
-            offered.append(Offered(
-                self.number, int(attempts.start_ns[i]), int(attempts.service[i]),
-                Event(t, self.xbee_port, RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p), marks)
-                if ok else None,
-                self.sender.frames(attempts, i, self.src16, COORDINATOR16, p) if self.air else []))
+        kept, src16 = self._in_network(packets.ready_ns, marks)
+        payloads = packets.payloads if len(kept) == len(packets.payloads) else \
+            [packets.payloads[i] for i in kept.tolist()]
+        air = self.sender.block(attempts, kept, src16.tolist(), COORDINATOR16, payloads) if self.air \
+            else [[]] * len(kept)
+        port, src64, start, service = self.xbee_port, self.src64, attempts.start_ns, attempts.service
+        offered = [Offered(self.number, s, d, Event(t, port, RfPacket(src64, my, OPT_ACKNOWLEDGED, p),
+                                                    marks.get(i, ())) if ok else None, a)
+                   for i, s, d, t, ok, my, p, a in zip(
+                       kept.tolist(), start[kept].tolist(), service[kept].tolist(),
+                       arrival[kept].tolist(), delivered[kept].tolist(), src16.tolist(), payloads, air)]
         return events, offered
+
+    def _in_network(self, ready_ns, marks: dict):
+        """(the block's packets the router sends while in the network, the MY each goes
+        from): a packet sent while a router fault has it out is lost at the router, and the
+        first one back goes from a new MY, marked in *marks* with the episode."""
+        absent, cause = self._out_of_network(ready_ns)
+        if absent is None:
+            return np.arange(len(ready_ns)), np.full(len(ready_ns), self.src16)
+        kept, src16 = [], []
+        for i in range(len(ready_ns)):
+            if absent[i]:
+                self._absent = self._absent or {"kind": cause.KIND, "fault": cause,
+                                                "t_ns": int(ready_ns[i]), "lost": 0}
+                self._absent["lost"] += 1
+                continue
+            if self._absent is not None:  # back in the network, under a new address
+                self.src16 = int(self._rejoin_rng.integers(1, 0xFFF8))
+                marks[i], self._absent = marks.get(i, ()) + ({**self._absent, "my": self.src16},), None
+            kept.append(i)
+            src16.append(self.src16)
+        return np.array(kept, dtype=np.int64), np.array(src16, dtype=np.int64)
 
     def _out_of_network(self, ready_ns):
         """(which packets the router sends while a router fault has it out of the network,

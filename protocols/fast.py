@@ -210,10 +210,12 @@ def rows_packer(st: c.Struct) -> Callable[..., np.ndarray]:
     """``pack(*columns) -> (n, size) uint8``: n payloads of a flat Struct at once, one row
     each, equal to n calls of :func:`packer_for`'s packer (the block builder of the frames a
     device writes a second at a time). The columns are the fields' values in declaration
-    order, an (n,) array per field, an (n, count) array per Array; a Const field is its
-    declared bytes and takes no column. The layout is a numpy structured type made from the
-    declaration (each field's width and byte order), so the bytes are numpy's assignment
-    into it; a value outside its field's range is refused, as ``struct.pack`` refuses it."""
+    order: per row, an (n,) array for a field, an (n, count) array for an Array; or one value
+    every row shares (an int, a (count,) array); at least one column per row. A Const field
+    is its declared bytes and takes no column. The layout is a numpy structured type made
+    from the declaration (each field's width and byte order), so the bytes are numpy's
+    assignment into it; a value outside its field's range is refused, as ``struct.pack``
+    refuses it."""
     fields, given, fixed = [], [], {}
     for i, sub in enumerate(st.subcons):
         name, inner = (sub.name, sub.subcon) if isinstance(sub, c.Renamed) else (None, sub)
@@ -223,25 +225,27 @@ def rows_packer(st: c.Struct) -> Callable[..., np.ndarray]:
             fixed[key] = np.frombuffer(inner.value, dtype=np.uint8)
         elif isinstance(inner, c.FormatField):
             fields.append((key, _numpy_type(inner)))
-            given.append((key, _limits(fields[-1][1])))
+            given.append((key, 0, _limits(fields[-1][1])))
         elif isinstance(inner, c.Array) and isinstance(inner.subcon, c.FormatField) \
                 and isinstance(inner.count, int):
             fields.append((key, _numpy_type(inner.subcon), (inner.count,)))
-            given.append((key, _limits(fields[-1][1])))
+            given.append((key, 1, _limits(fields[-1][1])))
         elif inner is not c.Terminated:
             raise TypeError(f"field {name!r} ({type(inner).__name__}) has no row form")
     layout = np.dtype(fields)
 
     def pack(*columns) -> np.ndarray:
         if len(columns) != len(given):
-            raise TypeError(f"{len(given)} columns ({', '.join(k for k, _ in given)}), "
+            raise TypeError(f"{len(given)} columns ({', '.join(k for k, _, _ in given)}), "
                             f"not {len(columns)}")
-        n = len(columns[0]) if columns else 0
+        columns = [np.asarray(v) for v in columns]
+        n = next((len(v) for v, (_, dims, _) in zip(columns, given) if v.ndim > dims), None)
+        if n is None:
+            raise TypeError("no column has a value per row: give one an array of n rows")
         rows = np.empty(n, dtype=layout)
         for key, value in fixed.items():
             rows[key] = value
-        for (key, limits), column in zip(given, columns):
-            column = np.asarray(column)
+        for (key, _, limits), column in zip(given, columns):
             if limits is not None and column.size and (column.min() < limits.min
                                                        or column.max() > limits.max):
                 raise ValueError(f"field {key!r}: a value outside {limits.min}..{limits.max}")

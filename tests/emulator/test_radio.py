@@ -165,3 +165,37 @@ def test_host_traffic_never_changes_the_device_streams():
         busy.downlinks["xbee"].unicast(t, 40)  # the host sends to the router now and then
     events += busy.advance(busy.duration_ns)
     assert events == quiet
+
+
+@pytest.mark.parametrize("loss", [0.0, 0.5, 1.0])
+def test_a_blocks_air_is_each_packets_attempts_then_the_ack_of_the_received_one(loss):
+    """Sender.block against the air written out per attempt: every attempt a packet made
+    carries its data frame (MAC seq counting the packets, src16 its own), and an ACK of the
+    same seq follows the attempt that was received, one turnaround after its end."""
+    from navtwin.emulator.radio import AirFrame, Sender
+    from navtwin.protocols import ieee802154, zigbee
+    from navtwin.protocols.ieee802154 import TURNAROUND_NS
+
+    spec = replace(load_scenario("office").link, per_attempt_loss=loss, max_retries=3)
+    ready = np.arange(300, dtype=np.int64) * 7_000_000
+    payloads = [bytes([k % 256]) * (30 if k % 7 else 44) for k in range(300)]
+    _, _, _, attempts = Link(spec, [], stream(4, "t")).transmit(ready, [len(p) for p in payloads])
+    which = np.flatnonzero(np.arange(300) % 5 != 2)  # the others left out (a router away)
+    src16 = [0x1000 + k for k in which.tolist()]
+    sender = Sender(0x3A7C)
+    sender.sent = 250  # the MAC sequence number wraps within the block
+    got = sender.block(attempts, which, src16, 0, [payloads[k] for k in which.tolist()])
+    expected = []
+    for n, (k, my) in enumerate(zip(which.tolist(), src16)):
+        seq = (250 + n) & 0xFF
+        psdu = ieee802154.data_frame(seq, 0x3A7C, 0, my, zigbee.data_packet(0, my, 0x1E, seq, seq, payloads[k]))
+        air = []
+        for a in range(int(attempts.count[k])):
+            air.append(AirFrame(int(attempts.on_air_ns[k, a]), psdu))
+            if not attempts.lost[k, a]:
+                air.append(AirFrame(int(attempts.on_air_ns[k, a] + attempts.air_ns[k]) + TURNAROUND_NS,
+                                    ieee802154.ack_frame(seq)))
+        expected.append(air)
+    assert got == expected and sender.sent == 250 + len(which)
+    # frames a packet: 2 when received at once, 5 at the last retry, 4 lost (no ACK)
+    assert {len(a) for a in got} == ({2} if loss == 0 else {4} if loss == 1 else {2, 3, 4, 5})
