@@ -61,22 +61,21 @@ class Router:
             return Packets(np.empty(0, dtype=np.int64), [])
         gap_after = np.diff(a, append=np.inf if next_byte_ns is None else next_byte_ns)
         ends = np.flatnonzero(gap_after > self.ro_ns) + 1  # exclusive ends of silent-gap runs
-        ready, payloads = [], []
-        start = 0
-        for end in ends.tolist():
-            for lo in range(start, end, self.np):
-                hi = min(lo + self.np, end)
-                full = hi - lo == self.np
-                ready.append(int(a[hi - 1]) + (0 if full else round(self.ro_ns)))
-                payloads.append(data[lo:hi])
-            start = end
-        # the open run: full NP chunks go now, the rest waits for more bytes
-        for lo in range(start, len(a) - self.np + 1, self.np):
-            ready.append(int(a[lo + self.np - 1]))
-            payloads.append(data[lo:lo + self.np])
-            start = lo + self.np
-        self._data, self._times = data[start:], a[start:]
-        return Packets(np.array(ready, dtype=np.int64), payloads)
+        # a closed run goes as NP chunks, the last one short; the open run after the last
+        # end sends its full NP chunks now, and the rest waits for more bytes
+        starts = np.concatenate(([0], ends))[:-1]
+        chunks = -(-(ends - starts) // self.np)
+        first = np.cumsum(chunks) - chunks  # each run's first chunk
+        lo = np.repeat(starts, chunks) + self.np * (np.arange(int(chunks.sum())) - np.repeat(first, chunks))
+        hi = np.minimum(lo + self.np, np.repeat(ends, chunks))
+        ready = a[hi - 1] + np.where(hi - lo == self.np, 0, round(self.ro_ns))
+        start = int(ends[-1]) if len(ends) else 0
+        full = start + self.np * np.arange(1, (len(a) - start) // self.np + 1)  # open run's ends
+        lo, hi = np.concatenate((lo, full - self.np)).tolist(), np.concatenate((hi, full)).tolist()
+        rest = int(full[-1]) if len(full) else start  # the bytes that wait
+        self._data, self._times = data[rest:], a[rest:]
+        return Packets(np.concatenate((ready, a[full - 1])).astype(np.int64),
+                       [data[i:j] for i, j in zip(lo, hi)])
 
 
 @dataclass(slots=True)

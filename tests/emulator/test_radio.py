@@ -199,3 +199,41 @@ def test_a_blocks_air_is_each_packets_attempts_then_the_ack_of_the_received_one(
     assert got == expected and sender.sent == 250 + len(which)
     # frames a packet: 2 when received at once, 5 at the last retry, 4 lost (no ACK)
     assert {len(a) for a in got} == ({2} if loss == 0 else {4} if loss == 1 else {2, 3, 4, 5})
+
+
+def packetised_by_the_byte(np_bytes: int, ro_ns: float, data: bytes, times, next_byte_ns):
+    """The router's packets, byte by byte as its firmware sees them: a packet closes at NP
+    bytes, or when the gap after a byte is longer than RO (never at the end of the bytes
+    given, when more come at *next_byte_ns*). (ready_ns, payloads, the bytes left open)."""
+    ready, payloads, lo = [], [], 0
+    after = list(times[1:]) + [math.inf if next_byte_ns is None else next_byte_ns]
+    for i, (t, gap_end) in enumerate(zip(times, after)):
+        if i + 1 - lo == np_bytes or gap_end - t > ro_ns:
+            ready.append(int(t) + (0 if i + 1 - lo == np_bytes else round(ro_ns)))
+            payloads.append(data[lo:i + 1])
+            lo = i + 1
+    return ready, payloads, data[lo:]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_packets_are_the_routers_byte_by_byte(seed):
+    """Random streams (bursts, silences, RO 0..4, NP 1..99) in blocks: the same packets,
+    ready times and open bytes as the byte-by-byte router."""
+    rng = np.random.default_rng(seed)
+    for _ in range(200):
+        np_bytes, ro = int(rng.integers(1, 100)), int(rng.integers(0, 5))
+        router, t, data_all, times_all = Router(np_bytes, ro, CHAR), 0, b"", []
+        got_ready, got = [], []
+        for block in range(4):
+            gaps = rng.choice([87, 87, 87, 200, 300, 1000, 5000], int(rng.integers(0, 300)))
+            times = t + np.cumsum(gaps).astype(np.int64)
+            t = int(times[-1]) if len(times) else t
+            data = rng.integers(0, 256, len(times), dtype=np.uint8).tobytes()
+            nxt = None if block == 3 else t + int(rng.choice([87, 500, 5000]))
+            p = router.packetise(data, times, nxt)
+            got_ready += p.ready_ns.tolist()
+            got += p.payloads
+            data_all, times_all = data_all + data, times_all + times.tolist()
+            t = t if nxt is None else nxt - 87
+        ready, payloads, left = packetised_by_the_byte(np_bytes, ro * CHAR, data_all, times_all, None)
+        assert (got_ready, got, router._data) == (ready, payloads, left)
