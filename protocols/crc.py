@@ -20,6 +20,9 @@ def crc16(data: bytes) -> int:
     return crc_hqx(data, CRC16_INIT)
 
 
+_BITS = (np.arange(256)[:, None] >> np.arange(8)) & 1 == 1  # (value, bit): the bit is set
+
+
 class RowsCrc:
     """A CRC of many messages of one length at once, as numpy columns, from the CRC of one
     message (*crc*: bytes -> int, a CRC-16: any polynomial, reflected or not, any init).
@@ -28,7 +31,7 @@ class RowsCrc:
     crc(M) = crc(0^L) ^ XOR_j c_j(M_j) over the L bytes, where c_j(v) is what byte value v at
     position j adds. Started from a zero register, leading zero bytes leave it zero, so c_j
     depends only on how many bytes follow j (d = L - 1 - j): c(v, d) = crc(v 0^d) ^ crc(0^(d+1)).
-    A table of 256 entries per d (made from *crc* itself, on first use of each length) turns
+    A table of 256 entries per d (made from *crc* itself, as far as the longest length used) turns
     the CRCs of n rows into one lookup of every (row, column) byte and one XOR across the
     columns: two numpy calls for a block, not one call per frame.
     """
@@ -40,11 +43,13 @@ class RowsCrc:
 
     def _tables(self, length: int) -> tuple[np.ndarray, int]:
         if length not in self._lengths:
-            have = len(self._by_d)
-            more = [[self.crc(bytes((v,)) + bytes(d)) ^ self.crc(bytes(d + 1)) for v in range(256)]
-                    for d in range(have, length)]
-            if more:
-                self._by_d = np.concatenate((self._by_d, np.array(more, dtype=np.uint16)))
+            # c(v, d) is linear in v too: the XOR of c(2^b, d) over v's set bits b, so eight
+            # calls of the CRC a distance make its 256 entries
+            basis = np.array([[self.crc(bytes((1 << b,)) + bytes(d)) ^ self.crc(bytes(d + 1))
+                               for b in range(8)] for d in range(len(self._by_d), length)],
+                             dtype=np.uint16).reshape(-1, 1, 8)
+            self._by_d = np.concatenate((self._by_d, np.bitwise_xor.reduce(
+                np.where(_BITS, basis, np.uint16(0)), axis=2)))
             self._lengths[length] = (self._by_d[length - 1::-1] if length else self._by_d[:0],
                                      self.crc(bytes(length)))
         return self._lengths[length]

@@ -41,6 +41,13 @@ def test_the_column_crc_is_the_crc_of_each_row(crc, length):
     assert RowsCrc(crc)(rows[:0]).tolist() == []
 
 
+def test_one_column_crc_serves_lengths_in_any_order():
+    rows_crc, rng = RowsCrc(crc16), np.random.default_rng(7)
+    for length in (30, 5, 41, 1, 30):
+        rows = rng.integers(0, 256, (9, length), dtype=np.uint8)
+        assert rows_crc(rows).tolist() == [crc16(r.tobytes()) for r in rows]
+
+
 def test_one_bit_changes_the_column_crc():
     rows = np.zeros((1, 26), dtype=np.uint8)
     flipped = rows.copy()
