@@ -264,9 +264,9 @@ class World:
         self._generated_ns = hi
 
     def _wait(self, block: list[Event], keys: np.ndarray) -> None:
-        """Join the block's events (keys: those that wait, then the block's) to those that
-        wait, in the order :meth:`advance` returns them: the key is (t_ns, port rank) as one
-        integer. A block's events are never earlier than the block (module doc), so those
+        """Join the events of a *block* to those that wait, in the order :meth:`advance`
+        returns them (*keys*: the order keys of those that wait, then of the block's; a key is
+        (t_ns, port rank) as one integer). A block's events are never earlier than the block (module doc), so those
         that wait can take it before they are asked for: advance() returns none before their
         time. A stable sort keeps generation order among equal keys (one port's events, made
         in its order); events at or after the run's end are dropped."""
