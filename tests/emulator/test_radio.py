@@ -237,3 +237,22 @@ def test_the_packets_are_the_routers_byte_by_byte(seed):
             t = t if nxt is None else nxt - 87
         ready, payloads, left = packetised_by_the_byte(np_bytes, ro * CHAR, data_all, times_all, None)
         assert (got_ready, got, router._data) == (ready, payloads, left)
+
+
+def test_a_transmit_requests_frame_has_its_own_radius_and_endpoints():
+    """The coordinator's one packet (Sender.frames) with a 0x11's endpoints, cluster, profile
+    and radius: its data frame is the builders' with those, not the router's defaults made
+    before for the same addresses."""
+    from navtwin.emulator.radio import Sender
+    from navtwin.protocols import ieee802154, zigbee
+
+    spec = replace(load_scenario("office").link, per_attempt_loss=0.0)
+    _, _, _, attempts = Link(spec, [], stream(4, "t")).transmit(np.array([0, 10**7]), [5, 5])
+    sender = Sender(0x3A7C)
+    plain = sender.frames(attempts, 0, 0, 0x5B21, b"hello")
+    aps = dict(src_endpoint=0, dest_endpoint=0, cluster=0x0031, profile=0)
+    own = sender.frames(attempts, 1, 0, 0x5B21, b"hello", 5, **aps)
+    assert plain[0].psdu == ieee802154.data_frame(0, 0x3A7C, 0x5B21, 0, zigbee.data_packet(
+        0x5B21, 0, 0x1E, 0, 0, b"hello"))
+    assert own[0].psdu == ieee802154.data_frame(1, 0x3A7C, 0x5B21, 0, zigbee.data_packet(
+        0x5B21, 0, 5, 1, 1, b"hello", **aps)) != plain[0].psdu
