@@ -62,7 +62,7 @@ EVENT_ORDER = (ports.SINS.name, ports.NANOLOC.name, ports.XBEE.name)
 _T_NS = attrgetter("t_ns")
 
 
-def _events(t_ns: np.ndarray, port: str, data: list, marks: dict) -> list[Event]:
+def _port_events(t_ns: np.ndarray, port: str, data: list, marks: dict) -> list[Event]:
     """The events of one port's block: data[i] at t_ns[i], with the ledger marks by index."""
     return rows(Event, t_ns.tolist(), repeat(port), data,
                 [marks.get(i, ()) for i in range(len(data))] if marks else repeat(()))
@@ -125,7 +125,7 @@ class Vehicle:
         the network is not offered): ``(sins events, offered packets)``."""
         self.imu.generate(lo, hi)
         t_sins, frames, marks = self.board.frames(lo, hi)
-        events = _events(t_sins, self.sins_port, frames, marks)
+        events = _port_events(t_sins, self.sins_port, frames, marks)
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
         times = self.board.byte_times(t_sins, [len(f) for f in frames])
         packets = self.router.packetise(b"".join(frames), times, next_byte)
@@ -136,7 +136,7 @@ class Vehicle:
             [packets.payloads[i] for i in kept.tolist()]
         air = self.sender.block(attempts, kept, src16.tolist(), COORDINATOR16, payloads) if self.air \
             else [[]] * len(kept)
-        received = _events(arrival[kept], self.xbee_port, rows(
+        received = _port_events(arrival[kept], self.xbee_port, rows(
             RfPacket, repeat(self.src64), src16.tolist(), repeat(OPT_ACKNOWLEDGED), payloads),
             {j: marks[i] for j, i in enumerate(kept.tolist()) if i in marks} if marks else marks)
         received = [e if ok else None for e, ok in zip(received, delivered[kept].tolist())]
@@ -253,7 +253,7 @@ class World:
             air += a
         for port, network in self.networks.items():
             t_nl, reports, marks = network.reports(lo, hi)
-            made.append((port, _events(t_nl, port, reports, marks)))
+            made.append((port, _port_events(t_nl, port, reports, marks)))
         self._wait([e for _, events in made for e in events], np.concatenate(
             [self._keys] + [np.fromiter(map(_T_NS, events), np.int64, len(events)) * len(self._rank)
                             + self._rank[port] for port, events in made]))
