@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from navtwin.protocols.fast import frames_of
 from navtwin.protocols.sins import build_magnetometer
 from navtwin.protocols.serial import char_ns
 
@@ -78,9 +79,7 @@ class Board:
             seq = k - self._k0
         if len(k):
             self._last_k = int(k[-1])  # the last frame written
-        words = self.imu.read(t - self.spi_read_ns).tolist()
-        frame = self.imu.words.frame
-        frames = [frame(s, w) for s, w in zip(seq.tolist(), words)]
+        frames = frames_of(self.imu.words.frames(seq, self.imu.read(t - self.spi_read_ns)))
         if not self.every:
             return t, frames, marks
         return self._with_magnetometer(t, seq, frames, marks)

@@ -48,8 +48,9 @@ class Adis16350Words:
         return out
 
     @staticmethod
-    def frame(seq: int, row: list) -> bytes:
-        return sins.build_sample(seq, row)
+    def frames(seq: np.ndarray, words: np.ndarray) -> np.ndarray:
+        """The block's sample frames, one a row (protocols.sins.build_samples)."""
+        return sins.build_samples(seq, words)
 
 
 class Adis16488Words:
@@ -73,8 +74,9 @@ class Adis16488Words:
                                 wide.counts(accel_m_s2 / adis.STANDARD_GRAVITY, wide.ACCEL_LSB_G)))
 
     @staticmethod
-    def frame(seq: int, row: list) -> bytes:
-        return sins.build_wide_sample(seq, row[0], row[1:4], row[4:7], row[7:10], row[10])
+    def frames(seq: np.ndarray, words: np.ndarray) -> np.ndarray:
+        """The block's wide sample frames, one a row (protocols.sins.build_wide_samples)."""
+        return sins.build_wide_samples(seq, words)
 
 
 #: ``[imu] words``: the kinds of words by name, and the lab's (a scenario that names none)

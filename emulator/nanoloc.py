@@ -66,7 +66,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from navtwin.protocols.nanoloc import (FRAME_SIZE, NARROW_IDS, SPEED_OF_LIGHT, STATUS_COMPLETE,
-                                      STATUS_TIMEOUT, STATUS_VALUE_ERROR, WIDE_FRAME_SIZE, build_report)
+                                      STATUS_TIMEOUT, STATUS_VALUE_ERROR, WIDE_FRAME_SIZE, build_reports)
+from navtwin.protocols.fast import frames_of
 from navtwin.protocols.serial import char_ns
 
 from .clock import serial_queue
@@ -258,9 +259,7 @@ class NanolocNetwork:
             self.busy_until = int(end[-1])
         seq = self.seq
         self.seq += len(start)
-        reports = [build_report(seq=seq + n, t_us=t_us, anchor=a, tag=tag, status=st, rssi=rs, tau=tau,
+        reports = build_reports(seq=seq + np.arange(len(start)), t_us=x["t_us"], anchor=x["anchor"],
+                                tag=x["tag"], status=x["status"], rssi=x["rssi"], tau=x["tau"],
                                 wide=self.wide)
-                   for n, (t_us, a, tag, st, rs, tau) in enumerate(zip(
-                       x["t_us"].tolist(), x["anchor"].tolist(), x["tag"].tolist(),
-                       x["status"].tolist(), x["rssi"].tolist(), x["tau"].tolist()))]
-        return start, reports, x["marks"]
+        return start, frames_of(reports), x["marks"]

@@ -35,7 +35,8 @@ from __future__ import annotations
 import bisect
 import contextlib
 from dataclasses import dataclass
-from operator import attrgetter, itemgetter
+from itertools import repeat
+from operator import attrgetter
 
 import numpy as np
 
@@ -44,7 +45,7 @@ from navtwin.protocols.zigbee import COORDINATOR16
 
 from .board import Board
 from .channel import Channel, Offered
-from .events import Event, RfPacket
+from .events import Event, RfPacket, rows
 from .faults import acting_on
 from .imu import Adis16350
 from .magnetometer import Magnetometer
@@ -59,6 +60,12 @@ from .truth import truth_arrays
 #: never depends on how the devices were generated
 EVENT_ORDER = (ports.SINS.name, ports.NANOLOC.name, ports.XBEE.name)
 _T_NS = attrgetter("t_ns")
+
+
+def _port_events(t_ns: np.ndarray, port: str, data: list, marks: dict) -> list[Event]:
+    """The events of one port's block: data[i] at t_ns[i], with the ledger marks by index."""
+    return rows(Event, t_ns.tolist(), repeat(port), data,
+                [marks.get(i, ()) for i in range(len(data))] if marks else repeat(()))
 
 
 @dataclass(slots=True)
@@ -118,30 +125,45 @@ class Vehicle:
         the network is not offered): ``(sins events, offered packets)``."""
         self.imu.generate(lo, hi)
         t_sins, frames, marks = self.board.frames(lo, hi)
-        events = [Event(t, self.sins_port, f, marks.get(i, ())) for i, (t, f) in enumerate(zip(t_sins.tolist(), frames))]
+        events = _port_events(t_sins, self.sins_port, frames, marks)
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
         times = self.board.byte_times(t_sins, [len(f) for f in frames])
         packets = self.router.packetise(b"".join(frames), times, next_byte)
-        arrival, delivered, lost, attempts = self.uplink.transmit(
+        arrival, delivered, marks, attempts = self.uplink.transmit(
             packets.ready_ns, [len(p) for p in packets.payloads])
-        offered, (absent, cause) = [], self._out_of_network(packets.ready_ns)
-        for i, (t, p, ok) in enumerate(zip(arrival.tolist(), packets.payloads, delivered.tolist())):
-            marks = lost.get(i, ())
-            if absent is not None:
-                if absent[i]:
-                    self._absent = self._absent or {"kind": cause.KIND, "fault": cause,
-                                                    "t_ns": int(packets.ready_ns[i]), "lost": 0}
-                    self._absent["lost"] += 1
-                    continue
-                if self._absent is not None:  # back in the network, under a new address
-                    self.src16 = int(self._rejoin_rng.integers(1, 0xFFF8))
-                    marks, self._absent = marks + ({**self._absent, "my": self.src16},), None
-            offered.append(Offered(
-                self.number, int(attempts.start_ns[i]), int(attempts.service[i]),
-                Event(t, self.xbee_port, RfPacket(self.src64, self.src16, OPT_ACKNOWLEDGED, p), marks)
-                if ok else None,
-                self.sender.frames(attempts, i, self.src16, COORDINATOR16, p) if self.air else []))
+        kept, src16 = self._in_network(packets.ready_ns, marks)
+        payloads = packets.payloads if len(kept) == len(packets.payloads) else \
+            [packets.payloads[i] for i in kept.tolist()]
+        air = self.sender.block(attempts, kept, src16.tolist(), COORDINATOR16, payloads) if self.air \
+            else [[]] * len(kept)
+        received = _port_events(arrival[kept], self.xbee_port, rows(
+            RfPacket, repeat(self.src64), src16.tolist(), repeat(OPT_ACKNOWLEDGED), payloads),
+            {j: marks[i] for j, i in enumerate(kept.tolist()) if i in marks} if marks else marks)
+        received = [e if ok else None for e, ok in zip(received, delivered[kept].tolist())]
+        offered = rows(Offered, repeat(self.number), attempts.start_ns[kept].tolist(),
+                       attempts.service[kept].tolist(), received, air)
         return events, offered
+
+    def _in_network(self, ready_ns, marks: dict):
+        """(the block's packets the router sends while in the network, the MY each goes
+        from): a packet sent while a router fault has it out is lost at the router, and the
+        first one back goes from a new MY, marked in *marks* with the episode."""
+        absent, cause = self._out_of_network(ready_ns)
+        if absent is None:
+            return np.arange(len(ready_ns)), np.full(len(ready_ns), self.src16)
+        kept, src16 = [], []
+        for i in range(len(ready_ns)):
+            if absent[i]:
+                self._absent = self._absent or {"kind": cause.KIND, "fault": cause,
+                                                "t_ns": int(ready_ns[i]), "lost": 0}
+                self._absent["lost"] += 1
+                continue
+            if self._absent is not None:  # back in the network, under a new address
+                self.src16 = int(self._rejoin_rng.integers(1, 0xFFF8))
+                marks[i], self._absent = marks.get(i, ()) + ({**self._absent, "my": self.src16},), None
+            kept.append(i)
+            src16.append(self.src16)
+        return np.array(kept, dtype=np.int64), np.array(src16, dtype=np.int64)
 
     def _out_of_network(self, ready_ns):
         """(which packets the router sends while a router fault has it out of the network,
@@ -198,7 +220,9 @@ class World:
         names = [ports.instance(p, n) for p in EVENT_ORDER for n in every]
         self._rank = {name: i for i, name in enumerate(names)}
         self._generated_ns = 0  # blocks before this are generated
-        self._pending: list[tuple[int, Event]] = []  # generated, not returned, keyed, in order
+        #: generated, not returned, in order, and their order keys (:meth:`_wait`)
+        self._events: list[Event] = []
+        self._keys = np.empty(0, dtype=np.int64)
         self._returned_ns = 0
         self._air: list[AirFrame] = []  # generated, in order; those before _air_at returned
         self._air_at = 0
@@ -212,11 +236,11 @@ class World:
         into the events that wait."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
-        keyed, air = [], []
+        made, air = [], []  # made: each port's events of the block, in generation order
         offered: dict[str, list[Offered]] = {}
         for vehicle in self.vehicles:
             s, packets = vehicle.block(lo, hi, hi < self.duration_ns)
-            keyed += self._keyed(s)
+            made.append((vehicle.sins_port, s))
             offered.setdefault(vehicle.xbee_port, []).append(packets)
         for port, shares in offered.items():
             channel = self.channels.get(port)
@@ -225,29 +249,31 @@ class World:
             else:  # a router alone on its channel: its link's own schedule
                 r = [p.event for share in shares for p in share if p.event is not None]
                 a = [f for share in shares for p in share for f in p.air]
-            keyed += self._keyed(r)
+            made.append((port, r))
             air += a
         for port, network in self.networks.items():
             t_nl, reports, marks = network.reports(lo, hi)
-            keyed += self._keyed([Event(t, port, r, marks.get(i, ())) for i, (t, r) in enumerate(zip(t_nl.tolist(), reports))])
-        # a block's events are never earlier than the block (module doc), so those that wait
-        # can take it before they are asked for: advance() returns none before their time.
-        # A stable sort keeps generation order among equal keys (one port's events, made in
-        # its order); sorted here, the block joins those that wait as a merge of two sorted runs
-        keyed.sort(key=itemgetter(0))
-        self._pending += keyed
-        self._pending.sort(key=itemgetter(0))
+            made.append((port, _port_events(t_nl, port, reports, marks)))
+        self._wait([e for _, events in made for e in events], np.concatenate(
+            [self._keys] + [np.fromiter(map(_T_NS, events), np.int64, len(events)) * len(self._rank)
+                            + self._rank[port] for port, events in made]))
         if air:  # the returned dropped here, once a block: air() copies none
             self._air = self._air[self._air_at:] + [f for f in air if f.t_ns < self.duration_ns]
             self._air.sort(key=_T_NS)  # stable: an ACK stays after its frame
             self._air_at = 0
         self._generated_ns = hi
 
-    def _keyed(self, events: list[Event]) -> list[tuple[int, Event]]:
-        """(order key, event) of *events* within the run: the key is (t_ns, port rank) as
-        one integer, the order :meth:`advance` returns them in."""
-        rank, ranks, end = self._rank, len(self._rank), self.duration_ns
-        return [(e.t_ns * ranks + rank[e.port], e) for e in events if e.t_ns < end]
+    def _wait(self, block: list[Event], keys: np.ndarray) -> None:
+        """Join the events of a *block* to those that wait, in the order :meth:`advance`
+        returns them (*keys*: the order keys of those that wait, then of the block's; a key is
+        (t_ns, port rank) as one integer). A block's events are never earlier than the block (module doc), so those
+        that wait can take it before they are asked for: advance() returns none before their
+        time. A stable sort keeps generation order among equal keys (one port's events, made
+        in its order); events at or after the run's end are dropped."""
+        events = self._events + block
+        order = np.argsort(keys, kind="stable")
+        order = order[keys[order] < self.duration_ns * len(self._rank)]
+        self._keys, self._events = keys[order], [events[i] for i in order.tolist()]
 
     def made(self, until_ns: int) -> bool:
         """Whether the blocks before *until_ns* are made, so ``advance`` up to it returns at
@@ -266,9 +292,8 @@ class World:
             return []
         while self._generated_ns < until_ns:
             self._make()
-        cut = bisect.bisect_left(self._pending, until_ns * len(self._rank), key=itemgetter(0))
-        out = [e for _, e in self._pending[:cut]]
-        del self._pending[:cut]
+        cut = int(np.searchsorted(self._keys, until_ns * len(self._rank)))
+        out, self._events, self._keys = self._events[:cut], self._events[cut:], self._keys[cut:]
         self._returned_ns = until_ns
         return out
 

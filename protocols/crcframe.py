@@ -13,7 +13,9 @@ Unknown types are kept as raw payload bytes, so a reader can skip them by ``len`
 from construct import (Checksum, Const, GreedyBytes, Int8ub, Int16ub, Prefixed, RawCopy, Struct,
                        Switch, this)
 
-from .crc import crc16
+import numpy as np
+
+from .crc import crc16, crc16_rows
 
 HEADER = 4  # sync + type + len
 TRAILER = 2  # crc
@@ -24,6 +26,19 @@ def encode(sync: bytes, ftype: int, payload: bytes) -> bytes:
     body = bytes((ftype, len(payload))) + payload
     c = crc16(body)
     return sync + body + bytes((c >> 8, c & 0xFF))
+
+
+def encode_rows(sync: bytes, ftype: int, payloads: np.ndarray) -> np.ndarray:
+    """The frames around the rows of *payloads* ((n, len) uint8), one a row: :func:`encode`
+    of each, the CRCs column by column (protocols.crc.RowsCrc)."""
+    n, size = payloads.shape
+    out = np.empty((n, HEADER + size + TRAILER), dtype=np.uint8)
+    out[:, :2] = np.frombuffer(sync, dtype=np.uint8)
+    out[:, 2:4] = (ftype, size)
+    out[:, HEADER:-TRAILER] = payloads
+    c = crc16_rows(out[:, 2:-TRAILER])
+    out[:, -2], out[:, -1] = c >> 8, c & 0xFF
+    return out
 
 
 def crc_framed(sync: bytes, payloads: dict):

@@ -23,10 +23,11 @@ Wide ranging report (type 02, len ``1C`` = 28, 34 bytes): the same fields with `
 its network exceeds 254; a reader that knows only type 01 skips it by len, as the reserved
 types, so the extension is compatible.
 """
+import numpy as np
 from construct import Array, Int8sb, Int8ub, Int16ub, Int32ub, Struct, Terminated
 
-from .crcframe import crc_framed, encode
-from .fast import packer_for
+from .crcframe import crc_framed, encode, encode_rows
+from .fast import packer_for, rows_packer
 
 SYNC = b"\x4e\x4c"
 TYPE_RANGING = 0x01
@@ -88,3 +89,15 @@ def build_report(*, seq, t_us, anchor, tag, status, rssi, tau, wide: bool = Fals
     ``NanolocFrame.build``). Counters wrap."""
     ftype = TYPE_WIDE_RANGING if wide else TYPE_RANGING
     return encode(SYNC, ftype, _PACK[ftype](seq & 0xFFFF, t_us & 0xFFFFFFFF, anchor, tag, status, rssi, *tau))
+
+
+_ROWS = {t: rows_packer(st) for t, st in LAYOUTS.items()}
+
+
+def build_reports(*, seq, t_us, anchor, tag, status, rssi, tau, wide: bool = False) -> np.ndarray:
+    """The reports of a block, one an (n, 32) uint8 row ((n, 34) with *wide*): each field an
+    (n,) array, *tau* (n, 4) (= :func:`build_report` of each row). Counters wrap."""
+    ftype = TYPE_WIDE_RANGING if wide else TYPE_RANGING
+    return encode_rows(SYNC, ftype, _ROWS[ftype](np.asarray(seq) & 0xFFFF,
+                                                 np.asarray(t_us) & 0xFFFFFFFF, anchor, tag,
+                                                 status, rssi, tau))

@@ -165,3 +165,94 @@ def test_host_traffic_never_changes_the_device_streams():
         busy.downlinks["xbee"].unicast(t, 40)  # the host sends to the router now and then
     events += busy.advance(busy.duration_ns)
     assert events == quiet
+
+
+@pytest.mark.parametrize("loss", [0.0, 0.5, 1.0])
+def test_a_blocks_air_is_each_packets_attempts_then_the_ack_of_the_received_one(loss):
+    """Sender.block against the air written out per attempt: every attempt a packet made
+    carries its data frame (MAC seq counting the packets, src16 its own), and an ACK of the
+    same seq follows the attempt that was received, one turnaround after its end."""
+    from navtwin.emulator.radio import AirFrame, Sender
+    from navtwin.protocols import ieee802154, zigbee
+    from navtwin.protocols.ieee802154 import TURNAROUND_NS
+
+    spec = replace(load_scenario("office").link, per_attempt_loss=loss, max_retries=3)
+    ready = np.arange(300, dtype=np.int64) * 7_000_000
+    payloads = [bytes([k % 256]) * (30 if k % 7 else 44) for k in range(300)]
+    _, _, _, attempts = Link(spec, [], stream(4, "t")).transmit(ready, [len(p) for p in payloads])
+    which = np.flatnonzero(np.arange(300) % 5 != 2)  # the others left out (a router away)
+    src16 = [0x1000 + k for k in which.tolist()]
+    sender = Sender(0x3A7C)
+    sender.sent = 250  # the MAC sequence number wraps within the block
+    got = sender.block(attempts, which, src16, 0, [payloads[k] for k in which.tolist()])
+    expected = []
+    for n, (k, my) in enumerate(zip(which.tolist(), src16)):
+        seq = (250 + n) & 0xFF
+        psdu = ieee802154.data_frame(seq, 0x3A7C, 0, my, zigbee.data_packet(0, my, 0x1E, seq, seq, payloads[k]))
+        air = []
+        for a in range(int(attempts.count[k])):
+            air.append(AirFrame(int(attempts.on_air_ns[k, a]), psdu))
+            if not attempts.lost[k, a]:
+                air.append(AirFrame(int(attempts.on_air_ns[k, a] + attempts.air_ns[k]) + TURNAROUND_NS,
+                                    ieee802154.ack_frame(seq)))
+        expected.append(air)
+    assert got == expected and sender.sent == 250 + len(which)
+    # frames a packet: 2 when received at once, 5 at the last retry, 4 lost (no ACK)
+    assert {len(a) for a in got} == ({2} if loss == 0 else {4} if loss == 1 else {2, 3, 4, 5})
+
+
+def packetised_by_the_byte(np_bytes: int, ro_ns: float, data: bytes, times, next_byte_ns):
+    """The router's packets, byte by byte as its firmware sees them: a packet closes at NP
+    bytes, or when the gap after a byte is longer than RO (never at the end of the bytes
+    given, when more come at *next_byte_ns*). (ready_ns, payloads, the bytes left open)."""
+    ready, payloads, lo = [], [], 0
+    after = list(times[1:]) + [math.inf if next_byte_ns is None else next_byte_ns]
+    for i, (t, gap_end) in enumerate(zip(times, after)):
+        if i + 1 - lo == np_bytes or gap_end - t > ro_ns:
+            ready.append(int(t) + (0 if i + 1 - lo == np_bytes else round(ro_ns)))
+            payloads.append(data[lo:i + 1])
+            lo = i + 1
+    return ready, payloads, data[lo:]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_packets_are_the_routers_byte_by_byte(seed):
+    """Random streams (bursts, silences, RO 0..4, NP 1..99) in blocks: the same packets,
+    ready times and open bytes as the byte-by-byte router."""
+    rng = np.random.default_rng(seed)
+    for _ in range(200):
+        np_bytes, ro = int(rng.integers(1, 100)), int(rng.integers(0, 5))
+        router, t, data_all, times_all = Router(np_bytes, ro, CHAR), 0, b"", []
+        got_ready, got = [], []
+        for block in range(4):
+            gaps = rng.choice([87, 87, 87, 200, 300, 1000, 5000], int(rng.integers(0, 300)))
+            times = t + np.cumsum(gaps).astype(np.int64)
+            t = int(times[-1]) if len(times) else t
+            data = rng.integers(0, 256, len(times), dtype=np.uint8).tobytes()
+            nxt = None if block == 3 else t + int(rng.choice([87, 500, 5000]))
+            p = router.packetise(data, times, nxt)
+            got_ready += p.ready_ns.tolist()
+            got += p.payloads
+            data_all, times_all = data_all + data, times_all + times.tolist()
+            t = t if nxt is None else nxt - 87
+        ready, payloads, left = packetised_by_the_byte(np_bytes, ro * CHAR, data_all, times_all, None)
+        assert (got_ready, got, router._data) == (ready, payloads, left)
+
+
+def test_a_transmit_requests_frame_has_its_own_radius_and_endpoints():
+    """The coordinator's one packet (Sender.frames) with a 0x11's endpoints, cluster, profile
+    and radius: its data frame is the builders' with those, not the router's defaults made
+    before for the same addresses."""
+    from navtwin.emulator.radio import Sender
+    from navtwin.protocols import ieee802154, zigbee
+
+    spec = replace(load_scenario("office").link, per_attempt_loss=0.0)
+    _, _, _, attempts = Link(spec, [], stream(4, "t")).transmit(np.array([0, 10**7]), [5, 5])
+    sender = Sender(0x3A7C)
+    plain = sender.frames(attempts, 0, 0, 0x5B21, b"hello")
+    aps = dict(src_endpoint=0, dest_endpoint=0, cluster=0x0031, profile=0)
+    own = sender.frames(attempts, 1, 0, 0x5B21, b"hello", 5, **aps)
+    assert plain[0].psdu == ieee802154.data_frame(0, 0x3A7C, 0x5B21, 0, zigbee.data_packet(
+        0x5B21, 0, 0x1E, 0, 0, b"hello"))
+    assert own[0].psdu == ieee802154.data_frame(1, 0x3A7C, 0x5B21, 0, zigbee.data_packet(
+        0x5B21, 0, 5, 1, 1, b"hello", **aps)) != plain[0].psdu
