@@ -12,6 +12,20 @@ from navtwin.protocols.serial import wire_ns
 from navtwin.emulator.world import World
 
 
+class _Moody(Wire):
+    """A device whose frames depend on a mode the host sets (as the coordinator's AO does)."""
+
+    def __init__(self):
+        super().__init__(115200)
+        self.mode = 0
+
+    def render(self, t, item):
+        return bytes([self.mode]) * self.mode + item
+
+    def size(self, t, item):
+        return len(self.render(t, item))
+
+
 class Timer:
     def __init__(self, t):
         self.t = t
@@ -55,25 +69,31 @@ def test_a_line_gets_a_deadline_when_it_gets_a_chunk():
     assert d.next() is None
     line.put(1_000, b"x" * 10)
     d.touch("sins")
+    assert d.next() == 1_000  # the chunk starts (a wire's: in the burst of every car's)
+    assert d.due(1_000) == ["sins"]
+    line.poll(1_000, 10**9, 10**9)
+    assert d.next() == line.next_ns() > 1_000  # now: its end
+
+
+def test_a_device_that_tells_the_size_gets_the_deadline_of_the_chunks_end():
+    """A device that can say what it will render (the coordinator's RF packets) gives the
+    line the deadline of the chunk's end, and the poll there takes the start too; a marked
+    item (its ledger entry) or a device without size gets the deadline of its start."""
+    line = Line("xbee", _Moody())
+    d = Deadlines({"xbee": line})
+    line.put(1_000, b"x" * 10)
+    d.touch("xbee")
     end = 1_000 + wire_ns(10, 115200)
-    assert d.next() == end  # not its start: the poll at its end takes the start too
+    assert d.next() == end
     assert d.due(end - 1) == []
-    assert d.due(end) == ["sins"]
+    assert d.due(end) == ["xbee"]
     assert [c.end_ns for c in line.poll(end, 10**9, 10**9)] == [end]
     assert d.next() is None
-
-
-def test_a_line_without_its_devices_size_wakes_at_the_start():
-    """A device that cannot say what it will render (a reply that may reconfigure it, a
-    marked item, a device without size) gets the deadline of the chunk's start."""
-    class Unsized(Wire):
-        size = None
-
-    line = Line("xbee", Unsized(115200))
-    line.put(1_000, b"x" * 10)
-    assert line.next_ns() == 1_000
-    line = Line("sins", Wire(115200))
+    line = Line("xbee", _Moody())
     line.put(1_000, Marked(b"x" * 10, ({"kind": "k"},)))
+    assert line.next_ns() == 1_000
+    line = Line("xbee", Wire(115200))
+    line.put(1_000, b"x" * 10)
     assert line.next_ns() == 1_000
 
 
@@ -81,7 +101,7 @@ def test_catch_up_takes_the_steps_and_keeps_the_chunks_for_the_poll():
     """A change from outside the timeline at t finds the line as a poll at every step
     would: the chunk that started before t is on the wire, and the chunks that ended are
     given by the next poll, in order."""
-    line = Line("sins", Wire(115200))
+    line = Line("xbee", _Moody())
     line.put(0, b"a" * 10)
     line.put(10, b"b" * 10)
     a_end = wire_ns(10, 115200)
@@ -128,20 +148,6 @@ def test_turns_spread_each_item_once_a_period():
     assert t.due(5000) == list("abcd")  # a stall of 35 periods: each once
     assert t.due(5000) == []
     assert Turns([], 100, 0).due(10**9) == []
-
-
-class _Moody(Wire):
-    """A device whose frames depend on a mode the host sets (as the coordinator's AO does)."""
-
-    def __init__(self):
-        super().__init__(115200)
-        self.mode = 0
-
-    def render(self, t, item):
-        return bytes([self.mode]) * self.mode + item
-
-    def size(self, t, item):
-        return len(self.render(t, item))
 
 
 def _played(lazy: bool, items, changes) -> list:
