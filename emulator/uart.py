@@ -213,9 +213,10 @@ class Line(_Wrapped):
     and woke the loop twice each); a :class:`Wire` does not say, on purpose: the cars' SINS
     frames and reports start together, so their starts cost one wake-up for all of them,
     and taken there they stay out of the burst of their ends (taken at the ends, they made
-    a burst of 50 cars 1 ms late 3-10 times as often, `navtwin bench emulator-writes`). What changes a line or its device from outside the timeline (the host's
-    bytes at the device, a live fault) comes after :meth:`catch_up` to its time, so it finds
-    the line as a poll at every step would have left it.
+    a burst of 50 cars 1 ms late 3-10 times as often: ``navtwin bench emulator-writes``).
+    What changes a line or its device from outside the timeline (the host's bytes at the
+    device, a live fault) comes after :meth:`catch_up` to its time, so it finds the line as
+    a poll at every step would have left it.
     """
 
     def __init__(self, name: str, device: Any, wrappers: Iterable[LineWrapper] = (),
