@@ -425,7 +425,7 @@ class Emulation:
         paced = self.speed is not None
         feed = self.prepare()
         t0 = self.t0_monotonic_ns = start_monotonic_ns or time.monotonic_ns()
-        self._turns = Turns(self.ports.values(), CHECK_NS, time.monotonic_ns())
+        self._turns = Turns(self.ports.values(), CHECK_NS, t0)  # every port at the clock's start
         next_progress = t0 + PROGRESS_NS if self.progress else END
         next_flush = t0 + FLUSH_NS if self.recorder is not None else END
         try:

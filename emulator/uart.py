@@ -221,7 +221,8 @@ class Line(_Wrapped):
 
     def __init__(self, name: str, device: Any, wrappers: Iterable[LineWrapper] = (),
                  ledger=None) -> None:
-        self.device = device  # .baud, .admit(t_ns, item, queued) and .render(t_ns, item)
+        # .baud, .admit(t_ns, item, queued), .render(t_ns, item), and optionally .size(t_ns, item)
+        self.device = device
         self._pending: list = []  # heap of (ready, seq, item) not yet in the buffer
         self._queue: deque = deque()  # (ready, item, size) in the buffer, in ready order
         self._pieces: deque = deque()  # (start, data, baud) of the chunk being sent, not started
