@@ -70,7 +70,7 @@ class Turns:
     *start_ns*, then turn k (k >= n) at ``start + (k - n + 1) period / n``, and :meth:`due`
     gives those whose slot has come. So the looks are spread over the wake-ups the loop has
     anyway, a few at each: the ports' ``tcgetattr``, every port's at once every 10 ms, held
-    up the writes due meanwhile (0.4 ms of the loop at 25 cars)."""
+    up the writes due meanwhile."""
 
     def __init__(self, items, period_ns: int, start_ns: int) -> None:
         self.items = list(items)
