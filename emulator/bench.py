@@ -165,50 +165,98 @@ def jitter_beside(seconds: float, scenarios: list[str], timings: list[str] = ("a
 FRAME_BYTES = 30  # the bare pair's frame: a SINS frame's size
 
 
-def _bare_writer(master: int, frames: int, start_ns: int, period_ns: int) -> None:
-    """Write a frame at start + k x period: sleep, then spin the last 0.5 ms."""
-    for k in range(frames):
-        due = start_ns + k * period_ns
+def _bare_writer(masters: list[int], writes: list[tuple[int, int]]) -> None:
+    """Write a frame on ``masters[i]`` at each ``(due_ns, i)`` of *writes* (in order): sleep,
+    then spin the last 0.5 ms."""
+    frame = b"\x00" * FRAME_BYTES
+    for due, i in writes:
         while (left := due - time.monotonic_ns()) > 0:
             if left > 600_000:
                 time.sleep((left - 500_000) / 1e9)
-        os.write(master, b"\x00" * FRAME_BYTES)
+        os.write(masters[i], frame)
+
+
+def nominal_period_ns(ends_ns) -> int:
+    """A port's schedule, from its chunks' device ends: the median interval to the ms (the
+    SINS board's 10 ms on its clock's ppm, the gateway's 25 ms cycle, the coordinator's
+    packets about the routers' 10 ms), the period of the bare pair it is judged against."""
+    return int(round(float(np.median(np.diff(np.asarray(ends_ns, dtype=np.int64)))), -6))
+
+
+def period_key(period_ns: int) -> str:
+    """A bare pair's name in a benchmark's output: its period, ``10 ms``."""
+    return f"{period_ns / 1e6:g} ms"
+
+
+def port_periods(scenario, seed: int | None = None, seconds: float = 2.0) -> dict[str, int]:
+    """Each port's schedule (:func:`nominal_period_ns`) in the first *seconds* of *scenario*
+    (a Scenario) made in memory: the bare pairs a benchmark runs beside it, one per period."""
+    from collections import defaultdict
+
+    from .runner import Emulation
+
+    ends = defaultdict(list)
+    with Emulation(scenario, 1 if seed is None else seed, speed=None, duration_s=seconds,
+                   ports=False, sink=lambda c: ends[c.port].append(c.end_ns)) as emu:
+        emu.run()
+    return {port: nominal_period_ns(e) for port, e in ends.items() if len(e) >= 2}
 
 
 def pty_floor(frames: int = 3000, period_ns: int = 10_000_000) -> dict:
-    """The same reader measure on a bare PTY pair: a separate process writes 30 bytes every
-    10 ms on an exact schedule, this one reads (``select``, then one ``read(2)`` of what is
+    """The same reader measure on one bare PTY pair (:func:`pty_floors`)."""
+    return pty_floors({period_ns: frames})[period_ns]
+
+
+def pty_floors(frames: dict[int, int]) -> dict[int, dict]:
+    """The same reader measure on bare PTY pairs, one per schedule: *frames* maps a period
+    (ns) to how many frames its pair carries. A separate process writes 30 bytes on each
+    pair at start + k x period (every pair on its own exact schedule, as one emulator writes
+    all its ports), this one reads them all (``select``, then one ``read(2)`` of what is
     there, as the host's port reader does). What is left is the kernel's PTY path and the
-    reader's wake-ups: the floor any PTY-based emulator sits on, on this machine. The
-    schedule is on this machine's CLOCK_MONOTONIC, so lateness is absolute."""
+    reader's wake-ups: the floor any PTY-based emulator sits on, on this machine, for a
+    port on that schedule (a 40 Hz port's p99 is the tail of fewer intervals than a
+    100 Hz port's, so each is judged against a pair of its own rate). The schedules are on
+    this machine's CLOCK_MONOTONIC, so lateness is absolute. Figures per period."""
     import multiprocessing as mp
     import tty
 
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    reader = os.open(os.ttyname(slave), os.O_RDWR | os.O_NOCTTY)
+    pairs = []
+    for _ in frames:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        pairs.append((master, slave, os.open(os.ttyname(slave), os.O_RDWR | os.O_NOCTTY)))
     start_ns = time.monotonic_ns() + 100_000_000
+    writes = sorted((start_ns + k * period, i) for i, (period, n) in enumerate(frames.items())
+                    for k in range(n))
     writer = mp.get_context("fork").Process(
-        target=_bare_writer, args=(master, frames, start_ns, period_ns))
+        target=_bare_writer, args=([m for m, _, _ in pairs], writes))
     writer.start()
-    stamps, ends, got = [], [], 0
+    readers = {r: i for i, (_, _, r) in enumerate(pairs)}
+    want = {r: FRAME_BYTES * n for r, n in zip(readers, frames.values())}
+    got = dict.fromkeys(readers, 0)
+    stamps = {r: ([], []) for r in readers}  # read times, stream ends
     try:
-        while got < FRAME_BYTES * frames:
-            if select.select([reader], [], [], 5.0)[0]:
-                got += len(os.read(reader, 4096))
-                stamps.append(time.monotonic_ns())
-                ends.append(got)
-            elif not writer.is_alive():
+        while any(got[r] < want[r] for r in readers):
+            ready = select.select([r for r in readers if got[r] < want[r]], [], [], 5.0)[0]
+            for r in ready:
+                got[r] += len(os.read(r, 4096))
+                stamps[r][0].append(time.monotonic_ns())
+                stamps[r][1].append(got[r])
+            if not ready and not writer.is_alive():
                 break
     finally:
         writer.join()
-        for fd in (reader, slave, master):
+        for fd in (fd for pair in pairs for fd in pair):
             os.close(fd)
-    k = np.arange(got // FRAME_BYTES)
-    schedule = start_ns + k * period_ns
-    arrived = arrivals((k + 1) * FRAME_BYTES, ends, stamps)
-    return {"frames": int(len(k)), "lost": frames - int(len(k)), "nominal_ms": period_ns / 1e6,
-            **period_error(arrived, schedule), **lateness(arrived, schedule)}
+    out = {}
+    for r, (period_ns, n) in zip(readers, frames.items()):
+        k = np.arange(got[r] // FRAME_BYTES)
+        schedule = start_ns + k * period_ns
+        arrived = arrivals((k + 1) * FRAME_BYTES, stamps[r][1], stamps[r][0])
+        out[period_ns] = {"frames": int(len(k)), "lost": n - int(len(k)),
+                          "nominal_ms": period_ns / 1e6,
+                          **period_error(arrived, schedule), **lateness(arrived, schedule)}
+    return out
 
 
 def speed(scenarios: list[str], repeat: int = 3) -> dict:

@@ -1,5 +1,5 @@
 """``navtwin bench timing``: how punctually the hosts read the emulated lab's ports while they
-run, beside a bare PTY pair in the same run (a benchmark: it measures, it does not assert).
+run, beside bare PTY pairs in the same run (a benchmark: it measures, it does not assert).
 
 One run: ``navtwin emulate --speed realtime --record`` (with ``vehicles`` N, emulator.fleet's
 convoy, its air shared as ``network`` says) and, on its links, the hosts that follow its cars
@@ -7,9 +7,12 @@ convoy, its air shared as ``network`` says) and, on its links, the hosts that fo
 for one car or cars sharing the air, one per car on its own ports with per-vehicle networks),
 each its own process, started as ``navtwin lab`` starts them (lab.orchestrator.start_host,
 each host's files named as there), and, in this process at the same time,
-emulator.bench's bare PTY pair written on the SINS board's exact 10 ms schedule and read as a
-host reads (``select``, one ``read(2)``). The window measured starts ``SETTLE_S`` after the
-last host's ``started`` line and lasts as long as the bare pair writes (``seconds``).
+emulator.bench's bare PTY pairs, one on each schedule the hosts' ports run on (a port's
+schedule: the median interval of its chunks in the scenario's first seconds made in memory,
+emulator.bench.port_periods; 10 ms for the coordinator's packets, 25 ms for the gateway's
+reports), each written on its exact schedule and read as a host reads (``select``, one
+``read(2)``). The window measured starts ``SETTLE_S`` after the last host's ``started``
+line and lasts as long as the bare pairs write (``seconds``).
 
 Per port any host reads (keyed by the emulator's name, ``xbee2``; the host that reads it
 knows it by its input's, ``xbee``), from the two recordings, on one clock: the emulator's
@@ -29,11 +32,11 @@ brought its last byte. Of the chunks scheduled in the window:
 * the lateness, arrival minus schedule (the reader's and the kernel's delay together), and
   the emulator's own write lateness (its recording's ``t_wall_ns`` against the schedule).
 
-``p99_ratio``: each port's period-error p99 over the bare pair's (issue 22's goal: at most 1.2
-with the host running), ``worst_p99_ratio`` the largest; ``late_p99_ratio``, the same of the
-lateness. A reader that wakes late takes two frames or more in one read: each of their
+``p99_ratio``: each port's period-error p99 over its bare pair's (``bare_period`` names the
+pair; issue 22's goal: at most 1.2 with the host running), ``worst_p99_ratio`` the largest;
+``late_p99_ratio``, the same of the lateness. A reader that wakes late takes two frames or more in one read: each of their
 intervals is then off by a whole period, so under stalls longer than a period the period
-error's p99 saturates at the period (10 ms on ``sins``'s schedule) while the lateness still
+error's p99 saturates at the period (10 ms on the coordinator's schedule) while the lateness still
 tells the stalls apart.
 
 ``cpu_cores``: the emulator's (its maker process included) and the hosts' CPU time (user + system, ``/proc/PID/stat``, all
@@ -52,7 +55,8 @@ from pathlib import Path
 import numpy as np
 
 from navtwin.emulator.api import EmulatorError, emulate
-from navtwin.emulator.bench import arrivals, lateness, period_error, pty_floor, sins_period_ns
+from navtwin.emulator.bench import (arrivals, lateness, period_error, period_key, port_periods,
+                                    pty_floors)
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
@@ -152,8 +156,9 @@ def fleet_rows(emulator: Recording, hosts: list[tuple[dict[str, str], Recording]
             for inputs, rec in hosts for given, port in inputs.items()}
 
 
-def _ratios(rows: dict, bare: dict, figure: str) -> dict:
-    return {p: r[figure] / bare[figure] for p, r in rows.items() if figure in r}
+def _ratios(rows: dict, peer: dict, figure: str) -> dict:
+    """Each port's *figure* over its peer's (the bare pair on its schedule)."""
+    return {p: r[figure] / peer[p][figure] for p, r in rows.items() if figure in r}
 
 
 def timing(seconds: float = 60.0, scenario: str = "office", mode: str = "auto",
@@ -161,14 +166,16 @@ def timing(seconds: float = 60.0, scenario: str = "office", mode: str = "auto",
            network: str | None = None) -> dict:
     """One run of the emulator (timing mode *mode*; with *vehicles* N, emulator.fleet's
     convoy sharing the air as *network* says) with the hosts that follow its cars (tracks
-    *filters*, lab.fleet) on their ports and the bare PTY pair beside them, *seconds*
+    *filters*, lab.fleet) on their ports and the bare PTY pairs beside them, *seconds*
     measured; the module docstring. LabError (one line) if a side fails."""
     sc, config, hosts = fleet_lab(scenario, vehicles, network, None, None)
+    period = port_periods(sc, seed)
+    read = {port for h in hosts for port in h.inputs.values()}
     with tempfile.TemporaryDirectory(prefix="navtwin-timing-") as tmp:
         d = Path(tmp)
         run_scenario, config = write_fleet(d, sc, hosts, scenario, config)
         try:
-            run = _run(d, seconds, run_scenario, round(sins_period_ns(scenario)), mode, seed,
+            run = _run(d, seconds, run_scenario, {period[p] for p in read}, mode, seed,
                        hosts, config, filters)
         except EmulatorError as e:
             raise LabError(f"the emulator failed: {str(e).strip().splitlines()[-1]}") from None
@@ -181,13 +188,15 @@ def timing(seconds: float = 60.0, scenario: str = "office", mode: str = "auto",
                           run["t0_monotonic_ns"], run["window"])
     w0, w1 = run["window"]
     bare, cores = run["bare_pty"], lambda cpu: cpu / ((w1 - w0) / 1e9)
-    ratios = _ratios(rows, bare, "p99_ms")
+    peer = {p: bare[period[p]] for p in rows}
+    ratios = _ratios(rows, peer, "p99_ms")
     return {"benchmark": "timing", "scenario": scenario, "vehicles": len(sc.fleet),
             "network": network, "hosts": len(hosts), "timing": run["timing"],
             "filters": filters, "seconds": (w1 - w0) / 1e9,
             "load_average": [round(x, 2) for x in os.getloadavg()], "ports": rows,
-            "bare_pty": bare, "p99_ratio": ratios,
-            "late_p99_ratio": _ratios(rows, bare, "late_p99_ms"),
+            "bare_pty": {period_key(t): bare[t] for t in sorted(bare)},
+            "bare_period": {p: period_key(period[p]) for p in rows}, "p99_ratio": ratios,
+            "late_p99_ratio": _ratios(rows, peer, "late_p99_ms"),
             "worst_p99_ratio": max(ratios.values(), default=None),
             "frames_lost_total": sum(r["lost"] for r in rows.values()),
             "cpu_cores": {"emulator": cores(run["cpu_s"]["emulator"]),
@@ -195,7 +204,7 @@ def timing(seconds: float = 60.0, scenario: str = "office", mode: str = "auto",
                           "per_host": [cores(x) for x in run["cpu_s"]["hosts"]]}}
 
 
-def _run(d: Path, seconds: float, scenario: str | Path, period_ns: int, mode: str,
+def _run(d: Path, seconds: float, scenario: str | Path, periods: set[int], mode: str,
          seed: int | None, hosts: list[Follower], config: str | None, filters: str) -> dict:
     """The run itself, recorded in *d* (the emulator's recording in ``emulator``, each
     host's files as ``navtwin lab`` names them): the emulator's ``t0_monotonic_ns`` and
@@ -215,7 +224,7 @@ def _run(d: Path, seconds: float, scenario: str | Path, period_ns: int, mode: st
             time.sleep(SETTLE_S)
             pids = [lab.process.pid] + [p.pid for p in procs]
             cpu0, w0 = [cpu_s(p) for p in pids], time.monotonic_ns()
-            bare = pty_floor(round(seconds * 1e9 / period_ns), period_ns)
+            bare = pty_floors({t: round(seconds * 1e9 / t) for t in periods})
             cpu1, w1 = [cpu_s(p) for p in pids], time.monotonic_ns()
             for name, log, p in zip(who, logs, procs):
                 if p.poll() is not None:  # its recording stops where it died: no figure

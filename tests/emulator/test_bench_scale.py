@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from navtwin.emulator.bench import nominal_period_ns
 from navtwin.emulator.bench_scale import (arrivals, late_share, medians, meets_goal, period_errors,
                                           port_figures, scale)
 
@@ -28,6 +29,14 @@ def test_port_figures_skip_what_was_written_before_the_reader_and_count_what_it_
     assert fig == {"read": 2, "p50_ms": 0.5, "p99_ms": 0.5, "max_ms": 0.5, "drift_ms": 0.5}
 
 
+def test_a_ports_schedule_is_its_median_interval_to_the_ms():
+    board = np.arange(50) * 9_999_900  # 10 ms on a clock 10 ppm fast
+    gateway = np.cumsum(np.r_[0, np.full(20, 25_000_000) + np.tile([-120, 90], 10)])
+    packets = np.cumsum(np.r_[0, [9_950_000, 12_100_000, 7_900_000, 10_120_000, 10_190_000]])
+    assert [nominal_period_ns(e) for e in (board, gateway, packets)] == \
+        [10_000_000, 25_000_000, 10_000_000]
+
+
 def test_the_goal_needs_every_figure():
     row = {"p99_ratio_to_bare": 1.1, "frames_lost": 0, "cpu_per_vehicle": 0.015,
            "late_1ms_share": 0.005}
@@ -43,15 +52,16 @@ def test_repeated_runs_are_judged_on_their_medians():
     the median run does; the count of runs that met it is given beside."""
     def run(n, ratio, cpu=0.015, lost=0):
         return {"vehicles": n, "p99_ratio_to_bare": ratio, "frames_lost": lost,
-                "cpu_per_vehicle": cpu, "late_1ms_share": 0.001, "bare_pty": {"p99_ms": 2.0},
+                "cpu_per_vehicle": cpu, "late_1ms_share": 0.001,
+                "bare_pty": {"10 ms": {"p99_ms": 2.0}, "25 ms": {"p99_ms": ratio}},
                 **{k: 1.0 for k in ("reader_cpu_cores", "worst_p99_ms", "worst_max_ms",
-                                    "worst_sins_p99_ms", "sins_p99_ratio_to_bare",
-                                    "median_port_p99_ms", "median_p99_ratio_to_bare")}}
+                                    "median_p99_ratio_to_bare")}}
     rows = [run(25, 0.9), run(50, 1.1), run(25, 1.0), run(50, 3.0), run(25, 1.5), run(50, 1.15)]
     by_n = medians(rows)
     assert [m["vehicles"] for m in by_n] == [25, 50] and [m["runs"] for m in by_n] == [3, 3]
     assert by_n[1]["p99_ratio_to_bare"] == 1.15 and by_n[0]["p99_ratio_to_bare"] == 1.0
     assert [m["runs_meeting_goal"] for m in by_n] == [2, 2]
+    assert by_n[1]["bare_p99_ms"] == {"10 ms": 2.0, "25 ms": 1.15}  # each pair's own median
     assert all(meets_goal(m) for m in by_n)
     assert not meets_goal(medians([run(50, 1.1, lost=2), run(50, 1.1, lost=1),
                                    run(50, 1.1)])[0])  # lost in most runs: lost
@@ -68,6 +78,12 @@ def test_a_short_scale_run_reads_every_port(capsys):
     out = scale([2], 3.0, workers="1", readers=1, ports=True)
     (row,) = out["rows"]
     assert set(row["ports"]) == {"sins", "xbee", "nanoloc", "sins2", "xbee2", "nanoloc2"}
-    assert row["status"] == 0 and row["workers"] == 1 and row["bare_pty"]["frames"] > 0
+    assert row["status"] == 0 and row["workers"] == 1
+    # a pair on each schedule: the boards' and coordinators' 10 ms, the gateways' 25 ms
+    assert {k: b["frames"] for k, b in row["bare_pty"].items()} == {"10 ms": 250, "25 ms": 100}
     assert all(p["read"] > 0 for p in row["ports"].values())
+    for name, p in row["ports"].items():
+        peer = row["bare_pty"]["25 ms" if name.startswith("nanoloc") else "10 ms"]
+        assert p["p99_ratio_to_bare"] == p["p99_ms"] / peer["p99_ms"], name
+    assert row["p99_ratio_to_bare"] == max(p["p99_ratio_to_bare"] for p in row["ports"].values())
     assert out["largest_n_meeting_goal"] in (None, 2)

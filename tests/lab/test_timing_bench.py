@@ -154,11 +154,16 @@ def _adds_up(out: dict, ports: set[str], hosts: int, frames: int) -> None:
         assert 0 < row["frames_read"] <= row["frames_written"], name
         assert row["lost"] == row["frames_written"] - row["frames_read"], name
         assert row["p99_ms"] >= row["p50_ms"] >= 0 and row["max_ms"] >= row["p99_ms"], name
-        assert out["p99_ratio"][name] == row["p99_ms"] / out["bare_pty"]["p99_ms"]
-        assert out["late_p99_ratio"][name] == row["late_p99_ms"] / out["bare_pty"]["late_p99_ms"]
+        peer = out["bare_pty"][out["bare_period"][name]]  # the pair on the port's schedule
+        assert out["p99_ratio"][name] == row["p99_ms"] / peer["p99_ms"]
+        assert out["late_p99_ratio"][name] == row["late_p99_ms"] / peer["late_p99_ms"]
     assert out["worst_p99_ratio"] == max(out["p99_ratio"].values())
     assert out["frames_lost_total"] == sum(r["lost"] for r in out["ports"].values())
-    assert (out["bare_pty"]["frames"], out["bare_pty"]["lost"]) == (frames, 0)
+    # the coordinators' packets on the 10 ms pair, the gateways' reports on the 25 ms one
+    assert {p: out["bare_period"][p] for p in ports} == {
+        p: "25 ms" if p.startswith("nanoloc") else "10 ms" for p in ports}
+    assert {k: (b["frames"], b["lost"]) for k, b in out["bare_pty"].items()} == {
+        "10 ms": (frames, 0), "25 ms": (frames * 2 // 5, 0)}
     cpu = out["cpu_cores"]
     assert len(cpu["per_host"]) == out["hosts"] == hosts
     assert cpu["emulator"] >= 0 and min(cpu["per_host"]) >= 0
