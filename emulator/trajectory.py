@@ -261,6 +261,7 @@ class Trajectory:
     """The vehicle of a scenario: ``Trajectory(sc.trajectory, height=sc.tag.z)``."""
 
     def __init__(self, spec, height: float) -> None:
+        self.key = (spec, height)  # all its motion depends on
         self.path = Path(spec.waypoints, spec.closed, spec.turn_radius_m, spec.transition_m)
         distance = self.path.length * spec.loops
         self.speed = SteppedProfile(spec.alignment_s, spec.speed_m_s, spec.accel_m_s2, distance,

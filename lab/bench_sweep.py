@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 from navtwin.common.limits import MAX_DURATION_S
 from navtwin.common.schema import between, key, positive, takes
+from navtwin.emulator.imu import shared_truth
 from navtwin.emulator.scenario import load_scenario
 
 #: all eight tracks of papers 000 and 001, the goal's
@@ -61,8 +62,12 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
             est, _ = run_in_memory(sc, s, filters=filters, duration=duration)
             rows += sweep.cells(sc, s, filters, batch.columns(est, filters))
         return rows
-    byte_rows, byte_s = _cpu(by_bytes)
-    outcome, batch_s = _cpu(lambda: batch.run(sc, numbers, filters=filters, duration=duration))
+    # each engine as a sweep's task runs it: its seeds share the truth (shared_truth), each
+    # engine computing it afresh
+    with shared_truth():
+        byte_rows, byte_s = _cpu(by_bytes)
+    with shared_truth():
+        outcome, batch_s = _cpu(lambda: batch.run(sc, numbers, filters=filters, duration=duration))
     batch_rows, score_s = _cpu(lambda: [r for s, e in zip(numbers, outcome.estimates)
                                         for r in sweep.cells(sc, s, filters, e)])
     batch_s += score_s

@@ -54,6 +54,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from navtwin.common import tomlfile
+from navtwin.emulator.imu import shared_truth
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
 from navtwin.host.replay import emulator_settings
 
@@ -192,20 +193,21 @@ def run_chunk(text: str, name: str, seeds: list[int], filters: tuple[str, ...],
     line."""
     sc = _scenario(text, name)
     rows = []
-    if engine != "bytes":
-        try:
-            rows = ENGINES[engine](sc, seeds, filters, duration)
-            seeds = []
-        except Exception:  # noqa: BLE001 - the seeds go the byte engine's way, one by one
-            rows = []
-    for seed in seeds:
-        for attempt in (1, 2):
+    with shared_truth():  # the task's seeds compute the vehicle's true motion once
+        if engine != "bytes":
             try:
-                rows += seed_cells(sc, seed, filters, duration)
-                break
-            except Exception as e:  # noqa: BLE001 - any failure of a cell is reported as a row
-                if attempt == 2:
-                    rows += [_failed(name, seed, f, _error_line(e)) for f in filters]
+                rows = ENGINES[engine](sc, seeds, filters, duration)
+                seeds = []
+            except Exception:  # noqa: BLE001 - the seeds go the byte engine's way, one by one
+                rows = []
+        for seed in seeds:
+            for attempt in (1, 2):
+                try:
+                    rows += seed_cells(sc, seed, filters, duration)
+                    break
+                except Exception as e:  # noqa: BLE001 - any failure of a cell is reported as a row
+                    if attempt == 2:
+                        rows += [_failed(name, seed, f, _error_line(e)) for f in filters]
     for r in rows:
         r["variant"] = variant
     return rows

@@ -10,10 +10,13 @@ import pytest
 from navtwin.common.earth import EARTH_RATE
 from navtwin.common.geodesy import meridian_radius, transverse_radius
 from navtwin.emulator.bias import FLICKER_TAUS_S, flicker_term_variance
-from navtwin.emulator.imu import Adis16350, deg_h, fir, fir_steady_state, gauss_markov, ug
+from navtwin.emulator import imu
+from navtwin.emulator.imu import (Adis16350, deg_h, fir, fir_steady_state, gauss_markov,
+                                  shared_truth, ug)
 from navtwin.emulator.rng import stream
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.trajectory import Kinematics, Trajectory
+from navtwin.emulator.world import World
 from navtwin.protocols import adis16350 as adis
 
 from ..protocols.vectors import SINS_LEVEL
@@ -367,3 +370,22 @@ def test_same_seed_same_bytes_other_seed_other_bytes():
     b = port_bytes(run(sc, 5)[1], "sins")
     c = port_bytes(run(sc, 6)[1], "sins")
     assert a == b and a != c and len(a) == len(c)
+
+
+def test_seeds_made_within_shared_truth_compute_the_motion_once_and_make_the_same_events():
+    """A sweep's task makes its seeds within shared_truth: the second seed of a scenario
+    takes every block's error-free outputs from the first, and every event (the SINS frames'
+    bytes, the packets, the reports) is what the seed makes alone."""
+    sc = load_scenario("office")
+
+    def events(seed):
+        return World(sc, seed, air=False).advance(4_000_000_000)
+
+    alone = [events(seed) for seed in (1, 2)]
+    with shared_truth():
+        shared = [events(1)]
+        blocks = len(imu._SHARED)
+        shared.append(events(2))
+        assert len(imu._SHARED) == blocks == 4  # a second's block each, none added by seed 2
+    assert imu._SHARED is None
+    assert shared == alone and alone[0] != alone[1]
