@@ -102,20 +102,24 @@ def bench_latency(config: HostConfig, filters, chunks, seconds: float) -> dict:
 
 def replay_speeds(directory: str | os.PathLike, sets: dict, runs: int = 1) -> dict:
     """Replay speed of the recording in *directory* with each of *sets* (name -> filters,
-    None: the recorded run's), the median wall time of *runs* replays each, the runs interleaved (set a, set b, set a, ...) so that a drift in the machine's speed
-    weighs on every set alike; name -> its result."""
+    None: the recorded run's), the median wall time of *runs* replays each, and the median
+    CPU time (a set's cost: what its ratio to another is taken in, a loaded machine's other
+    processes left out), the runs interleaved (set a, set b, set a, ...) so that a drift in
+    the machine's speed weighs on every set alike; name -> its result."""
     rec = Recording(directory)
     stamps = [t_ns for _, _, t_ns in replay_chunks(rec, settings(rec)["inputs"])]
     recorded_s = (max(stamps) - min(stamps)) / 1e9
     walls: dict[str, list[float]] = {name: [] for name in sets}
+    cpus: dict[str, list[float]] = {name: [] for name in sets}
     lines, used = {}, {}
     for _ in range(runs):
         for name, filters in sets.items():
             count = [0]
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             pipe = replay(rec, lambda es: count.__setitem__(0, count[0] + len(es)),
                           **({"filters": tuple(filters)} if filters else {}))
             walls[name].append(time.perf_counter() - t)
+            cpus[name].append(time.process_time() - c)
             lines[name], used[name] = count[0], list(pipe.filters)
     out = {}
     for name, w in walls.items():
@@ -123,6 +127,7 @@ def replay_speeds(directory: str | os.PathLike, sets: dict, runs: int = 1) -> di
         out[name] = {"benchmark": "replay", "recording": str(directory),
                      "recorded_s": round(recorded_s, 3), "runs": runs, "wall_s": round(wall, 3),
                      "wall_s_range": [round(min(w), 3), round(max(w), 3)],
+                     "cpu_s": round(float(np.median(cpus[name])), 3),
                      "x_real_time": round(recorded_s / wall, 1), "lines": lines[name],
                      "filters": used[name]}
     return out

@@ -22,9 +22,10 @@ from navtwin.common.limits import MAX_DURATION_S
 from navtwin.common.schema import between, key, positive, takes
 from navtwin.emulator.imu import shared_truth
 from navtwin.emulator.scenario import load_scenario
+from navtwin.host import tracks
 
 #: all eight tracks of papers 000 and 001, the goal's
-EIGHT = "sins,wsn,kf,ekf,ukf,lc,tc,fatci"
+EIGHT = ",".join(tracks.EIGHT)
 GOAL_RATIO = 20.0
 GOAL_MINUTES = 15.0
 PROJECTED_SEEDS = 10_000

@@ -23,6 +23,9 @@ from .base import Estimate, NoSettings, Track
 #: five's replay time (docs/lab.md, "Replay with all eight tracks"); 003's (centroid, wcl,
 #: geosins) likewise (not yet in that measurement).
 DEFAULT = ("sins", "wsn", "kf", "ekf", "ukf")
+#: 000's and 001's tracks: those with a batch twin (host.batch), a sweep's default and the set
+#: issue 23's speed figures take (navtwin bench sweep, host-replay)
+EIGHT = DEFAULT + ("lc", "tc", "fatci")
 GROUP = "navtwin.tracks"
 
 
@@ -54,7 +57,7 @@ TRACKS: Registry[type[Track]] = Registry(GROUP, "track", {
 BUILT_IN = TRACKS.built_in
 names, get, unregister = TRACKS.names, TRACKS.get, TRACKS.unregister
 
-__all__ = ["BUILT_IN", "DEFAULT", "Estimate", "GROUP", "NoSettings", "TRACKS", "Track", "get", "names",
+__all__ = ["BUILT_IN", "DEFAULT", "EIGHT", "Estimate", "GROUP", "NoSettings", "TRACKS", "Track", "get", "names",
            "register", "unregister"]
 
 
