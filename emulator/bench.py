@@ -183,6 +183,28 @@ def nominal_period_ns(ends_ns) -> int:
     return int(round(float(np.median(np.diff(np.asarray(ends_ns, dtype=np.int64)))), -6))
 
 
+def cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) process *pid* has used so far, its threads and its
+    descendants included (the emulator's maker process, its workers): each live one's own
+    and what its children that ended had used, so a child that ends between two readings
+    still counts once."""
+    ticks, children = {}, {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:  # it ended meanwhile
+                continue
+            ticks[int(entry)] = sum(int(f) for f in fields[11:15])  # utime stime cutime cstime
+            children.setdefault(int(fields[1]), []).append(int(entry))
+    total, todo = 0, [pid]
+    while todo:
+        p = todo.pop()
+        total += ticks.get(p, 0)
+        todo += children.get(p, [])
+    return total / os.sysconf("SC_CLK_TCK")
+
+
 def period_key(period_ns: int) -> str:
     """A bare pair's name in a benchmark's output: its period, ``10 ms``."""
     return f"{period_ns / 1e6:g} ms"

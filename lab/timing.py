@@ -55,8 +55,8 @@ from pathlib import Path
 import numpy as np
 
 from navtwin.emulator.api import EmulatorError, emulate
-from navtwin.emulator.bench import (arrivals, lateness, period_error, period_key, port_periods,
-                                    pty_floors)
+from navtwin.emulator.bench import (arrivals, cpu_s, lateness, period_error, period_key,
+                                    port_periods, pty_floors)
 from navtwin.protocols.ports import DEFAULT_BAUD
 from navtwin.protocols.recording import Recording
 from navtwin.protocols.serial import wire_ns
@@ -71,28 +71,6 @@ SETTLE_S = 1.0  # after the last, before the window: the hosts' first reads, the
 WAIT_READ_S = 10.0  # after the emulator has stopped: each host reads what is left, then down
 #: a chunk is looked for this far past where the last one ended (bytes a lost part left)
 RESYNC_BYTES = 4096
-
-
-def cpu_s(pid: int) -> float:
-    """CPU seconds (user + system) process *pid* has used so far, its threads and its
-    descendants included (the emulator's maker process, its workers): each live one's own
-    and what its children that ended had used, so a child that ends between two readings
-    still counts once."""
-    ticks, children = {}, {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
-            except OSError:  # it ended meanwhile
-                continue
-            ticks[int(entry)] = sum(int(f) for f in fields[11:15])  # utime stime cutime cstime
-            children.setdefault(int(fields[1]), []).append(int(entry))
-    total, todo = 0, [pid]
-    while todo:
-        p = todo.pop()
-        total += ticks.get(p, 0)
-        todo += children.get(p, [])
-    return total / os.sysconf("SC_CLK_TCK")
 
 
 def _last_line(path: Path) -> str:

@@ -55,7 +55,7 @@ def test_repeated_runs_are_judged_on_their_medians():
                 "cpu_per_vehicle": cpu, "late_1ms_share": 0.001,
                 "bare_pty": {"10 ms": {"p99_ms": 2.0}, "25 ms": {"p99_ms": ratio}},
                 **{k: 1.0 for k in ("reader_cpu_cores", "worst_p99_ms", "worst_max_ms",
-                                    "median_p99_ratio_to_bare")}}
+                                    "median_p99_ratio_to_bare", "cpu_per_vehicle_whole_run")}}
     rows = [run(25, 0.9), run(50, 1.1), run(25, 1.0), run(50, 3.0), run(25, 1.5), run(50, 1.15)]
     by_n = medians(rows)
     assert [m["vehicles"] for m in by_n] == [25, 50] and [m["runs"] for m in by_n] == [3, 3]
@@ -79,6 +79,8 @@ def test_a_short_scale_run_reads_every_port(capsys):
     (row,) = out["rows"]
     assert set(row["ports"]) == {"sins", "xbee", "nanoloc", "sins2", "xbee2", "nanoloc2"}
     assert row["status"] == 0 and row["workers"] == 1
+    # the steady-state CPU (the window) and the whole run's (start-up too): both measured
+    assert row["cpu_per_vehicle"] > 0 and row["cpu_per_vehicle_whole_run"] > 0
     # a pair on each schedule: the boards' and coordinators' 10 ms, the gateways' 25 ms
     assert {k: b["frames"] for k, b in row["bare_pty"].items()} == {"10 ms": 250, "25 ms": 100}
     assert all(p["read"] > 0 for p in row["ports"].values())

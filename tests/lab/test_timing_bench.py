@@ -11,8 +11,8 @@ import pytest
 
 from navtwin.cli.bench import available, settings
 from navtwin.cli.main import UsageError
-from navtwin.emulator.bench import arrivals, lateness, period_error
-from navtwin.lab.timing import cpu_s, fleet_rows, found_ends, port_row, timing
+from navtwin.emulator.bench import arrivals, cpu_s, lateness, period_error
+from navtwin.lab.timing import fleet_rows, found_ends, port_row, timing
 from navtwin.protocols.ports import host_inputs
 from navtwin.protocols.recording import Read, Recording, RecordingWriter
 from navtwin.protocols.serial import wire_ns
