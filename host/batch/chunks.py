@@ -382,17 +382,38 @@ def _aligned(clock: DeviceClock, device: np.ndarray, arrival: np.ndarray) -> np.
 def _time_order(t_imu, pos_imu, t_r, pos_r, arrival, hold: float):
     """Where the pipeline gives each exchange (host.pipeline's hold rule): (the sample each
     exchange given goes just before, in the order given; len(t_imu): after the last) and
-    the exchanges' indices in that order."""
-    n_imu, n_r = len(t_imu), len(t_r)
-    first_after = np.searchsorted(pos_imu, pos_r, side="right")  # samples after it
+    the exchanges' indices in that order.
+
+    When no hold times out (the IMU stream never stalls: office's runs), each exchange is
+    given on its own, late at once or just before the first sample after it whose time is
+    not older; several before one sample in (t, arrival order), after the late ones (given
+    earlier). Every exchange given is then older than the samples before the next one, so
+    none moves the filter time that the others are judged late against. Otherwise
+    :func:`_held_in_turn` replays the holds one release at a time."""
+    n_imu = len(t_imu)
+    first_after = np.searchsorted(pos_imu, pos_r, side="right")  # the samples after each
     t_before = np.where(first_after > 0, t_imu[np.maximum(first_after - 1, 0)], -np.inf)
     # the chunk at whose end its hold times out: the first to arrive hold_s after its own
     timeout = np.maximum(np.searchsorted(arrival - hold, arrival[pos_r], side="left"), pos_r)
-    chunk_slot = np.searchsorted(pos_imu, np.arange(len(arrival)), side="right")
+    late = t_r <= t_before
+    by = np.maximum(first_after, np.searchsorted(t_imu, t_r, side="left"))
+    at = np.where(by < n_imu, pos_imu[np.minimum(by, n_imu - 1)], len(arrival))
+    if (~late & (timeout < len(arrival)) & (at > timeout)).any():
+        return _held_in_turn(t_imu, pos_imu, t_r, pos_r, first_after, t_before, timeout,
+                             len(arrival))
+    slot = np.where(late, first_after, by)
+    emitted = np.lexsort((np.arange(len(t_r)), np.where(late, 0.0, t_r), ~late, slot))
+    return slot[emitted], emitted
+
+
+def _held_in_turn(t_imu, pos_imu, t_r, pos_r, first_after, t_before, timeout, end: int):
+    """:func:`_time_order`'s result by replaying the pipeline's holds: a loop over the
+    exchanges, each release (by a sample, a timeout, the end) found in the arrays."""
+    n_imu, n_r = len(t_imu), len(t_r)
+    chunk_slot = np.searchsorted(pos_imu, np.arange(end), side="right")
     T, P = t_imu.tolist(), pos_imu.tolist()
     tr, pr, k0, tb, jt = (x.tolist() for x in (t_r, pos_r, first_after, t_before, timeout))
     cs = chunk_slot.tolist()
-    end = len(arrival)
     held: list = []  # heap of (t, index): index = arrival order
     waiting: list = []  # held indices in arrival order (their timeouts in order)
     w = 0
