@@ -107,8 +107,9 @@ def bulk_stream(ports: Mapping[str, tuple[bytes, np.ndarray, np.ndarray]],
     vehicle = config.vehicles[0]
     hold = config.hold_s if imu_ports else 0.0
 
-    if imu_ports:
-        port = imu_ports[0]
+    empty = np.zeros(0, np.int64)
+    payload, chunk, payload_ends, pos = np.zeros(0, np.uint8), empty, empty, empty
+    for port in imu_ports:
         if declared[port].format == formats.XBEE_SINS.name:
             if not settings["escaped"]:
                 raise Unbatchable("XBee API mode 1")
@@ -118,21 +119,16 @@ def bulk_stream(ports: Mapping[str, tuple[bytes, np.ndarray, np.ndarray]],
             data, sizes, _ = ports[port]
             payload, chunk, payload_ends = (np.frombuffer(data, np.uint8), np.arange(len(sizes)),
                                             np.cumsum(sizes))
-        ftype, fields, last_byte = _sins_frames(payload)
-        # a frame is decoded with the chunk that brings its last byte
-        where = chunk[np.searchsorted(payload_ends, last_byte, side="right")]
-        pos_imu = at[port][where]
-        t_imu = _imu_times(fields["seq"].astype(np.int64), arrival[pos_imu])
-        gyro, accel, nd_ok = _units(ftype, fields, vehicle.gyro_range_dps)
-    else:
-        pos_imu, t_imu = np.zeros(0, np.int64), np.zeros(0)
-        gyro = accel = np.zeros((0, 3))
-        nd_ok, fields = np.ones(0, bool), {"seq": np.zeros(0, np.int64)}
-
-    none = (b"", np.zeros(0, np.int64), None)
-    pos_r, t_r, anchor, distance, status = _exchanges(
-        ports[report_ports[0]] if report_ports else none, at.get(next(iter(report_ports), None)),
-        arrival, vehicle.tag, frozenset(config.anchors))
+        pos = at[port]
+    ftype, fields, last_byte = _sins_frames(payload)
+    # a frame is decoded with the chunk that brings its last byte
+    pos_imu = pos[chunk[np.searchsorted(payload_ends, last_byte, side="right")]]
+    t_imu = _imu_times(fields["seq"].astype(np.int64), arrival[pos_imu])
+    gyro, accel, nd_ok = _units(ftype, fields, vehicle.gyro_range_dps)
+    pos_r, t_r, anchor, distance, status = empty, np.zeros(0), empty, np.zeros(0), empty
+    for port in report_ports:
+        pos_r, t_r, anchor, distance, status = _exchanges(
+            ports[port], at[port], arrival, vehicle.tag, frozenset(config.anchors))
 
     if not nd_ok.all():
         raise Unbatchable("IMU sample stale")
@@ -275,9 +271,8 @@ def _exchanges(port, position: np.ndarray, arrival: np.ndarray, tag: int | None,
     """(position, t, anchor, distance, status) of the vehicle's exchanges in the
     ``nanoloc`` port's chunks, each chunk one report."""
     data, sizes, _ = port
-    if not len(sizes):  # no reports (or no nanoloc input)
-        none = np.zeros(0, np.int64)
-        return none, np.zeros(0), none, np.zeros(0), none
+    if not len(sizes):
+        return position, np.zeros(0), position, np.zeros(0), position
     raw = np.frombuffer(data, np.uint8)
     ftype = int(raw[2]) if len(raw) > 2 else -1
     layout = _REPORTS.get(ftype)
@@ -390,14 +385,13 @@ def _time_order(t_imu, pos_imu, t_r, pos_r, arrival, hold: float):
     earlier). Every exchange given is then older than the samples before the next one, so
     none moves the filter time that the others are judged late against. Otherwise
     :func:`_held_in_turn` replays the holds one release at a time."""
-    n_imu = len(t_imu)
     first_after = np.searchsorted(pos_imu, pos_r, side="right")  # the samples after each
-    t_before = np.where(first_after > 0, t_imu[np.maximum(first_after - 1, 0)], -np.inf)
+    t_before = np.append(-np.inf, t_imu)[first_after]  # the filter time the samples made
     # the chunk at whose end its hold times out: the first to arrive hold_s after its own
     timeout = np.maximum(np.searchsorted(arrival - hold, arrival[pos_r], side="left"), pos_r)
     late = t_r <= t_before
     by = np.maximum(first_after, np.searchsorted(t_imu, t_r, side="left"))
-    at = np.where(by < n_imu, pos_imu[np.minimum(by, n_imu - 1)], len(arrival))
+    at = np.append(pos_imu, len(arrival))[by]  # that sample's chunk (none: past the end)
     if (~late & (timeout < len(arrival)) & (at > timeout)).any():
         return _held_in_turn(t_imu, pos_imu, t_r, pos_r, first_after, t_before, timeout,
                              len(arrival))
