@@ -41,11 +41,12 @@ Regular, and what each step reproduces:
    blocks; a clock reset (a point ``step_s`` below the line) is not regular, nor a sample
    whose time the strict stream's +1e-6 rule would move. The anchors' non-strict rule is a
    running maximum.
-5. Time order (host.pipeline's hold rule): a Python loop over the exchanges only, with the
-   samples' times and positions in arrays: each exchange is given late at once, or held
+5. Time order (host.pipeline's hold rule): each exchange is given late at once, or held
    until the first sample after it with time >= its own, or until the end of the first
    chunk that arrives ``hold_s`` after its own (then with every held exchange up to the
-   latest time among those timed out), or the end; released in (t, arrival order).
+   latest time among those timed out), or the end; released in (t, arrival order). When
+   no hold times out (office's runs) that is a sort of whole arrays; otherwise a Python
+   loop over the exchanges only (the convoy's, whose coordinator carries three cars).
 
 The samples then pass :func:`~navtwin.host.batch.estimator.stream`'s checks (ND set, no gap
 longer than the estimator's ``imu_gap_s``). Equality with the pipeline's records:
