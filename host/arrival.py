@@ -12,6 +12,8 @@ from __future__ import annotations
 import heapq
 from collections.abc import Iterable, Iterator, Mapping
 
+import numpy as np
+
 from navtwin.protocols.serial import wire_ns
 
 from navtwin.protocols.ports import host_inputs
@@ -32,3 +34,13 @@ def arrivals(streams: Mapping[str, Iterable[tuple[bytes, int]]],
     for t, _, _, port, data in heapq.merge(*(timed(p) for p in streams)):
         last = max(t, last + 1)
         yield port, data, last
+
+
+def split(ports: Mapping[str, tuple[bytes, np.ndarray, np.ndarray]]) -> dict[str, list[tuple[bytes, int]]]:
+    """Each port's ``(data, sizes, start_ns)`` arrays (its chunks joined, one size and device
+    time a chunk) as the ``(bytes, t_device_ns)`` chunks :func:`arrivals` takes."""
+    out = {}
+    for port, (data, sizes, start_ns) in ports.items():
+        ends = np.cumsum(sizes).tolist()
+        out[port] = [(data[a:b], t) for a, b, t in zip([0, *ends], ends, start_ns.tolist())]
+    return out

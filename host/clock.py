@@ -111,14 +111,19 @@ class ClockAligner:
         low = lag - self.rate * device_s
         if block != self._block:
             if self._open is not None:
-                self._minima.append(self._open)
-                self._fit()
+                self.close_block(self._open)
                 low = lag - self.rate * device_s
             self._block, self._open = block, (device_s, lag)
         elif low < self._open[1] - self.rate * self._open[0]:
             self._open = (device_s, lag)
         if self.offset is None or low < self.offset:
             self.offset = low
+
+    def close_block(self, minimum: tuple[float, float]) -> None:
+        """The open block ends with its lowest point *minimum* (device t, lag): the window's
+        fit of rate and offset (host.batch.chunks replays the blocks of a run this way)."""
+        self._minima.append(minimum)
+        self._fit()
 
     def _fit(self) -> None:
         pts = sorted(self._minima)

@@ -71,6 +71,21 @@ AT_QUERIES = (b"DB", b"AP")
 T_US_TICK_S = 1e-6
 
 
+def imu_clock() -> DeviceClock:
+    """A SINS stream's clock: the board's 16-bit sample counter, a tick a sample, strict."""
+    return DeviceClock(16, sins.PERIOD_S, strict=True)
+
+
+def anchor_clock() -> DeviceClock:
+    """The anchor network's clock: its 32-bit ``t_us``, not strict (an exchange may be older)."""
+    return DeviceClock(32, T_US_TICK_S, strict=False)
+
+
+def report_counter() -> Unwrapper:
+    """The gateway's report counter: equal = a duplicate, any step back = a restart."""
+    return Unwrapper(16, restart=0)
+
+
 def _with_vehicle(fn: Callable, vehicle: int, t, filter, kind, dim, nis, accepted) -> None:
     """An estimator's innovation, passed on with its vehicle's number."""
     fn(t, vehicle, filter, kind, dim, nis, accepted)
@@ -86,7 +101,7 @@ class Vehicle:
         self.router = None if settings.router is None else int(settings.router, 16)
         self.tag = settings.tag  # None: every tag's exchanges (a lab with one vehicle)
         self.gyro_range_dps = settings.gyro_range_dps
-        self.imu_clock = DeviceClock(16, sins.PERIOD_S, strict=True)
+        self.imu_clock = imu_clock()
         self.estimator = estimator
         self.held: list[tuple] = []  # heap of (t, n, Exchange | Restart)
         self.arrived: deque[tuple[float, float]] = deque()  # (arrival, t) of each held record
@@ -144,9 +159,8 @@ class Pipeline:
         self._hold = config.hold_s if any(p.carries_imu for p in declared) else 0.0
         self._handlers = {"imu": self._imu, "ranges": self._range, "radio": self._xbee}
         self._handler_of: dict[str, Callable] = {}  # frame format -> its handler
-        self.range_clock = DeviceClock(32, T_US_TICK_S, strict=False)
-        # the gateway's report counter: equal = a duplicate, any step back = a restart
-        self._report_seq = Unwrapper(16, restart=0)
+        self.range_clock = anchor_clock()
+        self._report_seq = report_counter()
         self._n = 0  # tie-break of held records: the order they came in
         self._arrival = 0.0
         self._db_period = db_period_s

@@ -7,7 +7,12 @@ A seed's run has two halves, and this engine takes them apart:
    the records each vehicle's estimator is given (host.measurements: IMU samples,
    exchanges, ...). :func:`records` runs that half as the in-memory run does, the
    estimator replaced by one that keeps what it is given, so the records are those of
-   the byte path by construction.
+   the byte path by construction. A seed whose tracks all have a twin takes the bulk path
+   first: its input chunks straight to the batch's arrays in numpy
+   (host.batch.chunks.bulk_stream, bit for bit the same), and the pipeline only when the
+   run is not regular (its ``Unbatchable``), on the same chunks. With tracks run per seed
+   the records are made by the pipeline: those tracks take record objects, and an
+   exchange's RSSI, which the batch's arrays leave out.
 2. **Tracks.** The tracks with a batch twin (host.batch.tracks) run for every seed of the
    batch at once (host.batch.estimator.BatchEstimator); the others run per seed with the
    estimator itself, on the same records. A seed that leaves the batch's common path (the
@@ -33,13 +38,15 @@ from pathlib import Path
 import numpy as np
 
 from navtwin.emulator.scenario import Scenario
+from navtwin.host.arrival import arrivals, split
+from navtwin.host.batch.chunks import bulk_stream
 from navtwin.host.batch.estimator import BatchEstimator, Unbatchable, stream
 from navtwin.host.batch.tracks import batchable
 from navtwin.host.estimator import Estimator
 from navtwin.host.pipeline import Pipeline
 from navtwin.host.replay import drive
 
-from .run import lab_chunks, scenario_of
+from .run import lab_ports, scenario_of
 
 #: The column names of one track's estimates (:func:`columns`).
 COLUMNS = ("t", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
@@ -65,9 +72,15 @@ def records(scenario: str | Path | Scenario, seed: int | None = None, *,
             filters: tuple[str, ...] | None = None, duration: float | None = None):
     """The estimator settings of the host's vehicle 1 on *scenario*'s lab (run_in_memory's
     host config and filters) and the records its estimator is given in the run of *seed*."""
-    kw, chunks = lab_chunks(scenario_of(scenario), seed, duration=duration, filters=filters)
+    return records_of(*lab_ports(scenario_of(scenario), seed, duration=duration, filters=filters))
+
+
+def records_of(settings: dict, ports: dict, bauds: dict):
+    """:func:`records` of a run's input chunks (lab.run.lab_ports' arrays) under the
+    pipeline's *settings*."""
+    kw = dict(settings)
     pipe = Pipeline(kw.pop("config"), kw.pop("filters"), make_estimator=Kept, **kw)
-    drive(pipe, chunks, lambda _: None)
+    drive(pipe, arrivals(split(ports), bauds), lambda _: None)
     kept = pipe.vehicles[0].estimator
     return kept.cfg, kept.records
 
@@ -101,27 +114,29 @@ class Outcome:
     """A batch's result: ``estimates`` (per seed, :func:`columns`' layout), ``batched`` (the
     tracks run as a batch), ``ejected`` (seed -> why it ran per seed), and the CPU seconds of
     each half: ``records_s`` (the byte path to the records), ``batch_s`` (the batched tracks),
-    ``per_seed_s`` (the tracks without a twin, and the ejected seeds)."""
+    ``per_seed_s`` (the tracks without a twin, and the ejected seeds); ``bulk``: the seeds
+    whose records took the bulk path (module doc)."""
     estimates: list
     batched: tuple
     ejected: dict
     records_s: float = 0.0
     batch_s: float = 0.0
     per_seed_s: float = 0.0
+    bulk: int = 0
 
 
 def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | None = None,
         duration: float | None = None) -> Outcome:
     """Every track's estimates for each of *seeds* (module doc). Each seed's records are
-    made, taken by the tracks run per seed and turned into a :class:`Stream` (arrays) at once,
-    so a batch holds about a megabyte a seed; a seed the batch ejects has its records made
-    again (they are the same) and runs per seed."""
+    made (by the bulk path where it can), taken by the tracks run per seed and turned into
+    a :class:`Stream` (arrays) at once, so a batch holds about a megabyte a seed; a seed the
+    batch ejects has its records made again (they are the same) and runs per seed."""
     sc = scenario_of(scenario)
     seeds = list(seeds)
     out: list[dict] = [{} for _ in seeds]
     ejected: dict[int, str] = {}
     cpu = dict.fromkeys(("records", "batch", "per_seed"), 0.0)
-    streams, rows, cfg, batched, rest = [], [], None, (), ()
+    streams, rows, cfg, batched, rest, bulk = [], [], None, (), (), 0
 
     def made(seed):
         t = time.process_time()
@@ -130,14 +145,29 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
         return got
 
     for k, seed in enumerate(seeds):
-        c, recs = made(seed)
         t = time.process_time()
+        kw, ports, bauds = lab_ports(sc, seed, duration=duration, filters=filters)
+        c = kw["config"].estimator_config(kw["filters"], 1)  # vehicle 1's, as Kept's
         if cfg is None:
             cfg, batched = c, batchable(c.filters)
             rest = tuple(f for f in c.filters if f not in batched)
             if batched:
                 takes = BatchEstimator(replace(cfg, filters=batched), 0).takes()
                 others = Estimator(replace(cfg, filters=rest)).takes() if rest else frozenset()
+        recs = None
+        if batched and not rest:
+            try:
+                streams.append(bulk_stream(ports, bauds, kw, cfg.imu_gap_s))
+                rows.append(k)
+                bulk += 1
+            except Unbatchable:  # not regular: the pipeline's records, of the same chunks
+                recs = records_of(kw, ports, bauds)[1]
+        else:
+            recs = records_of(kw, ports, bauds)[1]
+        cpu["records"] += time.process_time() - t
+        if recs is None:  # its Stream is made
+            continue
+        t = time.process_time()
         if batched:
             try:
                 streams.append(stream(recs, takes, others, cfg.imu_gap_s))
@@ -165,7 +195,7 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
                 out[k] = {**got[j], **out[k]}
     if cfg is not None:
         out = [{f: e.get(f) or _empty() for f in cfg.filters} for e in out]
-    return Outcome(out, batched, ejected, cpu["records"], cpu["batch"], cpu["per_seed"])
+    return Outcome(out, batched, ejected, cpu["records"], cpu["batch"], cpu["per_seed"], bulk)
 
 
 def _empty() -> dict:

@@ -87,6 +87,7 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
                 "per_seed_tracks": round(outcome.per_seed_s / seeds, 4),
                 "scoring": round(score_s / seeds, 4)},
             "batched": list(outcome.batched), "ejected": len(outcome.ejected),
+            "bulk_records": outcome.bulk,  # seeds whose records skipped the pipeline
             "bytes_seeds_per_cpu_s": round(1 / per_byte, 3),
             "batch_seeds_per_cpu_s": round(1 / per_batch, 3),
             "ratio": round(per_byte / per_batch, 2), "goal_ratio": GOAL_RATIO,

@@ -22,10 +22,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
+
 from navtwin.emulator.runner import Chunk, Emulation
 from navtwin.emulator.scenario import Scenario, load_scenario
 from navtwin.emulator.world import World
-from navtwin.host.arrival import arrivals
+from navtwin.host.arrival import arrivals, split
 from navtwin.host.pipeline import Pipeline
 from navtwin.host import config as host_config
 from navtwin.host.replay import config_for, drive, emulator_settings
@@ -38,6 +40,38 @@ def scenario_of(scenario: str | Path | Scenario) -> Scenario:
     return scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
 
 
+def lab_ports(scenario: str | Path | Scenario, seed: int | None = None, *,
+              duration: float | None = None, follower: Follower | None = None,
+              **overrides) -> tuple[dict, dict, dict]:
+    """The emulation half of :func:`lab_chunks`: the pipeline's keyword arguments, and per
+    input port its chunks as arrays, ``{port: (data, sizes, start_ns)}`` (data: the port's
+    chunks joined; sizes and device start times int64, one a chunk, in device order) and
+    ``{port: baud}``: what :func:`navtwin.host.arrival.arrivals` stamps (the bulk path of
+    host.batch.chunks reads the arrays whole)."""
+    sc = scenario_of(scenario)
+    if follower is None and len(sc.fleet) > 1:
+        config = overrides.get("config") or host_config.load(config_for(sc.name))
+        follower = followers(sc, config, (1,))[0]
+    plugged = follower.inputs if follower is not None else {p: p for p in sc.ports}
+    if follower is not None:
+        overrides = {"config": follower.config, **overrides}
+    kw = emulator_settings(sc.name, {i: dict(sc.ports[p]) for i, p in plugged.items()}, **overrides)
+    streams: dict[str, tuple[list, list]] = {i: ([], []) for i in kw["inputs"]}
+    by_port = {plugged[i]: streams[i] for i in kw["inputs"]}
+
+    def sink(chunk: Chunk) -> None:
+        taken = by_port.get(chunk.port)
+        if taken is not None:
+            taken[0].append(chunk.data)
+            taken[1].append(chunk.start_ns)
+
+    with Emulation(sc, seed, speed=None, duration_s=duration, ports=False, sink=sink) as emu:
+        emu.run()
+    ports = {i: (b"".join(data), np.fromiter(map(len, data), np.int64, len(data)),
+                 np.array(starts, np.int64)) for i, (data, starts) in streams.items()}
+    return kw, ports, {i: sc.ports[plugged[i]]["baud"] for i in streams}
+
+
 def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,
                duration: float | None = None, follower: Follower | None = None,
                **overrides) -> tuple[dict, Iterator]:
@@ -47,25 +81,8 @@ def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,
     vehicles, *follower* (lab.fleet) says which ports a host reads as its inputs, and its
     config; without one, the host follows vehicle 1 (its config's vehicle 1 given vehicle 1's
     tag and router), so a sweep of a scenario with several cars scores car 1."""
-    sc = scenario_of(scenario)
-    if follower is None and len(sc.fleet) > 1:
-        config = overrides.get("config") or host_config.load(config_for(sc.name))
-        follower = followers(sc, config, (1,))[0]
-    plugged = follower.inputs if follower is not None else {p: p for p in sc.ports}
-    if follower is not None:
-        overrides = {"config": follower.config, **overrides}
-    kw = emulator_settings(sc.name, {i: dict(sc.ports[p]) for i, p in plugged.items()}, **overrides)
-    streams: dict[str, list[tuple[bytes, int]]] = {i: [] for i in kw["inputs"]}
-    by_port = {plugged[i]: streams[i] for i in kw["inputs"]}
-
-    def sink(chunk: Chunk) -> None:
-        taken = by_port.get(chunk.port)
-        if taken is not None:
-            taken.append((chunk.data, chunk.start_ns))
-
-    with Emulation(sc, seed, speed=None, duration_s=duration, ports=False, sink=sink) as emu:
-        emu.run()
-    return kw, arrivals(streams, {i: sc.ports[plugged[i]]["baud"] for i in streams})
+    kw, ports, bauds = lab_ports(scenario, seed, duration=duration, follower=follower, **overrides)
+    return kw, arrivals(split(ports), bauds)
 
 
 def run_in_memory(scenario: str | Path | Scenario, seed: int | None = None, *,

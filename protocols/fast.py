@@ -206,16 +206,9 @@ def _limits(t: np.dtype):
     return np.iinfo(t) if t.kind in "iu" else None
 
 
-def rows_packer(st: c.Struct) -> Callable[..., np.ndarray]:
-    """``pack(*columns) -> (n, size) uint8``: n payloads of a flat Struct at once, one row
-    each, equal to n calls of :func:`packer_for`'s packer (the block builder of the frames a
-    device writes a second at a time). The columns are the fields' values in declaration
-    order: per row, an (n,) array for a field, an (n, count) array for an Array; or one value
-    every row shares (an int, a (count,) array); at least one column per row. A Const field
-    is its declared bytes and takes no column. The layout is a numpy structured type made
-    from the declaration (each field's width and byte order), so the bytes are numpy's
-    assignment into it; a value outside its field's range is refused, as ``struct.pack``
-    refuses it."""
+def _row_fields(st: c.Struct, tail: bool):
+    """(numpy structured type, [(name, dims, limits)] of the fields a packer takes, {name:
+    Const bytes}) of a flat Struct; with *tail*, a GreedyBytes last is allowed and left out."""
     fields, given, fixed = [], [], {}
     for i, sub in enumerate(st.subcons):
         name, inner = (sub.name, sub.subcon) if isinstance(sub, c.Renamed) else (None, sub)
@@ -230,9 +223,31 @@ def rows_packer(st: c.Struct) -> Callable[..., np.ndarray]:
                 and isinstance(inner.count, int):
             fields.append((key, _numpy_type(inner.subcon), (inner.count,)))
             given.append((key, 1, _limits(fields[-1][1])))
+        elif tail and inner is c.GreedyBytes and i == len(st.subcons) - 1:
+            break
         elif inner is not c.Terminated:
             raise TypeError(f"field {name!r} ({type(inner).__name__}) has no row form")
-    layout = np.dtype(fields)
+    return np.dtype(fields), given, fixed
+
+
+def rows_layout(st: c.Struct) -> np.dtype:
+    """The numpy structured type of a flat Struct's fixed fields, in declaration order (a
+    GreedyBytes last, a packet's data, is left out): ``rows.view(rows_layout(st))`` reads n
+    payloads, one an (n, itemsize) uint8 row, as :func:`compile_flat`'s parser reads one."""
+    return _row_fields(st, tail=True)[0]
+
+
+def rows_packer(st: c.Struct) -> Callable[..., np.ndarray]:
+    """``pack(*columns) -> (n, size) uint8``: n payloads of a flat Struct at once, one row
+    each, equal to n calls of :func:`packer_for`'s packer (the block builder of the frames a
+    device writes a second at a time). The columns are the fields' values in declaration
+    order: per row, an (n,) array for a field, an (n, count) array for an Array; or one value
+    every row shares (an int, a (count,) array); at least one column per row. A Const field
+    is its declared bytes and takes no column. The layout is a numpy structured type made
+    from the declaration (each field's width and byte order), so the bytes are numpy's
+    assignment into it; a value outside its field's range is refused, as ``struct.pack``
+    refuses it."""
+    layout, given, fixed = _row_fields(st, tail=False)
 
     def pack(*columns) -> np.ndarray:
         if len(columns) != len(given):
