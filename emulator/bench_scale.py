@@ -245,8 +245,8 @@ def meets_goal(row: dict) -> bool:
 
 #: the figures of a row that :func:`medians` takes the median of
 MEDIAN_FIGURES = ("cpu_per_vehicle", "cpu_per_vehicle_whole_run", "reader_cpu_cores",
-                  "worst_p99_ms", "worst_max_ms", "median_p99_ratio_to_bare", "p99_ratio_to_bare", "frames_lost",
-                  "late_1ms_share")
+                  "worst_p99_ms", "worst_max_ms", "median_p99_ratio_to_bare",
+                  "p99_ratio_to_bare", "frames_lost", "late_1ms_share")
 
 
 def medians(rows: list[dict]) -> list[dict]:
