@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import threading
 
 import numpy as np
 
@@ -50,26 +51,29 @@ from navtwin.protocols import adis16350 as adis
 from .bias import FlickerBias, RateRandomWalk
 from .clock import Clock
 
-#: while :func:`shared_truth` is entered, the error-free outputs of every block made, by the
-#: sensor's motion and the block's sample times; None: not kept
-_SHARED: dict | None = None
+#: per thread, while :func:`shared_truth` is entered: ``shared``, the error-free outputs of
+#: every block made, by the sensor's motion and the block's sample times
+_LOCAL = threading.local()
 SHARED_BLOCKS = 1024  # at most this many blocks kept (about 40 kB each): then it starts over
+
+
+def _shared() -> dict | None:
+    return getattr(_LOCAL, "shared", None)
 
 
 @contextlib.contextmanager
 def shared_truth():
-    """Within it, sensors that move alike (the same trajectory, height, site and area) and
-    sample at the same true times share their error-free outputs (:meth:`Adis16350.
-    true_outputs`, a sixth of the world's CPU): the seeds of one scenario, made one after
-    another in a process (a sweep's task), compute each block's kinematics once. The
-    outputs are a function of those inputs alone, so every byte is the same; the arrays
-    are read-only."""
-    global _SHARED
-    outer, _SHARED = _SHARED, {} if _SHARED is None else _SHARED
+    """Within it (in this thread), sensors that move alike (the same trajectory, height, site
+    and area) and sample at the same true times share their error-free outputs
+    (:meth:`Adis16350.true_outputs`): the seeds of one scenario, made one after another (a
+    sweep's task), compute each block's kinematics once. The outputs are a function of
+    those inputs alone, so every byte is the same; the arrays are read-only."""
+    outer = _shared()
+    _LOCAL.shared = {} if outer is None else outer
     try:
         yield
     finally:
-        _SHARED = outer
+        _LOCAL.shared = outer
 
 
 MG = 1e-3 * adis.STANDARD_GRAVITY  # m/s^2 per mg
@@ -246,14 +250,15 @@ class Adis16350:
     def true_outputs(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Error-free specific force (m/s^2) and angular rate (rad/s), body axes (within
         :func:`shared_truth`, computed once for sensors that move alike)."""
-        if _SHARED is None or self._motion is None:
+        shared = _shared()
+        if shared is None or self._motion is None:
             return self._true_outputs(t_ns)
         key = (self._motion, t_ns.tobytes())
-        got = _SHARED.get(key)
+        got = shared.get(key)
         if got is None:
-            if len(_SHARED) >= SHARED_BLOCKS:
-                _SHARED.clear()
-            got = _SHARED[key] = self._true_outputs(t_ns)
+            if len(shared) >= SHARED_BLOCKS:
+                shared.clear()
+            got = shared[key] = self._true_outputs(t_ns)
             for a in got:
                 a.flags.writeable = False
         return got

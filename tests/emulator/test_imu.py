@@ -3,6 +3,7 @@ at rest and in motion, the error budget of the integrated z gyro, and the regist
 import dataclasses
 import functools
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -384,8 +385,13 @@ def test_seeds_made_within_shared_truth_compute_the_motion_once_and_make_the_sam
     alone = [events(seed) for seed in (1, 2)]
     with shared_truth():
         shared = [events(1)]
-        blocks = len(imu._SHARED)
+        blocks = len(imu._shared())
         shared.append(events(2))
-        assert len(imu._SHARED) == blocks == 4  # a second's block each, none added by seed 2
-    assert imu._SHARED is None
+        assert len(imu._shared()) == blocks == 4  # a second's block each, none added by seed 2
+        other = []  # another thread is outside it: it keeps nothing
+        thread = threading.Thread(target=lambda: other.append(imu._shared()))
+        thread.start()
+        thread.join()
+        assert other == [None]
+    assert imu._shared() is None
     assert shared == alone and alone[0] != alone[1]
