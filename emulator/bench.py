@@ -117,6 +117,12 @@ def jitter(seconds: float = 60.0, scenario: str = "office", seed: int | None = N
 DRIFT_FRAMES = 100
 
 
+def period_errors(arrivals_ns, scheduled_ns) -> np.ndarray:
+    """|arrival interval - scheduled interval| of consecutive frames or chunks, in ms."""
+    return np.abs(np.diff(np.asarray(arrivals_ns, dtype=np.int64))
+                  - np.diff(np.asarray(scheduled_ns, dtype=np.int64))) / 1e6
+
+
 def period_error(arrival_ns, scheduled_ns) -> dict:
     """How regularly frames arrived, against when they were due: for frames ``i`` read at
     ``arrival_ns[i]`` and scheduled (written, on the writer's schedule) at ``scheduled_ns[i]``,
@@ -126,7 +132,7 @@ def period_error(arrival_ns, scheduled_ns) -> dict:
     :data:`DRIFT_FRAMES` frames minus that of the first (medians, ms): a reader falling behind
     the schedule, or a schedule run on a wrong clock. Needs two frames or more."""
     a, s = np.asarray(arrival_ns), np.asarray(scheduled_ns)
-    dev = np.abs(np.diff(a) - np.diff(s)) / 1e6
+    dev = period_errors(a, s)
     late = (a - s) / 1e6
     n = min(DRIFT_FRAMES, len(late))
     return {"p50_ms": float(np.percentile(dev, 50)), "p99_ms": float(np.percentile(dev, 99)),

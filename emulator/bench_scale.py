@@ -68,7 +68,7 @@ import numpy as np
 
 from navtwin.common.schema import Check, between, counts, key, takes
 
-from .bench import cpu_s, nominal_period_ns, period_key, pty_floors
+from .bench import arrivals, cpu_s, nominal_period_ns, period_errors, period_key, pty_floors
 
 GOAL_RATIO = 1.2  # a port's reader-side p99 over the bare PTY's
 GOAL_CORE = 0.02  # of a core per vehicle
@@ -78,27 +78,13 @@ TAIL_NS = 100_000_000  # chunks ending this close to the end are left out: the e
 #                        closes its PTYs at once, and a reader may not have read them yet
 
 
-def period_errors(arrivals_ns: np.ndarray, device_ns: np.ndarray) -> np.ndarray:
-    """|arrival interval - device-time interval| of consecutive chunks, in ms."""
-    return np.abs(np.diff(np.asarray(arrivals_ns, dtype=np.int64))
-                  - np.diff(np.asarray(device_ns, dtype=np.int64))) / 1e6
-
-
-def arrivals(read_t: np.ndarray, read_n: np.ndarray, ends: np.ndarray) -> np.ndarray:
-    """When each chunk arrived: the time of the read that brought its last byte. *read_t*,
-    *read_n*: each read's time and size; *ends*: each chunk's end offset in the bytes read
-    (only chunks the reads reach)."""
-    got = np.cumsum(read_n)
-    return np.asarray(read_t)[np.searchsorted(got, ends, side="left")]
-
-
 def port_figures(read_t, read_n, sizes, ends_ns, skipped: int) -> dict:
     """One port's figures: *sizes* and *ends_ns* of the chunks written (device time),
     *skipped* bytes written before the reader was there."""
     offsets = np.cumsum(sizes) - skipped
     total = int(np.sum(read_n))
     whole = (offsets > 0) & (offsets <= total)  # chunks read whole
-    t = arrivals(read_t, read_n, offsets[whole])
+    t = arrivals(offsets[whole], np.cumsum(read_n), read_t)
     dev = np.asarray(ends_ns, dtype=np.int64)[whole]
     out = {"read": int(whole.sum())}
     if len(t) >= 2:

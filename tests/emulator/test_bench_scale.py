@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from navtwin.emulator.bench import nominal_period_ns
-from navtwin.emulator.bench_scale import (arrivals, late_share, medians, meets_goal, period_errors,
-                                          port_figures, scale)
+from navtwin.emulator.bench import arrivals, nominal_period_ns, period_errors
+from navtwin.emulator.bench_scale import late_share, medians, meets_goal, port_figures, scale
 
 
 def test_period_error_is_arrival_interval_against_device_interval():
@@ -17,7 +16,7 @@ def test_period_error_is_arrival_interval_against_device_interval():
 
 def test_a_chunk_arrives_with_the_read_that_brings_its_last_byte():
     # reads of 20, 40 and 30 bytes; chunks of 30 bytes end at 30, 60 and 90
-    t = arrivals(np.array([100, 200, 300]), np.array([20, 40, 30]), np.array([30, 60, 90]))
+    t = arrivals(np.array([30, 60, 90]), np.cumsum([20, 40, 30]), np.array([100, 200, 300]))
     assert t.tolist() == [200, 200, 300]
 
 
