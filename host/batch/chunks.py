@@ -67,9 +67,9 @@ from navtwin.protocols import ports as port_declarations
 from navtwin.protocols.crc import crc16_rows
 from navtwin.protocols.crcframe import HEADER, TRAILER
 from navtwin.protocols.fast import rows_layout
-from navtwin.protocols.serial import wire_ns
 from navtwin.protocols.stream import Frame, sins_decoder
 
+from ..arrival import processing_order
 from ..clock import MIN_STEP_S, DeviceClock, Unwrapper
 from ..pipeline import anchor_clock, imu_clock, report_counter
 from .estimator import EXCHANGE, IMU, Stream, Unbatchable
@@ -101,9 +101,10 @@ def bulk_stream(ports: Mapping[str, tuple[bytes, np.ndarray, np.ndarray]],
     if any(d.format not in _READ for d in declared.values()) or len(imu_ports) > 1 \
             or len(report_ports) > 1:
         raise Unbatchable(f"inputs {', '.join(inputs)}")
-    order = [p for p in port_declarations.host_inputs() if p in inputs]
-    position, stamp = _arrivals([ports[p] for p in order], [bauds[p] for p in order])
-    at = dict(zip(order, position))
+    try:
+        at, stamp = processing_order({p: ports[p] for p in inputs}, bauds)
+    except ValueError as e:
+        raise Unbatchable(str(e)) from None
     arrival = stamp * 1e-9  # the pipeline's ``t_ns * 1e-9``, in processing order
     vehicle = config.vehicles[0]
     hold = config.hold_s if imu_ports else 0.0
@@ -154,29 +155,6 @@ def bulk_stream(ports: Mapping[str, tuple[bytes, np.ndarray, np.ndarray]],
     anchors, dist, stat = np.zeros(n, np.int64), np.full(n, np.nan), np.zeros(n, np.int64)
     anchors[~is_imu], dist[~is_imu], stat[~is_imu] = anchor[take_r], distance[take_r], status[take_r]
     return Stream(kind, t, g, a, uptime, anchors, dist, stat)
-
-
-# -- arrival -----------------------------------------------------------------------------------
-
-def _arrivals(ports: list, bauds: list) -> tuple[list[np.ndarray], np.ndarray]:
-    """Each port's chunks' processing positions, and the arrival stamps (ns) in processing
-    order (host.arrival.arrivals)."""
-    times, rank, index = [], [], []
-    for r, ((_, sizes, start), baud) in enumerate(zip(ports, bauds)):
-        t = start + wire_ns(sizes, baud)
-        if (np.diff(t) < 0).any():
-            raise Unbatchable("a port's chunks arrive out of their order")
-        times.append(t)
-        rank.append(np.full(len(t), r))
-        index.append(np.arange(len(t)))
-    t = np.concatenate(times)
-    order = np.lexsort((np.concatenate(index), np.concatenate(rank), t))
-    i = np.arange(len(t))
-    stamp = np.maximum.accumulate(t[order] - i) + i
-    position = np.empty(len(t), np.int64)
-    position[order] = i
-    cuts = np.cumsum([len(x) for x in times])[:-1]
-    return np.split(position, cuts), stamp
 
 
 # -- decoding ----------------------------------------------------------------------------------
