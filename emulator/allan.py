@@ -132,24 +132,35 @@ def _rel(measured: float, want: float) -> float:
     return measured / want - 1.0 if want else math.nan
 
 
-def dithered(imu: Imu) -> bool:
-    """Whether the words of the ``[imu]`` table *imu* carry its grade: the white noise of a
-    read spans a gyro LSB (rounding then adds white noise; below it, the words stick)."""
+def read_lsbs(imu: Imu) -> float:
+    """The white noise of a read of the ``[imu]`` table *imu*, in gyro LSBs: above 1 rounding
+    adds white noise to it (the words are dithered; below, they stick); above
+    :data:`TRANSPARENT`, rounding's LSB/sqrt(12) is below a thousandth of it."""
     taps = adis.bartlett_taps(imu.filter_taps)
     sigma = math.radians(imu.errors.gyro_arw_deg_rt_h) / 60 * math.sqrt(np.sum(taps ** 2) / imu.sample_period_s)
-    return sigma > math.radians(imu.word_format.gyro_lsb_dps(imu))
+    return sigma / math.radians(imu.word_format.gyro_lsb_dps(imu))
+
+
+#: read noise in LSBs from which the words are as good as the registers
+TRANSPARENT = 300.0
 
 
 def round_trip(grade: str, seconds: float, seed: int, imu: dict | None = None) -> dict:
     """One grade's Allan round trip: its white noise and floors, the grade's beside the
-    measured (the sensor's own: SENSOR registers from the bytes, or the registers before
-    quantisation for a grade finer than an LSB), with the Allan deviation at 1 .. 1000 s."""
-    fine = not dithered(parked(seconds, {"grade": grade, **SENSOR, **(imu or {})}).imu)
-    # a grade the words carry: SENSOR registers, from 0.5 s; a finer one: the default 4 taps,
-    # whose reads are independent (the filter spans 8.5 ms), from 20 ms
-    sc = parked(seconds, {"grade": grade, **({} if fine else SENSOR), **(imu or {})})
-    gyro, accel = (sensor_rates if fine else sins_rates)(sc, seed)
-    taus = np.logspace(math.log10(0.02 if fine else 0.5), math.log10(seconds / 10), 20)
+    measured, with the Allan deviation at 1 .. 1000 s. Read from the bytes at the default 4
+    taps where the words are transparent (``[imu] words = "adis16488"``), from the bytes
+    with the SENSOR registers where they are dithered, or from the registers before
+    quantisation where they stick (``paper003`` in the 14-bit words)."""
+    default = parked(seconds, {"grade": grade, **(imu or {})})
+    sensor = parked(seconds, {"grade": grade, **SENSOR, **(imu or {})})
+    if read_lsbs(default.imu) > TRANSPARENT:
+        sc, rates = default, sins_rates
+    else:
+        sc, rates = (sensor, sins_rates) if read_lsbs(sensor.imu) > 1 else (default, sensor_rates)
+    gyro, accel = rates(sc, seed)
+    # SENSOR's 16 taps span 38 ms, so its reads are correlated below it: from 0.5 s; the
+    # default 4 taps span 8.5 ms, so reads 10 ms apart are independent: from 20 ms
+    taus = np.logspace(math.log10(0.5 if sc is sensor else 0.02), math.log10(seconds / 10), 20)
     g, a = fit(gyro, 1 / READ_S, taus), fit(accel, 1 / READ_S, taus)
     e, alias = sc.imu.errors, adis.read_white_factor(sc.imu.filter_taps, 1 / sc.imu.sample_period_s, READ_S)
     rows = {
@@ -164,7 +175,7 @@ def round_trip(grade: str, seconds: float, seed: int, imu: dict | None = None) -
     def adev(fitted: dict) -> list:
         return np.interp(np.log(at), np.log(taus), fitted["adev"]).tolist()
 
-    return {"grade": grade, "from": "registers" if fine else "bytes", "seconds": seconds,
+    return {"grade": grade, "from": "registers" if rates is sensor_rates else "bytes", "seconds": seconds,
             "rows": {k: {"grade": w, "measured": m, "rel": _rel(m, w)} for k, (w, m) in rows.items()},
             "adev_at_s": at.tolist(), "gyro_adev_deg_h": [math.degrees(v) * 3600 for v in adev(g)],
             "accel_adev_ug": [v / ug(1.0) for v in adev(a)]}

@@ -15,9 +15,18 @@ which is the Allan variance of flicker noise, 2 ln 2 h_-1 for S(f) = h_-1 / f (I
 S = B^2 / (2 pi f) gives the floor 0.664 B). Two terms a decade from 0.03 s to 30 000 s keep
 the Allan deviation within 1.3 % of the floor from 1 s to 3000 s (0.04 % ripple inside).
 
+Each term is stepped every m_k samples, m_k = max(1, floor(tau_k / (HOLD_RATIO ts))), as a GM
+process on that grid (phi = exp(-m_k ts / tau_k)), and held in between: the slow terms draw
+once in many samples (0.5 normals a sample per axis at 819.2 Hz, not 13). Averaged over the
+phase of the grid, which an overlapping Allan estimate does, a held term's autocovariance is
+the chord of q e^(-|t|/tau) between the grid's lags, so its Allan curve is the GM's to the
+chord's error. At HOLD_RATIO = 8 and 819.2 samples/s the samples' exact curve
+(:func:`flicker_allan_variance` with *ts*) is the continuous terms' within 0.8 % at 10 ms
+and 0.1 % from 0.1 s to 3000 s (tests/emulator/test_bias.py; docs/emulator-models.md 3.1).
+
 Rate random walk: b_j = b_j-1 + K sqrt(Ts) w_j from 0; its Allan deviation is K sqrt(T / 3).
 
-Each process draws from the Generator it is given (its sensor's own stream), all terms of a
+Each process draws from the Generator it is given (its sensor's own stream), all steps of a
 block at once. The recursions run as a prefix scan in numpy (no scipy on the emulator's path
 to its ready line): after the steps s = 1, 2, 4, ... each y_j holds
 sum_{i=0}^{2s-1} phi^i x_{j-i}, every factor phi^s <= 1, so no step grows the rounding.
@@ -32,6 +41,13 @@ import numpy as np
 FLICKER_TAUS_S = np.logspace(math.log10(0.03), math.log10(30_000.0), 13)
 #: the band over which its Allan deviation is flat (within 1.3 %; tests/emulator/test_bias.py)
 FLICKER_BAND_S = (1.0, 3000.0)
+#: a term is held for at most tau_k / HOLD_RATIO between its steps (module doc)
+HOLD_RATIO = 8
+
+
+def hold_samples(ts: float, taus: np.ndarray = FLICKER_TAUS_S) -> np.ndarray:
+    """m_k: the samples each term is held for at sample period *ts* (at least one)."""
+    return np.maximum(1, np.floor(taus / (HOLD_RATIO * ts))).astype(np.int64)
 
 
 def gm_allan_variance(t: np.ndarray, tau: float, q: float = 1.0) -> np.ndarray:
@@ -47,43 +63,101 @@ def flicker_term_variance(floor: float, taus: np.ndarray = FLICKER_TAUS_S) -> fl
     return floor ** 2 * math.log(taus[1] / taus[0]) / (2 * math.log(2))
 
 
-def flicker_allan_variance(t: np.ndarray, floor: float, taus: np.ndarray = FLICKER_TAUS_S) -> np.ndarray:
-    """The exact Allan variance of the sum of GM terms :class:`FlickerBias` runs."""
+def flicker_allan_variance(t: np.ndarray, floor: float, ts: float | None = None,
+                           taus: np.ndarray = FLICKER_TAUS_S) -> np.ndarray:
+    """The Allan variance of the sum of GM terms at averaging times *t*: of the continuous
+    terms (*ts* None, the design), or exactly of the samples :class:`FlickerBias` makes at
+    period *ts* (*t* rounded to whole samples), averaged over the phase of the holds."""
     q = flicker_term_variance(floor, taus)
-    return sum(gm_allan_variance(t, tau, q) for tau in taus)
+    if ts is None:
+        return sum(gm_allan_variance(t, tau, q) for tau in taus)
+    n = np.maximum(1, np.rint(np.asarray(t, dtype=float) / ts))
+    return q * sum(_held_allan_variance(n, int(m), math.exp(-m * ts / tau))
+                   for m, tau in zip(hold_samples(ts, taus), taus))
+
+
+def _held_allan_variance(n: np.ndarray, m: int, phi: float) -> np.ndarray:
+    """AVAR / q at n samples of one held term: its phase-averaged autocorrelation at lag
+    l = a m + b is r(l) = phi^a (1 - b (1 - phi) / m). With y the difference of two n-sample
+    means, AVAR = (1 / 2n^2) sum_l c(l) (r(0) - r(l)) over the lags' weights
+    c(l) = 2n - 3l (l <= n), l - 2n (n < l <= 2n), whose sum over l = 1 .. 2n is -n:
+
+        AVAR = (n + S) / n^2,   S = sum_{l=1}^{2n} (2n - 3l) r(l) + 4 sum_{l=n+1}^{2n} (l - n) r(l)
+
+    S in closed form from the prefix sums F_p(L) = sum_{l<L} l^p r(l), block by block. On the
+    grids :func:`hold_samples` gives, m ts >= tau / 16, so 1 - phi > 0.06 and the geometric
+    sums do not cancel (a term of phi near 1 would need their expm1 forms)."""
+    beta = (1.0 - phi) / m
+
+    def prefix(big_l):  # F_0 and F_1 over l < big_l: K whole blocks and B lags of the next
+        k, b = np.divmod(big_l, m)
+        geo = (1.0 - phi ** k) / (1.0 - phi)  # sum_{a<K} phi^a
+        ageo = phi * (1.0 - k * phi ** (k - 1) + (k - 1) * phi ** k) / (1.0 - phi) ** 2  # sum a phi^a
+        a0 = m - beta * m * (m - 1) / 2  # sum_b (1 - beta b) over a whole block
+        a1 = m * (m - 1) / 2 - beta * (m - 1) * m * (2 * m - 1) / 6  # sum_b b (1 - beta b)
+        p0 = b - beta * b * (b - 1) / 2
+        p1 = b * (b - 1) / 2 - beta * (b - 1) * b * (2 * b - 1) / 6
+        f0 = a0 * geo + phi ** k * p0
+        f1 = m * a0 * ageo + a1 * geo + phi ** k * (k * m * p0 + p1)
+        return f0, f1
+
+    f0_all, f1_all = prefix(2 * n + 1)
+    f0_half, f1_half = prefix(n + 1)
+    s = 2 * n * (f0_all - 1.0) - 3 * f1_all + 4 * ((f1_all - f1_half) - n * (f0_all - f0_half))
+    return (n + s) / n ** 2
 
 
 class FlickerBias:
     """A 3-axis bias with a flat Allan floor *floor*: the GM terms of FLICKER_TAUS_S, each
-    started stationary, sampled every *ts* seconds."""
+    started stationary and stepped every :func:`hold_samples` samples of period *ts*, the
+    first step at the first sample (module doc)."""
 
     def __init__(self, floor: float, ts: float, rng: np.random.Generator) -> None:
         self.rng = rng
         sigma = math.sqrt(flicker_term_variance(floor))
-        self.phi = np.exp(-ts / FLICKER_TAUS_S)
+        self.hold = hold_samples(ts)
+        self.phi = np.exp(-self.hold * ts / FLICKER_TAUS_S)
         self.drive = sigma * np.sqrt(1.0 - self.phi ** 2)
-        self.state = sigma * rng.standard_normal((len(FLICKER_TAUS_S), 3))  # b_-1 of each term
+        self.state = sigma * rng.standard_normal((len(FLICKER_TAUS_S), 3))  # each term before its first step
+        self.samples = 0  # made so far
 
     def next(self, n: int) -> np.ndarray:
-        """The bias (n, 3) at the next *n* samples."""
-        b = first_order(self.phi, self.drive[:, None, None] * self.rng.standard_normal((len(self.phi), n, 3)),
-                        self.state)
-        self.state = b[:, -1]
-        return b.sum(axis=0)
+        """The bias (n, 3) at the next *n* samples: the terms' sum before the block, plus each
+        step's change at its sample, summed down the block. The terms that step are scanned
+        together, each padded to the most steps (the padding's values are not used)."""
+        hold, j0 = self.hold, self.samples
+        self.samples = j0 + n
+        first = -(-j0 // hold) * hold - j0  # each term's first step in the block (may be >= n)
+        steps = np.maximum(0, -(-(n - first) // hold))
+        change = np.zeros((n, 3))
+        change[0] = self.state.sum(axis=0)
+        k = np.flatnonzero(steps)
+        if len(k):
+            u = steps[k]
+            taken = np.arange(u.max()) < u[:, None]  # (terms, steps): term by term, as drawn
+            x = np.zeros(taken.shape + (3,))
+            x[taken] = np.repeat(self.drive[k], u)[:, None] * self.rng.standard_normal((u.sum(), 3))
+            before = self.state[k]
+            b = first_order(self.phi[k], x, before)
+            jumps = np.diff(b, axis=1, prepend=before[:, None])
+            for row, term in enumerate(k):
+                change[first[term]::hold[term]] += jumps[row, :u[row]]
+            self.state[k] = b[np.arange(len(k)), u - 1]
+        return np.cumsum(change, axis=0)
 
 
 def first_order(phi: np.ndarray, x: np.ndarray, before: np.ndarray) -> np.ndarray:
     """y_j = phi y_j-1 + x_j along axis 1 of *x* (K, n, 3), one phi per term k, from
-    y_-1 = *before* (K, 3): a prefix scan of log2(n) numpy steps."""
+    y_-1 = *before* (K, 3): phi y_-1 joins x_0, then a prefix scan of log2(n) numpy steps."""
     y = x.copy()
+    y[:, 0] += phi[:, None] * before
     scratch = np.empty_like(y)  # one buffer for every step's products, not one each
     step, power, n = 1, phi.copy(), y.shape[1]
     while step < n:
         product = np.multiply(power[:, None, None], y[:, :-step], out=scratch[:, :n - step])
         y[:, step:] += product
         step, power = 2 * step, power * power
-    decay = phi[:, None] ** np.arange(1, y.shape[1] + 1)  # phi^(j+1)
-    return y + decay[:, :, None] * before[:, None, :]
+    return y
 
 
 class RateRandomWalk:
