@@ -18,8 +18,7 @@ the Allan deviation within 1.3 % of the floor from 1 s to 3000 s (0.04 % ripple 
 Each term is stepped every m_k samples, m_k = max(1, floor(tau_k / (HOLD_RATIO ts))), as a GM
 process on that grid (phi = exp(-m_k ts / tau_k)), and held in between: the slow terms draw
 once in many samples (0.5 normals a sample per axis at 819.2 Hz, not 13). Averaged over the
-phase of the grid (each term's is drawn at power-on, so this holds for any window of a run,
-its start included), a held term's autocovariance is
+phase of the grid, which an overlapping Allan estimate does, a held term's autocovariance is
 the chord of q e^(-|t|/tau) between the grid's lags, so its Allan curve is the GM's to the
 chord's error. At HOLD_RATIO = 8 and 819.2 samples/s the samples' exact curve
 (:func:`flicker_allan_variance` with *ts*) is the continuous terms' within 0.8 % at 10 ms
@@ -110,8 +109,8 @@ def _held_allan_variance(n: np.ndarray, m: int, phi: float) -> np.ndarray:
 
 class FlickerBias:
     """A 3-axis bias with a flat Allan floor *floor*: the GM terms of FLICKER_TAUS_S, each
-    started stationary and stepped every :func:`hold_samples` samples of period *ts* on a
-    grid of its own random phase (module doc)."""
+    started stationary and stepped every :func:`hold_samples` samples of period *ts*, the
+    first step at the first sample (module doc)."""
 
     def __init__(self, floor: float, ts: float, rng: np.random.Generator) -> None:
         self.rng = rng
@@ -120,9 +119,6 @@ class FlickerBias:
         self.phi = np.exp(-self.hold * ts / FLICKER_TAUS_S)
         self.drive = sigma * np.sqrt(1.0 - self.phi ** 2)
         self.state = sigma * rng.standard_normal((len(FLICKER_TAUS_S), 3))  # each term before its first step
-        # term k steps at the samples j with (j + offset_k) % m_k == 0: a grid locked to the
-        # first sample would hold every slow term still for its first m_k samples in every run
-        self.offset = rng.integers(0, self.hold)
         self.samples = 0  # made so far
 
     def next(self, n: int) -> np.ndarray:
@@ -131,7 +127,7 @@ class FlickerBias:
         together, each padded to the most steps (the padding's values are not used)."""
         hold, j0 = self.hold, self.samples
         self.samples = j0 + n
-        first = -(j0 + self.offset) % hold  # each term's first step in the block (may be >= n)
+        first = -(-j0 // hold) * hold - j0  # each term's first step in the block (may be >= n)
         steps = np.maximum(0, -(-(n - first) // hold))
         change = np.zeros((n, 3))
         change[0] = self.state.sum(axis=0)
