@@ -103,7 +103,7 @@ from .schedule import Deadlines, Turns
 from .tap import SOCKET as TAP_SOCKET, TapServer
 from .timing import Lateness, Mode, TimingError, choose as choose_timing
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows, file_name as truth_file
-from .uart import END, Chunk, Inbound, Line, LineWrapper, Marked
+from .uart import END, Chunk, Inbound, Irregular, Line, LineWrapper, Marked
 from .uart_rx import ClientView, line_framing
 
 SEC = 1_000_000_000
@@ -437,6 +437,33 @@ class Emulation:
             self.record_error = e
             self.interrupted = True
         return self.summary()
+
+    def chunks(self, ports) -> dict[str, tuple[list[bytes], list[int]]]:
+        """The quick path of an in-memory run (lab.run): what :meth:`run` at --speed max would
+        hand a sink for each port instance in *ports*, as the data and start time of each
+        chunk in the port's order, the lines timed in one pass each (emulator.uart
+        Line.drain); the other ports' events are not put on their lines, and the world makes
+        no events of the SINS ports not taken (World.only). Only for a
+        fresh run at --speed max with no PTY and no recording, of a scenario without faults
+        (wrappers, marks and a coordinator's power cuts are the timeline's: uart.Irregular,
+        as for whatever else drain refuses; the emulation is then spent and the caller runs
+        a fresh one). Equal to the sink's: tests/emulator/test_quick_lines.py."""
+        if self.speed is not None or self.ports or self.recorder is not None \
+                or self._feed is not None:
+            raise Irregular("only a fresh run at --speed max without ports or a recording")
+        if self.scenario.faults:
+            raise Irregular("a scenario with faults")
+        taken = set(ports)
+        self.world.only(taken)
+        devices, lines = self.devices, self.lines
+        feed = self._feed = Feed(self.world, self.end_ns, MAX_BLOCK_NS, tuple(devices.values()))
+        while not feed.exhausted:
+            for ev in feed.step():
+                if ev.port in taken:
+                    t_ns, item = devices[ev.port].to_line(ev)
+                    lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
+        self.reached_ns = self.end_ns
+        return {port: lines[port].drain(self.end_ns) for port in ports}
 
     def prepare(self) -> Feed:
         """The world's events before the clock starts (paced: its first second), once; a

@@ -90,6 +90,7 @@ class Vehicle:
                  air: bool = True) -> None:
         self.number = number
         self.air = air  # make its frames on the air (nobody may be there to take them)
+        self.sins_events = True  # make the events of its SINS port (World.only)
         self.spec = spec
         self.sins_port = ports.instance(ports.SINS.name, number)
         #: the port of the coordinator its router joined (its own, or vehicle 1's)
@@ -125,7 +126,7 @@ class Vehicle:
         the network is not offered): ``(sins events, offered packets)``."""
         self.imu.generate(lo, hi)
         t_sins, frames, marks = self.board.frames(lo, hi)
-        events = _port_events(t_sins, self.sins_port, frames, marks)
+        events = _port_events(t_sins, self.sins_port, frames, marks) if self.sins_events else []
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
         times = self.board.byte_times(t_sins, [len(f) for f in frames])
         packets = self.router.packetise(b"".join(frames), times, next_byte)
@@ -229,6 +230,13 @@ class World:
         #: while :meth:`ahead` runs, and after: the process that makes the blocks
         #: (emulator.maker), whose blocks advance, air, made and held give
         self._maker = None
+
+    def only(self, taken) -> None:
+        """From the next block on, make no events of the SINS ports not in *taken* (port
+        instances): their frames still go to the routers, so every other event is the same
+        (a caller that reads only the radio, lab.run's in-memory runs)."""
+        for v in self.vehicles:
+            v.sins_events = v.sins_port in taken
 
     # -- generation -------------------------------------------------------------------------
     def _make(self) -> None:
