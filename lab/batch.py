@@ -43,8 +43,9 @@ from navtwin.host.batch.chunks import bulk_stream
 from navtwin.host.batch.estimator import BatchEstimator, Unbatchable, stream
 from navtwin.host.batch.tracks import batchable
 from navtwin.host.estimator import Estimator
+from navtwin.host import config as host_config
 from navtwin.host.pipeline import Pipeline
-from navtwin.host.replay import drive
+from navtwin.host.replay import config_for, drive
 
 from .run import lab_ports, scenario_of
 
@@ -137,6 +138,9 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
     ejected: dict[int, str] = {}
     cpu = dict.fromkeys(("records", "batch", "per_seed"), 0.0)
     streams, rows, cfg, batched, rest, bulk = [], [], None, (), (), 0
+    # each seed's host config, loaded once (lab_ports loads it per seed); a fleet's follower
+    # config is made from it per seed
+    shared = {} if len(sc.fleet) > 1 else {"config": host_config.load(config_for(sc.name))}
 
     def made(seed):
         t = time.process_time()
@@ -146,7 +150,7 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
 
     for k, seed in enumerate(seeds):
         t = time.process_time()
-        kw, ports, bauds = lab_ports(sc, seed, duration=duration, filters=filters)
+        kw, ports, bauds = lab_ports(sc, seed, duration=duration, filters=filters, **shared)
         c = kw["config"].estimator_config(kw["filters"], 1)  # vehicle 1's, as Kept's
         if cfg is None:
             cfg, batched = c, batchable(c.filters)
