@@ -122,28 +122,43 @@ class FlickerBias:
         self.samples = 0  # made so far
 
     def next(self, n: int) -> np.ndarray:
-        """The bias (n, 3) at the next *n* samples: the terms' sum before the block, plus each
-        step's change at its sample, summed down the block. The terms that step are scanned
-        together, each padded to the most steps (the padding's values are not used)."""
-        hold, j0 = self.hold, self.samples
-        self.samples = j0 + n
+        """The bias (n, 3) at the next *n* samples (:meth:`together`, alone)."""
+        return FlickerBias.together([self], n)[0]
+
+    @staticmethod
+    def together(biases: list[FlickerBias], n: int) -> np.ndarray:
+        """The biases (S, n, 3) of S alike processes (one floor and period: a sweep's seeds)
+        at their next *n* samples, each seed's numbers what it would make alone: the terms'
+        sum before the block, plus each step's change at its sample, summed down the block.
+        The terms that step are scanned together, each padded to the most steps (the
+        padding's values are not used); each seed draws from its own stream, term by term."""
+        first_bias = biases[0]
+        hold, j0 = first_bias.hold, first_bias.samples
+        for b in biases:
+            b.samples = j0 + n
         first = -(-j0 // hold) * hold - j0  # each term's first step in the block (may be >= n)
         steps = np.maximum(0, -(-(n - first) // hold))
-        change = np.zeros((n, 3))
-        change[0] = self.state.sum(axis=0)
+        state = np.stack([b.state for b in biases])  # (S, terms, 3)
+        change = np.zeros((len(biases), n, 3))
+        change[:, 0] = state.sum(axis=1)
         k = np.flatnonzero(steps)
         if len(k):
             u = steps[k]
             taken = np.arange(u.max()) < u[:, None]  # (terms, steps): term by term, as drawn
-            x = np.zeros(taken.shape + (3,))
-            x[taken] = np.repeat(self.drive[k], u)[:, None] * self.rng.standard_normal((u.sum(), 3))
-            before = self.state[k]
-            b = first_order(self.phi[k], x, before)
-            jumps = np.diff(b, axis=1, prepend=before[:, None])
+            x = np.zeros((len(biases),) + taken.shape + (3,))
+            draws = np.stack([b.rng.standard_normal((u.sum(), 3)) for b in biases])
+            x[:, taken] = np.repeat(first_bias.drive[k], u)[:, None] * draws
+            before = state[:, k]
+            rows = len(biases) * len(k)
+            b = first_order(np.tile(first_bias.phi[k], len(biases)), x.reshape(rows, -1, 3),
+                            before.reshape(rows, 3)).reshape(x.shape)
+            jumps = np.diff(b, axis=2, prepend=before[:, :, None])
             for row, term in enumerate(k):
-                change[first[term]::hold[term]] += jumps[row, :u[row]]
-            self.state[k] = b[np.arange(len(k)), u - 1]
-        return np.cumsum(change, axis=0)
+                change[:, first[term]::hold[term]] += jumps[:, row, :u[row]]
+            state[:, k] = b[:, np.arange(len(k)), u - 1]
+            for i, bias in enumerate(biases):
+                bias.state = state[i]
+        return np.cumsum(change, axis=1)
 
 
 def first_order(phi: np.ndarray, x: np.ndarray, before: np.ndarray) -> np.ndarray:
@@ -172,3 +187,8 @@ class RateRandomWalk:
         b = self.state + self.step * np.cumsum(self.rng.standard_normal((n, 3)), axis=0)
         self.state = b[-1]
         return b
+
+    @staticmethod
+    def together(walks: list[RateRandomWalk], n: int) -> np.ndarray:
+        """The next *n* samples (S, n, 3) of S walks, each as alone."""
+        return np.stack([w.next(n) for w in walks])

@@ -157,23 +157,32 @@ class _Sensor:
             RateRandomWalk(rrw, ts, drift_rng) if rrw > 0 else None) if process is not None]
         self.fir_state = None
 
-    def measure(self, true: np.ndarray, white: np.ndarray, drive: np.ndarray):
-        """Filtered outputs and per-sample overrange flags for true values (N, 3)."""
-        raw = true @ self.matrix.T + self.turn_on
-        if self.drive:
-            gm = gauss_markov(self.phi, self.gm_state, self.drive * drive)
-            self.gm_state = self.phi * gm[-1]
-            raw += gm
-        for process in self.slow:
-            raw += process.next(len(true))
-        raw += self.noise * white
-        over = np.abs(raw) > self.full_scale
-        raw = np.clip(raw, -self.full_scale, self.full_scale)
-        if self.fir_state is None:  # the sensor ran before t = 0: start from steady state,
-            # each delay holding raw[0] times the taps it has still to add
-            self.fir_state = fir_steady_state(self.taps)[:, None] * raw[0]
-        out, self.fir_state = fir(self.taps, raw, self.fir_state)
-        return out, over.any(axis=1)
+    @staticmethod
+    def measure(triads: list[_Sensor], true: np.ndarray, white: np.ndarray, drive: np.ndarray):
+        """Filtered outputs (S, N, 3) and per-sample overrange flags (S, N) of the S *triads*
+        (alike: one grade, one of each seed's sensors) for the true values (N, 3) they all
+        sense, with their white noise and GM drive (S, N, 3). Each seed's arithmetic is
+        what it would be alone (S = 1): the products stacked per seed, the rest elementwise."""
+        first = triads[0]
+        raw = np.matmul(true, np.stack([t.matrix for t in triads]).transpose(0, 2, 1)) \
+            + np.stack([t.turn_on for t in triads])[:, None, :]
+        if first.drive:
+            for t, row, steps in zip(triads, raw, drive):
+                gm = gauss_markov(t.phi, t.gm_state, t.drive * steps)
+                t.gm_state = t.phi * gm[-1]
+                row += gm
+        for k, process in enumerate(first.slow):
+            raw += type(process).together([t.slow[k] for t in triads], len(true))
+        raw += first.noise * white
+        over = np.abs(raw) > first.full_scale
+        raw = np.clip(raw, -first.full_scale, first.full_scale)
+        out = np.empty_like(raw)
+        for t, row, filtered in zip(triads, raw, out):
+            if t.fir_state is None:  # the sensor ran before t = 0: start from steady state,
+                # each delay holding raw[0] times the taps it has still to add
+                t.fir_state = fir_steady_state(t.taps)[:, None] * row[0]
+            filtered[:], t.fir_state = fir(t.taps, row, t.fir_state)
+        return out, over.any(axis=2)
 
     def errors(self) -> dict:
         return {"turn_on_bias": self.turn_on.tolist(), "matrix": self.matrix.tolist()}
@@ -228,6 +237,7 @@ class Adis16350:
         self._temp = np.empty((0, 3))
         self._alarm = np.empty(0, dtype=bool)  # some STATUS flag set at this sample
         self._last_read_j = -1
+        self.made_ns = 0  # the blocks before it are run
 
     def frame_rates(self, pos: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 3) earth rate w_ie and transport rate w_en in the area's axes at local points
@@ -273,23 +283,18 @@ class Adis16350:
         return f_b, w_b
 
     def generate(self, lo_ns: int, hi_ns: int) -> None:
-        """Run the internal samples with lo_ns <= t < hi_ns (blocks must follow each other)."""
-        j = self.clock.ticks_between(lo_ns, hi_ns)
-        if not len(j):  # a short last block with no sample in it (a slow SMPL_PRD)
-            return
-        t = self.clock.tick(j)
-        f_b, w_b = self.true_outputs(t)
-        z = self.rng.standard_normal((len(j), 16))
-        gyro, gover = self.gyro.measure(w_b, z[:, 0:3], z[:, 3:6])
-        accel, aover = self.accel.measure(f_b, z[:, 6:9], z[:, 9:12])
-        spec = self.spec
-        supply = spec.supply_v + spec.supply_noise_v * z[:, 12]
-        temp = spec.temperature_c + spec.temperature_noise_c * z[:, 13:16]
-        alarm = gover | aover | (supply < SUPPLY_LIMITS_V[0]) | (supply > SUPPLY_LIMITS_V[1])
-        keep = self._t >= lo_ns - 1_000_000_000  # one earlier block is plenty for any read
-        for name, new in (("_t", t), ("_j", j), ("_gyro", gyro), ("_accel", accel),
-                          ("_supply", supply), ("_temp", temp), ("_alarm", alarm)):
-            setattr(self, name, np.concatenate((getattr(self, name)[keep], new)))
+        """Run the internal samples with lo_ns <= t < hi_ns (blocks must follow each other;
+        a block :func:`generate_together` ran already is not run again)."""
+        if hi_ns > self.made_ns:
+            generate_together([self], lo_ns, hi_ns)
+
+    def alike(self, other: Adis16350) -> bool:
+        """Whether *other* samples the same true outputs at the same times with the same
+        grade, filter and words (another seed of the same vehicle), so that
+        :func:`generate_together` may run both."""
+        return (self._motion is not None and self._motion == other._motion
+                and self.spec == other.spec and vars(self.clock) == vars(other.clock)
+                and self.made_ns == other.made_ns)
 
     def _latest(self, t_read_ns: np.ndarray) -> np.ndarray:
         """Index of the latest internal sample at each read time."""
@@ -326,3 +331,43 @@ class Adis16350:
     def errors(self) -> dict:
         """The power-on draws (for evaluation; they never reach the host)."""
         return {"gyro": self.gyro.errors(), "accel": self.accel.errors()}
+
+
+def generate_together(sensors: list[Adis16350], lo_ns: int, hi_ns: int) -> None:
+    """:meth:`Adis16350.generate` of the block [lo_ns, hi_ns) for each of *sensors*, each
+    sensor's samples and state as it alone would leave them: the sensors that are
+    :meth:`~Adis16350.alike` (a sweep's seeds of one vehicle) are run along a leading seed
+    axis, so each numpy call of the model serves them all (every draw is still each seed's
+    own, from its own streams, in its own order); the others one by one."""
+    groups: list[list[Adis16350]] = []
+    for sensor in sensors:
+        group = next((g for g in groups if g[0].alike(sensor)), None)
+        if group is None:
+            groups.append([sensor])
+        else:
+            group.append(sensor)
+    for group in groups:
+        _generate(group, lo_ns, hi_ns)
+
+
+def _generate(sensors: list[Adis16350], lo_ns: int, hi_ns: int) -> None:
+    first = sensors[0]
+    j = first.clock.ticks_between(lo_ns, hi_ns)
+    for sensor in sensors:
+        sensor.made_ns = hi_ns
+    if not len(j):  # a short last block with no sample in it (a slow SMPL_PRD)
+        return
+    t = first.clock.tick(j)
+    f_b, w_b = first.true_outputs(t)
+    z = np.stack([sensor.rng.standard_normal((len(j), 16)) for sensor in sensors])
+    gyro, gover = _Sensor.measure([s.gyro for s in sensors], w_b, z[..., 0:3], z[..., 3:6])
+    accel, aover = _Sensor.measure([s.accel for s in sensors], f_b, z[..., 6:9], z[..., 9:12])
+    spec = first.spec
+    supply = spec.supply_v + spec.supply_noise_v * z[..., 12]
+    temp = spec.temperature_c + spec.temperature_noise_c * z[..., 13:16]
+    alarm = gover | aover | (supply < SUPPLY_LIMITS_V[0]) | (supply > SUPPLY_LIMITS_V[1])
+    for k, sensor in enumerate(sensors):
+        keep = sensor._t >= lo_ns - 1_000_000_000  # one earlier block is plenty for any read
+        for name, new in (("_t", t), ("_j", j), ("_gyro", gyro[k]), ("_accel", accel[k]),
+                          ("_supply", supply[k]), ("_temp", temp[k]), ("_alarm", alarm[k])):
+            setattr(sensor, name, np.concatenate((getattr(sensor, name)[keep], new)))

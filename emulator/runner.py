@@ -185,6 +185,28 @@ class Feed:
         return events
 
 
+def chunks_together(emulations: list[Emulation], ports) -> list[dict]:
+    """:meth:`Emulation.chunks` of several fresh runs (a sweep's seeds of one scenario, in
+    one process), their worlds' blocks made in step (World.make_together: each block's IMU
+    samples for all of them at once), each run's chunks what it gives alone; Irregular if
+    any is refused (then all are spent)."""
+    from .world import World
+
+    taken = set(ports)
+    feeds = [emu._quick(taken) for emu in emulations]
+    worlds = [emu.world for emu in emulations]
+    while not all(feed.exhausted for feed in feeds):
+        World.make_together(worlds, max(min(f.known_ns + f.block_ns, f.end_ns) for f in feeds))
+        for emu, feed in zip(emulations, feeds):
+            if not feed.exhausted:
+                emu._put(feed.step(), taken)
+    out = []
+    for emu in emulations:
+        emu.reached_ns = emu.end_ns
+        out.append({port: emu.lines[port].drain(emu.end_ns) for port in ports})
+    return out
+
+
 class Emulation:
     """One run of a scenario: world, coordinator, UART lines, PTY ports, recording.
 
@@ -443,27 +465,32 @@ class Emulation:
         hand a sink for each port instance in *ports*, as the data and start time of each
         chunk in the port's order, the lines timed in one pass each (emulator.uart
         Line.drain); the other ports' events are not put on their lines, and the world makes
-        no events of the SINS ports not taken (World.only). Only for a
-        fresh run at --speed max with no PTY and no recording, of a scenario without faults
-        (wrappers, marks and a coordinator's power cuts are the timeline's: uart.Irregular,
-        as for whatever else drain refuses; the emulation is then spent and the caller runs
-        a fresh one). Equal to the sink's: tests/emulator/test_quick_lines.py."""
+        no events of the SINS ports not taken (World.only). Only for a fresh run at --speed
+        max with no PTY and no recording, of a scenario without faults (wrappers, marks and
+        a coordinator's power cuts are the timeline's: uart.Irregular, as for whatever else
+        drain refuses; the emulation is then spent and the caller runs a fresh one). Equal
+        to the sink's: tests/emulator/test_quick_lines.py. :func:`chunks_together` runs
+        several seeds' at once."""
+        return chunks_together([self], ports)[0]
+
+    def _quick(self, taken: set) -> Feed:
+        """The feed of :meth:`chunks`, its refusals checked first."""
         if self.speed is not None or self.ports or self.recorder is not None \
                 or self._feed is not None:
             raise Irregular("only a fresh run at --speed max without ports or a recording")
         if self.scenario.faults:
             raise Irregular("a scenario with faults")
-        taken = set(ports)
         self.world.only(taken)
+        self._feed = Feed(self.world, self.end_ns, MAX_BLOCK_NS, tuple(self.devices.values()))
+        return self._feed
+
+    def _put(self, events: list, taken: set) -> None:
+        """The events of the ports *taken* on their lines (:meth:`_enqueue`, the rest left)."""
         devices, lines = self.devices, self.lines
-        feed = self._feed = Feed(self.world, self.end_ns, MAX_BLOCK_NS, tuple(devices.values()))
-        while not feed.exhausted:
-            for ev in feed.step():
-                if ev.port in taken:
-                    t_ns, item = devices[ev.port].to_line(ev)
-                    lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
-        self.reached_ns = self.end_ns
-        return {port: lines[port].drain(self.end_ns) for port in ports}
+        for ev in events:
+            if ev.port in taken:
+                t_ns, item = devices[ev.port].to_line(ev)
+                lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
 
     def prepare(self) -> Feed:
         """The world's events before the clock starts (paced: its first second), once; a

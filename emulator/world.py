@@ -47,7 +47,7 @@ from .board import Board
 from .channel import Channel, Offered
 from .events import Event, RfPacket, rows
 from .faults import acting_on
-from .imu import Adis16350
+from .imu import Adis16350, generate_together
 from .magnetometer import Magnetometer
 from .nanoloc import NanolocNetwork
 from .radio import OPT_ACKNOWLEDGED, AirFrame, Link, Router, Sender
@@ -282,6 +282,25 @@ class World:
         order = np.argsort(keys, kind="stable")
         order = order[keys[order] < self.duration_ns * len(self._rank)]
         self._keys, self._events = keys[order], [events[i] for i in order.tolist()]
+
+    @staticmethod
+    def make_together(worlds: list[World], until_ns: int) -> None:
+        """Make the blocks before *until_ns* of several worlds (a sweep's seeds of one
+        scenario, none under :meth:`ahead`) block by block in step, each block's IMU samples
+        made for all of them at once (emulator.imu.generate_together: each sensor's numbers
+        as alone), so ``advance(until_ns)`` then only takes each world's events."""
+        while True:
+            blocks: dict[tuple[int, int], list[World]] = {}
+            for w in worlds:
+                lo = w._generated_ns
+                if lo < min(until_ns, w.duration_ns):
+                    blocks.setdefault((lo, min(lo + w.BLOCK_NS, w.duration_ns)), []).append(w)
+            if not blocks:
+                return
+            for (lo, hi), group in blocks.items():
+                generate_together([v.imu for w in group for v in w.vehicles], lo, hi)
+                for w in group:
+                    w._make()
 
     def made(self, until_ns: int) -> bool:
         """Whether the blocks before *until_ns* are made, so ``advance`` up to it returns at

@@ -47,7 +47,11 @@ from navtwin.host import config as host_config
 from navtwin.host.pipeline import Pipeline
 from navtwin.host.replay import config_for, drive
 
-from .run import lab_ports, scenario_of
+from .run import lab_ports, lab_ports_together, scenario_of
+
+#: seeds whose emulations are made together (emulator.runner.chunks_together): beyond about
+#: 16 a block's numpy calls gain little more, and each seed's chunks wait in memory meanwhile
+TOGETHER = 16
 
 #: The column names of one track's estimates (:func:`columns`).
 COLUMNS = ("t", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
@@ -148,9 +152,13 @@ def run(scenario: str | Path | Scenario, seeds, *, filters: tuple[str, ...] | No
         cpu["records"] += time.process_time() - t
         return got
 
+    lab: list = []  # the next seeds' emulations, made TOGETHER at a time
     for k, seed in enumerate(seeds):
         t = time.process_time()
-        kw, ports, bauds = lab_ports(sc, seed, duration=duration, filters=filters, **shared)
+        if not lab:
+            lab = lab_ports_together(sc, seeds[k:k + TOGETHER], duration=duration,
+                                     filters=filters, **shared)[::-1]
+        kw, ports, bauds = lab.pop()
         c = kw["config"].estimator_config(kw["filters"], 1)  # vehicle 1's, as Kept's
         if cfg is None:
             cfg, batched = c, batchable(c.filters)

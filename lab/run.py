@@ -19,12 +19,13 @@ The chunks of the lab computer's inputs are held in memory until the emulation h
 """
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
-from navtwin.emulator.runner import Chunk, Emulation
+from navtwin.emulator.runner import Chunk, Emulation, chunks_together
 from navtwin.emulator.uart import Irregular
 from navtwin.emulator.scenario import Scenario, load_scenario
 from navtwin.emulator.world import World
@@ -49,6 +50,16 @@ def lab_ports(scenario: str | Path | Scenario, seed: int | None = None, *,
     chunks joined; sizes and device start times int64, one a chunk, in device order) and
     ``{port: baud}``: what :func:`navtwin.host.arrival.arrivals` stamps (the bulk path of
     host.batch.chunks reads the arrays whole)."""
+    return lab_ports_together(scenario, [seed], duration=duration, follower=follower,
+                              **overrides)[0]
+
+
+def lab_ports_together(scenario: str | Path | Scenario, seeds, *,
+                       duration: float | None = None, follower: Follower | None = None,
+                       **overrides) -> list[tuple[dict, dict, dict]]:
+    """:func:`lab_ports` of each of *seeds* (a sweep's task), each seed's what it gives
+    alone. A scenario without faults takes the emulator's quick path, the seeds' worlds made
+    in step (emulator.runner.chunks_together); otherwise each seed runs the timeline."""
     sc = scenario_of(scenario)
     if follower is None and len(sc.fleet) > 1:
         config = overrides.get("config") or host_config.load(config_for(sc.name))
@@ -57,29 +68,34 @@ def lab_ports(scenario: str | Path | Scenario, seed: int | None = None, *,
     if follower is not None:
         overrides = {"config": follower.config, **overrides}
     kw = emulator_settings(sc.name, {i: dict(sc.ports[p]) for i, p in plugged.items()}, **overrides)
-    streams: dict[str, tuple[list, list]] = {i: ([], []) for i in kw["inputs"]}
-    by_port = {plugged[i]: streams[i] for i in kw["inputs"]}
+    bauds = {i: sc.ports[plugged[i]]["baud"] for i in kw["inputs"]}
+    port_of = {i: plugged[i] for i in kw["inputs"]}
+    try:  # the lines timed in one pass each, where the runs allow (Emulation.chunks)
+        with contextlib.ExitStack() as runs:
+            emulations = [runs.enter_context(Emulation(sc, seed, speed=None, duration_s=duration,
+                                                       ports=False)) for seed in seeds]
+            made = chunks_together(emulations, list(port_of.values()))
+    except Irregular:  # the timeline's steps, fresh runs
+        made = [_sunk(sc, seed, duration, port_of.values()) for seed in seeds]
+    return [(dict(kw), {i: (b"".join(got[p][0]), np.fromiter(map(len, got[p][0]), np.int64,
+                                                              len(got[p][0])),
+                            np.array(got[p][1], np.int64)) for i, p in port_of.items()},
+             bauds) for got in made]
+
+
+def _sunk(sc: Scenario, seed, duration, ports) -> dict[str, tuple[list, list]]:
+    """The chunks the run of *seed* hands its sink on *ports*: their data and starts."""
+    got: dict[str, tuple[list, list]] = {p: ([], []) for p in ports}
 
     def sink(chunk: Chunk) -> None:
-        taken = by_port.get(chunk.port)
+        taken = got.get(chunk.port)
         if taken is not None:
             taken[0].append(chunk.data)
             taken[1].append(chunk.start_ns)
 
-    try:  # the lines timed in one pass each, where the run allows (Emulation.chunks)
-        with Emulation(sc, seed, speed=None, duration_s=duration, ports=False) as emu:
-            for port, (data, starts) in emu.chunks(list(by_port)).items():
-                by_port[port][0].extend(data)
-                by_port[port][1].extend(starts)
-    except Irregular:  # the timeline's steps, a fresh run
-        for data, starts in streams.values():
-            data.clear()
-            starts.clear()
-        with Emulation(sc, seed, speed=None, duration_s=duration, ports=False, sink=sink) as emu:
-            emu.run()
-    ports = {i: (b"".join(data), np.fromiter(map(len, data), np.int64, len(data)),
-                 np.array(starts, np.int64)) for i, (data, starts) in streams.items()}
-    return kw, ports, {i: sc.ports[plugged[i]]["baud"] for i in streams}
+    with Emulation(sc, seed, speed=None, duration_s=duration, ports=False, sink=sink) as emu:
+        emu.run()
+    return got
 
 
 def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,

@@ -395,3 +395,26 @@ def test_seeds_made_within_shared_truth_compute_the_motion_once_and_make_the_sam
         assert other == [None]
     assert imu._shared() is None
     assert shared == alone and alone[0] != alone[1]
+
+
+@pytest.mark.parametrize("toml", ["", '[imu]\ngrade = "paper003"\n',
+                                  "[imu]\ngyro_bias_corr_s = 300.0\naccel_rrw_ug_rt_h = 20.0\n"])
+def test_worlds_made_together_equal_each_made_alone(tmp_path, toml):
+    """World.make_together runs the seeds' IMU blocks along one seed axis (the flicker bias,
+    a Gauss-Markov bias and a rate random walk here); every seed's samples and events are
+    those it makes alone, to the bit, and a world that is not alike (another grade) is made
+    in its own group of the same call."""
+    sc = variant(tmp_path, "office", toml, "together") if toml else load_scenario("office")
+    other = variant(tmp_path, "office", '[imu]\ngrade = "paper003"\ngyro_arw_deg_rt_h = 0.01\n',
+                    "other")
+    until = 2_500_000_000
+    alone = [World(w_sc, s) for w_sc, s in ((sc, 1), (sc, 2), (sc, 5), (other, 1))]
+    alone_events = [w.advance(until) for w in alone]
+    together = [World(w_sc, s) for w_sc, s in ((sc, 1), (sc, 2), (sc, 5), (other, 1))]
+    World.make_together(together, until)
+    assert [w.advance(until) for w in together] == alone_events
+    for a, b in zip(alone, together):
+        ia, ib = a.vehicles[0].imu, b.vehicles[0].imu
+        assert np.array_equal(ia._gyro, ib._gyro) and np.array_equal(ia._accel, ib._accel)
+        assert np.array_equal(ia._temp, ib._temp) and ia.made_ns == ib.made_ns >= until
+    assert not np.array_equal(alone[0].vehicles[0].imu._gyro, alone[1].vehicles[0].imu._gyro)

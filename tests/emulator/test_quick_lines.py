@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from navtwin.emulator.runner import Emulation
+from navtwin.emulator.runner import Emulation, chunks_together
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.shipped import NAMES
 from navtwin.emulator.uart import Irregular, Line, LineWrapper, Marked, Wire
@@ -144,3 +144,12 @@ def test_a_scenario_with_faults_is_refused_and_lab_ports_runs_the_timeline():
     for port, (data, sizes, starts) in ports.items():
         assert data == b"".join(sunk[port][0]) and starts.tolist() == sunk[port][1]
         assert sizes.tolist() == [len(d) for d in sunk[port][0]]
+
+
+def test_seeds_run_together_give_each_seeds_chunks_alone():
+    """chunks_together (the seeds' worlds in step, their IMU blocks on one seed axis)."""
+    sc = load_scenario("office")
+    alone = [_quick(sc, seed, 6.0) for seed in (1, 2, 3)]
+    runs = [Emulation(sc, seed, speed=None, duration_s=6.0, ports=False) for seed in (1, 2, 3)]
+    assert chunks_together(runs, list(runs[0].lines)) == alone
+    assert alone[0] != alone[1]

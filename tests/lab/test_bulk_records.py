@@ -383,7 +383,7 @@ def test_the_batch_engine_falls_back_to_the_pipeline_on_the_same_chunks(broken, 
     the bulk path refused (an IMU gap then ejects the seed: it runs per seed)."""
     kw, ports, bauds = run_of("office", 1, 10.0)
     broken_ports = broken(ports)
-    monkeypatch.setattr(batch, "lab_ports", lambda *a, **k: (kw, broken_ports, bauds))
+    monkeypatch.setattr(batch, "lab_ports_together", lambda *a, **k: [(kw, broken_ports, bauds)])
     out = batch.run("office", (1,), filters=FILTERS, duration=10.0)
     assert out.bulk == 0
     cfg, recs = batch.records_of(kw, broken_ports, bauds)
