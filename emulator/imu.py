@@ -67,13 +67,30 @@ def shared_truth():
     and area) and sample at the same true times share their error-free outputs
     (:meth:`Adis16350.true_outputs`): the seeds of one scenario, made one after another (a
     sweep's task), compute each block's kinematics once. The outputs are a function of
-    those inputs alone, so every byte is the same; the arrays are read-only."""
+    those inputs alone, so every byte is the same; the arrays are read-only. The vehicles'
+    truth for evaluation is shared so too (lab.run.truth)."""
     outer = _shared()
     _LOCAL.shared = {} if outer is None else outer
     try:
         yield
     finally:
         _LOCAL.shared = outer
+
+
+def shared(key, make):
+    """``make()``, a tuple of arrays or an array that is a function of *key* alone: within
+    :func:`shared_truth` made once per key (read-only), else each time (*key* None: always)."""
+    store = _shared()
+    if store is None or key is None:
+        return make()
+    got = store.get(key)
+    if got is None:
+        if len(store) >= SHARED_BLOCKS:
+            store.clear()
+        got = store[key] = make()
+        for a in got if isinstance(got, tuple) else (got,):
+            a.flags.writeable = False
+    return got
 
 
 MG = 1e-3 * adis.STANDARD_GRAVITY  # m/s^2 per mg
@@ -260,18 +277,8 @@ class Adis16350:
     def true_outputs(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Error-free specific force (m/s^2) and angular rate (rad/s), body axes (within
         :func:`shared_truth`, computed once for sensors that move alike)."""
-        shared = _shared()
-        if shared is None or self._motion is None:
-            return self._true_outputs(t_ns)
-        key = (self._motion, t_ns.tobytes())
-        got = shared.get(key)
-        if got is None:
-            if len(shared) >= SHARED_BLOCKS:
-                shared.clear()
-            got = shared[key] = self._true_outputs(t_ns)
-            for a in got:
-                a.flags.writeable = False
-        return got
+        return shared(None if self._motion is None else (self._motion, t_ns.tobytes()),
+                      lambda: self._true_outputs(t_ns))
 
     def _true_outputs(self, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         k = self.trajectory.kinematics(t_ns)

@@ -68,6 +68,12 @@ def _port_events(t_ns: np.ndarray, port: str, data: list, marks: dict) -> list[E
                 [marks.get(i, ()) for i in range(len(data))] if marks else repeat(()))
 
 
+def trajectory_of(spec) -> Trajectory:
+    """A vehicle's (a scenario's fleet entry) trajectory: its path, its tag's height. It
+    draws nothing: every seed's."""
+    return Trajectory(spec.trajectory, spec.tag.z)
+
+
 @dataclass(slots=True)
 class RouterEffects:
     """What router faults change in a block's packets: ``absent`` (bool per packet)."""
@@ -97,7 +103,7 @@ class Vehicle:
         self.xbee_port = ports.instance(ports.XBEE.name, number if sc.units("coordinator") > 1 else 1)
         self.src64 = (router["SH"] << 32) | router["SL"]
         self.src16 = router["MY"]
-        self.trajectory = Trajectory(spec.trajectory, spec.tag.z)
+        self.trajectory = trajectory_of(spec)
         self.imu = Adis16350(spec.imu, sc.site, sc.area, self.trajectory, sc.clocks.imu_ppm,
                              lambda name: self._stream(seed, name))
         mag = spec.magnetometer

@@ -69,8 +69,8 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
         byte_rows, byte_s = _cpu(by_bytes)
     with shared_truth():
         outcome, batch_s = _cpu(lambda: batch.run(sc, numbers, filters=filters, duration=duration))
-    batch_rows, score_s = _cpu(lambda: [r for s, e in zip(numbers, outcome.estimates)
-                                        for r in sweep.cells(sc, s, filters, e)])
+        batch_rows, score_s = _cpu(lambda: [r for s, e in zip(numbers, outcome.estimates)
+                                            for r in sweep.cells(sc, s, filters, e)])
     batch_s += score_s
     worst = max((abs(a[m] - b[m]) / max(1.0, abs(b[m])) for a, b in zip(batch_rows, byte_rows)
                  for m in sweep.METRICS if isinstance(a[m], float) and isinstance(b[m], float)

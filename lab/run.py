@@ -28,7 +28,9 @@ import numpy as np
 from navtwin.emulator.runner import Chunk, Emulation, chunks_together
 from navtwin.emulator.uart import Irregular
 from navtwin.emulator.scenario import Scenario, load_scenario
-from navtwin.emulator.world import World
+from navtwin.emulator.imu import shared
+from navtwin.emulator.truth import truth_arrays
+from navtwin.emulator.world import trajectory_of
 from navtwin.host.arrival import arrivals, split
 from navtwin.host.pipeline import Pipeline
 from navtwin.host import config as host_config
@@ -131,7 +133,12 @@ def run_in_memory(scenario: str | Path | Scenario, seed: int | None = None, *,
 def truth(scenario: str | Path | Scenario, seed: int | None = None, vehicle: int = 1) -> dict:
     """Vehicle *vehicle*'s true ``t`` (s), ``x``, ``y`` (m), ``vx``, ``vy`` (m/s), one row per
     millisecond, as :func:`navtwin.lab.evaluate.load_truth` reads them from the emulator's
-    ``truth.csv`` (``truth<n>.csv``)."""
-    w = World(scenario_of(scenario), seed)
-    tr = w.truth(0, w.duration_ns, vehicle)
+    ``truth.csv`` (``truth<n>.csv``). The motion draws nothing, so *seed* changes nothing
+    (within emulator.imu.shared_truth, a sweep's task, it is made once)."""
+    sc = scenario_of(scenario)
+    if not 1 <= vehicle <= len(sc.fleet):
+        raise ValueError(f"vehicle {vehicle}: scenario {sc.name} has vehicles 1..{len(sc.fleet)}")
+    motion = trajectory_of(sc.fleet[vehicle - 1])
+    tr = shared(("truth", motion.key, sc.duration_ns),
+                lambda: truth_arrays(motion, 0, sc.duration_ns))
     return {"t": tr["t"] / 1e9, "x": tr["x"], "y": tr["y"], "vx": tr["vx"], "vy": tr["vy"]}

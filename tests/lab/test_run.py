@@ -1,8 +1,12 @@
 """The in-memory run gives exactly what recording the emulator and replaying it gives."""
+import numpy as np
 import pytest
 
+from navtwin.emulator.imu import shared_truth
+from navtwin.emulator.scenario import load_scenario
+from navtwin.emulator.world import World
 from navtwin.host.output import estimate_line
-from navtwin.lab.run import run_in_memory
+from navtwin.lab.run import run_in_memory, truth
 from tests.reference import estimate_lines
 
 
@@ -42,3 +46,18 @@ def test_replay_speeds_replays_each_filter_set_over_the_same_recording(capsys):
         assert res["recorded_s"] == pytest.approx(5.0, abs=0.1)
     assert main(["bench", "host-replay", "--seconds", "5", "--runs", "1", "--filters", "wsn"]) == 0
     assert json.loads(capsys.readouterr().out)["filters"] == ["wsn"]
+
+
+def test_the_truth_is_the_worlds_every_seeds_and_made_once_in_a_task():
+    sc = load_scenario("office")
+    w = World(sc, 4)
+    want = w.truth(0, w.duration_ns)
+    got = truth(sc, 4)
+    assert np.array_equal(got["t"], want["t"] / 1e9)
+    assert all(np.array_equal(got[k], want[k]) for k in ("x", "y", "vx", "vy"))
+    with shared_truth():
+        one, two = truth(sc, 1), truth(sc, 2)
+    assert one["x"].base is two["x"].base and not one["x"].flags.writeable
+    assert truth(sc, 1)["x"].base is not one["x"].base  # outside a task: made each time
+    with pytest.raises(ValueError, match="vehicles 1..1"):
+        truth(sc, 1, vehicle=2)
