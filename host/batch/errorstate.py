@@ -20,7 +20,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from navtwin.host.filters.errorstate import NAV, add_process_noises, process_noise, transition
+from navtwin.host.filters.errorstate import (NAV, add_process_noises, interval_powers, process_noise,
+                                             transition)
 
 from .base import BatchFilter
 from .innovation import BatchInnovation
@@ -39,8 +40,28 @@ def propagate(P: np.ndarray, dt, f_n: np.ndarray, noise: tuple) -> np.ndarray:
     if np.ndim(dt) == 0:
         M += process_noise(float(dt), *noise)
     else:
-        add_process_noises(M, dt, *noise)
+        add_process_noises(M, dt, *noise, _powers(dt))
     return M
+
+
+class _LastPowers:
+    """interval_powers of the last intervals asked for: a batch's error-state tracks predict
+    over the same intervals (each seed's IMU step) one after another, so two of three find
+    theirs here rather than take Python's powers of every seed's again."""
+
+    def __init__(self) -> None:
+        self._key, self._powers = None, None
+
+    def __call__(self, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = dt.tobytes()
+        if key != self._key:
+            self._key, self._powers = key, interval_powers(dt)
+            for a in self._powers:
+                a.flags.writeable = False  # shared
+        return self._powers
+
+
+_powers = _LastPowers()
 
 
 @lru_cache(maxsize=8)

@@ -29,6 +29,7 @@ Update (001 eqs. 28-30, Joseph form, chi-square gated like host.filters.kf)::
 from __future__ import annotations
 
 from functools import lru_cache
+from itertools import repeat
 
 import numpy as np
 
@@ -57,17 +58,23 @@ def process_noises(dt: np.ndarray, gyro_psd: float, accel_psd: float, extra_psd:
 
 
 def add_process_noises(M: np.ndarray, dt: np.ndarray, gyro_psd: float, accel_psd: float,
-                       extra_psd: float, extra: int) -> None:
+                       extra_psd: float, extra: int, powers=None) -> None:
     """M += G Q G^T over each of the intervals dt (k,), M (k, n, n), in place: the nonzero
     entries alone, each the sum M + Q gives (host.batch's F P F^T + Q, with no Q of zeros
-    made). dt^2 and dt^3 are Python's float powers, as one interval's always were: numpy's
-    power rounds a few percent of them otherwise in the last bit."""
-    dts = dt.tolist()
-    d2, d3 = np.array([d**2 for d in dts]), np.array([d**3 for d in dts])
+    made); *powers*: :func:`interval_powers` of dt, if the caller has them."""
+    d2, d3 = interval_powers(dt) if powers is None else powers
     terms = np.column_stack((accel_psd * d3 / 4, accel_psd * d2 / 2, accel_psd * dt,
                              gyro_psd * dt, extra_psd * dt))
     row, col, term = _noise_entries(NAV + extra)
     M[:, row, col] += terms[:, term]
+
+
+def interval_powers(dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """dt^2 and dt^3 of each interval as Python's float powers (libm's pow), as one interval's
+    always were: numpy's power rounds a few percent of them otherwise in the last bit."""
+    k = len(dt)
+    return (np.fromiter(map(pow, dt.tolist(), repeat(2.0)), float, k),
+            np.fromiter(map(pow, dt.tolist(), repeat(3.0)), float, k))
 
 
 @lru_cache(maxsize=8)
