@@ -9,8 +9,9 @@ A seed whose NIS exceeds the gate (chi-square with dim(z) degrees of freedom, e.
 ``host.wsn.chi2_gate``) is rejected and keeps its x and P: the gain and the Joseph products
 are computed for the accepted seeds alone, each with the per-filter products in the same
 order (host.batch.linalg), so each seed's x and P are the per-filter update's. A shared H
-that picks states (host.batch.linalg.selection: the Motion products') has P H^T, H P H^T and
-K H taken, not multiplied: the same numbers.
+that picks states (host.batch.linalg.selection: the Motion products') has P H^T and H P H^T
+taken, not multiplied: the same numbers. (K H is multiplied: filling I - K H column by
+column costs more than the product.)
 """
 from __future__ import annotations
 
@@ -68,12 +69,7 @@ def joseph_correct(x: np.ndarray, P: np.ndarray, I: np.ndarray, y: np.ndarray, H
             return v if a is None else v[a]
         K = np.matmul(rows(PHT), rows(SI))
         xa = rows(x) + mv(K, rows(y))
-        if cols is None:
-            I_KH = I - np.matmul(K, take(H, 2, a))
-        else:  # K H is K in the picked columns, zeros elsewhere
-            I_KH = np.empty(K.shape[:1] + I.shape)
-            I_KH[:] = I
-            I_KH[:, :, cols] -= K
+        I_KH = I - np.matmul(K, take(H, 2, a))
         Pa = np.matmul(np.matmul(I_KH, rows(P)), T(I_KH)) + np.matmul(np.matmul(K, take(R, 2, a)), T(K))
         if a is None:
             x, P = xa, Pa
