@@ -291,7 +291,6 @@ class BatchEstimator:
         moving = ~aligning
         acceleration = None
         if moving.any():
-            m = idx[moving]
             acceleration = self._step(idx, t, gyro, accel, moving)
         self.t_imu[idx] = t
         if Motion in self._takers:

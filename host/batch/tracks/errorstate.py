@@ -107,7 +107,7 @@ class BatchErrorStateTrack(BatchTrack):
         aligned = self.ctx.aligned[idx]
         if not aligned.any():
             return
-        idx, t, gyro, accel = idx[aligned], b.t[aligned], b.gyro[aligned], b.accel[aligned]
+        idx, t = idx[aligned], b.t[aligned]
         new = ~self.on[idx]
         if new.any():  # the alignment ended with this sample: start from its strapdown
             s = idx[new]

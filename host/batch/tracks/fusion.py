@@ -122,7 +122,9 @@ class BatchFusionTrack(BatchTrack):
             ctx.eject(idx, f"{self.name}: numerical reset")
             return
         self.x[r], self.P[r] = x, P
-        since = self._gated_since.setdefault(kind, np.full(ctx.n, np.nan))
+        since = self._gated_since.get(kind)
+        if since is None:
+            since = self._gated_since[kind] = np.full(ctx.n, np.nan)
         out = ~inn.accepted
         if out.any():  # the run of rejections of this kind goes on, or starts now
             r = idx[out]
