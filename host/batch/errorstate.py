@@ -7,17 +7,21 @@ Predict over one IMU interval T with seed s's nav-frame specific force f^n_s (00
     F_s = [[I, T I, -(f^n_s x)_h T^2/2], [0, I, -(f^n_s x)_h T], [0, 0, I]]   (+ I on the e_i)
     P_s = F_s P_s F_s^T + G Q G^T
 
-G Q G^T is ``host.filters.errorstate.process_noise`` of each seed's T (``process_noises``:
-the seeds' intervals at once; the noise densities are the filter's). Update: the gated
+G Q G^T is ``host.filters.errorstate.process_noise`` of each seed's T (``add_process_noises``:
+the seeds' intervals at once, added to F P F^T's nonzero entries alone; the noise densities
+are the filter's). Update: the gated
 Joseph form (001 eqs. 28-30) of host.batch.innovation; ``take_nav`` resets the nav part
 after its feedback (closed loop). Each seed's P equals ErrorStateFilter's stepped alone,
 bit for bit (tests/host/test_batch.py).
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
-from navtwin.host.filters.errorstate import NAV, process_noise, process_noises, transition
+from navtwin.host.filters.errorstate import (NAV, add_process_noises, interval_powers, process_noise,
+                                             transition)
 
 from .base import BatchFilter
 from .innovation import BatchInnovation
@@ -29,12 +33,43 @@ def propagate(P: np.ndarray, dt, f_n: np.ndarray, noise: tuple) -> np.ndarray:
     """F P F^T + G Q G^T (module doc) of the seeds' P (k, n, n), over dt (one value, or (k,)
     per seed) with each seed's specific force f_n (k, 3) (or one (3,)); *noise* is
     process_noise's (gyro_psd, accel_psd, extra_psd, extra)."""
-    fx, fy, fz = np.moveaxis(f_n, -1, 0)
-    F = np.zeros_like(P)
-    F[:, *np.diag_indices(P.shape[-1])] = 1.0
-    transition(F, dt, fx, fy, fz)
-    Q = process_noise(float(dt), *noise) if np.ndim(dt) == 0 else process_noises(dt, *noise)
-    return np.matmul(np.matmul(F, P), T(F)) + Q
+    F = np.empty(P.shape)
+    F[:] = _eye(P.shape[-1])
+    transition(F, dt, *f_n.T)
+    M = np.matmul(np.matmul(F, P), T(F))
+    if np.ndim(dt) == 0:
+        M += process_noise(float(dt), *noise)
+    else:
+        add_process_noises(M, dt, *noise, _powers(dt))
+    return M
+
+
+class _LastPowers:
+    """interval_powers of the last intervals asked for: a batch's error-state tracks predict
+    over the same intervals (each seed's IMU step) one after another, so two of three find
+    theirs here rather than take Python's powers of every seed's again."""
+
+    def __init__(self) -> None:
+        self._key, self._powers = None, None
+
+    def __call__(self, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = dt.tobytes()
+        if key != self._key:
+            self._key, self._powers = key, interval_powers(dt)
+            for a in self._powers:
+                a.flags.writeable = False  # shared
+        return self._powers
+
+
+_powers = _LastPowers()
+
+
+@lru_cache(maxsize=8)
+def _eye(n: int) -> np.ndarray:
+    """I (n, n), read-only: what F is outside transition's entries."""
+    I = np.eye(n)
+    I.flags.writeable = False
+    return I
 
 
 class BatchErrorStateFilter(BatchFilter):

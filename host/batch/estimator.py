@@ -38,6 +38,7 @@ from ..wsn import AnchorLayout
 from . import tracks as batch_tracks
 from .kf import propagate
 from .ranging import BatchRanging
+from .seeds import whole
 from .strapdown import BatchStrapdown
 
 #: what a seed's next record is: an IMU sample, an exchange, a record only the tracks run per
@@ -290,7 +291,6 @@ class BatchEstimator:
         moving = ~aligning
         acceleration = None
         if moving.any():
-            m = idx[moving]
             acceleration = self._step(idx, t, gyro, accel, moving)
         self.t_imu[idx] = t
         if Motion in self._takers:
@@ -333,7 +333,7 @@ class BatchEstimator:
         to = np.tile(self.t[idx], len(self._ca))
         behind = self._ca_t[rows] < to
         if behind.any():
-            b, to = rows[behind], to[behind]
+            b, to = whole(rows[behind], len(self._ca_t)), to[behind]
             self._ca_x[b], self._ca_P[b] = propagate(self._ca_x[b], self._ca_P[b],
                                                      *self.model.many(to - self._ca_t[b]))
             self._ca_t[b] = to

@@ -8,7 +8,10 @@ For each seed (000 eq. 15, 001 eqs. 28-30)::
 A seed whose NIS exceeds the gate (chi-square with dim(z) degrees of freedom, e.g.
 ``host.wsn.chi2_gate``) is rejected and keeps its x and P: the gain and the Joseph products
 are computed for the accepted seeds alone, each with the per-filter products in the same
-order (host.batch.linalg), so each seed's x and P are the per-filter update's.
+order (host.batch.linalg), so each seed's x and P are the per-filter update's. A shared H
+that picks states (host.batch.linalg.selection: the Motion products') has P H^T and H P H^T
+taken, not multiplied: the same numbers. (K H is multiplied: filling I - K H column by
+column costs more than the product.)
 """
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .linalg import T, dot, inverse, mv, vm
+from .linalg import T, dot, inverse, mv, selection, vm
 from .seeds import take
 
 
@@ -40,13 +43,23 @@ class BatchInnovation(NamedTuple):
         return cls(y, S, nis, accepted)
 
 
+def projected(P: np.ndarray, H: np.ndarray, R: np.ndarray, cols) -> tuple[np.ndarray, np.ndarray]:
+    """P H^T (N, n, m) and S = H P H^T + R of each seed's P (N, n, n); *cols*: the entries a
+    shared H picks (host.batch.linalg.selection), taken, or None to multiply."""
+    if cols is None:
+        PHT = np.matmul(P, T(H))
+        return PHT, np.matmul(H, PHT) + R
+    PHT = P.take(cols, 2)  # C-ordered (N, n, m), as the product is
+    return PHT, PHT.take(cols, 1) + R
+
+
 def joseph_correct(x: np.ndarray, P: np.ndarray, I: np.ndarray, y: np.ndarray, H: np.ndarray,
                    R: np.ndarray, gate) -> tuple[np.ndarray, np.ndarray, BatchInnovation]:
     """The update of innovations y (N, m) for x (N, n), P (N, n, n); H (m, n) or (N, m, n), R
     (m, m) or (N, m, m), gate None, one value or (N,); I the identity of P's size. Returns
     the new x and P (new arrays if any seed changed) and the innovations."""
-    PHT = np.matmul(P, T(H))
-    S = np.matmul(H, PHT) + R
+    cols = selection(H)
+    PHT, S = projected(P, H, R, cols)
     SI = inverse(S)
     nis = dot(vm(y, SI), y)
     accepted = np.ones(len(nis), bool) if gate is None else nis <= gate

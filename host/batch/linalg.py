@@ -7,8 +7,15 @@ would be one gemm whose rounding differs from gemv's in the last bit, so vectors
 :func:`mv` as columns. The inverse is host.filters.linalg.inverse's: 1x1 and 2x2 in closed
 form (the same float operations elementwise), larger ones by LAPACK's gesv
 (:func:`solve_each`).
+
+A shared H whose rows are rows of the identity (a Motion product's: it measures some of the
+states) picks entries: in H x, P H^T and H P H^T every entry is one term 1 * a plus zeros,
+exact whatever order a product sums in, so taking the entries (:func:`selection`) gives the
+products' numbers without their BLAS calls (for finite operands, as every covariance here is).
 """
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 
@@ -38,7 +45,24 @@ def dot(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def T(A: np.ndarray) -> np.ndarray:
     """The transpose of each seed's matrix (a view, as ``A.T`` is)."""
-    return np.swapaxes(A, -1, -2)
+    return A.swapaxes(-1, -2)
+
+
+def selection(H: np.ndarray) -> np.ndarray | None:
+    """The columns a shared H (m, n) picks, row by row, if each of its rows is a row of the
+    identity (module doc); None otherwise, or for an H per seed (N, m, n)."""
+    return _picks(H.shape, H.dtype.str, H.tobytes()) if H.ndim == 2 else None
+
+
+@lru_cache(maxsize=16)
+def _picks(shape: tuple[int, int], dtype: str, data: bytes) -> np.ndarray | None:
+    H = np.frombuffer(data, dtype).reshape(shape)
+    ones = H == 1.0
+    if not ((ones | (H == 0.0)).all() and (ones.sum(1) == 1).all()):
+        return None
+    cols = ones.argmax(1)
+    cols.flags.writeable = False  # cached
+    return cols
 
 
 def inverse(S: np.ndarray) -> np.ndarray:

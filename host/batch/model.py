@@ -21,7 +21,7 @@ import numpy as np
 
 from navtwin.host.filters.model import DIM_X
 
-from .linalg import mv
+from .linalg import mv, selection
 from .seeds import take
 
 
@@ -43,8 +43,15 @@ class BatchLinear(NamedTuple):
         return BatchLinear(take(self.H, 2, k))
 
     def linearize(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """H x (n, m) and H: the products are the KF's H.dot(x)."""
-        return mv(self.H, x), self.H
+        """H x (n, m) and H: the products are the KF's H.dot(x) (x's entries, for an H that
+        picks them: host.batch.linalg.selection)."""
+        return hx(self.H, x), self.H
+
+
+def hx(H: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """H x of each seed's x (n, 6): gemv as for one filter, or the entries an H picks."""
+    cols = selection(H)
+    return mv(H, x) if cols is None else x.take(cols, 1)
 
 
 def position_fixes(lag: np.ndarray) -> BatchLinear:

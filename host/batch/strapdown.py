@@ -20,6 +20,8 @@ from navtwin.host.sins import area_from_enu, earth_rate_nav, mat_vec
 from navtwin.host.sins import quat_multiply as qmul
 from navtwin.host.sins import quat_to_dcm as dcm
 
+from .seeds import ALL, whole
+
 
 def from_rotvec(x, y, z):
     """host.sins.quat_from_rotvec, per seed (its series below 1e-4 rad)."""
@@ -28,6 +30,16 @@ def from_rotvec(x, y, z):
     with np.errstate(divide="ignore", invalid="ignore"):
         k = np.where(angle < 1e-4, 0.5 - angle * angle / 48.0, np.sin(half) / angle)
     return (np.cos(half), k * x, k * y, k * z)
+
+
+def put(a: np.ndarray, idx, columns) -> None:
+    """The rows *idx* (host.batch.seeds.whole) of *a* (N, k) set to k columns (n,): in place,
+    column by column, for every row; else stacked and scattered."""
+    if idx is ALL:
+        for k, c in enumerate(columns):
+            a[:, k] = c
+    else:
+        a[idx] = np.stack(columns, 1)
 
 
 class BatchStrapdown:
@@ -72,6 +84,7 @@ class BatchStrapdown:
     def step(self, idx: np.ndarray, dt: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> np.ndarray:
         """host.sins.Strapdown.step for the seeds *idx*: dt (n,), gyro and accel (n, 3);
         returns their horizontal dv/dt (n, 2)."""
+        idx = whole(idx, len(self.p))
         bx, by, bz = self.gyro_bias[idx].T
         gx, gy, gz = gyro.T
         gx, gy, gz = gx - bx, gy - by, gz - bz
@@ -82,7 +95,7 @@ class BatchStrapdown:
                      for now, before in zip((gx, gy, gz), prev[:, :3].T))
         f_b = tuple(np.where(had, 0.5 * (now + before), now)
                     for now, before in zip((fx, fy, fz), prev[:, 3:].T))
-        self.prev[idx] = np.column_stack((gx, gy, gz, fx, fy, fz))
+        put(self.prev, idx, (gx, gy, gz, fx, fy, fz))
         self.has_prev[idx] = True
         vx, vy, vz = self.v[idx].T
         ie_x, ie_y, ie_z = self._w_ie
@@ -97,17 +110,18 @@ class BatchStrapdown:
         q_mid = qmul(nav_half, qmul(q, body_half))
         qw, qx, qy, qz = qmul(nav_half, qmul(q_mid, body_half))
         norm = np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        self.q[idx] = np.column_stack((qw / norm, qx / norm, qy / norm, qz / norm))
+        put(self.q, idx, (qw / norm, qx / norm, qy / norm, qz / norm))
         wx, wy, wz = 2.0 * ie_x + en_x, 2.0 * ie_y + en_y, 2.0 * ie_z + en_z
-        fn_x, fn_y, fn_z = mat_vec(dcm(q_mid), f_b)
-        self.f_n[idx] = np.column_stack((fn_x, fn_y, fn_z))
+        fn_x, fn_y, fn_z = f_n = mat_vec(dcm(q_mid), f_b)
+        put(self.f_n, idx, f_n)
         ax = fn_x - (wy * vz - wz * vy)
         ay = fn_y - (wz * vx - wx * vz)
         s = 0.5 * dt * dt
         x, y, z = self.p[idx].T
-        self.p[idx] = np.column_stack((x + (vx * dt + ax * s), y + (vy * dt + ay * s), z + vz * dt))
-        self.v[idx] = np.column_stack((vx + ax * dt, vy + ay * dt, vz))
-        return np.column_stack((ax, ay))
+        # p before v: p's step reads the old v (views of it when idx is every row)
+        put(self.p, idx, (x + (vx * dt + ax * s), y + (vy * dt + ay * s), z + vz * dt))
+        put(self.v, idx, (vx + ax * dt, vy + ay * dt, vz))
+        return np.stack((ax, ay), 1)
 
     def take(self, idx: np.ndarray, other: BatchStrapdown) -> None:
         """Seeds *idx* in the state of *other*'s rows (host.sins.Strapdown.copy: a track's
@@ -119,12 +133,13 @@ class BatchStrapdown:
         """host.sins.Strapdown.correct for the seeds *idx*: remove the estimated errors dp,
         dv (n, 2) of the horizontal position and velocity and da (n, 3) of the attitude
         (C_computed = exp(da x) C_true)."""
+        idx = whole(idx, len(self.p))
         self.p[idx, :2] = self.p[idx, :2] - dp
         self.v[idx, :2] = self.v[idx, :2] - dv
         dax, day, daz = da.T
         qw, qx, qy, qz = qmul(from_rotvec(-dax, -day, -daz), tuple(self.q[idx].T))
         norm = np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        self.q[idx] = np.column_stack((qw / norm, qx / norm, qy / norm, qz / norm))
+        put(self.q, idx, (qw / norm, qx / norm, qy / norm, qz / norm))
 
     def place(self, idx: np.ndarray, p: np.ndarray, v: np.ndarray) -> None:
         """host.sins.Strapdown.place for the seeds *idx*: horizontal position and velocity

@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .innovation import BatchInnovation
-from .linalg import T, dot, inverse, mv, vm
-from .model import BatchLinear
+from .innovation import BatchInnovation, projected
+from .linalg import T, dot, inverse, mv, selection, vm
+from .model import BatchLinear, hx
 
 
 def sigma_points(x: np.ndarray, P: np.ndarray, scale: float) -> np.ndarray:
@@ -38,9 +38,8 @@ def unscented_correct(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray
     new x and P (the rejected seeds' unchanged) and the innovations."""
     if isinstance(meas, BatchLinear):
         H = meas.H
-        zp = mv(H, x)
-        Pxz = np.matmul(P, T(H))
-        S = np.matmul(H, Pxz) + R
+        zp = hx(H, x)
+        Pxz, S = projected(P, H, R, selection(H))
     else:
         scale, Wm, Wc = weights
         X = sigma_points(x, P, scale)
@@ -54,10 +53,16 @@ def unscented_correct(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray
     y = z - zp
     nis = dot(vm(y, SI), y)
     accepted = np.ones(len(nis), bool) if gate is None else nis <= gate
-    a = np.flatnonzero(accepted)
-    if a.size:
-        K = np.matmul(Pxz[a], SI[a])
-        x, P = x.copy(), P.copy()
-        x[a] = x[a] + mv(K, y[a])
-        P[a] = P[a] - np.matmul(np.matmul(K, S[a]), T(K))
+    a = None if accepted.all() else np.flatnonzero(accepted)
+    if a is None or a.size:
+        def rows(v):
+            return v if a is None else v[a]
+        K = np.matmul(rows(Pxz), rows(SI))
+        xa = rows(x) + mv(K, rows(y))
+        Pa = rows(P) - np.matmul(np.matmul(K, rows(S)), T(K))
+        if a is None:
+            x, P = xa, Pa
+        else:
+            x, P = x.copy(), P.copy()
+            x[a], P[a] = xa, Pa
     return x, P, BatchInnovation(y, S, nis, accepted)

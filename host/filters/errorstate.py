@@ -29,6 +29,7 @@ Update (001 eqs. 28-30, Joseph form, chi-square gated like host.filters.kf)::
 from __future__ import annotations
 
 from functools import lru_cache
+from itertools import repeat
 
 import numpy as np
 
@@ -49,28 +50,43 @@ def process_noise(dt: float, gyro_psd: float, accel_psd: float, extra_psd: float
 def process_noises(dt: np.ndarray, gyro_psd: float, accel_psd: float, extra_psd: float,
                    extra: int) -> np.ndarray:
     """G Q G^T over each of the intervals dt (k,): (k, n, n) at once (host.batch, where each
-    seed has its own interval). dt^2 and dt^3 are Python's float powers, as one interval's
-    always were: numpy's power rounds a few percent of them otherwise in the last bit."""
-    dts = dt.tolist()
-    d2, d3 = np.array([d**2 for d in dts]), np.array([d**3 for d in dts])
+    seed has its own interval)."""
     n = NAV + extra
+    Q = np.zeros((len(dt), n, n))
+    add_process_noises(Q, dt, gyro_psd, accel_psd, extra_psd, extra)
+    return Q
+
+
+def add_process_noises(M: np.ndarray, dt: np.ndarray, gyro_psd: float, accel_psd: float,
+                       extra_psd: float, extra: int, powers=None) -> None:
+    """M += G Q G^T over each of the intervals dt (k,), M (k, n, n), in place: the nonzero
+    entries alone, each the sum M + Q gives (host.batch's F P F^T + Q, with no Q of zeros
+    made); *powers*: :func:`interval_powers` of dt, if the caller has them."""
+    d2, d3 = interval_powers(dt) if powers is None else powers
     terms = np.column_stack((accel_psd * d3 / 4, accel_psd * d2 / 2, accel_psd * dt,
                              gyro_psd * dt, extra_psd * dt))
-    Q = np.zeros((len(dts), n * n))
-    at, term = _noise_entries(n)
-    Q[:, at] = terms[:, term]
-    return Q.reshape(-1, n, n)
+    row, col, term = _noise_entries(NAV + extra)
+    M[:, row, col] += terms[:, term]
+
+
+def interval_powers(dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """dt^2 and dt^3 of each interval as Python's float powers (libm's pow), as one interval's
+    always were: numpy's power rounds a few percent of them otherwise in the last bit."""
+    k = len(dt)
+    return (np.fromiter(map(pow, dt.tolist(), repeat(2.0)), float, k),
+            np.fromiter(map(pow, dt.tolist(), repeat(3.0)), float, k))
 
 
 @lru_cache(maxsize=8)
-def _noise_entries(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Where the nonzero entries of G Q G^T (n x n) are, row-major, and which of
-    process_noises' terms (Q_pp, Q_pv, Q_vv, Q_AA, Q_ee) each is."""
+def _noise_entries(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the nonzero entries of G Q G^T (n x n) are (rows, columns), and which of
+    add_process_noises' terms (Q_pp, Q_pv, Q_vv, Q_AA, Q_ee) each is."""
     entries = [((i, i), 0) for i in range(2)]
     entries += [((i, i + 2), 1) for i in range(2)] + [((i + 2, i), 1) for i in range(2)]
     entries += [((i, i), 2) for i in range(2, 4)] + [((i, i), 3) for i in range(A.start, A.stop)]
     entries += [((i, i), 4) for i in range(NAV, n)]
-    return (np.array([r * n + c for (r, c), _ in entries]), np.array([k for _, k in entries]))
+    return (np.array([r for (r, _), _ in entries]), np.array([c for (_, c), _ in entries]),
+            np.array([k for _, k in entries]))
 
 
 def transition(F: np.ndarray, dt, fx, fy, fz) -> None:

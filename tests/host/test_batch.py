@@ -22,7 +22,9 @@ from filterpy.kalman import KalmanFilter as FpKF
 
 from navtwin.host.batch import BatchErrorStateFilter, BatchKalmanFilter
 from navtwin.host.batch.bench import GOAL, ONE_THREAD
-from navtwin.host.batch.linalg import STACKED_UP_TO, inverse, solve_each
+from navtwin.host.batch.innovation import projected
+from navtwin.host.batch.linalg import STACKED_UP_TO, inverse, mv, selection, solve_each
+from navtwin.host.batch.model import hx
 from navtwin.host.filters import ACCELERATION, ConstantAcceleration, KalmanFilter, Ranges, position_fix
 from navtwin.host.filters.errorstate import NAV, ErrorStateFilter
 from navtwin.host.wsn import chi2_gate
@@ -235,6 +237,28 @@ def test_the_inverse_is_the_per_filter_one_and_names_singular_seeds():
         with pytest.raises(np.linalg.LinAlgError, match=r"singular innovation covariance at "
                                                         r"seeds \[2, 5\]; leave them out"):
             inverse(S)
+
+
+def test_a_shared_h_that_picks_states_is_taken_bit_for_bit_as_multiplied():
+    """selection names the columns a Motion product's H picks (rows of the identity) and
+    nothing for any other H; the entries taken are the BLAS products' numbers."""
+    from navtwin.host.inertial import STATIONARY
+
+    assert selection(ACCELERATION.H).tolist() == [4, 5]
+    assert selection(STATIONARY.H).tolist() == [2, 3, 4, 5]
+    for H in (position_fix(0.1).H, 2.0 * ACCELERATION.H, ACCELERATION.H[:, ::-1] + ACCELERATION.H,
+              np.stack([ACCELERATION.H] * 3)):
+        assert selection(H) is None
+    rng = np.random.default_rng(5)
+    P = np.stack([spd(rng, [10.0 ** k for k in range(-3, 3)]) for _ in range(40)])
+    x = rng.normal(size=(40, 6)) * 1e3
+    for H in (ACCELERATION.H, STATIONARY.H):
+        m = len(H)
+        R = np.stack([spd(rng, [1.0] * m) for _ in range(40)])
+        for taken, multiplied in zip(projected(P, H, R, selection(H)), projected(P, H, R, None)):
+            assert taken.flags.c_contiguous
+            np.testing.assert_array_equal(taken, multiplied)
+        np.testing.assert_array_equal(hx(H, x), mv(H, x))
 
 
 @pytest.mark.parametrize("m", range(2, STACKED_UP_TO + 3))

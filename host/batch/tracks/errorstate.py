@@ -39,6 +39,7 @@ from navtwin.host.wsn import chi2_gate
 from ..errorstate import propagate
 from ..innovation import joseph_correct
 from ..linalg import T, mv
+from ..seeds import whole
 from ..strapdown import BatchStrapdown
 from .base import BatchTrack, Columns
 
@@ -106,7 +107,7 @@ class BatchErrorStateTrack(BatchTrack):
         aligned = self.ctx.aligned[idx]
         if not aligned.any():
             return
-        idx, t, gyro, accel = idx[aligned], b.t[aligned], b.gyro[aligned], b.accel[aligned]
+        idx, t = idx[aligned], b.t[aligned]
         new = ~self.on[idx]
         if new.any():  # the alignment ended with this sample: start from its strapdown
             s = idx[new]
@@ -116,7 +117,7 @@ class BatchErrorStateTrack(BatchTrack):
             self.x[s], self.P[s] = 0.0, self._P0
         old = ~new
         if old.any():
-            s = idx[old]
+            s = whole(idx[old], len(self.on))
             dt = t[old] - self.t_nav[s]
             self.t_nav[s] = t[old]
             self.P[s] = propagate(self.P[s], dt, self.nav.f_n[s], self._noise)

@@ -26,7 +26,7 @@ from navtwin.host.wsn import chi2_gate
 from ..innovation import joseph_correct
 from ..kf import propagate
 from ..model import BatchLinear, BatchRanges
-from ..seeds import take
+from ..seeds import take, whole
 from .base import BatchTrack, Columns
 
 
@@ -114,14 +114,17 @@ class BatchFusionTrack(BatchTrack):
         if not idx.size:
             return
         self.sync(idx)
+        r = whole(idx, ctx.n)
         try:
-            x, P, inn = self.correct(self.x[idx], self.P[idx], z, R, meas,
+            x, P, inn = self.correct(self.x[r], self.P[r], z, R, meas,
                                      chi2_gate(meas.dim, ctx.cfg.gate_probability))
         except np.linalg.LinAlgError:
             ctx.eject(idx, f"{self.name}: numerical reset")
             return
-        self.x[idx], self.P[idx] = x, P
-        since = self._gated_since.setdefault(kind, np.full(ctx.n, np.nan))
+        self.x[r], self.P[r] = x, P
+        since = self._gated_since.get(kind)
+        if since is None:
+            since = self._gated_since[kind] = np.full(ctx.n, np.nan)
         out = ~inn.accepted
         if out.any():  # the run of rejections of this kind goes on, or starts now
             r = idx[out]
