@@ -61,16 +61,29 @@ def joseph_correct(x: np.ndarray, P: np.ndarray, I: np.ndarray, y: np.ndarray, H
     cols = selection(H)
     PHT, S = projected(P, H, R, cols)
     SI = inverse(S)
+
+    def correct(rows, a):
+        K = np.matmul(rows(PHT), rows(SI))
+        I_KH = I - np.matmul(K, take(H, 2, a))
+        return rows(x) + mv(K, rows(y)), np.matmul(np.matmul(I_KH, rows(P)), T(I_KH)) \
+            + np.matmul(np.matmul(K, take(R, 2, a)), T(K))
+
+    return gated(x, P, y, S, SI, gate, correct)
+
+
+def gated(x: np.ndarray, P: np.ndarray, y: np.ndarray, S: np.ndarray, SI: np.ndarray, gate,
+          correct) -> tuple[np.ndarray, np.ndarray, BatchInnovation]:
+    """An update's gate and scatter: NIS = y^T S^-1 y per seed; the seeds within *gate* (None:
+    all) take ``correct(rows, a)``'s new x and P of their rows (*rows* picks them from an
+    array, *a* their indices, None for every seed), the others keep theirs (new arrays if
+    any seed changed); with the innovations."""
     nis = dot(vm(y, SI), y)
     accepted = np.ones(len(nis), bool) if gate is None else nis <= gate
     a = None if accepted.all() else np.flatnonzero(accepted)
     if a is None or a.size:
         def rows(v):
             return v if a is None else v[a]
-        K = np.matmul(rows(PHT), rows(SI))
-        xa = rows(x) + mv(K, rows(y))
-        I_KH = I - np.matmul(K, take(H, 2, a))
-        Pa = np.matmul(np.matmul(I_KH, rows(P)), T(I_KH)) + np.matmul(np.matmul(K, take(R, 2, a)), T(K))
+        xa, Pa = correct(rows, a)
         if a is None:
             x, P = xa, Pa
         else:

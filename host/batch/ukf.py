@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .innovation import BatchInnovation, projected
-from .linalg import T, dot, inverse, mv, selection, vm
+from .innovation import BatchInnovation, gated, projected
+from .linalg import T, inverse, mv, selection
 from .model import BatchLinear, hx
 
 
@@ -51,18 +51,9 @@ def unscented_correct(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray
         Pxz = np.matmul(T(X - x[:, None]), WdZ)
     SI = inverse(S)
     y = z - zp
-    nis = dot(vm(y, SI), y)
-    accepted = np.ones(len(nis), bool) if gate is None else nis <= gate
-    a = None if accepted.all() else np.flatnonzero(accepted)
-    if a is None or a.size:
-        def rows(v):
-            return v if a is None else v[a]
+
+    def correct(rows, a):
         K = np.matmul(rows(Pxz), rows(SI))
-        xa = rows(x) + mv(K, rows(y))
-        Pa = rows(P) - np.matmul(np.matmul(K, rows(S)), T(K))
-        if a is None:
-            x, P = xa, Pa
-        else:
-            x, P = x.copy(), P.copy()
-            x[a], P[a] = xa, Pa
-    return x, P, BatchInnovation(y, S, nis, accepted)
+        return rows(x) + mv(K, rows(y)), rows(P) - np.matmul(np.matmul(K, rows(S)), T(K))
+
+    return gated(x, P, y, S, SI, gate, correct)
