@@ -477,7 +477,7 @@ class Emulation:
         """The feed of :meth:`chunks`, its refusals checked first."""
         if self.speed is not None or self.ports or self.recorder is not None \
                 or self._feed is not None:
-            raise Irregular("only a fresh run at --speed max without ports or a recording")
+            raise Irregular("only a fresh unpaced run without ports or a recording")
         if self.scenario.faults:
             raise Irregular("a scenario with faults")
         self.world.only(taken)
