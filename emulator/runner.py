@@ -185,6 +185,12 @@ class Feed:
         return events
 
 
+def quick_refusal(scenario) -> str | None:
+    """Why :meth:`Emulation.chunks` refuses every run of *scenario* (None: it may take them),
+    so a caller can run the timeline without building runs it would refuse."""
+    return "a scenario with faults" if scenario.faults else None
+
+
 def chunks_together(emulations: list[Emulation], ports) -> list[dict]:
     """:meth:`Emulation.chunks` of several fresh runs (a sweep's seeds of one scenario, in
     one process), their worlds' blocks made in step (World.make_together: each block's IMU
@@ -478,8 +484,8 @@ class Emulation:
         if self.speed is not None or self.ports or self.recorder is not None \
                 or self._feed is not None:
             raise Irregular("only a fresh unpaced run without ports or a recording")
-        if self.scenario.faults:
-            raise Irregular("a scenario with faults")
+        if (reason := quick_refusal(self.scenario)) is not None:
+            raise Irregular(reason)
         self.world.only(taken)
         self._feed = Feed(self.world, self.end_ns, MAX_BLOCK_NS, tuple(self.devices.values()))
         return self._feed

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from navtwin.emulator.runner import Chunk, Emulation, chunks_together
+from navtwin.emulator.runner import Chunk, Emulation, chunks_together, quick_refusal
 from navtwin.emulator.uart import Irregular
 from navtwin.emulator.scenario import Scenario, load_scenario
 from navtwin.emulator.imu import shared
@@ -72,12 +72,17 @@ def lab_ports_together(scenario: str | Path | Scenario, seeds, *,
     kw = emulator_settings(sc.name, {i: dict(sc.ports[p]) for i, p in plugged.items()}, **overrides)
     bauds = {i: sc.ports[plugged[i]]["baud"] for i in kw["inputs"]}
     port_of = {i: plugged[i] for i in kw["inputs"]}
-    try:  # the lines timed in one pass each, where the runs allow (Emulation.chunks)
-        with contextlib.ExitStack() as runs:
-            emulations = [runs.enter_context(Emulation(sc, seed, speed=None, duration_s=duration,
-                                                       ports=False)) for seed in seeds]
-            made = chunks_together(emulations, list(port_of.values()))
-    except Irregular:  # the timeline's steps, fresh runs
+    made = None
+    if quick_refusal(sc) is None:
+        try:  # the lines timed in one pass each, where the runs allow (Emulation.chunks)
+            with contextlib.ExitStack() as runs:
+                emulations = [runs.enter_context(Emulation(sc, seed, speed=None,
+                                                           duration_s=duration, ports=False))
+                              for seed in seeds]
+                made = chunks_together(emulations, list(port_of.values()))
+        except Irregular:  # the timeline's steps, fresh runs
+            pass
+    if made is None:
         made = [_sunk(sc, seed, duration, port_of.values()) for seed in seeds]
     return [(dict(kw), {i: (b"".join(got[p][0]), np.fromiter(map(len, got[p][0]), np.int64,
                                                               len(got[p][0])),
