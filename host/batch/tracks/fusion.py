@@ -114,14 +114,14 @@ class BatchFusionTrack(BatchTrack):
         if not idx.size:
             return
         self.sync(idx)
-        r = whole(idx, ctx.n)
+        at = whole(idx, ctx.n)
         try:
-            x, P, inn = self.correct(self.x[r], self.P[r], z, R, meas,
+            x, P, inn = self.correct(self.x[at], self.P[at], z, R, meas,
                                      chi2_gate(meas.dim, ctx.cfg.gate_probability))
         except np.linalg.LinAlgError:
             ctx.eject(idx, f"{self.name}: numerical reset")
             return
-        self.x[r], self.P[r] = x, P
+        self.x[at], self.P[at] = x, P
         since = self._gated_since.get(kind)
         if since is None:
             since = self._gated_since[kind] = np.full(ctx.n, np.nan)
