@@ -423,7 +423,7 @@ class BatchEstimator:
                 bad = c.valid & ~np.isfinite(c.x.sum(1) + c.v.sum(1))
                 if bad.any():
                     self.eject(idx[bad], f"{track.name}: estimate not finite")
-                self._out[track.name].append((idx, b, c, yaw))
+                self._out[track.name].append(_rows(idx, b, c, yaw))
             self.k_out[idx] += 1
             self.next_out[idx] = self.k_out[idx] * self.cfg.output_period_s
 
@@ -435,21 +435,22 @@ class BatchEstimator:
         for name, chunks in self._out.items():
             if not chunks:
                 continue
-            seed = np.concatenate([i[c.valid] for i, _, c, _ in chunks])
+            seed, *cols = (np.concatenate(c) for c in zip(*chunks))
             order = np.argsort(seed, kind="stable")
-            seed = seed[order]
-
-            def cat(get):
-                return np.concatenate([get(b, c, y)[c.valid] for _, b, c, y in chunks])[order]
-            cols = {"t": cat(lambda b, c, y: b),
-                    "x": cat(lambda b, c, y: c.x[:, 0]), "y": cat(lambda b, c, y: c.x[:, 1]),
-                    "vx": cat(lambda b, c, y: c.v[:, 0]), "vy": cat(lambda b, c, y: c.v[:, 1]),
-                    "yaw": cat(lambda b, c, y: (y if c.yaw is None else c.yaw) if c.has_yaw
-                               else np.full(len(b), np.nan)),
-                    "cov": cat(lambda b, c, y: c.cov.reshape(len(b), 16)),
-                    "extrapolated": cat(lambda b, c, y: c.stale)}
-            cuts = np.searchsorted(seed, np.arange(self.n + 1))
+            cols = dict(zip(("t", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated"),
+                            (c[order] for c in cols)))
+            cuts = np.searchsorted(seed[order], np.arange(self.n + 1))
             for i in range(self.n):
                 if self._alive[i]:
                     out[i][name] = {k: v[cuts[i]:cuts[i + 1]] for k, v in cols.items()}
         return out
+
+
+def _rows(idx, b, c, yaw) -> tuple:
+    """The output rows of one emit (seed, then :meth:`BatchEstimator._columns`' columns), the
+    valid ones copied out: a view would keep the track's whole state (an 11- or 15-state P)
+    alive until the run ends, megabytes a seed."""
+    v = c.valid
+    y = ((yaw if c.yaw is None else c.yaw) if c.has_yaw else np.full(len(b), np.nan))[v]
+    return (idx[v], b[v], c.x[v, 0], c.x[v, 1], c.v[v, 0], c.v[v, 1], y,
+            c.cov[v].reshape(-1, 16), c.stale[v])
