@@ -1,10 +1,12 @@
 """``navtwin bench sweep``: a sweep's seeds per CPU-second by each engine, in the same run.
 
-The same seeds of one scenario go through the byte engine (each seed's in-memory run) and the
-batch engine (lab.batch: the records per seed, the tracks with a twin as one batch, the others
-per seed), each followed by the same scoring (lab.sweep.cells); CPU time of this process, all
+Seeds 1..N of one scenario go through the byte engine (each seed's in-memory run) and seeds
+1..M through the batch engine as one of a sweep's tasks (lab.batch: the records per seed, the
+tracks with a twin as one batch, the others per seed; M the sweep's batch, 128, by default:
+the batched tracks cost less a seed as the batch grows), each followed by the same scoring
+(lab.sweep.cells); CPU time of this process, all
 its threads (the filters' matrices are too small for a BLAS to thread). The batch engine's CPU is split into its
-halves, so the figure says where the time goes. The cells of the two are compared (the
+halves, so the figure says where the time goes. The cells of the seeds both ran are compared (the
 largest relative difference of any figure), and 10 000 seeds are projected onto this
 machine's cores (a sweep's workers scale: ``navtwin bench host-replays``).
 
@@ -40,6 +42,8 @@ class SweepEngines:
     filters: str = key(EIGHT, "", "the tracks, a comma list or all")
     duration: float | None = key(None, "s", "of each run; none = the whole scenario (15 quick)",
                                  positive(hi=MAX_DURATION_S))
+    batch_seeds: int | None = key(None, "", "seeds 1..M through the batch engine, one task; none ="
+                                  " the sweep's batch, 128 (quick: as seeds)", between(1, 4096))
 
 
 def _cpu(fn):
@@ -49,17 +53,19 @@ def _cpu(fn):
 
 
 def engines(scenario: str = "office", seeds: int = 32, filters=None,
-            duration: float | None = None) -> dict:
-    """Seeds per CPU-second of both engines on seeds 1..*seeds* (module doc)."""
+            duration: float | None = None, batch_seeds: int | None = None) -> dict:
+    """Seeds per CPU-second of the byte engine on seeds 1..*seeds* and of the batch engine on
+    1..*batch_seeds* (default: the sweep's batch size; module doc)."""
     from . import batch, sweep
     from .run import run_in_memory
 
     sc = load_scenario(scenario)
     filters = tuple(filters or sweep.default_filters(sc))
-    numbers = list(range(1, seeds + 1))
+    batch_seeds = batch_seeds or sweep.BATCH_SIZE
+    numbers = list(range(1, batch_seeds + 1))
     def by_bytes():
         rows = []
-        for s in numbers:
+        for s in range(1, seeds + 1):
             est, _ = run_in_memory(sc, s, filters=filters, duration=duration)
             rows += sweep.cells(sc, s, filters, batch.columns(est, filters))
         return rows
@@ -72,20 +78,22 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
         batch_rows, score_s = _cpu(lambda: [r for s, e in zip(numbers, outcome.estimates)
                                             for r in sweep.cells(sc, s, filters, e)])
     batch_s += score_s
+    # zip: the cells of the seeds both engines ran, in the same order
     worst = max((abs(a[m] - b[m]) / max(1.0, abs(b[m])) for a, b in zip(batch_rows, byte_rows)
                  for m in sweep.METRICS if isinstance(a[m], float) and isinstance(b[m], float)
                  and math.isfinite(a[m]) and math.isfinite(b[m])), default=0.0)
     cores = os.cpu_count() or 1
-    per_byte, per_batch = byte_s / seeds, batch_s / seeds
-    return {"benchmark": "sweep", "scenario": sc.name, "seeds": seeds, "filters": list(filters),
+    per_byte, per_batch = byte_s / seeds, batch_s / batch_seeds
+    return {"benchmark": "sweep", "scenario": sc.name, "seeds": seeds, "batch_seeds": batch_seeds,
+            "filters": list(filters),
             "virtual_s": duration or sc.duration_s,
             "bytes_cpu_s_per_seed": round(per_byte, 4),
             "batch_cpu_s_per_seed": round(per_batch, 4),
             "batch_split_cpu_s_per_seed": {
-                "records": round(outcome.records_s / seeds, 4),
-                "batched_tracks": round(outcome.batch_s / seeds, 4),
-                "per_seed_tracks": round(outcome.per_seed_s / seeds, 4),
-                "scoring": round(score_s / seeds, 4)},
+                "records": round(outcome.records_s / batch_seeds, 4),
+                "batched_tracks": round(outcome.batch_s / batch_seeds, 4),
+                "per_seed_tracks": round(outcome.per_seed_s / batch_seeds, 4),
+                "scoring": round(score_s / batch_seeds, 4)},
             "batched": list(outcome.batched), "ejected": len(outcome.ejected),
             "bulk_records": outcome.bulk,  # seeds whose records skipped the pipeline
             "bytes_seeds_per_cpu_s": round(1 / per_byte, 3),
@@ -103,9 +111,10 @@ def benchmarks() -> dict:
 
     @takes(SweepEngines)
     def sweep(quick: bool, s: SweepEngines) -> dict:
-        """emulator+host: sweep seeds per CPU-second, batch engine vs byte engine, same seeds
-        (goals: 20x; 10 000 office seeds with all eight tracks in 15 min on 2 cores)"""
-        return engines(s.scenario, s.seeds or (4 if quick else 32), _tracks(s.filters),
-                       s.duration or (15.0 if quick else None))
+        """emulator+host: sweep seeds per CPU-second, batch engine (a sweep's task) vs byte
+        engine (goals: 20x; 10 000 office seeds with all eight tracks in 15 min on 2 cores)"""
+        seeds = s.seeds or (4 if quick else 32)
+        return engines(s.scenario, seeds, _tracks(s.filters), s.duration or (15.0 if quick else None),
+                       s.batch_seeds or (seeds if quick else None))
 
     return {"sweep": sweep}
