@@ -149,10 +149,10 @@ class NanolocNetwork:
         self.report_ns = round((WIDE_FRAME_SIZE if self.wide else FRAME_SIZE) * char_ns(sc.gateway.baud))
         self.busy_until = 0
         self.seq = 0
-        #: all a block's arithmetic takes besides the draws, the schedule and the anchors'
+        #: all a block's arithmetic and schedule take besides the draws and the anchors'
         #: faults and multipath: networks of one key (a sweep's seeds of one scenario) make
         #: their blocks together (:meth:`reports_together`)
-        self.key = (self.r, tuple(t.key for t in self.trajectories), self.anchor_every,
+        self.key = (self.r, sc.clocks.network_ppm, tuple(t.key for t in self.trajectories), self.anchor_every,
                     self.latency_ns, self.report_ns, self.wide, self.tags.tobytes(),
                     self.e_t.tobytes(), *(a.tobytes() for a in (self.ids, self.positions, self.e_a, self.bias)))
 
@@ -179,7 +179,8 @@ class NanolocNetwork:
         reports and state as it alone would leave them. The networks of equal ``key`` (a
         sweep's seeds of one scenario) are run along a seed axis: the blocks of 1 s hold a
         few dozen exchanges, so one numpy call over all the seeds' exchanges costs what one
-        seed's did. Per seed still: the schedule's block (its own cycle starts), each
+        seed's did. Per seed still: the schedule's block when it has cycle jitter (its own
+        cycle starts; without, the schedule draws nothing and one block serves all), each
         anchor's draws (its own stream, in its cycle order), the anchor faults and multipath
         of its anchors (a loop over the anchors that have them), the gateway's serial line
         and counter, the ledger marks."""
@@ -216,7 +217,9 @@ def _exchanges(nets: list[NanolocNetwork], lo_ns: int, hi_ns: int) -> tuple[dict
     and where each network's exchanges begin (and the last ends)."""
     first = nets[0]  # the anchors' and tags' constants and the ranging keys are all the same
     r = first.r
-    blocks = [net.schedule.block(lo_ns, hi_ns) for net in nets]
+    # without cycle jitter the schedule draws nothing: the key's networks have one block
+    blocks = [first.schedule.block(lo_ns, hi_ns)] * len(nets) if first.starts.rng is None else \
+        [net.schedule.block(lo_ns, hi_ns) for net in nets]
     idx, k, t0, network_us = (np.concatenate(col) for col in zip(*blocks))
     m = len(k)
     seg = np.repeat(np.arange(len(nets)), [len(b[1]) for b in blocks])  # each exchange's network
