@@ -110,16 +110,16 @@ class Anchor:
         self._rng = None
         self.multipath = Multipath(r.multipath, spec.id, seed) if r.multipath.enabled else None
 
-    def draw(self, n: int) -> np.ndarray:
-        """The random draws of its next *n* exchanges (n, 9): jitter T, jitter A, n1..n4,
-        shadowing, uniform (timeout), exponential (NLOS)."""
+    def draw(self, normal: np.ndarray, uniform: np.ndarray, exponential: np.ndarray) -> None:
+        """The random draws of its next exchanges, one a row, written into contiguous
+        *normal* (n, 7): jitter T, jitter A, n1..n4, shadowing; *uniform* (n,): the timeout;
+        *exponential* (n,): the NLOS bias (in place: a block has a few per anchor, and the
+        arrays the generator would make cost more than the draws)."""
         if self._rng is None:
             self._rng = stream(self.seed, self.stream_name)
-        draws = np.empty((n, 9))
-        draws[:, :7] = self._rng.standard_normal((n, 7))
-        draws[:, 7] = self._rng.random(n)
-        draws[:, 8] = self._rng.standard_exponential(n)
-        return draws
+        self._rng.standard_normal(out=normal)
+        self._rng.random(out=uniform)
+        self._rng.standard_exponential(out=exponential)
 
 
 class NanolocNetwork:
@@ -230,9 +230,12 @@ def _exchanges(nets: list[NanolocNetwork], lo_ns: int, hi_ns: int) -> tuple[dict
     by_anchor = np.argsort(g, kind="stable")
     present, counts = np.unique(g, return_counts=True)
     present = present.tolist()  # the anchors of the block's exchanges: no others act
+    normal, uniform, exponential = np.empty((m, 7)), np.empty(m), np.empty(m)
+    ends = np.cumsum(counts).tolist()
+    for i, a, b in zip(present, [0] + ends, ends):
+        anchors[i].draw(normal[a:b], uniform[a:b], exponential[a:b])
     z = np.empty((m, 9))
-    if m:
-        z[by_anchor] = np.concatenate([anchors[i].draw(c) for i, c in zip(present, counts.tolist())])
+    z[by_anchor, :7], z[by_anchor, 7], z[by_anchor, 8] = normal, uniform, exponential
     e_a = first.e_a[idx]
     # the far end of each exchange: the tag, or another anchor (module doc)
     peer = np.full(m, -1)
