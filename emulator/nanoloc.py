@@ -58,6 +58,9 @@ exchange). RSSI at the anchor: RSSI(1 m) - 10 n lg d + N(0, shadowing^2) - NLOS 
 gateway receives it latency_us later and writes one 32-byte report per exchange, in order,
 on its serial line (wire-formats.md section 3); the 34-byte wide report (type 02) when some
 anchor or tag id exceeds 254.
+
+A sweep's seeds of one scenario make each block's exchanges together
+(:meth:`NanolocNetwork.reports_together`), every network's reports those it makes alone.
 """
 from __future__ import annotations
 
@@ -152,9 +155,10 @@ class NanolocNetwork:
         #: all a block's arithmetic and schedule take besides the draws and the anchors'
         #: faults and multipath: networks of one key (a sweep's seeds of one scenario) make
         #: their blocks together (:meth:`reports_together`)
-        self.key = (self.r, sc.clocks.network_ppm, tuple(t.key for t in self.trajectories), self.anchor_every,
-                    self.latency_ns, self.report_ns, self.wide, self.tags.tobytes(),
-                    self.e_t.tobytes(), *(a.tobytes() for a in (self.ids, self.positions, self.e_a, self.bias)))
+        self.key = (self.r, sc.clocks.network_ppm, tuple(t.key for t in self.trajectories),
+                    self.anchor_every, self.latency_ns, self.report_ns, self.wide,
+                    *(a.tobytes() for a in (self.tags, self.e_t, self.ids, self.positions, self.e_a,
+                                            self.bias)))
 
     def tag_position(self, k: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
         """(n, 3) true positions at *t_ns* of the tags of cycles *k* (module doc), in metres."""
