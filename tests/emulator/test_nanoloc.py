@@ -300,7 +300,8 @@ anchor = 3
 
 #: (base, overrides) by what each tries
 TOGETHER = {
-    "office": ("office", None),
+    "office": ("office", None),  # the seeds share the schedule's block: it draws nothing
+    "jitter": ("office", "[ranging]\ncycle_jitter_ms = 2.0\n"),  # each seed its cycle starts
     "multipath": ("corridor", None),
     "faults": ("office", FAULTS),
     "outage": ("corridor-outage", '[[faults]]\nkind = "anchor_outage"\nanchor = 1\n'),
