@@ -58,6 +58,9 @@ exchange). RSSI at the anchor: RSSI(1 m) - 10 n lg d + N(0, shadowing^2) - NLOS 
 gateway receives it latency_us later and writes one 32-byte report per exchange, in order,
 on its serial line (wire-formats.md section 3); the 34-byte wide report (type 02) when some
 anchor or tag id exceeds 254.
+
+A sweep's seeds of one scenario make each block's exchanges together
+(:meth:`NanolocNetwork.reports_together`), every network's reports those it makes alone.
 """
 from __future__ import annotations
 
@@ -110,16 +113,16 @@ class Anchor:
         self._rng = None
         self.multipath = Multipath(r.multipath, spec.id, seed) if r.multipath.enabled else None
 
-    def draw(self, n: int) -> np.ndarray:
-        """The random draws of its next *n* exchanges (n, 9): jitter T, jitter A, n1..n4,
-        shadowing, uniform (timeout), exponential (NLOS)."""
+    def draw(self, normal: np.ndarray, uniform: np.ndarray, exponential: np.ndarray) -> None:
+        """The random draws of its next exchanges, one a row, written into contiguous
+        *normal* (n, 7): jitter T, jitter A, n1..n4, shadowing; *uniform* (n,): the timeout;
+        *exponential* (n,): the NLOS bias (in place: a block has a few per anchor, and the
+        arrays the generator would make cost more than the draws)."""
         if self._rng is None:
             self._rng = stream(self.seed, self.stream_name)
-        draws = np.empty((n, 9))
-        draws[:, :7] = self._rng.standard_normal((n, 7))
-        draws[:, 7] = self._rng.random(n)
-        draws[:, 8] = self._rng.standard_exponential(n)
-        return draws
+        self._rng.standard_normal(out=normal)
+        self._rng.random(out=uniform)
+        self._rng.standard_exponential(out=exponential)
 
 
 class NanolocNetwork:
@@ -149,6 +152,13 @@ class NanolocNetwork:
         self.report_ns = round((WIDE_FRAME_SIZE if self.wide else FRAME_SIZE) * char_ns(sc.gateway.baud))
         self.busy_until = 0
         self.seq = 0
+        #: all a block's arithmetic and schedule take besides the draws and the anchors'
+        #: faults and multipath: networks of one key (a sweep's seeds of one scenario) make
+        #: their blocks together (:meth:`reports_together`)
+        self.key = (self.r, sc.clocks.network_ppm, tuple(t.key for t in self.trajectories),
+                    self.anchor_every, self.latency_ns, self.report_ns, self.wide,
+                    *(a.tobytes() for a in (self.tags, self.e_t, self.ids, self.positions, self.e_a,
+                                            self.bias)))
 
     def tag_position(self, k: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
         """(n, 3) true positions at *t_ns* of the tags of cycles *k* (module doc), in metres."""
@@ -161,105 +171,150 @@ class NanolocNetwork:
             out[mine] = self.trajectories[i].position(t_ns[mine])
         return out
 
-    def exchanges(self, lo_ns: int, hi_ns: int) -> dict:
-        """The exchanges starting in [lo_ns, hi_ns), in start order: anchor, start, t_us,
-        status, rssi, taus (ps) and when the gateway has the result."""
-        r = self.r
-        idx, k, t0, network_us = self.schedule.block(lo_ns, hi_ns)
-        # each anchor's draws in its cycle order, from its own stream (emulator.tdma)
-        by_anchor = np.argsort(idx, kind="stable")
-        present, counts = np.unique(idx, return_counts=True)
-        z = np.empty((len(k), 9))
-        if len(k):
-            z[by_anchor] = np.concatenate([self.anchors[i].draw(n) for i, n in zip(present.tolist(), counts.tolist())])
-        m = len(k)
-        e_a = self.e_a[idx]
-        # the far end of each exchange: the tag, or another anchor (module doc)
-        peer = np.full(m, -1)
-        if self.anchor_every:
-            n = len(self.anchors)
-            among = k % self.anchor_every == 0
-            peer[among] = (idx[among] + 1 + (k[among] // self.anchor_every) % (n - 1)) % n
-        peered = peer >= 0
-        tag_of = k % len(self.tags)  # the cycle's tag
-        e_t = np.where(peered, self.e_a[peer], self.e_t[tag_of])
-        p_t = r.tag_reply_us * 1e-6 / (1 + e_t) + r.reply_jitter_ns * 1e-9 * z[:, 0]
-        p_a = r.anchor_reply_us * 1e-6 / (1 + e_a) + r.reply_jitter_ns * 1e-9 * z[:, 1]
-        gap = r.leg_gap_us * 1e-6 / (1 + e_t)
-        # transmission moments of the four legs (the nanoseconds of flight do not matter here)
-        offsets = np.column_stack((np.zeros(m), p_t, p_t + gap, p_t + gap + p_a))
-        when = t0[:, None] + np.rint(offsets * 1e9).astype(np.int64)
-        where = self.positions[idx]
-        tag = self.tag_position(np.repeat(k, 4), when.ravel()).reshape(m, 4, 3)
-        if peered.any():
-            tag[peered] = self.positions[peer[peered], None, :]
-        d = np.linalg.norm(tag - where[:, None, :], axis=2)
-        tof = d / SPEED_OF_LIGHT
-        effect = ExchangeEffects(z[:, 7] < r.timeout_prob, np.zeros(m), np.zeros(m), z[:, 8],
-                                 z[:, 7], np.zeros(m, dtype=bool))
-        hits = []  # (fault, the exchanges it changed): the ledger's marks
-        present = present.tolist()  # the anchors of the block's exchanges: no others act
-        for i in present:
-            mine = idx == i
-            for f in self.anchors[i].faults:
-                on = mine & f.active(t0)
-                acted = f.act(effect, on)
-                hits.append((f, on if acted is None else acted))
-        timeout, attenuation = effect.timeout, effect.attenuation_db
-        bias = self.bias[idx] + effect.bias_m
-        for i in present:
-            a = self.anchors[i]
-            if a.multipath is not None:
-                mine = idx == i  # an anchor's exchanges are in time order within its run
-                bias[mine] += a.multipath.error(t0[mine], tag[mine, 0, :2])
-        sigma = r.sigma0_m + r.sigma_per_m * d
-        det = (r.scale - 1) * tof + (bias / SPEED_OF_LIGHT)[:, None] + 2 * sigma / SPEED_OF_LIGHT * z[:, 2:6]
-        rt1 = tof[:, 0] + det[:, 0] + p_t + tof[:, 1] + det[:, 1]
-        rt3 = tof[:, 2] + det[:, 2] + p_a + tof[:, 3] + det[:, 3]
-        taus = np.column_stack((rt1 * (1 + e_a), p_t * (1 + e_t), rt3 * (1 + e_t), p_a * (1 + e_a)))
-        taus = np.clip(np.rint(taus * PS_PER_S), 0, U32).astype(np.int64)
-        value_error = effect.value_error & ~timeout
-        taus[timeout | value_error] = 0
-        rssi = r.rssi_1m_dbm - 10 * r.path_loss_exponent * np.log10(np.maximum(d[:, 0], 0.1)) \
-            + r.shadowing_db * z[:, 6] - attenuation
-        rssi = np.clip(np.rint(rssi), -128, 127).astype(np.int64)
-        done = rt1 + gap + rt3 + r.result_us * 1e-6
-        result = t0 + np.rint(np.where(timeout, r.timeout_ms * 1e-3, done) * 1e9).astype(np.int64)
-        t_us = np.floor(network_us)
-        order = np.argsort(t0, kind="stable")  # slots never overlap: results come in this order
-        if r.radio_range_m is not None:  # beyond the range the tag never hears the anchor
-            order = order[d[order, 0] <= r.radio_range_m]
-        marks: dict[int, tuple] = {}
-        if hits:
-            rank = np.full(m, -1, dtype=np.int64)
-            rank[order] = np.arange(len(order))
-            for f, acted in hits:
-                for j in np.flatnonzero(acted & (rank >= 0)).tolist():
-                    marks[int(rank[j])] = marks.get(int(rank[j]), ()) + (
-                        {"kind": f.KIND, "fault": f, "t_ns": int(t0[j]), "anchor": int(self.ids[idx[j]])},)
-        return {
-            "marks": marks,
-            "anchor": self.ids[idx][order],
-            "tag": np.where(peered, self.ids[peer], self.tags[tag_of])[order],
-            "start_ns": t0[order],
-            "t_us": t_us.astype(np.int64)[order],
-            "status": np.select([timeout, value_error], [STATUS_TIMEOUT, STATUS_VALUE_ERROR],
-                                STATUS_COMPLETE)[order],
-            "rssi": np.where(timeout, RSSI_NONE, rssi)[order],
-            "tau": taus[order],
-            "ready_ns": result[order] + self.latency_ns,
-        }
-
     def reports(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, list[bytes], dict]:
         """Write start times and bytes of the reports of the exchanges starting in the block,
         and the ledger marks of the reports a fault changed (by index)."""
-        x = self.exchanges(lo_ns, hi_ns)
-        start, end = serial_queue(x["ready_ns"], np.full(len(x["ready_ns"]), self.report_ns), self.busy_until)
-        if len(end):
-            self.busy_until = int(end[-1])
-        seq = self.seq
-        self.seq += len(start)
-        reports = build_reports(seq=seq + np.arange(len(start)), t_us=x["t_us"], anchor=x["anchor"],
-                                tag=x["tag"], status=x["status"], rssi=x["rssi"], tau=x["tau"],
-                                wide=self.wide)
-        return start, frames_of(reports), x["marks"]
+        return self.reports_together([self], lo_ns, hi_ns)[0]
+
+    @staticmethod
+    def reports_together(networks: list[NanolocNetwork], lo_ns: int,
+                         hi_ns: int) -> list[tuple[np.ndarray, list[bytes], dict]]:
+        """:meth:`reports` of the block [lo_ns, hi_ns) for each of *networks*, each network's
+        reports and state as it alone would leave them. The networks of equal ``key`` (a
+        sweep's seeds of one scenario) are run along a seed axis: the blocks of 1 s hold a
+        few dozen exchanges, so one numpy call over all the seeds' exchanges costs what one
+        seed's did. Per seed still: the schedule's block when it has cycle jitter (its own
+        cycle starts; without, the schedule draws nothing and one block serves all), each
+        anchor's draws (its own stream, in its cycle order), the anchor faults and multipath
+        of its anchors (a loop over the anchors that have them), the gateway's serial line
+        and counter, the ledger marks."""
+        groups: dict[tuple, list[int]] = {}
+        for i, net in enumerate(networks):
+            groups.setdefault(net.key, []).append(i)
+        out = [None] * len(networks)
+        for members in groups.values():
+            for i, made in zip(members, _reports([networks[i] for i in members], lo_ns, hi_ns)):
+                out[i] = made
+        return out
+
+
+def _reports(nets: list[NanolocNetwork], lo_ns: int, hi_ns: int) -> list[tuple]:
+    """reports_together of networks of one key: each one's (write starts, frames, marks)."""
+    x, marks, bounds = _exchanges(nets, lo_ns, hi_ns)
+    first, n = nets[0], len(x["ready_ns"])
+    start, seq = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    for net, a, b in zip(nets, bounds, bounds[1:]):
+        start[a:b], end = serial_queue(x["ready_ns"][a:b], np.full(b - a, first.report_ns), net.busy_until)
+        if b > a:
+            net.busy_until = int(end[-1])
+        seq[a:b] = net.seq + np.arange(b - a)
+        net.seq += b - a
+    frames = frames_of(build_reports(seq=seq, t_us=x["t_us"], anchor=x["anchor"], tag=x["tag"],
+                                     status=x["status"], rssi=x["rssi"], tau=x["tau"], wide=first.wide))
+    return [(start[a:b], frames[a:b], mine) for a, b, mine in zip(bounds, bounds[1:], marks)]
+
+
+def _exchanges(nets: list[NanolocNetwork], lo_ns: int, hi_ns: int) -> tuple[dict, list[dict], list[int]]:
+    """The exchanges starting in [lo_ns, hi_ns) of networks of one key, network after
+    network, each network's in start order: anchor, start, t_us, status, rssi, taus (ps) and
+    when the gateway has the result; with each network's ledger marks (by its report's index)
+    and where each network's exchanges begin (and the last ends)."""
+    first = nets[0]  # the anchors' and tags' constants and the ranging keys are all the same
+    r = first.r
+    # without cycle jitter the schedule draws nothing: the key's networks have one block
+    blocks = [first.schedule.block(lo_ns, hi_ns)] * len(nets) if first.starts.rng is None else \
+        [net.schedule.block(lo_ns, hi_ns) for net in nets]
+    idx, k, t0, network_us = (np.concatenate(col) for col in zip(*blocks))
+    m = len(k)
+    seg = np.repeat(np.arange(len(nets)), [len(b[1]) for b in blocks])  # each exchange's network
+    # each exchange's anchor among all the networks' anchors, network after network
+    anchors = [a for net in nets for a in net.anchors]
+    g = seg * len(first.anchors) + idx
+    # each anchor's draws in its cycle order, from its own stream (emulator.tdma)
+    by_anchor = np.argsort(g, kind="stable")
+    present, counts = np.unique(g, return_counts=True)
+    present = present.tolist()  # the anchors of the block's exchanges: no others act
+    normal, uniform, exponential = np.empty((m, 7)), np.empty(m), np.empty(m)
+    ends = np.cumsum(counts).tolist()
+    for i, a, b in zip(present, [0] + ends, ends):
+        anchors[i].draw(normal[a:b], uniform[a:b], exponential[a:b])
+    z = np.empty((m, 9))
+    z[by_anchor, :7], z[by_anchor, 7], z[by_anchor, 8] = normal, uniform, exponential
+    e_a = first.e_a[idx]
+    # the far end of each exchange: the tag, or another anchor (module doc)
+    peer = np.full(m, -1)
+    if first.anchor_every:
+        n = len(first.anchors)
+        among = k % first.anchor_every == 0
+        peer[among] = (idx[among] + 1 + (k[among] // first.anchor_every) % (n - 1)) % n
+    peered = peer >= 0
+    tag_of = k % len(first.tags)  # the cycle's tag
+    e_t = np.where(peered, first.e_a[peer], first.e_t[tag_of])
+    p_t = r.tag_reply_us * 1e-6 / (1 + e_t) + r.reply_jitter_ns * 1e-9 * z[:, 0]
+    p_a = r.anchor_reply_us * 1e-6 / (1 + e_a) + r.reply_jitter_ns * 1e-9 * z[:, 1]
+    gap = r.leg_gap_us * 1e-6 / (1 + e_t)
+    # transmission moments of the four legs (the nanoseconds of flight do not matter here)
+    offsets = np.column_stack((np.zeros(m), p_t, p_t + gap, p_t + gap + p_a))
+    when = t0[:, None] + np.rint(offsets * 1e9).astype(np.int64)
+    where = first.positions[idx]
+    tag = first.tag_position(np.repeat(k, 4), when.ravel()).reshape(m, 4, 3)
+    if peered.any():
+        tag[peered] = first.positions[peer[peered], None, :]
+    d = np.linalg.norm(tag - where[:, None, :], axis=2)
+    tof = d / SPEED_OF_LIGHT
+    effect = ExchangeEffects(z[:, 7] < r.timeout_prob, np.zeros(m), np.zeros(m), z[:, 8],
+                             z[:, 7], np.zeros(m, dtype=bool))
+    hits = []  # (fault, the exchanges it changed): the ledger's marks
+    for i in present:
+        if anchors[i].faults:
+            mine = g == i
+            for f in anchors[i].faults:
+                on = mine & f.active(t0)
+                acted = f.act(effect, on)
+                hits.append((f, on if acted is None else acted))
+    timeout, attenuation = effect.timeout, effect.attenuation_db
+    bias = first.bias[idx] + effect.bias_m
+    for i in present:
+        if anchors[i].multipath is not None:
+            mine = g == i  # an anchor's exchanges are in time order within its run
+            bias[mine] += anchors[i].multipath.error(t0[mine], tag[mine, 0, :2])
+    sigma = r.sigma0_m + r.sigma_per_m * d
+    det = (r.scale - 1) * tof + (bias / SPEED_OF_LIGHT)[:, None] + 2 * sigma / SPEED_OF_LIGHT * z[:, 2:6]
+    rt1 = tof[:, 0] + det[:, 0] + p_t + tof[:, 1] + det[:, 1]
+    rt3 = tof[:, 2] + det[:, 2] + p_a + tof[:, 3] + det[:, 3]
+    taus = np.column_stack((rt1 * (1 + e_a), p_t * (1 + e_t), rt3 * (1 + e_t), p_a * (1 + e_a)))
+    taus = np.clip(np.rint(taus * PS_PER_S), 0, U32).astype(np.int64)
+    value_error = effect.value_error & ~timeout
+    taus[timeout | value_error] = 0
+    rssi = r.rssi_1m_dbm - 10 * r.path_loss_exponent * np.log10(np.maximum(d[:, 0], 0.1)) \
+        + r.shadowing_db * z[:, 6] - attenuation
+    rssi = np.clip(np.rint(rssi), -128, 127).astype(np.int64)
+    done = rt1 + gap + rt3 + r.result_us * 1e-6
+    result = t0 + np.rint(np.where(timeout, r.timeout_ms * 1e-3, done) * 1e9).astype(np.int64)
+    t_us = np.floor(network_us)
+    # each network's in start order (slots never overlap: results come in this order)
+    order = np.lexsort((t0, seg))
+    if r.radio_range_m is not None:  # beyond the range the tag never hears the anchor
+        order = order[d[order, 0] <= r.radio_range_m]
+    bounds = np.searchsorted(seg[order], np.arange(len(nets) + 1)).tolist()
+    marks: list[dict[int, tuple]] = [{} for _ in nets]
+    if hits:
+        rank = np.full(m, -1, dtype=np.int64)
+        rank[order] = np.arange(len(order))
+        for f, acted in hits:
+            for j in np.flatnonzero(acted & (rank >= 0)).tolist():
+                net = int(seg[j])
+                at = int(rank[j]) - bounds[net]  # the report's index in its network's block
+                marks[net][at] = marks[net].get(at, ()) + (
+                    {"kind": f.KIND, "fault": f, "t_ns": int(t0[j]), "anchor": int(first.ids[idx[j]])},)
+    return {
+        "anchor": first.ids[idx][order],
+        "tag": np.where(peered, first.ids[peer], first.tags[tag_of])[order],
+        "start_ns": t0[order],
+        "t_us": t_us.astype(np.int64)[order],
+        "status": np.select([timeout, value_error], [STATUS_TIMEOUT, STATUS_VALUE_ERROR],
+                            STATUS_COMPLETE)[order],
+        "rssi": np.where(timeout, RSSI_NONE, rssi)[order],
+        "tau": taus[order],
+        "ready_ns": result[order] + first.latency_ns,
+    }, marks, bounds

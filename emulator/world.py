@@ -245,11 +245,14 @@ class World:
             v.sins_events = v.sins_port in taken
 
     # -- generation -------------------------------------------------------------------------
-    def _make(self) -> None:
-        """Make the next block: each vehicle, each nanoLOC network, and last the block sorted
-        into the events that wait."""
+    def _make(self, reports: list | None = None) -> None:
+        """Make the next block: each vehicle, each nanoLOC network (*reports*: their reports
+        of the block, made already by :meth:`make_together`), and last the block sorted into
+        the events that wait."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
+        if reports is None:
+            reports = NanolocNetwork.reports_together(list(self.networks.values()), lo, hi)
         made, air = [], []  # made: each port's events of the block, in generation order
         offered: dict[str, list[Offered]] = {}
         for vehicle in self.vehicles:
@@ -265,9 +268,8 @@ class World:
                 a = [f for share in shares for p in share for f in p.air]
             made.append((port, r))
             air += a
-        for port, network in self.networks.items():
-            t_nl, reports, marks = network.reports(lo, hi)
-            made.append((port, _port_events(t_nl, port, reports, marks)))
+        for port, (t_nl, frames, marks) in zip(self.networks, reports):
+            made.append((port, _port_events(t_nl, port, frames, marks)))
         self._wait([e for _, events in made for e in events], np.concatenate(
             [self._keys] + [np.fromiter(map(_T_NS, events), np.int64, len(events)) * len(self._rank)
                             + self._rank[port] for port, events in made]))
@@ -294,7 +296,9 @@ class World:
         """Make the blocks before *until_ns* of several worlds (a sweep's seeds of one
         scenario, none under :meth:`ahead`) block by block in step, each block's IMU samples
         made for all of them at once (emulator.imu.generate_together: each sensor's numbers
-        as alone), so ``advance(until_ns)`` then only takes each world's events."""
+        as alone), and so are their nanoLOC networks' reports
+        (NanolocNetwork.reports_together: each network's as alone), so
+        ``advance(until_ns)`` then only takes each world's events."""
         while True:
             blocks: dict[tuple[int, int], list[World]] = {}
             for w in worlds:
@@ -305,8 +309,10 @@ class World:
                 return
             for (lo, hi), group in blocks.items():
                 generate_together([v.imu for w in group for v in w.vehicles], lo, hi)
+                networks = [net for w in group for net in w.networks.values()]
+                reports = iter(NanolocNetwork.reports_together(networks, lo, hi))
                 for w in group:
-                    w._make()
+                    w._make([next(reports) for _ in w.networks])
 
     def made(self, until_ns: int) -> bool:
         """Whether the blocks before *until_ns* are made, so ``advance`` up to it returns at

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from navtwin.emulator.scenario import load_scenario
+from navtwin.emulator.world import World
 from navtwin.protocols.nanoloc import SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT
 
 from ..helpers import OFFICE_ANCHORS
@@ -281,3 +282,52 @@ def test_anchors_range_one_another_every_nth_cycle(tmp_path):
     assert np.all(np.abs(r["rssi"][among] - model) < 5 * rg.shadowing_db + 0.5)
     for k in ("seq", "t_us", "anchor", "tag", "status", "rssi", "tau"):
         assert np.array_equal(r[k][~among], rp[k][~among])
+
+
+# anchor 2 out of line of sight and anchor 3's reports flagged, from the start (ledger marks)
+FAULTS = """
+[[faults]]
+kind = "nlos"
+anchor = 2
+start_s = 0.5
+end_s = 2.0
+
+[[faults]]
+kind = "range_value_error"
+anchor = 3
+"""
+
+
+#: (base, overrides) by what each tries
+TOGETHER = {
+    "office": ("office", None),  # the seeds share the schedule's block: it draws nothing
+    "jitter": ("office", "[ranging]\ncycle_jitter_ms = 2.0\n"),  # each seed its cycle starts
+    "multipath": ("corridor", None),
+    "faults": ("office", FAULTS),
+    "outage": ("corridor-outage", '[[faults]]\nkind = "anchor_outage"\nanchor = 1\n'),
+    "tags": ("office-convoy", None),  # three tags in turn
+    "per-vehicle": ("office-convoy", '[ranging]\nnetwork = "per-vehicle"\n'),  # a port each
+    "in-range": ("outage-bridging", None),  # wide reports and cycle jitter too
+    "anchor-exchanges": ("rssi-centroid", None),  # and a radio range
+}
+
+
+@pytest.mark.parametrize("case", TOGETHER)
+def test_networks_made_together_equal_each_made_alone(tmp_path, case):
+    """World.make_together runs the nanoLOC networks of a block along one seed axis
+    (NanolocNetwork.reports_together); every seed's events (bytes, t_ns and ledger marks) are
+    those it makes alone, to the bit, and a world of another scenario (other networks) is made
+    in the same call."""
+    name, toml = TOGETHER[case]
+    sc = variant(tmp_path, name, toml, "together") if toml else load_scenario(name)
+    worlds = [(sc, 1), (sc, 2), (sc, 7), (load_scenario("office"), 3)]
+    until = 2_500_000_000
+    alone = [World(w_sc, s).advance(until) for w_sc, s in worlds]
+    together = [World(w_sc, s) for w_sc, s in worlds]
+    World.make_together(together, until)
+    made = [w.advance(until) for w in together]
+    assert made == alone
+    ranged = [[e.data for e in events if e.port.startswith("nanoloc")] for events in made]
+    assert ranged[0] and ranged[0] != ranged[1]  # the seeds draw their own numbers
+    if toml == FAULTS:
+        assert any(e.marks for e in made[0] if e.port == "nanoloc")
