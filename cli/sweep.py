@@ -9,7 +9,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from navtwin.common.limits import SEEDS, span
+from navtwin.common.limits import BATCH_SEEDS, BATCH_SIZE, SEEDS, span
 
 from .emulate import DURATION_HELP, duration, scenario_help
 from .main import UsageError, number
@@ -110,8 +110,8 @@ def register(sub) -> None:
     p.add_argument("--engine", choices=("batch", "bytes"), default="batch",
                    help="batch (default): a task's seeds step their tracks together, the same "
                         "estimates to 1e-9; bytes: each seed's in-memory run (docs/sweeps.md)")
-    p.add_argument("--batch-size", type=number(1, 4096, integer=True), metavar="N",
-                   help="seeds a batch-engine task holds at most (default 128)")
+    p.add_argument("--batch-size", type=number(*BATCH_SEEDS, integer=True), metavar="N",
+                   help=f"seeds a batch-engine task holds at most (default {BATCH_SIZE})")
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run, extra="sweep")
 
@@ -140,7 +140,7 @@ def run(args) -> int:
             result = sweep.run(sc, args.seeds, args.filters, duration=args.duration, out=out,
                                client=client, serial=args.serial, vary=args.vary,
                                progress=progress, engine=args.engine,
-                               batch_size=args.batch_size or sweep.BATCH_SIZE)
+                               batch_size=args.batch_size or BATCH_SIZE)
     except (sweep.SweepError, VaryError) as e:
         raise UsageError(str(e)) from None
     vary = result.meta["vary"]

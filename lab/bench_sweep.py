@@ -2,13 +2,13 @@
 
 Seeds 1..N of one scenario go through the byte engine (each seed's in-memory run) and seeds
 1..M through the batch engine as one of a sweep's tasks (lab.batch: the records per seed, the
-tracks with a twin as one batch, the others per seed; M the sweep's batch, 128, by default:
-the batched tracks cost less a seed as the batch grows), each followed by the same scoring
-(lab.sweep.cells); CPU time of this process, all
-its threads (the filters' matrices are too small for a BLAS to thread). The batch engine's CPU is split into its
-halves, so the figure says where the time goes. The cells of the seeds both ran are compared (the
-largest relative difference of any figure), and 10 000 seeds are projected onto this
-machine's cores (a sweep's workers scale: ``navtwin bench host-replays``).
+tracks with a twin as one batch, the others per seed; M the sweep's batch,
+common.limits.BATCH_SIZE, by default: the batched tracks cost less a seed as the batch grows),
+each followed by the same scoring (lab.sweep.cells); CPU time of this process, all its threads
+(the filters' matrices are too small for a BLAS to thread). The batch engine's CPU is split
+into its halves, so the figure says where the time goes. The cells of the seeds both ran are
+compared (the largest relative difference of any figure), and 10 000 seeds are projected onto
+this machine's cores (a sweep's workers scale: ``navtwin bench host-replays``).
 
 Goals (issue 23): the batch engine at least 20x the byte engine's seeds per CPU-second, and
 10 000 office seeds with all eight tracks within 15 minutes on this 2-core machine.
@@ -20,7 +20,7 @@ import os
 import time
 from dataclasses import dataclass
 
-from navtwin.common.limits import MAX_DURATION_S
+from navtwin.common.limits import BATCH_SEEDS, BATCH_SIZE, MAX_DURATION_S
 from navtwin.common.schema import between, key, positive, takes
 from navtwin.emulator.imu import shared_truth
 from navtwin.emulator.scenario import load_scenario
@@ -43,7 +43,8 @@ class SweepEngines:
     duration: float | None = key(None, "s", "of each run; none = the whole scenario (15 quick)",
                                  positive(hi=MAX_DURATION_S))
     batch_seeds: int | None = key(None, "", "seeds 1..M through the batch engine, one task; none ="
-                                  " the sweep's batch, 128 (quick: as seeds)", between(1, 4096))
+                                  f" the sweep's batch, {BATCH_SIZE} (quick: as seeds)",
+                                  between(*BATCH_SEEDS))
 
 
 def _cpu(fn):
@@ -61,7 +62,7 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
 
     sc = load_scenario(scenario)
     filters = tuple(filters or sweep.default_filters(sc))
-    batch_seeds = batch_seeds or sweep.BATCH_SIZE
+    batch_seeds = batch_seeds or BATCH_SIZE
     numbers = list(range(1, batch_seeds + 1))
     def by_bytes():
         rows = []

@@ -54,6 +54,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from navtwin.common import tomlfile
+from navtwin.common.limits import BATCH_SIZE
 from navtwin.emulator.imu import shared_truth
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
 from navtwin.host.replay import emulator_settings
@@ -144,8 +145,6 @@ def batch_cells(sc: Scenario, seeds: list[int], filters: tuple[str, ...],
 ENGINES = {"batch": batch_cells,
            "bytes": lambda sc, seeds, filters, duration: [
                row for seed in seeds for row in seed_cells(sc, seed, filters, duration)]}
-#: Seeds one batch-engine task holds at most (the tracks of a batch step together).
-BATCH_SIZE = 128
 
 
 def cells(sc: Scenario, seed: int, filters: tuple[str, ...], columns: dict) -> list[dict]:
