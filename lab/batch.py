@@ -40,7 +40,7 @@ import numpy as np
 from navtwin.emulator.scenario import Scenario
 from navtwin.host.arrival import arrivals, split
 from navtwin.host.batch.chunks import bulk_stream
-from navtwin.host.batch.estimator import BatchEstimator, Unbatchable, stream
+from navtwin.host.batch.estimator import COLUMNS, BatchEstimator, Unbatchable, stream
 from navtwin.host.batch.tracks import batchable
 from navtwin.host.estimator import Estimator
 from navtwin.host import config as host_config
@@ -53,8 +53,6 @@ from .run import lab_ports, lab_ports_together, scenario_of
 #: 16 a block's numpy calls gain little more, and each seed's chunks wait in memory meanwhile
 TOGETHER = 16
 
-#: The column names of one track's estimates (:func:`columns`).
-COLUMNS = ("t", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
 
 
 class Kept:
@@ -91,8 +89,8 @@ def records_of(settings: dict, ports: dict, bauds: dict):
 
 
 def columns(estimates, filters) -> dict[str, dict[str, np.ndarray]]:
-    """Estimate objects (host.tracks.base.Estimate) as columns per track, *filters* first
-    (a track without estimates has empty columns)."""
+    """Estimate objects (host.tracks.base.Estimate) as columns per track (COLUMNS, as the
+    batch's), *filters* first (a track without estimates has empty columns)."""
     rows: dict[str, list] = {f: [] for f in filters}
     for e in estimates:
         rows.setdefault(e.filter, []).append(
@@ -100,8 +98,7 @@ def columns(estimates, filters) -> dict[str, dict[str, np.ndarray]]:
     out = {}
     for name, r in rows.items():
         a = np.array(r, dtype=float).reshape(len(r), 23)
-        out[name] = {"t": a[:, 0], "x": a[:, 1], "y": a[:, 2], "vx": a[:, 3], "vy": a[:, 4],
-                     "yaw": a[:, 5], "cov": a[:, 6:22], "extrapolated": a[:, 22].astype(bool)}
+        out[name] = dict(zip(COLUMNS, (*a[:, :6].T, a[:, 6:22], a[:, 22].astype(bool))))
     return out
 
 

@@ -143,6 +143,12 @@ def stream(records: list, takes: frozenset, taken: frozenset, gap_s: float) -> S
     return Stream(kind, t, gyro, accel, uptime, anchor, distance, status)
 
 
+#: The column names of one track's estimates, per seed (:meth:`BatchEstimator.run`; lab.batch's
+#: ``columns`` of the per-seed estimator's give the same): ``cov`` the 4x4 of x, y, vx, vy as
+#: (k, 16), ``yaw`` NaN where the track reports none.
+COLUMNS = ("t", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated")
+
+
 class BatchEstimator:
     """host.estimator.Estimator for N seeds and the tracks of *cfg* that have a batch twin
     (host.batch.tracks; the caller runs the others per seed)."""
@@ -437,8 +443,7 @@ class BatchEstimator:
                 continue
             seed, *cols = (np.concatenate(c) for c in zip(*chunks))
             order = np.argsort(seed, kind="stable")
-            cols = dict(zip(("t", "x", "y", "vx", "vy", "yaw", "cov", "extrapolated"),
-                            (c[order] for c in cols)))
+            cols = dict(zip(COLUMNS, (c[order] for c in cols)))
             cuts = np.searchsorted(seed[order], np.arange(self.n + 1))
             for i in range(self.n):
                 if self._alive[i]:
@@ -447,7 +452,7 @@ class BatchEstimator:
 
 
 def _rows(idx, b, c, yaw) -> tuple:
-    """The output rows of one emit (seed, then :meth:`BatchEstimator._columns`' columns), the
+    """The output rows of one emit (seed, then :data:`COLUMNS`), the
     valid ones copied out: a view would keep the track's whole state (an 11- or 15-state P)
     alive until the run ends, megabytes a seed."""
     v = c.valid
