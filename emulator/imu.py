@@ -295,13 +295,14 @@ class Adis16350:
         if hi_ns > self.made_ns:
             generate_together([self], lo_ns, hi_ns)
 
-    def alike(self, other: Adis16350) -> bool:
-        """Whether *other* samples the same true outputs at the same times with the same
-        grade, filter and words (another seed of the same vehicle), so that
-        :func:`generate_together` may run both."""
-        return (self._motion is not None and self._motion == other._motion
-                and self.spec == other.spec and vars(self.clock) == vars(other.clock)
-                and self.made_ns == other.made_ns)
+    @property
+    def key(self):
+        """What :func:`generate_together` runs alike: sensors of equal key sample the same
+        true outputs at the same times with the same grade, filter and words, from the same
+        block on (another seed of the same vehicle); None: it runs alone."""
+        if self._motion is None:
+            return None
+        return self._motion, self.spec, tuple(vars(self.clock).values()), self.made_ns
 
     def _latest(self, t_read_ns: np.ndarray) -> np.ndarray:
         """Index of the latest internal sample at each read time."""
@@ -342,18 +343,15 @@ class Adis16350:
 
 def generate_together(sensors: list[Adis16350], lo_ns: int, hi_ns: int) -> None:
     """:meth:`Adis16350.generate` of the block [lo_ns, hi_ns) for each of *sensors*, each
-    sensor's samples and state as it alone would leave them: the sensors that are
-    :meth:`~Adis16350.alike` (a sweep's seeds of one vehicle) are run along a leading seed
+    sensor's samples and state as it alone would leave them: the sensors of one
+    :attr:`~Adis16350.key` (a sweep's seeds of one vehicle) are run along a leading seed
     axis, so each numpy call of the model serves them all (every draw is still each seed's
     own, from its own streams, in its own order); the others one by one."""
-    groups: list[list[Adis16350]] = []
-    for sensor in sensors:
-        group = next((g for g in groups if g[0].alike(sensor)), None)
-        if group is None:
-            groups.append([sensor])
-        else:
-            group.append(sensor)
-    for group in groups:
+    groups: dict = {}
+    for i, sensor in enumerate(sensors):
+        key = sensor.key
+        groups.setdefault(i if key is None else key, []).append(sensor)
+    for group in groups.values():
         _generate(group, lo_ns, hi_ns)
 
 
