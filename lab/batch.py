@@ -54,7 +54,6 @@ from .run import lab_ports, lab_ports_together, scenario_of
 TOGETHER = 16
 
 
-
 class Kept:
     """An estimator that keeps the records the pipeline gives it and estimates nothing."""
 
