@@ -295,6 +295,7 @@ class Coordinator:
     reset_until_ns: int = field(default=-1, init=False)
     ignored: int = field(default=0, init=False)  # host frames the firmware does not handle
     dropped_tx_buffer: int = field(default=0, init=False)  # RF packets the UART had no room for
+    room: int = field(default=SERIAL_TX_BUFFER, init=False)  # the serial transmit buffer's bytes
     _prefix: dict = field(default_factory=dict, init=False)
     #: the API frames of RF packets admitted and not yet rendered, by (AP 2, AO bit 0,
     #: packet): the frame is a function of the three, so render takes what admit made
@@ -323,7 +324,7 @@ class Coordinator:
             self._framed.pop(self._rx_key(item), None)  # sized ahead, never sent
             return None
         frame = self._frame_of(item)
-        if queued + len(frame) > SERIAL_TX_BUFFER:
+        if queued + len(frame) > self.room:
             self._framed.pop(self._rx_key(item))
             self.dropped_tx_buffer += 1
             return None
@@ -337,7 +338,7 @@ class Coordinator:
         if isinstance(item, Reply) or t_ns < self.reset_until_ns or self.off(t_ns):
             return None
         n = len(self._frame_of(item))
-        return n if n <= SERIAL_TX_BUFFER else None
+        return n if n <= self.room else None
 
     def render(self, t_ns: int, item) -> bytes:
         """The API frame bytes of an output item, in the current API mode; b"" = nothing."""
@@ -354,6 +355,25 @@ class Coordinator:
         if t_ns < self.reset_until_ns or self.off(t_ns):
             return b""  # the radio is rebooting: the packet is never reported
         return self._rx_frame(item) if frame is None else frame
+
+    def render_all(self, ready, items) -> tuple[bytes, list[int]] | None:
+        """:meth:`render` of every item, ready at *ready* (ascending), all admitted: their
+        frames end to end and each one's size (emulator.uart Line.drain); None where a
+        rendering would change the radio (a power-up or reconfiguring reply) or the radio
+        is off or resetting at some item."""
+        if self.faults or (len(ready) and ready[0] < self.reset_until_ns):
+            return None
+        prefix, parts = self._rx_prefix, []
+        for item in items:
+            if type(item) is Reply:
+                if item.power_up or item.reconfigure:
+                    return None
+                parts += (b"", item.data)
+            else:
+                parts += (prefix(item), item.data)
+        data, sizes = xbee.wrap_many(b"".join(parts), np.fromiter(
+            map(len, parts), np.int64, len(parts)).reshape(-1, 2).sum(axis=1), self.escaped)
+        return data, sizes
 
     def _rx_key(self, pkt) -> tuple:
         return self.escaped, self.registers.values["AO"] & 1, pkt

@@ -103,7 +103,7 @@ from .schedule import Deadlines, Turns
 from .tap import SOCKET as TAP_SOCKET, TapServer
 from .timing import Lateness, Mode, TimingError, choose as choose_timing
 from .truth import HEADER as TRUTH_HEADER, csv_rows as truth_rows, file_name as truth_file
-from .uart import END, Chunk, Inbound, Irregular, Line, LineWrapper, Marked
+from .uart import END, Chunk, Drained, Inbound, Irregular, Line, LineWrapper, Marked
 from .uart_rx import ClientView, line_framing
 
 SEC = 1_000_000_000
@@ -466,11 +466,11 @@ class Emulation:
             self.interrupted = True
         return self.summary()
 
-    def chunks(self, ports) -> dict[str, tuple[list[bytes], list[int]]]:
+    def chunks(self, ports) -> dict[str, Drained]:
         """The quick path of an in-memory run (lab.run): what :meth:`run` at --speed max would
-        hand a sink for each port instance in *ports*, as the data and start time of each
-        chunk in the port's order, the lines timed in one pass each (emulator.uart
-        Line.drain); the other ports' events are not put on their lines, and the world makes
+        hand a sink for each port instance in *ports*, as the chunks' bytes end to end and
+        each one's size and start time, in the port's order, the lines timed in one pass each
+        (emulator.uart Line.drain); the other ports' events are not put on their lines, and the world makes
         no events of the SINS ports not taken (World.only). Only for a fresh run at --speed
         max with no PTY and no recording, of a scenario without faults (wrappers, marks and
         a coordinator's power cuts are the timeline's: uart.Irregular, as for whatever else

@@ -7,7 +7,10 @@ and a chunk is delivered whole when its last byte would have arrived. The device
 transmit buffer may be bounded (the coordinator's ``admit``). Times are integer
 nanoseconds since the run started.
 
-A device is any object with ``.baud`` and the two calls of :class:`Wire`. Between the
+A device is any object with ``.baud`` and the two calls of :class:`Wire`; one that can
+render many items at once also has ``render_all`` and ``room`` (its transmit buffer's bytes,
+None: unbounded; its ``admit`` drops an item exactly when what is queued and the item do
+not fit), which :meth:`Line.drain` uses. Between the
 device and its line sit the line's wrappers (:class:`LineWrapper`, as pyserial's ``spy://``
 wraps a port): each sees every chunk the device hands the UART, with its start time and
 baud, and gives back the chunk to send, changed, shortened, lengthened, emptied (dropped),
@@ -32,14 +35,26 @@ length of what it returned.
 """
 from __future__ import annotations
 
+import bisect
 import heapq
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Iterable, NamedTuple
 
+import numpy as np
+
 from navtwin.protocols.serial import wire_ns
 
 END = 1 << 62  # later than any event
+
+
+class Drained(NamedTuple):
+    """A drained line's chunks (:meth:`Line.drain`): their bytes end to end, each one's
+    size and start (ns)."""
+
+    data: bytes
+    sizes: list[int]
+    starts: list[int]
 
 
 class Irregular(ValueError):
@@ -67,6 +82,8 @@ class Chunk:
 class Wire:
     """A device that writes its bytes as they are (SINS board, nanoLOC gateway)."""
 
+    room = None  # it never drops what it writes
+
     def __init__(self, baud: int) -> None:
         self.baud = baud
 
@@ -77,6 +94,10 @@ class Wire:
     @staticmethod
     def render(t_ns: int, item: bytes) -> bytes:
         return item
+
+    @staticmethod
+    def render_all(ready, items: list[bytes]) -> tuple[bytes, list[int]]:
+        return b"".join(items), list(map(len, items))
 
 
 class LineWrapper:
@@ -225,7 +246,8 @@ class Line(_Wrapped):
 
     def __init__(self, name: str, device: Any, wrappers: Iterable[LineWrapper] = (),
                  ledger=None) -> None:
-        # .baud, .admit(t_ns, item, queued), .render(t_ns, item), and optionally .size(t_ns, item)
+        # .baud, .admit(t_ns, item, queued), .render(t_ns, item), and optionally .size(t_ns,
+        # item), .render_all(ready, items) with .room (the module doc)
         self.device = device
         self._pending: list = []  # heap of (ready, seq, item) not yet in the buffer
         self._queue: deque = deque()  # (ready, item, size) in the buffer, in ready order
@@ -360,11 +382,11 @@ class Line(_Wrapped):
                                      "port": self.name, "direction": "to_host",
                                      "start": offset, "end": offset + sent})
 
-    def drain(self, end_ns: int) -> tuple[list[bytes], list[int]]:
+    def drain(self, end_ns: int) -> Drained:
         """Every chunk of the items put, as :meth:`poll` sends them over a run that ends at
         *end_ns* with nothing else happening on the line (no host write, no live fault, no
-        later put): each chunk's data and start. The quick path of an in-memory run
-        (Emulation.chunks): one pass in ready order instead of the timeline's steps.
+        later put). The quick path of an in-memory run (Emulation.chunks): the chunks
+        timed in ready order, not by the timeline's steps.
 
         In ready order, an item is admitted with ``queued`` = the bytes of the items
         admitted before it whose chunks have not ended (a chunk ending at its arrival has
@@ -378,10 +400,56 @@ class Line(_Wrapped):
         and the modes). :class:`Irregular` (the line is then spent) for a line that has
         sent anything or has wrappers, an item with ledger marks, or a rendering whose
         length is not what was admitted (a reply that reconfigures the radio, a packet
-        dropped at its start)."""
+        dropped at its start).
+
+        A device that renders its items all at once (``render_all``) has them timed in a
+        few numpy calls (:meth:`_timed`), where none would be dropped; the others, and a
+        buffer that overflows, item by item (:meth:`_each`): the same chunks."""
         if self.wrappers or self.chunks or self.current is not None or self._queue:
             raise Irregular(f"{self.name}: a line with wrappers or history")
         items, self._pending = sorted(self._pending), []
+        items = items[:bisect.bisect_left(items, (end_ns,))]  # ready before the end
+        if any(type(item) is Marked for _, _, item in items):
+            raise Irregular(f"{self.name}: an item with ledger marks")
+        render_all = getattr(self.device, "render_all", None)
+        got = None
+        if render_all is not None and items:
+            ready = np.fromiter((r for r, _, _ in items), np.int64, len(items))
+            rendered = render_all(ready, [item for _, _, item in items])
+            if rendered is not None:
+                got = self._timed(ready, *rendered, end_ns)
+        if got is None:
+            got = self._each(items, end_ns)
+        self.chunks = len(got.sizes)
+        self.bytes = self.delivered = len(got.data)
+        return got
+
+    def _timed(self, ready: np.ndarray, data: bytes, sizes: np.ndarray, end_ns: int) -> Drained | None:
+        """The chunks of items ready at *ready*, rendered to *data* (*sizes* bytes each),
+        all admitted: chunk i ends at e_i = max(r_i, e_{i-1}) + d_i from e_-1 = the line's
+        free time, i.e. e_i = D_i + max(free, max_{k<=i} (r_k - D_{k-1})) with D the
+        running sum of the durations d, a running maximum (integers: exact). An item of no
+        bytes makes no chunk and leaves the line as it was. None when the device's buffer
+        (``room``) would have dropped one, which only the item-by-item pass counts."""
+        sizes = np.asarray(sizes, dtype=np.int64)
+        some = sizes > 0
+        r, n = ready[some], sizes[some]
+        d = wire_ns(n, self.device.baud)
+        total = np.cumsum(d)
+        ends = total + np.maximum.accumulate(np.maximum(r - (total - d), self.free_ns))
+        starts = ends - d
+        sent = int(np.searchsorted(starts, end_ns))  # starts rise: those before the end
+        room = getattr(self.device, "room", None)
+        if room is not None:  # what each item finds queued: admitted before it, not ended
+            ended = np.concatenate(([0], np.cumsum(n[:sent])))[
+                np.searchsorted(ends[:sent], ready, side="right")]
+            if np.any(np.cumsum(sizes) - ended > room):  # queued + its own size
+                return None
+        cut = int(n[:sent].sum())
+        return Drained(data[:cut], n[:sent].tolist(), starts[:sent].tolist())
+
+    def _each(self, items: list, end_ns: int) -> Drained:
+        """:meth:`drain`'s chunks, item by item (*items*: (ready, seq, item), in order)."""
         admit, render = self.device.admit, self.device.render
         datas: list[bytes] = []
         starts: list[int] = []
@@ -389,10 +457,6 @@ class Line(_Wrapped):
         free, admitted, ended, done = self.free_ns, 0, 0, 0  # done: chunks ended so far
         stopped = False
         for ready, _, item in items:
-            if ready >= end_ns:
-                break
-            if type(item) is Marked:
-                raise Irregular(f"{self.name}: an item with ledger marks")
             while done < len(ends) and ends[done] <= ready:
                 ended += len(datas[done])
                 done += 1
@@ -413,9 +477,7 @@ class Line(_Wrapped):
             datas.append(data)
             starts.append(start)
             ends.append(free)
-        self.chunks = len(datas)
-        self.bytes = self.delivered = sum(map(len, datas))
-        return datas, starts
+        return Drained(b"".join(datas), list(map(len, datas)), starts)
 
     def _start(self, t: int, data: bytes, baud: int) -> None:
         """Put *data* on the wire from *t*: the chunk in progress."""

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from navtwin.emulator.runner import Chunk, Emulation, chunks_together, quick_refusal
-from navtwin.emulator.uart import Irregular
+from navtwin.emulator.uart import Drained, Irregular
 from navtwin.emulator.scenario import Scenario, load_scenario
 from navtwin.emulator.imu import shared
 from navtwin.emulator.truth import truth_arrays
@@ -84,14 +84,13 @@ def lab_ports_together(scenario: str | Path | Scenario, seeds, *,
             pass
     if made is None:
         made = [_sunk(sc, seed, duration, port_of.values()) for seed in seeds]
-    return [(dict(kw), {i: (b"".join(got[p][0]), np.fromiter(map(len, got[p][0]), np.int64,
-                                                              len(got[p][0])),
-                            np.array(got[p][1], np.int64)) for i, p in port_of.items()},
+    return [(dict(kw), {i: (got[p].data, np.array(got[p].sizes, np.int64),
+                            np.array(got[p].starts, np.int64)) for i, p in port_of.items()},
              bauds) for got in made]
 
 
-def _sunk(sc: Scenario, seed, duration, ports) -> dict[str, tuple[list, list]]:
-    """The chunks the run of *seed* hands its sink on *ports*: their data and starts."""
+def _sunk(sc: Scenario, seed, duration, ports) -> dict[str, Drained]:
+    """The chunks the run of *seed* hands its sink on *ports*, as a drained line's."""
     got: dict[str, tuple[list, list]] = {p: ([], []) for p in ports}
 
     def sink(chunk: Chunk) -> None:
@@ -102,7 +101,8 @@ def _sunk(sc: Scenario, seed, duration, ports) -> dict[str, tuple[list, list]]:
 
     with Emulation(sc, seed, speed=None, duration_s=duration, ports=False, sink=sink) as emu:
         emu.run()
-    return got
+    return {p: Drained(b"".join(data), list(map(len, data)), starts)
+            for p, (data, starts) in got.items()}
 
 
 def lab_chunks(scenario: str | Path | Scenario, seed: int | None = None, *,

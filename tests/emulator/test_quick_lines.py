@@ -8,7 +8,8 @@ import pytest
 from navtwin.emulator.runner import Emulation, chunks_together
 from navtwin.emulator.scenario import load_scenario
 from navtwin.emulator.shipped import NAMES
-from navtwin.emulator.uart import Irregular, Line, LineWrapper, Marked, Wire
+from navtwin.emulator.uart import Drained, Irregular, Line, LineWrapper, Marked, Wire
+from navtwin.lab import run as lab_run
 from navtwin.lab.run import lab_ports
 from navtwin.protocols.serial import wire_ns
 
@@ -43,7 +44,7 @@ def _polled(items, device, end_ns, steps):
             line.put(*items[at])
             at += 1
         out += line.poll(now, now if at < len(items) else 4 * end_ns, end_ns)
-    return [c.data for c in out], [c.start_ns for c in out]
+    return Drained(b"".join(c.data for c in out), [len(c.data) for c in out], [c.start_ns for c in out])
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -67,6 +68,39 @@ def test_a_drained_line_sends_what_polling_it_sends(seed):
     assert drained_device.dropped == polled_device.dropped > 0
 
 
+class _Counted(_Bounded):
+    """_Bounded, counting the items it admits one at a time (Line.drain's item-by-item pass)."""
+
+    def __init__(self, room) -> None:
+        super().__init__(room)
+        self.admitted = 0
+
+    def admit(self, t_ns, item, queued):
+        self.admitted += 1
+        return super().admit(t_ns, item, queued) if self.room is not None else len(item)
+
+
+@pytest.mark.parametrize("room, one_by_one", [(None, False), (2000, False), (120, True)])
+def test_a_line_rendered_at_once_is_timed_as_polling_times_it(room, one_by_one):
+    """The running-maximum timing (render_all) against the timeline's steps: items of
+    nothing, bursts, a cut at the end; a buffer that would drop an item sends the line
+    item by item instead, with the same drops."""
+    rng = np.random.default_rng(7)
+    ready = np.sort(rng.integers(0, SEC, 300))
+    ready[100:120] = ready[100]
+    items = [(int(t), bytes([k % 256]) * int(s))
+             for k, (t, s) in enumerate(zip(ready, rng.integers(0, 30, 300)))]
+    end_ns = int(0.7 * SEC)
+    polled, drained = _Counted(room), _Counted(room)
+    want = _polled(items, polled, end_ns, sorted(rng.integers(0, end_ns, 15).tolist()))
+    line = Line("x", drained)
+    for item in items:
+        line.put(*item)
+    assert line.drain(end_ns) == want and len(want.sizes) > 100
+    assert (drained.admitted > 0) == one_by_one and drained.dropped == polled.dropped
+    assert line.chunks == len(want.sizes) and line.delivered == len(want.data)
+
+
 def test_a_chunk_that_ends_as_an_item_arrives_has_left_the_buffer():
     """The tie as poll takes it: the end first, so the item finds the buffer empty."""
     end = wire_ns(30, 115200)
@@ -74,7 +108,7 @@ def test_a_chunk_that_ends_as_an_item_arrives_has_left_the_buffer():
     line = Line("x", _Bounded(35))
     for item in items:
         line.put(*item)
-    assert line.drain(SEC) == _polled(items, _Bounded(35), SEC, []) == ([b"a" * 30, b"b" * 10], [0, end])
+    assert line.drain(SEC) == _polled(items, _Bounded(35), SEC, []) == (b"a" * 30 + b"b" * 10, [30, 10], [0, end])
 
 
 def test_a_line_with_wrappers_marks_or_history_is_not_drained():
@@ -93,16 +127,7 @@ def test_a_line_with_wrappers_marks_or_history_is_not_drained():
 
 
 def _sunk(sc, seed, duration):
-    got: dict = {}
-
-    def sink(chunk):
-        data, starts = got.setdefault(chunk.port, ([], []))
-        data.append(chunk.data)
-        starts.append(chunk.start_ns)
-
-    with Emulation(sc, seed, speed=None, duration_s=duration, ports=False, sink=sink) as emu:
-        emu.run()
-    return got
+    return lab_run._sunk(sc, seed, duration, [p for p, _ in sc.instances()])
 
 
 def _quick(sc, seed, duration):
@@ -142,8 +167,7 @@ def test_a_scenario_with_faults_is_refused_and_lab_ports_runs_the_timeline():
     _, ports, _ = lab_ports(sc, 1, duration=5.0)
     sunk = _sunk(sc, 1, 5.0)
     for port, (data, sizes, starts) in ports.items():
-        assert data == b"".join(sunk[port][0]) and starts.tolist() == sunk[port][1]
-        assert sizes.tolist() == [len(d) for d in sunk[port][0]]
+        assert (data, sizes.tolist(), starts.tolist()) == sunk[port]
 
 
 def test_seeds_run_together_give_each_seeds_chunks_alone():

@@ -8,7 +8,7 @@ import struct
 import numpy as np
 import pytest
 
-from navtwin.protocols import nanoloc, sins
+from navtwin.protocols import nanoloc, sins, xbee
 from navtwin.protocols.crc import RowsCrc, crc16, crc16_rows
 from navtwin.protocols.fast import frames_of, packer_for, rows_packer
 from navtwin.protocols.ieee802154 import fcs
@@ -135,3 +135,20 @@ def test_a_layout_without_a_row_form_is_refused():
 
     with pytest.raises(TypeError, match="no row form"):
         rows_packer(Struct("a" / Int8ub, "rest" / GreedyBytes))
+
+
+@pytest.mark.parametrize("escaped", [False, True], ids=["api1", "api2"])
+@pytest.mark.parametrize("seed", range(4))
+def test_many_xbee_frames_wrapped_at_once_equal_each_wrapped(seed, escaped):
+    """xbee.wrap_many against xbee.wrap of each frame: data made of the escaped bytes,
+    lengths whose bytes or checksum are themselves escaped (0x7D, 0x11, 0x13 ...), one byte."""
+    rng = np.random.default_rng(seed)
+    sizes = np.concatenate(([1, 0x11, 0x7D, 0x113, 0x7E7D], rng.integers(1, 120, 200)))
+    rng.shuffle(sizes)
+    frames = [rng.choice(TRICKY_BYTES, int(n)).astype(np.uint8).tobytes() for n in sizes]
+    data, lengths = xbee.wrap_many(b"".join(frames), sizes, escaped)
+    each = [xbee.wrap(f, escaped) for f in frames]
+    assert data == b"".join(each) and lengths.tolist() == list(map(len, each))
+    assert xbee.wrap_many(b"", [], escaped)[0] == b""
+    with pytest.raises(ValueError, match="0 bytes"):
+        xbee.wrap_many(b"a", [1, 0], escaped)
