@@ -429,10 +429,16 @@ class Coordinator:
     def received(self, t_ns: int, packet) -> Output:
         """An RF packet the radio received at *t_ns*: reported as a 0x90/0x91 frame. The
         sender's 16-bit address is learnt from it (a router that rejoined has a new one)."""
-        for r in self.remotes:
-            if r.addr64 == packet.src64 and r.addr16 != packet.src16:
-                r.registers.values["MY"] = packet.src16
+        self.received_all([packet])
         return Output(t_ns, packet)
+
+    def received_all(self, packets: list) -> None:
+        """:meth:`received` of each of *packets*, in order (each reported at its time): a
+        remote's MY ends as the last of its packets has it."""
+        last = {p.src64: p.src16 for p in packets}
+        for r in self.remotes:
+            if r.addr64 in last and r.addr16 != last[r.addr64]:
+                r.registers.values["MY"] = last[r.addr64]
 
     def host(self, t_ns: int, data: bytes) -> list[Output]:
         """Bytes the host wrote, arriving at *t_ns*: the answers they cause."""

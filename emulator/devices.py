@@ -45,6 +45,11 @@ class Device:
     def to_line(self, ev) -> tuple[int, object]:
         return ev.t_ns, ev.data
 
+    def to_line_many(self, events: list) -> tuple[list, list]:
+        """:meth:`to_line` of each of *events* (one port's, in order): their times and items."""
+        got = [self.to_line(ev) for ev in events]
+        return [t for t, _ in got], [item for _, item in got]
+
     def host(self, t_ns: int, data: bytes) -> list:
         return []
 
@@ -65,6 +70,11 @@ class CoordinatorDevice(Device):
     def to_line(self, ev) -> tuple[int, object]:
         out = self.coordinator.received(ev.t_ns, ev.data)
         return out.t_ns, out.item
+
+    def to_line_many(self, events: list) -> tuple[list, list]:
+        packets = [ev.data for ev in events]
+        self.coordinator.received_all(packets)
+        return [ev.t_ns for ev in events], packets
 
     def host(self, t_ns: int, data: bytes) -> list:
         return [(out.t_ns, out.item) for out in self.coordinator.host(t_ns, data)]

@@ -195,21 +195,28 @@ def chunks_together(emulations: list[Emulation], ports) -> list[dict]:
     """:meth:`Emulation.chunks` of several fresh runs (a sweep's seeds of one scenario, in
     one process), their worlds' blocks made in step (World.make_together: each block's IMU
     samples for all of them at once), each run's chunks what it gives alone; Irregular if
-    any is refused (then all are spent)."""
+    any is refused (then all are spent). Each world keeps its events by port
+    (World.by_port), so each line takes its port's events of the whole run at once, in
+    the order the timeline puts them (by time, in the order made)."""
     from .world import World
 
     taken = set(ports)
-    feeds = [emu._quick(taken) for emu in emulations]
-    worlds = [emu.world for emu in emulations]
-    while not all(feed.exhausted for feed in feeds):
-        World.make_together(worlds, max(min(f.known_ns + f.block_ns, f.end_ns) for f in feeds))
-        for emu, feed in zip(emulations, feeds):
-            if not feed.exhausted:
-                emu._put(feed.step(), taken)
+    for emu in emulations:
+        emu._quick(taken)
+    World.make_together([emu.world for emu in emulations], max(emu.end_ns for emu in emulations))
     out = []
     for emu in emulations:
-        emu.reached_ns = emu.end_ns
-        out.append({port: emu.lines[port].drain(emu.end_ns) for port in ports})
+        own = [ev for device in emu.devices.values() for ev in device.advance(emu.end_ns)]
+        got = {}
+        for port in ports:
+            events = emu.world.kept(port) + [ev for ev in own if ev.port == port]
+            if any(ev.marks for ev in events):
+                raise Irregular(f"{port}: an item with ledger marks")
+            line = emu.lines[port]
+            line.put_many(*emu.devices[port].to_line_many(events))
+            got[port] = line.drain(emu.end_ns)
+        emu._feed.known_ns = emu.reached_ns = emu.end_ns
+        out.append(got)
     return out
 
 
@@ -479,24 +486,16 @@ class Emulation:
         several seeds' at once."""
         return chunks_together([self], ports)[0]
 
-    def _quick(self, taken: set) -> Feed:
-        """The feed of :meth:`chunks`, its refusals checked first."""
+    def _quick(self, taken: set) -> None:
+        """The run as :meth:`chunks` takes it, its refusals checked first: its world keeps
+        the events of the ports *taken*, by port; its feed is spent."""
         if self.speed is not None or self.ports or self.recorder is not None \
                 or self._feed is not None:
             raise Irregular("only a fresh unpaced run without ports or a recording")
         if (reason := quick_refusal(self.scenario)) is not None:
             raise Irregular(reason)
-        self.world.only(taken)
+        self.world.by_port(taken)
         self._feed = Feed(self.world, self.end_ns, MAX_BLOCK_NS, tuple(self.devices.values()))
-        return self._feed
-
-    def _put(self, events: list, taken: set) -> None:
-        """The events of the ports *taken* on their lines (:meth:`_enqueue`, the rest left)."""
-        devices, lines = self.devices, self.lines
-        for ev in events:
-            if ev.port in taken:
-                t_ns, item = devices[ev.port].to_line(ev)
-                lines[ev.port].put(t_ns, Marked(item, ev.marks) if ev.marks else item)
 
     def prepare(self) -> Feed:
         """The world's events before the clock starts (paced: its first second), once; a

@@ -268,6 +268,12 @@ class Line(_Wrapped):
         heapq.heappush(self._pending, (t_ns, self._seq, item))
         self._seq += 1
 
+    def put_many(self, t_ns: list[int], items: list) -> None:
+        """:meth:`put` of each item at its time, in order."""
+        self._pending += zip(t_ns, range(self._seq, self._seq + len(items)), items)
+        self._seq += len(items)
+        heapq.heapify(self._pending)
+
     def _next_start(self, end_ns: int) -> tuple[int, int]:
         """(time, what) of the next chunk start on an idle line: what = -2 the next piece,
         -1 the next item of the buffer, k >= 0 wrapper k's release; (END, 0) if none

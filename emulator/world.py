@@ -233,6 +233,7 @@ class World:
         self._returned_ns = 0
         self._air: list[AirFrame] = []  # generated, in order; those before _air_at returned
         self._air_at = 0
+        self._by_port: dict[str, list[Event]] | None = None  # :meth:`by_port`
         #: while :meth:`ahead` runs, and after: the process that makes the blocks
         #: (emulator.maker), whose blocks advance, air, made and held give
         self._maker = None
@@ -243,6 +244,20 @@ class World:
         (a caller that reads only the radio, lab.run's in-memory runs)."""
         for v in self.vehicles:
             v.sins_events = v.sins_port in taken
+
+    def by_port(self, taken) -> None:
+        """From the next block on, keep the events of the ports *taken* (port instances) by
+        port, for :meth:`kept`, and no others (:meth:`only`): ``advance`` returns none. For
+        a caller that takes each port's events of the whole run at once (the quick path
+        of an in-memory run, emulator.runner.chunks_together), which needs no merge of
+        the ports into one timeline."""
+        self.only(taken)
+        self._by_port = {port: [] for port in taken}
+
+    def kept(self, port: str) -> list[Event]:
+        """The events of *port* made so far under :meth:`by_port`, in the order made: a
+        block after another, and within a block a port's own order, not sorted by time."""
+        return self._by_port[port]
 
     # -- generation -------------------------------------------------------------------------
     def _make(self, reports: list | None = None) -> None:
@@ -270,6 +285,12 @@ class World:
             air += a
         for port, (t_nl, frames, marks) in zip(self.networks, reports):
             made.append((port, _port_events(t_nl, port, frames, marks)))
+        self._generated_ns = hi
+        if self._by_port is not None:
+            for port, events in made:
+                if port in self._by_port:
+                    self._by_port[port] += events
+            return
         self._wait([e for _, events in made for e in events], np.concatenate(
             [self._keys] + [np.fromiter(map(_T_NS, events), np.int64, len(events)) * len(self._rank)
                             + self._rank[port] for port, events in made]))
@@ -277,7 +298,6 @@ class World:
             self._air = self._air[self._air_at:] + [f for f in air if f.t_ns < self.duration_ns]
             self._air.sort(key=_T_NS)  # stable: an ACK stays after its frame
             self._air_at = 0
-        self._generated_ns = hi
 
     def _wait(self, block: list[Event], keys: np.ndarray) -> None:
         """Join the events of a *block* to those that wait, in the order :meth:`advance`
