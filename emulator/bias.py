@@ -130,8 +130,10 @@ class FlickerBias:
         """The biases (S, n, 3) of S alike processes (one floor and period: a sweep's seeds)
         at their next *n* samples, each seed's numbers what it would make alone: the terms'
         sum before the block, plus each step's change at its sample, summed down the block.
-        The terms that step are scanned together, each padded to the most steps (the
-        padding's values are not used); each seed draws from its own stream, term by term."""
+        Each seed draws from its own stream, term by term. Each term that steps is scanned
+        over its own steps, its S seeds at once: the fastest steps 273 times in 819 samples at
+        819.2 Hz, most once or not at all, so one scan of all, each padded to the most steps,
+        did five times the arithmetic (the padding's values unused, the steps' the same)."""
         first_bias = biases[0]
         hold, j0 = first_bias.hold, first_bias.samples
         for b in biases:
@@ -139,38 +141,32 @@ class FlickerBias:
         first = -(-j0 // hold) * hold - j0  # each term's first step in the block (may be >= n)
         steps = np.maximum(0, -(-(n - first) // hold))
         state = np.stack([b.state for b in biases])  # (S, terms, 3)
-        change = np.zeros((len(biases), n, 3))
-        change[:, 0] = state.sum(axis=1)
-        k = np.flatnonzero(steps)
-        if len(k):
-            u = steps[k]
-            taken = np.arange(u.max()) < u[:, None]  # (terms, steps): term by term, as drawn
-            x = np.zeros((len(biases),) + taken.shape + (3,))
-            draws = np.stack([b.rng.standard_normal((u.sum(), 3)) for b in biases])
-            x[:, taken] = np.repeat(first_bias.drive[k], u)[:, None] * draws
+        change = np.zeros((n, len(biases), 3))  # samples first: each step's slice contiguous
+        change[0] = state.sum(axis=1)
+        draws = np.empty((len(biases), steps.sum(), 3))
+        for b, row in zip(biases, draws):
+            b.rng.standard_normal(out=row)
+        end = np.cumsum(steps)
+        for k in np.flatnonzero(steps):
+            x = first_bias.drive[k] * draws[:, end[k] - steps[k]:end[k]].swapaxes(0, 1)
             before = state[:, k]
-            rows = len(biases) * len(k)
-            b = first_order(np.tile(first_bias.phi[k], len(biases)), x.reshape(rows, -1, 3),
-                            before.reshape(rows, 3)).reshape(x.shape)
-            jumps = np.diff(b, axis=2, prepend=before[:, :, None])
-            for row, term in enumerate(k):
-                change[:, first[term]::hold[term]] += jumps[:, row, :u[row]]
-            state[:, k] = b[:, np.arange(len(k)), u - 1]
-            for i, bias in enumerate(biases):
-                bias.state = state[i]
-        return np.cumsum(change, axis=1)
+            b = first_order(first_bias.phi[k], x, before)
+            change[first[k]::hold[k]] += np.diff(b, axis=0, prepend=before[None])
+            state[:, k] = b[-1]
+        for bias, s in zip(biases, state):
+            bias.state = s
+        return np.cumsum(change, axis=0).swapaxes(0, 1)
 
 
-def first_order(phi: np.ndarray, x: np.ndarray, before: np.ndarray) -> np.ndarray:
-    """y_j = phi y_j-1 + x_j along axis 1 of *x* (K, n, 3), one phi per term k, from
-    y_-1 = *before* (K, 3): phi y_-1 joins x_0, then a prefix scan of log2(n) numpy steps."""
-    y = x.copy()
-    y[:, 0] += phi[:, None] * before
+def first_order(phi: float, x: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """y_j = phi y_j-1 + x_j along axis 0 of *x* (n, S, 3), from y_-1 = *before* (S, 3): phi
+    y_-1 joins x_0, then a prefix scan of log2(n) numpy steps."""
+    y = np.array(x, order="C")  # each step's slices contiguous: several times faster than seeds first
+    y[0] += phi * before
     scratch = np.empty_like(y)  # one buffer for every step's products, not one each
-    step, power, n = 1, phi.copy(), y.shape[1]
+    step, power, n = 1, phi, len(y)
     while step < n:
-        product = np.multiply(power[:, None, None], y[:, :-step], out=scratch[:, :n - step])
-        y[:, step:] += product
+        y[step:] += np.multiply(power, y[:-step], out=scratch[:n - step])
         step, power = 2 * step, power * power
     return y
 

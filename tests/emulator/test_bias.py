@@ -1,7 +1,8 @@
 """The flicker bias (emulator.bias): the weights' derivation holds, the sum of Gauss-Markov
-terms is flat at the floor over 1 .. 3000 s, its held terms step on their grids and keep the
-curve (the closed form against a dense solve over every phase), and a simulated bias gives
-back its floor (allantools' overlapping Allan deviation as the oracle)."""
+terms is flat at the floor over 1 .. 3000 s, its held terms step on their grids (a sweep's
+seeds together as each alone, to the bit) and keep the curve (the closed form against a dense
+solve over every phase), and a simulated bias gives back its floor (allantools' overlapping
+Allan deviation as the oracle)."""
 import math
 
 import numpy as np
@@ -83,6 +84,18 @@ def test_the_held_terms_step_on_their_grid_across_blocks():
     assert sum(hold < j) >= 9  # the slow terms stepped too
 
 
+@pytest.mark.parametrize("ts", [TS, 0.05])
+def test_seeds_together_are_each_alone_to_the_bit(ts):
+    """FlickerBias.together on three seeds gives each seed's bias of FlickerBias.next alone
+    (one seed), equal to the bit, over blocks of any length starting at any phase of the
+    holds: a term's scan runs over its own steps, whatever the seeds and the other terms."""
+    made = [FlickerBias(2.0, ts, np.random.default_rng(s)) for s in (1, 2, 3)]
+    alone = [FlickerBias(2.0, ts, np.random.default_rng(s)) for s in (1, 2, 3)]
+    for n in (1, 7, 819, 820, 3, 9000, 2, 2500, 17):
+        assert np.array_equal(FlickerBias.together(made, n), [b.next(n) for b in alone])
+    assert all(np.array_equal(a.state, b.state) for a, b in zip(made, alone))
+
+
 def test_simulated_flicker_and_rate_random_walk_give_back_their_allan_curves():
     """6 h at 20 Hz, three axes: the overlapping Allan deviation pooled over the axes at 1, 10
     and 100 s within 8 % of the samples' exact curve (the terms of 0.95 s and up held). Over five seeds its spread (1 sigma) is
@@ -101,16 +114,16 @@ def test_simulated_flicker_and_rate_random_walk_give_back_their_allan_curves():
 
 
 def test_the_prefix_scan_is_the_recursion():
-    """first_order's log2(n) numpy steps give y_j = phi y_j-1 + x_j from y_-1, per term, as
-    scipy's lfilter does (to rounding), over slow and fast terms and a block of odd length."""
+    """first_order's log2(n) numpy steps give y_j = phi y_j-1 + x_j from y_-1, per seed, as
+    scipy's lfilter does (to rounding), for slow and fast terms and a block of odd length."""
     from scipy.signal import lfilter
 
     from navtwin.emulator.bias import first_order
 
     rng = np.random.default_rng(3)
-    phi = np.exp(-1 / 819.2 / FLICKER_TAUS_S)
-    x, before = rng.standard_normal((len(phi), 819, 3)), rng.standard_normal((len(phi), 3))
-    got = first_order(phi, x, before)
-    for k, p in enumerate(phi):
-        want, _ = lfilter([1.0], [1.0, -p], x[k], axis=0, zi=(p * before[k])[None, :])
-        assert np.allclose(got[k], want, rtol=0, atol=1e-11)
+    for p in np.exp(-1 / 819.2 / FLICKER_TAUS_S):
+        x, before = rng.standard_normal((819, 4, 3)), rng.standard_normal((4, 3))
+        got = first_order(p, x, before)
+        for seed in range(4):
+            want, _ = lfilter([1.0], [1.0, -p], x[:, seed], axis=0, zi=(p * before[seed])[None, :])
+            assert np.allclose(got[:, seed], want, rtol=0, atol=1e-11)
