@@ -53,6 +53,36 @@ class Board:
         """Write start times and bytes of the frames with lo_ns <= t_k < hi_ns (the IMU must
         have generated its samples up to hi_ns), and the ledger marks by frame index: the
         first frame after a reset says which fault and how many frames were not written."""
+        return Board.frames_together([self], lo_ns, hi_ns)[0]
+
+    @staticmethod
+    def frames_together(boards: list[Board], lo_ns: int, hi_ns: int) -> list[tuple]:
+        """:meth:`frames` of each of *boards*, each one's as alone: the boards that write on
+        the same schedule from IMUs that run alike (a sweep's seeds of one vehicle,
+        emulator.imu.Adis16350.key) read their registers and build their frames along one
+        seed axis."""
+        planned = [b._schedule(lo_ns, hi_ns) for b in boards]
+        groups: dict = {}
+        for i, (b, (t, seq, _)) in enumerate(zip(boards, planned)):
+            key = b.imu.key
+            groups.setdefault(i if key is None else (key, b.spi_read_ns, t.tobytes(), seq.tobytes()),
+                              []).append(i)
+        out: list = [None] * len(boards)
+        for members in groups.values():
+            first = boards[members[0]]
+            t, seq, _ = planned[members[0]]
+            words = first.imu.read_together([boards[i].imu for i in members], t - first.spi_read_ns)
+            rows = frames_of(first.imu.words.frames(np.tile(seq, len(members)),
+                                                    words.reshape(-1, words.shape[-1])))
+            for k, i in enumerate(members):
+                b, marks = boards[i], planned[i][2]
+                frames = rows[k * len(t):(k + 1) * len(t)]
+                out[i] = b._with_magnetometer(t, seq, frames, marks) if b.every else (t, frames, marks)
+        return out
+
+    def _schedule(self, lo_ns: int, hi_ns: int) -> tuple[np.ndarray, np.ndarray, dict]:
+        """(write start, seq) of the frames with lo_ns <= t_k < hi_ns that the board writes
+        (not while a board fault has it off), and the ledger marks by frame index."""
         k = self.clock.ticks_between(lo_ns, hi_ns)
         t = self.clock.tick(k)
         effect = BoardEffects(np.zeros(len(k), dtype=bool))
@@ -79,10 +109,7 @@ class Board:
             seq = k - self._k0
         if len(k):
             self._last_k = int(k[-1])  # the last frame written
-        frames = frames_of(self.imu.words.frames(seq, self.imu.read(t - self.spi_read_ns)))
-        if not self.every:
-            return t, frames, marks
-        return self._with_magnetometer(t, seq, frames, marks)
+        return t, seq, marks
 
     def _with_magnetometer(self, t, seq, frames, marks):
         """The sample frames with a magnetometer frame after each one whose seq is a

@@ -320,20 +320,30 @@ class Adis16350:
     def read(self, t_read_ns: np.ndarray) -> np.ndarray:
         """(M, 11) register words SUPPLY_OUT..AUX_ADC read at increasing true times, the
         gyro and accelerometer columns in the scenario's words (emulator.imu_words)."""
-        i = self._latest(t_read_ns)
-        j = self._j[i]
-        nd = np.diff(np.concatenate(([self._last_read_j], j))) > 0
+        return Adis16350.read_together([self], t_read_ns)[0]
+
+    @staticmethod
+    def read_together(sensors: list[Adis16350], t_read_ns: np.ndarray) -> np.ndarray:
+        """(S, M, 11): :meth:`read` of each of S *sensors* of one :attr:`key` (their samples
+        at the same times: a sweep's seeds), each one's words as alone."""
+        first = sensors[0]
+        i = first._latest(t_read_ns)
+        j = first._j[i]
+        last = np.array([[s._last_read_j] for s in sensors])
+        nd = np.diff(np.concatenate((last, np.broadcast_to(j, (len(sensors), len(j)))), axis=1)) > 0
         if len(j):
-            self._last_read_j = int(j[-1])
-        supply, temp, ea = self._supply[i], self._temp[i], self._alarm[i]
+            for s in sensors:
+                s._last_read_j = int(j[-1])
+        supply, temp, gyro, accel, ea = (np.stack([getattr(s, name)[i] for s in sensors])
+                                         for name in ("_supply", "_temp", "_gyro", "_accel", "_alarm"))
         q, p = adis.quantise, adis.pack
-        words = np.empty((len(i), 11), dtype=np.int64)
-        words[:, 0] = p(q(supply, adis.SUPPLY_LSB_V), 12, nd=False, is_signed=False)
-        words[:, 1:7] = self.words.inertial(self._gyro[i], self._accel[i], self.spec)
-        words[:, 7:10] = p(q(temp - adis.TEMP_ZERO_C, adis.TEMP_LSB_C), 12, nd=False)
-        words[:, 10] = p(q(np.zeros(len(i)), adis.AUX_LSB_V), 12, nd=False, is_signed=False)
+        words = np.empty((len(sensors), len(i), 11), dtype=np.int64)
+        words[..., 0] = p(q(supply, adis.SUPPLY_LSB_V), 12, nd=False, is_signed=False)
+        words[..., 1:7] = first.words.inertial(gyro, accel, first.spec)
+        words[..., 7:10] = p(q(temp - adis.TEMP_ZERO_C, adis.TEMP_LSB_C), 12, nd=False)
+        words[..., 10] = p(q(np.zeros(len(i)), adis.AUX_LSB_V), 12, nd=False, is_signed=False)
         flags = np.where(nd, adis.ND, 0) | np.where(ea, adis.EA, 0)
-        words[:, self.words.flagged] |= flags[:, None]
+        words[..., first.words.flagged] |= flags[..., None]
         return words
 
     def errors(self) -> dict:

@@ -40,11 +40,12 @@ class Adis16350Words:
 
     @staticmethod
     def inertial(gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, spec) -> np.ndarray:
-        """(M, 6) words of the gyro (rad/s) and accelerometer (m/s^2) registers, flags clear."""
+        """(..., 6) words of the gyro (rad/s) and accelerometer (m/s^2) registers (..., 3),
+        flags clear."""
         q, p = adis.quantise, adis.pack
-        out = np.empty((len(gyro_rad_s), 6), dtype=np.int64)
-        out[:, :3] = p(q(np.degrees(gyro_rad_s), adis.GYRO_LSB_DPS[spec.gyro_range_dps]), 14, nd=False)
-        out[:, 3:] = p(q(accel_m_s2 / adis.STANDARD_GRAVITY, adis.ACCEL_LSB_G), 14, nd=False)
+        out = np.empty(gyro_rad_s.shape[:-1] + (6,), dtype=np.int64)
+        out[..., :3] = p(q(np.degrees(gyro_rad_s), adis.GYRO_LSB_DPS[spec.gyro_range_dps]), 14, nd=False)
+        out[..., 3:] = p(q(accel_m_s2 / adis.STANDARD_GRAVITY, adis.ACCEL_LSB_G), 14, nd=False)
         return out
 
     @staticmethod
@@ -70,8 +71,9 @@ class Adis16488Words:
 
     @staticmethod
     def inertial(gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, spec) -> np.ndarray:
-        return np.column_stack((wide.counts(np.degrees(gyro_rad_s), wide.GYRO_LSB_DPS),
-                                wide.counts(accel_m_s2 / adis.STANDARD_GRAVITY, wide.ACCEL_LSB_G)))
+        return np.concatenate((wide.counts(np.degrees(gyro_rad_s), wide.GYRO_LSB_DPS),
+                               wide.counts(accel_m_s2 / adis.STANDARD_GRAVITY, wide.ACCEL_LSB_G)),
+                              axis=-1)
 
     @staticmethod
     def frames(seq: np.ndarray, words: np.ndarray) -> np.ndarray:

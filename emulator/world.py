@@ -124,14 +124,15 @@ class Vehicle:
     def _stream(self, seed: int, name: str):
         return stream(seed, vehicles_name(self.number, name))
 
-    def block(self, lo: int, hi: int, more: bool):
+    def block(self, lo: int, hi: int, more: bool, written: tuple | None = None):
         """The board's SINS frames written in [lo, hi) and the RF packets they become (*more*:
         the run goes on after *hi*, so an open packet waits for the next bytes), each as it
         is offered to the channel (emulator.channel): its event at the coordinator (None when
         the link lost it) and its frames on the air (a packet the router sends while out of
-        the network is not offered): ``(sins events, offered packets)``."""
+        the network is not offered): ``(sins events, offered packets)``. *written*: the
+        board's frames of the block, made already (Board.frames_together)."""
         self.imu.generate(lo, hi)
-        t_sins, frames, marks = self.board.frames(lo, hi)
+        t_sins, frames, marks = written or self.board.frames(lo, hi)
         events = _port_events(t_sins, self.sins_port, frames, marks) if self.sins_events else []
         next_byte = self.board.next_start(hi) + round(self.board.char_ns) if more else None
         times = self.board.byte_times(t_sins, [len(f) for f in frames])
@@ -260,18 +261,18 @@ class World:
         return self._by_port[port]
 
     # -- generation -------------------------------------------------------------------------
-    def _make(self, reports: list | None = None) -> None:
+    def _make(self, reports: list | None = None, written: list | None = None) -> None:
         """Make the next block: each vehicle, each nanoLOC network (*reports*: their reports
-        of the block, made already by :meth:`make_together`), and last the block sorted into
-        the events that wait."""
+        of the block, *written*: the vehicles' SINS frames, made already by
+        :meth:`make_together`), and last the block sorted into the events that wait."""
         lo = self._generated_ns
         hi = min(lo + self.BLOCK_NS, self.duration_ns)
         if reports is None:
             reports = NanolocNetwork.reports_together(list(self.networks.values()), lo, hi)
         made, air = [], []  # made: each port's events of the block, in generation order
         offered: dict[str, list[Offered]] = {}
-        for vehicle in self.vehicles:
-            s, packets = vehicle.block(lo, hi, hi < self.duration_ns)
+        for vehicle, frames in zip(self.vehicles, written or [None] * len(self.vehicles)):
+            s, packets = vehicle.block(lo, hi, hi < self.duration_ns, frames)
             made.append((vehicle.sins_port, s))
             offered.setdefault(vehicle.xbee_port, []).append(packets)
         for port, shares in offered.items():
@@ -316,7 +317,8 @@ class World:
         """Make the blocks before *until_ns* of several worlds (a sweep's seeds of one
         scenario, none under :meth:`ahead`) block by block in step, each block's IMU samples
         made for all of them at once (emulator.imu.generate_together: each sensor's numbers
-        as alone), and so are their nanoLOC networks' reports
+        as alone), and so are their boards' SINS frames (Board.frames_together) and their
+        nanoLOC networks' reports
         (NanolocNetwork.reports_together: each network's as alone), so
         ``advance(until_ns)`` then only takes each world's events."""
         while True:
@@ -329,10 +331,12 @@ class World:
                 return
             for (lo, hi), group in blocks.items():
                 generate_together([v.imu for w in group for v in w.vehicles], lo, hi)
+                written = iter(Board.frames_together([v.board for w in group for v in w.vehicles],
+                                                     lo, hi))
                 networks = [net for w in group for net in w.networks.values()]
                 reports = iter(NanolocNetwork.reports_together(networks, lo, hi))
                 for w in group:
-                    w._make([next(reports) for _ in w.networks])
+                    w._make([next(reports) for _ in w.networks], [next(written) for _ in w.vehicles])
 
     def made(self, until_ns: int) -> bool:
         """Whether the blocks before *until_ns* are made, so ``advance`` up to it returns at

@@ -418,3 +418,34 @@ def test_worlds_made_together_equal_each_made_alone(tmp_path, toml):
         assert np.array_equal(ia._gyro, ib._gyro) and np.array_equal(ia._accel, ib._accel)
         assert np.array_equal(ia._temp, ib._temp) and ia.made_ns == ib.made_ns >= until
     assert not np.array_equal(alone[0].vehicles[0].imu._gyro, alone[1].vehicles[0].imu._gyro)
+
+
+#: (scenario, overrides): boards alike and not (each seed's own alarms, the magnetometer's
+#: frames between, a board reset's marks and seq, 32-bit words, three cars of other paths)
+BOARDS = {
+    "office": ("office", None),
+    "alarms": ("office", "[imu]\nsupply_noise_v = 0.2\n"),  # EA: the supply out of range
+    "reset": ("office", '[[faults]]\nkind = "board_reset"\nstart_s = 0.4\nend_s = 1.3\n'),
+    "wide-magnetometer": ("rssi-centroid", None),
+    "convoy": ("office-convoy", None),
+}
+
+
+@pytest.mark.parametrize("case", BOARDS)
+def test_boards_made_together_equal_each_made_alone(tmp_path, case):
+    """World.make_together reads the seeds' ADIS16350 registers and builds their SINS frames
+    along one seed axis (Board.frames_together); every seed's events (t_ns, bytes, ledger
+    marks) are those it makes alone, to the bit, beside a world of another scenario."""
+    name, toml = BOARDS[case]
+    sc = variant(tmp_path, name, toml, "together") if toml else load_scenario(name)
+    worlds = [(sc, 1), (sc, 2), (sc, 7), (load_scenario("corridor"), 3)]
+    until = 2_500_000_000
+    alone = [World(w_sc, s).advance(until) for w_sc, s in worlds]
+    together = [World(w_sc, s) for w_sc, s in worlds]
+    World.make_together(together, until)
+    made = [w.advance(until) for w in together]
+    assert made == alone
+    sins = [[e.data for e in events if e.port.startswith("sins")] for events in made]
+    assert sins[0] and sins[0] != sins[1]
+    if case == "reset":
+        assert any(e.marks for e in made[0] if e.port == "sins")
