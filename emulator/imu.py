@@ -381,8 +381,12 @@ def _generate(sensors: list[Adis16350], lo_ns: int, hi_ns: int) -> None:
     supply = spec.supply_v + spec.supply_noise_v * z[..., 12]
     temp = spec.temperature_c + spec.temperature_noise_c * z[..., 13:16]
     alarm = gover | aover | (supply < SUPPLY_LIMITS_V[0]) | (supply > SUPPLY_LIMITS_V[1])
+    # one earlier block is plenty for any read; the sensors alike sample at the same times,
+    # so they share those arrays (none is changed in place)
+    cut = int(np.searchsorted(first._t, lo_ns - 1_000_000_000))
+    times, ticks = np.concatenate((first._t[cut:], t)), np.concatenate((first._j[cut:], j))
     for k, sensor in enumerate(sensors):
-        keep = sensor._t >= lo_ns - 1_000_000_000  # one earlier block is plenty for any read
-        for name, new in (("_t", t), ("_j", j), ("_gyro", gyro[k]), ("_accel", accel[k]),
-                          ("_supply", supply[k]), ("_temp", temp[k]), ("_alarm", alarm[k])):
-            setattr(sensor, name, np.concatenate((getattr(sensor, name)[keep], new)))
+        sensor._t, sensor._j = times, ticks
+        for name, new in (("_gyro", gyro[k]), ("_accel", accel[k]), ("_supply", supply[k]),
+                          ("_temp", temp[k]), ("_alarm", alarm[k])):
+            setattr(sensor, name, np.concatenate((getattr(sensor, name)[cut:], new)))
