@@ -53,7 +53,9 @@ def geodetic(xyz) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lat = np.arctan2(z, p * (1.0 - WGS84_E2))
     for _ in range(10):  # each step gains about 3 digits; 10 is far past convergence
         n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
-        lat = np.arctan2(z + WGS84_E2 * n * np.sin(lat), p)
+        lat, was = np.arctan2(z + WGS84_E2 * n * np.sin(lat), p), lat
+        if np.array_equal(lat, was):  # a fixed point: every later step gives it again
+            break
     n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
     height = p / np.cos(lat) - n
     return np.degrees(lat), np.degrees(np.arctan2(y, x)), height

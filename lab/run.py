@@ -144,6 +144,9 @@ def truth(scenario: str | Path | Scenario, seed: int | None = None, vehicle: int
     if not 1 <= vehicle <= len(sc.fleet):
         raise ValueError(f"vehicle {vehicle}: scenario {sc.name} has vehicles 1..{len(sc.fleet)}")
     motion = trajectory_of(sc.fleet[vehicle - 1])
-    tr = shared(("truth", motion.key, sc.duration_ns),
-                lambda: truth_arrays(motion, 0, sc.duration_ns))
-    return {"t": tr["t"] / 1e9, "x": tr["x"], "y": tr["y"], "vx": tr["vx"], "vy": tr["vy"]}
+
+    def columns():  # each its own array: np.interp copies a column of the rows at every call
+        tr = truth_arrays(motion, 0, sc.duration_ns)
+        return tr["t"] / 1e9, *(np.ascontiguousarray(tr[f]) for f in ("x", "y", "vx", "vy"))
+
+    return dict(zip(("t", "x", "y", "vx", "vy"), shared(("truth", motion.key, sc.duration_ns), columns)))
