@@ -57,7 +57,8 @@ def test_the_truth_is_the_worlds_every_seeds_and_made_once_in_a_task():
     assert all(np.array_equal(got[k], want[k]) for k in ("x", "y", "vx", "vy"))
     with shared_truth():
         one, two = truth(sc, 1), truth(sc, 2)
-    assert one["x"].base is two["x"].base and not one["x"].flags.writeable
-    assert truth(sc, 1)["x"].base is not one["x"].base  # outside a task: made each time
+    assert one["x"] is two["x"] and not one["x"].flags.writeable
+    assert one["x"].flags.c_contiguous  # np.interp takes it as it is, without a copy
+    assert truth(sc, 1)["x"] is not one["x"]  # outside a task: made each time
     with pytest.raises(ValueError, match="vehicles 1..1"):
         truth(sc, 1, vehicle=2)
