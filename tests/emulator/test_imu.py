@@ -21,7 +21,7 @@ from navtwin.emulator.world import World
 from navtwin.protocols import adis16350 as adis
 
 from ..protocols.vectors import SINS_LEVEL
-from .world_helpers import port_bytes, run, sins, variant
+from .world_helpers import made_together, port_bytes, run, sins, variant
 
 NOISE_FREE = """
 [imu]
@@ -436,16 +436,6 @@ def test_boards_made_together_equal_each_made_alone(tmp_path, case):
     """World.make_together reads the seeds' ADIS16350 registers and builds their SINS frames
     along one seed axis (Board.frames_together); every seed's events (t_ns, bytes, ledger
     marks) are those it makes alone, to the bit, beside a world of another scenario."""
-    name, toml = BOARDS[case]
-    sc = variant(tmp_path, name, toml, "together") if toml else load_scenario(name)
-    worlds = [(sc, 1), (sc, 2), (sc, 7), (load_scenario("corridor"), 3)]
-    until = 2_500_000_000
-    alone = [World(w_sc, s).advance(until) for w_sc, s in worlds]
-    together = [World(w_sc, s) for w_sc, s in worlds]
-    World.make_together(together, until)
-    made = [w.advance(until) for w in together]
-    assert made == alone
-    sins = [[e.data for e in events if e.port.startswith("sins")] for events in made]
-    assert sins[0] and sins[0] != sins[1]
+    made = made_together(tmp_path, *BOARDS[case], "corridor", "sins")
     if case == "reset":
         assert any(e.marks for e in made[0] if e.port == "sins")

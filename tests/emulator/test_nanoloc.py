@@ -7,12 +7,11 @@ import numpy as np
 import pytest
 
 from navtwin.emulator.scenario import load_scenario
-from navtwin.emulator.world import World
 from navtwin.protocols.nanoloc import SPEED_OF_LIGHT, STATUS_COMPLETE, STATUS_TIMEOUT
 
 from ..helpers import OFFICE_ANCHORS
 from ..protocols.vectors import NANOLOC_5M
-from .world_helpers import reports, run, true_distances, variant
+from .world_helpers import made_together, reports, run, true_distances, variant
 
 QUIET = """
 [ranging]
@@ -319,15 +318,6 @@ def test_networks_made_together_equal_each_made_alone(tmp_path, case):
     those it makes alone, to the bit, and a world of another scenario (other networks) is made
     in the same call."""
     name, toml = TOGETHER[case]
-    sc = variant(tmp_path, name, toml, "together") if toml else load_scenario(name)
-    worlds = [(sc, 1), (sc, 2), (sc, 7), (load_scenario("office"), 3)]
-    until = 2_500_000_000
-    alone = [World(w_sc, s).advance(until) for w_sc, s in worlds]
-    together = [World(w_sc, s) for w_sc, s in worlds]
-    World.make_together(together, until)
-    made = [w.advance(until) for w in together]
-    assert made == alone
-    ranged = [[e.data for e in events if e.port.startswith("nanoloc")] for events in made]
-    assert ranged[0] and ranged[0] != ranged[1]  # the seeds draw their own numbers
+    made = made_together(tmp_path, name, toml, "office", "nanoloc")
     if toml == FAULTS:
         assert any(e.marks for e in made[0] if e.port == "nanoloc")

@@ -24,6 +24,23 @@ def variant(tmp_path: Path, base: str, toml: str, name: str = "variant") -> obje
     return load_scenario(path)
 
 
+def made_together(tmp_path: Path, base: str, toml: str | None, other: str, port: str) -> list:
+    """The events before 2.5 s of seeds 1, 2 and 7 of *base* (with *toml*'s overrides) and of
+    seed 3 of scenario *other*, made by World.make_together, asserted equal to each world's
+    made alone; each seed's *port* events differ from the next seed's (its own draws)."""
+    sc = variant(tmp_path, base, toml, "together") if toml else load_scenario(base)
+    worlds = [(sc, 1), (sc, 2), (sc, 7), (load_scenario(other), 3)]
+    until = 2_500_000_000
+    alone = [World(w_sc, s).advance(until) for w_sc, s in worlds]
+    together = [World(w_sc, s) for w_sc, s in worlds]
+    World.make_together(together, until)
+    made = [w.advance(until) for w in together]
+    assert made == alone
+    data = [[e.data for e in events if e.port.startswith(port)] for events in made]
+    assert data[0] and data[0] != data[1]
+    return made
+
+
 def run(sc, seed: int | None = None) -> tuple[World, list]:
     w = World(sc, seed)
     return w, w.advance(w.duration_ns)
