@@ -495,8 +495,8 @@ class Emulation:
         """The quick path of an in-memory run (lab.run): what :meth:`run` at --speed max would
         hand a sink for each port instance in *ports*, as the chunks' bytes end to end and
         each one's size and start time, in the port's order, the lines timed in one pass each
-        (emulator.uart Line.drain); the other ports' events are not put on their lines, and the world makes
-        no events of the SINS ports not taken (World.only). Only for a fresh run at --speed
+        (emulator.uart Line.drain); the world keeps no events of the other ports
+        (World.by_port). Only for a fresh run at --speed
         max with no PTY and no recording, of a scenario without faults (wrappers, marks and
         a coordinator's power cuts are the timeline's: uart.Irregular, as for whatever else
         drain refuses; the emulation is then spent and the caller runs a fresh one). Equal
