@@ -25,6 +25,7 @@ from navtwin.protocols.fast import frames_of
 from navtwin.protocols.sins import build_magnetometer
 from navtwin.protocols.serial import char_ns
 
+from .alike import alike
 from .clock import Clock
 
 
@@ -62,13 +63,10 @@ class Board:
         emulator.imu.Adis16350.key) read their registers and build their frames along one
         seed axis."""
         planned = [b._schedule(lo_ns, hi_ns) for b in boards]
-        groups: dict = {}
-        for i, (b, (t, seq, _)) in enumerate(zip(boards, planned)):
-            key = b.imu.key
-            groups.setdefault(i if key is None else (key, b.spi_read_ns, t.tobytes(), seq.tobytes()),
-                              []).append(i)
         out: list = [None] * len(boards)
-        for members in groups.values():
+        for members in alike([None if b.imu.key is None else
+                              (b.imu.key, b.spi_read_ns, t.tobytes(), seq.tobytes())
+                              for b, (t, seq, _) in zip(boards, planned)]):
             first = boards[members[0]]
             t, seq, _ = planned[members[0]]
             words = first.imu.read_together([boards[i].imu for i in members], t - first.spi_read_ns)

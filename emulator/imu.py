@@ -48,6 +48,7 @@ from navtwin.common.earth import EARTH_RATE
 from navtwin.common.geodesy import LocalFrame, meridian_radius, transverse_radius
 from navtwin.protocols import adis16350 as adis
 
+from .alike import alike
 from .bias import FlickerBias, RateRandomWalk
 from .clock import Clock
 
@@ -357,12 +358,8 @@ def generate_together(sensors: list[Adis16350], lo_ns: int, hi_ns: int) -> None:
     :attr:`~Adis16350.key` (a sweep's seeds of one vehicle) are run along a leading seed
     axis, so each numpy call of the model serves them all (every draw is still each seed's
     own, from its own streams, in its own order); the others one by one."""
-    groups: dict = {}
-    for i, sensor in enumerate(sensors):
-        key = sensor.key
-        groups.setdefault(i if key is None else key, []).append(sensor)
-    for group in groups.values():
-        _generate(group, lo_ns, hi_ns)
+    for members in alike([sensor.key for sensor in sensors]):
+        _generate([sensors[i] for i in members], lo_ns, hi_ns)
 
 
 def _generate(sensors: list[Adis16350], lo_ns: int, hi_ns: int) -> None:

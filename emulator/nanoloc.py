@@ -73,6 +73,7 @@ from navtwin.protocols.nanoloc import (FRAME_SIZE, NARROW_IDS, SPEED_OF_LIGHT, S
 from navtwin.protocols.fast import frames_of
 from navtwin.protocols.serial import char_ns
 
+from .alike import alike
 from .clock import serial_queue
 from .rng import stream
 from .faults import acting_on
@@ -188,11 +189,8 @@ class NanolocNetwork:
         anchor's draws (its own stream, in its cycle order), the anchor faults and multipath
         of its anchors (a loop over the anchors that have them), the gateway's serial line
         and counter, the ledger marks."""
-        groups: dict[tuple, list[int]] = {}
-        for i, net in enumerate(networks):
-            groups.setdefault(net.key, []).append(i)
         out = [None] * len(networks)
-        for members in groups.values():
+        for members in alike([net.key for net in networks]):
             for i, made in zip(members, _reports([networks[i] for i in members], lo_ns, hi_ns)):
                 out[i] = made
         return out

@@ -149,4 +149,5 @@ def truth(scenario: str | Path | Scenario, seed: int | None = None, vehicle: int
         tr = truth_arrays(motion, 0, sc.duration_ns)
         return tr["t"] / 1e9, *(np.ascontiguousarray(tr[f]) for f in ("x", "y", "vx", "vy"))
 
-    return dict(zip(("t", "x", "y", "vx", "vy"), shared(("truth", motion.key, sc.duration_ns), columns)))
+    return dict(zip(("t", "x", "y", "vx", "vy"),
+                    shared(("truth", motion.key, sc.duration_ns), columns)))
