@@ -276,14 +276,29 @@ def private_cluster(workers: int):
     run code as ours (a plain LocalCluster takes any connection to 127.0.0.1)."""
     import logging
 
+    import dask
     from distributed import LocalCluster
     from distributed.security import Security
 
     import cryptography  # noqa: F401  the sweep extra's; Security.temporary() needs it
 
-    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        host="127.0.0.1", protocol="tls://", security=Security.temporary(),
-                        dashboard_address=None, silence_logs=logging.ERROR)
+    with dask.config.set({ENVIRON: worker_environ(dask.config.get(ENVIRON))}):
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                            host="127.0.0.1", protocol="tls://", security=Security.temporary(),
+                            dashboard_address=None, silence_logs=logging.ERROR)
+
+
+ENVIRON = "distributed.nanny.pre-spawn-environ"  # what a nanny sets before it starts its worker
+
+
+def worker_environ(dask_default: dict) -> dict:
+    """Dask's environment for its workers without MALLOC_TRIM_THRESHOLD_, which it sets to
+    64 kB to hand freed memory back to the system at once. A batch task frees and takes
+    again arrays of hundreds of kB at every step, and each time the pages come back as
+    page faults: a fifth of a worker's CPU in the kernel (docs/performance.md, "The
+    workers' memory"). Unset, glibc's own thresholds, which grow with the arrays freed,
+    keep them, as in a plain process; a worker then holds its largest task's memory."""
+    return {k: v for k, v in dask_default.items() if k != "MALLOC_TRIM_THRESHOLD_"}
 
 
 def read_out(out: Path) -> tuple[list[dict], list[dict]]:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import gc
 import json
+import os
 import re
 import subprocess
 import sys
@@ -27,8 +28,11 @@ SHORT = 5.0
 
 def test_two_workers_give_the_serial_table_bit_for_bit(tmp_path):
     serial = sweep.run("office", range(1, 5), duration=SHORT, serial=True, out=tmp_path / "serial")
+    ours = os.environ.get("MALLOC_TRIM_THRESHOLD_")
     with sweep.Client(workers=2) as client:
         assert len(client.client.scheduler_info()["workers"]) == 2
+        # glibc's malloc as in a plain process, not Dask's 64 kB trim (lab.sweep.worker_environ)
+        assert set(client.client.run(os.getenv, "MALLOC_TRIM_THRESHOLD_").values()) == {ours}
         spread = sweep.run("office", range(1, 5), duration=SHORT, client=client,
                            out=tmp_path / "dask")
     assert serial.tasks == 1 and spread.tasks == 2  # one batch, or one per worker
