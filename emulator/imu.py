@@ -119,7 +119,9 @@ def fir(taps: np.ndarray, x: np.ndarray, state: np.ndarray) -> tuple[np.ndarray,
     """The board's FIR over the samples x (N, 3) from the delays *state* (len(taps) - 1, 3):
     the filtered samples and the delays after them. Each column is one full convolution with
     the delays added to its head, as scipy's lfilter computes a FIR (the same bytes)."""
-    full = np.stack([np.convolve(taps, column) for column in x.T], axis=1)
+    full = np.empty((len(x) + len(taps) - 1, x.shape[1]))
+    for k, column in enumerate(x.T):
+        full[:, k] = np.convolve(taps, column)
     full[:len(state)] += state
     return full[:len(x)], full[len(x):]
 
@@ -371,7 +373,9 @@ def _generate(sensors: list[Adis16350], lo_ns: int, hi_ns: int) -> None:
         return
     t = first.clock.tick(j)
     f_b, w_b = first.true_outputs(t)
-    z = np.stack([sensor.rng.standard_normal((len(j), 16)) for sensor in sensors])
+    z = np.empty((len(sensors), len(j), 16))
+    for sensor, draws in zip(sensors, z):  # each seed's draws, in its own order, in place
+        sensor.rng.standard_normal(out=draws)
     gyro, gover = _Sensor.measure([s.gyro for s in sensors], w_b, z[..., 0:3], z[..., 3:6])
     accel, aover = _Sensor.measure([s.accel for s in sensors], f_b, z[..., 6:9], z[..., 9:12])
     spec = first.spec

@@ -35,6 +35,7 @@ from __future__ import annotations
 import bisect
 import contextlib
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import repeat
 from operator import attrgetter
 
@@ -70,8 +71,14 @@ def _port_events(t_ns: np.ndarray, port: str, data: list, marks: dict) -> list[E
 
 def trajectory_of(spec) -> Trajectory:
     """A vehicle's (a scenario's fleet entry) trajectory: its path, its tag's height. It
-    draws nothing: every seed's."""
-    return Trajectory(spec.trajectory, spec.tag.z)
+    draws nothing and holds no state after it is built, so every seed of a vehicle shares
+    one (a sweep's task builds it once, not once a seed)."""
+    return _trajectory(spec.trajectory, spec.tag.z)
+
+
+@lru_cache(maxsize=64)
+def _trajectory(spec, height: float) -> Trajectory:
+    return Trajectory(spec, height)
 
 
 @dataclass(slots=True)
@@ -257,8 +264,10 @@ class World:
 
     def kept(self, port: str) -> list[Event]:
         """The events of *port* made so far under :meth:`by_port`, in the order made: a
-        block after another, and within a block a port's own order, not sorted by time."""
-        return self._by_port[port]
+        block after another, and within a block a port's own order, not sorted by time.
+        They are handed over (the world keeps none of them after), so they die with the
+        caller's use of them, not with the world."""
+        return self._by_port.pop(port)
 
     # -- generation -------------------------------------------------------------------------
     def _make(self, reports: list | None = None, written: list | None = None) -> None:
