@@ -41,7 +41,7 @@ from navtwin.emulator.fleet import convoy
 from navtwin.emulator.runner import Emulation
 from navtwin.emulator.scenario import MAX_VEHICLES, NETWORKS, ScenarioError, load_scenario
 from navtwin.emulator.timing import NAMES as TIMINGS
-from navtwin.common.limits import MAX_DURATION_S
+from navtwin.common.limits import BATCH_SEEDS, MAX_DURATION_S
 from navtwin.common.schema import Invalid, between, key, one_of, positive, takes
 from navtwin.host import config as host_config
 from navtwin.host import tracks
@@ -49,6 +49,7 @@ from navtwin.host.bench import bench_latency, replay_speeds, write_host_recordin
 from navtwin.host.replay import config_for, replay
 from navtwin.protocols.recording import Recording
 
+from .bench_sweep import GOAL_MINUTES
 from .run import lab_chunks, run_in_memory
 
 
@@ -126,25 +127,38 @@ def in_memory(scenario: str = "office", seeds: int = 3) -> dict:
 
 
 def sweep_rate(scenario: str = "office", seeds: int = 8, workers: int = 2,
-               duration: float | None = None) -> dict:
+               duration: float | None = None, filters: tuple[str, ...] | None = None) -> dict:
     """Seeds per second of a sweep, in this process and on a LocalCluster of *workers* (its
-    start-up timed apart), and their ratio; the two tables are checked equal."""
+    start-up timed apart), and their ratio; the two tables are checked equal. The workers'
+    CPU time over the sweep (user and system, read on each worker) a seed, and the wall
+    time 10 000 seeds would take at the cluster's rate: issue 23's goal is the whole sweep,
+    workers and all, not one process's CPU time (``navtwin bench sweep``)."""
     from . import sweep
 
     t = time.perf_counter()
-    serial = sweep.run(scenario, range(1, seeds + 1), duration=duration, serial=True)
+    serial = sweep.run(scenario, range(1, seeds + 1), filters, duration=duration, serial=True)
     serial_s = time.perf_counter() - t
     t = time.perf_counter()
     with sweep.Client(workers=workers) as client:
         start_s = time.perf_counter() - t
+        before = client.client.run(os.times)
         t = time.perf_counter()
-        spread = sweep.run(scenario, range(1, seeds + 1), duration=duration, client=client)
+        spread = sweep.run(scenario, range(1, seeds + 1), filters, duration=duration,
+                           client=client)
         cluster_s = time.perf_counter() - t
+        after = client.client.run(os.times)
+    user = sum(after[w][0] - before[w][0] for w in after)
+    system = sum(after[w][1] - before[w][1] for w in after)
     return {"benchmark": "lab-sweep", "scenario": scenario, "seeds": seeds, "workers": workers,
-            "virtual_s": duration or load_scenario(scenario).duration_s, "tasks": serial.tasks,
+            "filters": list(serial.filters),
+            "virtual_s": duration or load_scenario(scenario).duration_s, "tasks": spread.tasks,
             "serial_seeds_per_s": round(seeds / serial_s, 3),
             "cluster_seeds_per_s": round(seeds / cluster_s, 3),
             "cluster_start_s": round(start_s, 2), "ratio": round(serial_s / cluster_s, 2),
+            "workers_cpu_s_per_seed": round((user + system) / seeds, 4),
+            "workers_system_share": round(system / (user + system), 3) if user + system else 0.0,
+            "minutes_for_10000_seeds": round(10_000 * cluster_s / seeds / 60, 1),
+            "goal_minutes": GOAL_MINUTES,
             "same_cells": spread.rows == serial.rows}
 
 
@@ -218,10 +232,12 @@ class Soak:
 class Sweep:
     """lab-sweep's settings."""
     scenario: str = key("office", "", "the scenario swept (a name or a .toml path)")
-    seeds: int | None = key(None, "", "seeds; none = 8 (4 quick)", between(1, 1000))
+    seeds: int | None = key(None, "", "seeds, through each; none = 8 (4 quick)",
+                            between(*BATCH_SEEDS))
     workers: int = key(2, "", "LocalCluster workers", between(1, 64))
     duration: float | None = key(None, "s", "of each run; none = the whole scenario (20 quick)",
                                  positive(hi=MAX_DURATION_S))
+    filters: str | None = key(None, "", "the tracks, a comma list or all; none = the sweep's")
 
 
 #: what a scenario must run beyond timing's window: the emulator's and the host's start-up
@@ -323,7 +339,8 @@ def benchmarks() -> dict:
     def lab_sweep(quick: bool, s: Sweep) -> dict:
         """emulator+host: office seeds/s of navtwin sweep, serial and on 2 LocalCluster workers"""
         return sweep_rate(s.scenario, s.seeds or (4 if quick else 8), s.workers,
-                          s.duration or (20.0 if quick else None))
+                          s.duration or (20.0 if quick else None),
+                          None if s.filters is None else _tracks(s.filters))
 
     @takes(Timing)
     def reader_timing(quick: bool, s: Timing) -> dict:

@@ -339,3 +339,15 @@ def test_results_on_a_read_only_file_system_is_refused_before_the_work(tmp_path)
     assert p.stderr.strip() == (f"navtwin sweep: error: --results {ro}/results.md: Read-only "
                                 "file system; give a file you can write, or omit --results")
     assert not out.exists()  # refused before any cell was computed
+
+
+def test_the_sweep_rate_benchmark_reads_its_workers_cpu_and_projects_the_goal():
+    """lab-sweep's cluster figures come from the workers themselves (their user and system
+    time), so a worker's time in the kernel is seen, and its projection is 10 000 seeds at
+    the cluster's measured rate."""
+    from navtwin.lab.bench import sweep_rate
+
+    r = sweep_rate("office", seeds=2, workers=1, duration=2.0, filters=("kf",))
+    assert r["same_cells"] and r["filters"] == ["kf"]
+    assert r["workers_cpu_s_per_seed"] > 0 and 0 <= r["workers_system_share"] < 1
+    assert r["minutes_for_10000_seeds"] == pytest.approx(10_000 / r["cluster_seeds_per_s"] / 60, rel=0.01)
