@@ -351,3 +351,18 @@ def test_the_sweep_rate_benchmark_reads_its_workers_cpu_and_projects_the_goal():
     assert r["same_cells"] and r["filters"] == ["kf"]
     assert r["workers_cpu_s_per_seed"] > 0 and 0 <= r["workers_system_share"] < 1
     assert r["minutes_for_10000_seeds"] == pytest.approx(10_000 / r["cluster_seeds_per_s"] / 60, rel=0.01)
+
+
+@pytest.mark.parametrize("n, workers, batch", [(10_000, 2, 256), (513, 2, 256), (4, 2, 256),
+                                               (1, 2, 256), (300, 1, 256), (1000, 3, 64)])
+def test_batch_tasks_share_the_seeds_evenly_among_the_workers(n, workers, batch):
+    seeds = list(range(1, n + 1))
+    tasks = sweep.chunk_seeds(seeds, 70.0, "batch", workers, batch)
+    assert [s for t in tasks for s in t] == seeds
+    sizes = [len(t) for t in tasks]
+    assert max(sizes) <= batch
+    assert max(sizes) - min(sizes) <= 1
+    if n >= workers:  # a whole number of rounds of the workers
+        assert len(tasks) % workers == 0
+    if (n, workers, batch) == (10_000, 2, 256):
+        assert sizes == [250] * 40
