@@ -49,7 +49,6 @@ from navtwin.host.bench import bench_latency, replay_speeds, write_host_recordin
 from navtwin.host.replay import config_for, replay
 from navtwin.protocols.recording import Recording
 
-from .bench_sweep import GOAL_MINUTES
 from .run import lab_chunks, run_in_memory
 
 
@@ -158,7 +157,6 @@ def sweep_rate(scenario: str = "office", seeds: int = 8, workers: int = 2,
             "workers_cpu_s_per_seed": round((user + system) / seeds, 4),
             "workers_system_share": round(system / (user + system), 3) if user + system else 0.0,
             "minutes_for_10000_seeds": round(10_000 * cluster_s / seeds / 60, 1),
-            "goal_minutes": GOAL_MINUTES,
             "same_cells": spread.rows == serial.rows}
 
 
