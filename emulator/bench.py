@@ -238,53 +238,101 @@ def pty_floor(frames: int = 3000, period_ns: int = 10_000_000) -> dict:
 def pty_floors(frames: dict[int, int]) -> dict[int, dict]:
     """The same reader measure on bare PTY pairs, one per schedule: *frames* maps a period
     (ns) to how many frames its pair carries. A separate process writes 30 bytes on each
-    pair at start + k x period (every pair on its own exact schedule, as one emulator writes
-    all its ports), this one reads them all (``select``, then one ``read(2)`` of what is
-    there, as the host's port reader does). What is left is the kernel's PTY path and the
-    reader's wake-ups: the floor any PTY-based emulator sits on, on this machine, for a
-    port on that schedule (a 40 Hz port's p99 is the tail of fewer intervals than a
-    100 Hz port's, so each is judged against a pair of its own rate). The schedules are on
-    this machine's CLOCK_MONOTONIC, so lateness is absolute. Figures per period."""
-    import multiprocessing as mp
-    import tty
+    pair at start + k x period (:class:`BarePairs`), this one reads them all
+    (:func:`read_pairs`). What is left is the kernel's PTY path and the reader's wake-ups:
+    the floor any PTY-based emulator sits on, on this machine, for a port on that schedule
+    (a 40 Hz port's p99 is the tail of fewer intervals than a 100 Hz port's, so each is
+    judged against a pair of its own rate). Figures per period."""
+    with BarePairs(list(frames.items())) as pairs:
+        reads = read_pairs(pairs, range(len(frames)))
+        return {pairs.periods[i]: pairs.figures(i, r) for i, r in reads.items()}
 
-    pairs = []
-    for _ in frames:
-        master, slave = os.openpty()
-        tty.setraw(slave)
-        pairs.append((master, slave, os.open(os.ttyname(slave), os.O_RDWR | os.O_NOCTTY)))
-    start_ns = time.monotonic_ns() + 100_000_000
-    writes = sorted((start_ns + k * period, i) for i, (period, n) in enumerate(frames.items())
-                    for k in range(n))
-    writer = mp.get_context("fork").Process(
-        target=_bare_writer, args=([m for m, _, _ in pairs], writes))
-    writer.start()
-    readers = {r: i for i, (_, _, r) in enumerate(pairs)}
-    want = {r: FRAME_BYTES * n for r, n in zip(readers, frames.values())}
-    got = dict.fromkeys(readers, 0)
-    stamps = {r: ([], []) for r in readers}  # read times, stream ends
+
+def read_pairs(pairs: BarePairs, which) -> dict[int, list]:
+    """Start *pairs*' writer and read pairs *which* in this process (``select``, then one
+    ``read(2)`` of what is there, as the host's port reader does) until each has its frames
+    or the writer has stopped: each pair's reads, ``(time ns, bytes)``."""
+    fds = {os.open(pairs.paths[i], os.O_RDWR | os.O_NOCTTY): i for i in which}
+    want = {r: FRAME_BYTES * pairs.frames[i] for r, i in fds.items()}
+    got = dict.fromkeys(fds, 0)
+    reads = {r: [] for r in fds}
+    pairs.start()
     try:
-        while any(got[r] < want[r] for r in readers):
-            ready = select.select([r for r in readers if got[r] < want[r]], [], [], 5.0)[0]
+        while any(got[r] < want[r] for r in fds):
+            ready = select.select([r for r in fds if got[r] < want[r]], [], [], 5.0)[0]
             for r in ready:
-                got[r] += len(os.read(r, 4096))
-                stamps[r][0].append(time.monotonic_ns())
-                stamps[r][1].append(got[r])
-            if not ready and not writer.is_alive():
+                n = len(os.read(r, 4096))
+                reads[r].append((time.monotonic_ns(), n))
+                got[r] += n
+            if not ready and not pairs.writing():
                 break
     finally:
-        writer.join()
-        for fd in (fd for pair in pairs for fd in pair):
+        for r in fds:
+            os.close(r)
+    return {i: reads[r] for r, i in fds.items()}
+
+
+class BarePairs:
+    """Bare PTY pairs, each written FRAME_BYTES on its own exact schedule (*pairs*: its
+    period and frame count each) by one forked process (:meth:`start`), from a common start
+    on this machine's CLOCK_MONOTONIC, so lateness is absolute. Whoever reads them opens
+    :attr:`paths` (the pairs' slave ends, raw) and hands the reads to :meth:`figures`: the
+    bench's own process, or the very readers of an emulator's ports (emulator.bench_scale:
+    a pair read by the same reader as the ports it is the floor of)."""
+
+    LEAD_NS = 100_000_000  # from start() to the first write: the readers are in place
+
+    def __init__(self, pairs: list[tuple[int, int]]):
+        import tty
+
+        self.periods = [p for p, _ in pairs]
+        self.frames = [n for _, n in pairs]
+        self._fds, self.paths = [], []
+        for _ in pairs:
+            master, slave = os.openpty()
+            tty.setraw(slave)
+            self._fds += [master, slave]  # the slave held open: bytes wait for a late reader
+            self.paths.append(os.ttyname(slave))
+        self._writer = None
+        self.start_ns = 0
+
+    def start(self) -> None:
+        import multiprocessing as mp
+
+        self.start_ns = time.monotonic_ns() + self.LEAD_NS
+        writes = sorted((self.start_ns + k * period, i)
+                        for i, (period, n) in enumerate(zip(self.periods, self.frames))
+                        for k in range(n))
+        self._writer = mp.get_context("fork").Process(
+            target=_bare_writer, args=(self._fds[0::2], writes))
+        self._writer.start()
+
+    def writing(self) -> bool:
+        return self._writer is not None and self._writer.is_alive()
+
+    def wait(self) -> None:
+        """Until the last write is made."""
+        if self._writer is not None:
+            self._writer.join()
+
+    def figures(self, i: int, reads) -> dict:
+        """Pair *i*'s figures from its reads, ``(time ns, bytes)`` each in order: frames read,
+        lost, its period error (:func:`period_error`) and lateness against its schedule."""
+        reads = np.asarray(reads, dtype=np.int64).reshape(-1, 2)
+        period, n = self.periods[i], self.frames[i]
+        k = np.arange(int(reads[:, 1].sum()) // FRAME_BYTES)
+        schedule = self.start_ns + k * period
+        arrived = arrivals((k + 1) * FRAME_BYTES, np.cumsum(reads[:, 1]), reads[:, 0])
+        return {"frames": int(len(k)), "lost": n - int(len(k)), "nominal_ms": period / 1e6,
+                **period_error(arrived, schedule), **lateness(arrived, schedule)}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.wait()
+        for fd in self._fds:
             os.close(fd)
-    out = {}
-    for r, (period_ns, n) in zip(readers, frames.items()):
-        k = np.arange(got[r] // FRAME_BYTES)
-        schedule = start_ns + k * period_ns
-        arrived = arrivals((k + 1) * FRAME_BYTES, stamps[r][1], stamps[r][0])
-        out[period_ns] = {"frames": int(len(k)), "lost": n - int(len(k)),
-                          "nominal_ms": period_ns / 1e6,
-                          **period_error(arrived, schedule), **lateness(arrived, schedule)}
-    return out
 
 
 def speed(scenarios: list[str], repeat: int = 3) -> dict:

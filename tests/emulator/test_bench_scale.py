@@ -80,11 +80,18 @@ def test_a_short_scale_run_reads_every_port(capsys):
     assert row["status"] == 0 and row["workers"] == 1
     # the steady-state CPU (the window) and the whole run's (start-up too): both measured
     assert row["cpu_per_vehicle"] > 0 and row["cpu_per_vehicle_whole_run"] > 0
-    # a pair on each schedule: the boards' and coordinators' 10 ms, the gateways' 25 ms
-    assert {k: b["frames"] for k, b in row["bare_pty"].items()} == {"10 ms": 250, "25 ms": 100}
+    # a pair on each schedule (the boards' and coordinators' 10 ms, the gateways' 25 ms) read
+    # by the reader of the ports, and one read alone by the bench
+    for pairs in (row["bare_pty"], row["bare_pty_alone"]):
+        assert {k: (b["frames"], b["lost"]) for k, b in pairs.items()} == \
+            {"10 ms": (250, 0), "25 ms": (100, 0)}
+    assert all(len(b["by_reader"]) == 1 for b in row["bare_pty"].values())
     assert all(p["read"] > 0 for p in row["ports"].values())
     for name, p in row["ports"].items():
-        peer = row["bare_pty"]["25 ms" if name.startswith("nanoloc") else "10 ms"]
+        period = "25 ms" if name.startswith("nanoloc") else "10 ms"
+        peer = row["bare_pty"][period]["by_reader"][p["reader"]]
         assert p["p99_ratio_to_bare"] == p["p99_ms"] / peer["p99_ms"], name
+        assert p["p99_ratio_to_bare_alone"] == \
+            p["p99_ms"] / row["bare_pty_alone"][period]["p99_ms"], name
     assert row["p99_ratio_to_bare"] == max(p["p99_ratio_to_bare"] for p in row["ports"].values())
     assert out["largest_n_meeting_goal"] in (None, 2)
