@@ -157,7 +157,9 @@ def _adds_up(out: dict, ports: set[str], hosts: int, frames: int) -> None:
         peer = out["bare_pty"][out["bare_period"][name]]  # the pair on the port's schedule
         assert out["p99_ratio"][name] == row["p99_ms"] / peer["p99_ms"]
         assert out["late_p99_ratio"][name] == row["late_p99_ms"] / peer["late_p99_ms"]
+        assert out["max_over_bare_ms"][name] == row["max_ms"] - peer["max_ms"]
     assert out["worst_p99_ratio"] == max(out["p99_ratio"].values())
+    assert out["worst_max_over_bare_ms"] == max(out["max_over_bare_ms"].values())
     assert out["frames_lost_total"] == sum(r["lost"] for r in out["ports"].values())
     # the coordinators' packets on the 10 ms pair, the gateways' reports on the 25 ms one
     assert {p: out["bare_period"][p] for p in ports} == {
