@@ -475,6 +475,24 @@ class RealTime:
 
 
 @dataclass(frozen=True)
+class Floor:
+    """pty-floor's settings."""
+    seconds: float | None = key(None, "s", "how long the pairs are written; none = 60 (10 quick)",
+                                between(1, 3600))
+
+
+def floor(seconds: float) -> dict:
+    """Bare PTY pairs alone (:func:`pty_floors`), on the SINS board's 10 ms and the gateway's
+    25 ms, for *seconds*, with no navtwin code running: what this machine's PTY path and
+    scheduler give any program, the floor under every timing goal (issue 22: a maximum
+    within 1 ms over 10 minutes is a figure of the machine before it is one of ours)."""
+    periods = (10_000_000, 25_000_000)
+    got = pty_floors({t: int(seconds * 1e9 / t) for t in periods})
+    return {"benchmark": "pty-floor", "seconds": seconds, "load_average": os.getloadavg(),
+            "bare_pty": {period_key(t): got[t] for t in periods}}
+
+
+@dataclass(frozen=True)
 class Repeat:
     """digi-open's and digi-router's settings."""
     repeat: int | None = key(None, "", "timed calls, the median counts; none = 10 (3 quick)",
@@ -493,6 +511,11 @@ def benchmarks() -> dict:
         """emulator: SINS frame-period jitter seen by a pyserial reader, real time (goal p99 <= 0.3 ms)"""
         return jitter_beside(s.seconds or (10.0 if quick else 60.0), s.scenarios.split(","),
                              s.timings.split(","))
+
+    @takes(Floor)
+    def pty_floor_alone(quick: bool, s: Floor) -> dict:
+        """emulator: bare PTY pairs alone on the 10 and 25 ms schedules, the machine's floor"""
+        return floor(s.seconds or (10.0 if quick else 60.0))
 
     @takes(Repeat)
     def digi_xbee_open(quick: bool, s: Repeat) -> dict:
@@ -515,4 +538,5 @@ def benchmarks() -> dict:
 
     return {"emulator-speed": emulator_speed, "emulator-jitter": emulator_jitter,
             "digi-open": digi_xbee_open, "digi-router": digi_xbee_router,
-            "uart-rx": uart_rx_model, "imu-allan": imu_allan_round_trip}
+            "uart-rx": uart_rx_model, "imu-allan": imu_allan_round_trip,
+            "pty-floor": pty_floor_alone}

@@ -48,3 +48,15 @@ def test_an_unknown_timing_mode_is_one_line():
     run = available()["emulator-jitter"]
     with pytest.raises(UsageError, match="timings.*fifo,slack,spin"):
         settings("emulator-jitter", run.Settings, {"timings": "fifo,fast"})
+
+
+@pytest.mark.pty
+def test_the_pty_floor_writes_and_reads_every_frame_of_each_pair():
+    run = available()["pty-floor"]
+    out = run(False, settings("pty-floor", run.Settings, {"seconds": "2"}))
+    pairs = out["bare_pty"]
+    assert {k: (b["frames"], b["lost"]) for k, b in pairs.items()} == \
+        {"10 ms": (200, 0), "25 ms": (80, 0)}
+    for b in pairs.values():  # figures of real arrivals: ordered, and none before its write
+        assert 0 <= b["p50_ms"] <= b["p99_ms"] <= b["max_ms"]
+        assert 0 <= b["late_p50_ms"] <= b["late_p99_ms"] <= b["late_max_ms"]
