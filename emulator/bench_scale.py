@@ -331,7 +331,7 @@ def benchmarks() -> dict:
     """``navtwin bench scale`` (a set of navtwin.cli.bench.SETS)."""
     @takes(Scale)
     def scale_bench(quick: bool, s: Scale) -> dict:
-        """emulator: vehicles in real time, every port read, beside bare PTYs on their schedules (goal >= 50 at p99 <= 1.2x, <= 0.02 core each)"""
+        """emulator: vehicles in real time, every port read, beside bare PTYs its reader reads too (goal >= 50 at p99 <= 1.2x, <= 0.02 core each)"""
         counts = [int(v) for v in (s.vehicles or ("1,10" if quick else "1,10,25,50,75")).split(",")]
         return scale(counts, s.seconds or (5.0 if quick else 30.0), workers=s.workers,
                      readers=s.readers, repeat=s.repeat)
