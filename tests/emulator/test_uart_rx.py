@@ -279,6 +279,7 @@ class Run:
     def __init__(self, **kw) -> None:
         self.stop = threading.Event()
         self.lines: list[str] = []
+        self.seen = 0  # lines up to the last one waited for
         self.cond = threading.Condition()
         self.emu = Emulation(load_scenario("office"), progress=self._line, **kw)
         self.summary = None
@@ -294,11 +295,18 @@ class Run:
             self.cond.notify_all()
 
     def wait_for(self, text: str) -> None:
-        """Until an event line after those seen so far contains *text*."""
-        start = len(self.lines)
+        """Until an event line after the last one waited for contains *text*. A line that came
+        before this call counts: the action that causes it (a client's open, its termios) may
+        be noticed by the emulator's thread before the test's thread gets here."""
+        def found() -> bool:
+            for i in range(self.seen, len(self.lines)):
+                if text in self.lines[i]:
+                    self.seen = i + 1
+                    return True
+            return False
+
         with self.cond:
-            assert self.cond.wait_for(lambda: any(text in ln for ln in self.lines[start:]),
-                                      DEADLINE), (text, self.lines)
+            assert self.cond.wait_for(found, DEADLINE), (text, self.lines[self.seen:])
 
 
 @pytest.fixture
