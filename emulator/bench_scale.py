@@ -155,11 +155,10 @@ def run_n(n: int, seconds: float, seed: int, workers: str, readers: int) -> dict
     plan = schedule(n, seconds, seed)
     period = {name: nominal_period_ns(ends) for name, (_, ends) in plan.items()}
     periods = sorted(set(period.values()))
-    # a pair on each schedule for each reader, and one more for the bench's own reader; the
-    # run's last 0.5 s left out
-    pairs_of = [[(r, t) for t in periods] for r in [*range(readers), None]]
-    bare = BarePairs([(t, int((seconds - 0.5) * 1e9 / t)) for row in pairs_of for _, t in row])
-    index = {rt: i for i, rt in enumerate(rt for row in pairs_of for rt in row)}
+    # a pair on each schedule for each reader (None: the bench's own), the last 0.5 s left out
+    owners = [(r, t) for r in [*range(readers), None] for t in periods]
+    bare = BarePairs([(t, int((seconds - 0.5) * 1e9 / t)) for _, t in owners])
+    index = {owner: i for i, owner in enumerate(owners)}
     with tempfile.TemporaryDirectory(prefix="navtwin-scale-") as tmp, bare:
         proc = subprocess.Popen(
             [sys.executable, "-m", "navtwin", "emulate", "--scenario", "office", "--quiet",

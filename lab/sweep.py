@@ -299,8 +299,9 @@ def worker_environ(dask_default: dict) -> dict:
     64 kB to hand freed memory back to the system at once. A batch task frees and takes
     again arrays of hundreds of kB at every step, and each time the pages come back as
     page faults: 14 % of a worker's CPU in the kernel (navtwin bench lab-sweep;
-    docs/sweeps.md, "The workers' memory"). Unset, glibc's own thresholds, which grow with the arrays freed,
-    keep them, as in a plain process; a worker then holds its largest task's memory."""
+    docs/sweeps.md, "The workers' memory"). Unset, glibc's own thresholds, which grow with
+    the arrays freed, keep them, as in a plain process; a worker then holds its largest
+    task's memory."""
     return {k: v for k, v in dask_default.items() if k != "MALLOC_TRIM_THRESHOLD_"}
 
 

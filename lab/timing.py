@@ -36,10 +36,10 @@ brought its last byte. Of the chunks scheduled in the window:
 pair; issue 22's goal: at most 1.2 with the host running), ``worst_p99_ratio`` the largest;
 ``late_p99_ratio``, the same of the lateness; ``max_over_bare_ms``, each port's largest period
 error less its pair's (the goal: within 1 ms, on a quiet machine over 10 minutes),
-``worst_max_over_bare_ms`` the largest. A reader that wakes late takes two frames or more in one read: each of their
-intervals is then off by a whole period, so under stalls longer than a period the period
-error's p99 saturates at the period (10 ms on the coordinator's schedule) while the lateness still
-tells the stalls apart.
+``worst_max_over_bare_ms`` the largest. A reader that wakes late takes two frames or more in
+one read: each of their intervals is then off by a whole period, so under stalls longer than
+a period the period error's p99 saturates at the period (10 ms on the coordinator's
+schedule) while the lateness still tells the stalls apart.
 
 ``cpu_cores``: the emulator's (its maker process included) and the hosts' CPU time (user + system, ``/proc/PID/stat``, all
 their threads) over the window, as fractions of a core (``host`` the hosts' sum,
