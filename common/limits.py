@@ -29,9 +29,10 @@ SPEEDS = (0.01, 10000.0)
 #: Longest run, emulated or live, in seconds (about 115 days; ns counts stay far inside int64).
 MAX_DURATION_S = 10_000_000
 #: Seeds one batch-engine task of a sweep holds (lab.batch), and the default at most: a larger
-#: batch shares each record's numpy calls among more seeds, at about 4 MB a seed.
+#: batch shares each record's numpy calls among more seeds, at about 4 MB a seed of office
+#: (fewer by default where a worker's memory holds fewer: lab.sweep.batch_size_for).
 BATCH_SEEDS = (1, 4096)
-BATCH_SIZE = 256
+BATCH_SIZE = 512
 #: vehicle numbers of a scenario: 256 vehicles' ports are 768 PTYs, a fifth of Linux's
 #: default kernel.pty.max
 VEHICLES = (1, 256)

@@ -2,8 +2,9 @@
 
 Seeds 1..N of one scenario go through the byte engine (each seed's in-memory run) and seeds
 1..M through the batch engine as one of a sweep's tasks (lab.batch: the records per seed, the
-tracks with a twin as one batch, the others per seed; M the sweep's batch,
-common.limits.BATCH_SIZE, by default: the batched tracks cost less a seed as the batch grows),
+tracks with a twin as one batch, the others per seed; M by default the batch a serial sweep
+takes on this machine, lab.sweep.batch_size_for: the batched tracks cost less a seed as the
+batch grows),
 each followed by the same scoring (lab.sweep.cells); CPU time of this process, all its threads
 (the filters' matrices are too small for a BLAS to thread). The batch engine's CPU is split
 into its halves, so the figure says where the time goes. The cells of the seeds both ran are
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+import resource
 import time
 from dataclasses import dataclass
 
@@ -43,8 +45,13 @@ class SweepEngines:
     duration: float | None = key(None, "s", "of each run; none = the whole scenario (15 quick)",
                                  positive(hi=MAX_DURATION_S))
     batch_seeds: int | None = key(None, "", "seeds 1..M through the batch engine, one task; none ="
-                                  f" the sweep's batch, {BATCH_SIZE} (quick: as seeds)",
-                                  between(*BATCH_SEEDS))
+                                  f" a serial sweep's batch here, at most {BATCH_SIZE} (quick: "
+                                  "as seeds)", between(*BATCH_SEEDS))
+
+
+def _rss() -> int:
+    """This process's peak resident memory so far, bytes."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
 def _cpu(fn):
@@ -53,16 +60,33 @@ def _cpu(fn):
     return out, time.process_time() - t
 
 
+def sensors_floor(sc, seeds: int, duration: float | None = None) -> float:
+    """CPU-s a seed of the ADIS16350 models alone: *seeds* seeds' sensors generated together
+    (emulator.imu.generate_together) over the whole run in one call, their true motion
+    shared, as in a sweep's task (lab.batch.TOGETHER seeds at a time). No block costs
+    anything here, no frame, line, decoder or track: the least any records of these seeds
+    can cost with this sensor model."""
+    from navtwin.emulator.imu import generate_together
+    from navtwin.emulator.world import World
+
+    end = round((duration or sc.duration_s) * 1e9)
+    imus = [v.imu for s in range(1, seeds + 1) for v in World(sc, s).vehicles]
+    with shared_truth():
+        _, cpu = _cpu(lambda: generate_together(imus, 0, end))
+    return cpu / seeds
+
+
 def engines(scenario: str = "office", seeds: int = 32, filters=None,
             duration: float | None = None, batch_seeds: int | None = None) -> dict:
     """Seeds per CPU-second of the byte engine on seeds 1..*seeds* and of the batch engine on
-    1..*batch_seeds* (default: the sweep's batch size; module doc)."""
+    1..*batch_seeds* (default: a serial sweep's batch on this machine; module doc)."""
     from . import batch, sweep
     from .run import run_in_memory
 
     sc = load_scenario(scenario)
     filters = tuple(filters or sweep.default_filters(sc))
-    batch_seeds = batch_seeds or BATCH_SIZE
+    batch_seeds = batch_seeds or sweep.batch_size_for(sweep.worker_memory(None, 1),
+                                                      duration or sc.duration_s)
     numbers = list(range(1, batch_seeds + 1))
     def by_bytes():
         rows = []
@@ -74,11 +98,16 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
     # engine computing it afresh
     with shared_truth():
         byte_rows, byte_s = _cpu(by_bytes)
+    rss = _rss()  # the byte engine's seeds, one at a time, hold little
     with shared_truth():
         outcome, batch_s = _cpu(lambda: batch.run(sc, numbers, filters=filters, duration=duration))
+        # the batch's peak over what the process held before it, a seed per second of
+        # scenario (lab.sweep.BATCH_BYTES_PER_SEED_S, which the default batch reckons with)
+        per_seed_s = (_rss() - rss) / batch_seeds / (duration or sc.duration_s)
         batch_rows, score_s = _cpu(lambda: [r for s, e in zip(numbers, outcome.estimates)
                                             for r in sweep.cells(sc, s, filters, e)])
     batch_s += score_s
+    floor = sensors_floor(sc, min(batch.TOGETHER, batch_seeds), duration)
     # zip: the cells of the seeds both engines ran, in the same order
     worst = max((abs(a[m] - b[m]) / max(1.0, abs(b[m])) for a, b in zip(batch_rows, byte_rows)
                  for m in sweep.METRICS if isinstance(a[m], float) and isinstance(b[m], float)
@@ -95,11 +124,18 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
                 "batched_tracks": round(outcome.batch_s / batch_seeds, 4),
                 "per_seed_tracks": round(outcome.per_seed_s / batch_seeds, 4),
                 "scoring": round(score_s / batch_seeds, 4)},
+            "batch_peak_bytes_per_seed_s": round(per_seed_s),
+            "batch_bytes_per_seed_s_reckoned": sweep.BATCH_BYTES_PER_SEED_S,
             "batched": list(outcome.batched), "ejected": len(outcome.ejected),
             "bulk_records": outcome.bulk,  # seeds whose records skipped the pipeline
             "bytes_seeds_per_cpu_s": round(1 / per_byte, 3),
             "batch_seeds_per_cpu_s": round(1 / per_batch, 3),
             "ratio": round(per_byte / per_batch, 2), "goal_ratio": GOAL_RATIO,
+            # the ratio's ceiling with these tracks and this sensor model: records that cost
+            # only the ADIS16350 models' own work (sensors_floor)
+            "sensors_floor_cpu_s_per_seed": round(floor, 4),
+            "ratio_at_most": round(per_byte / (
+                (outcome.batch_s + outcome.per_seed_s + score_s) / batch_seeds + floor), 2),
             "cells_max_relative_difference": worst,
             f"minutes_for_{PROJECTED_SEEDS}_seeds_on_{cores}_cores": round(
                 PROJECTED_SEEDS * per_batch / cores / 60, 1),

@@ -54,7 +54,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from navtwin.common import tomlfile
-from navtwin.common.limits import BATCH_SIZE
+from navtwin.common.limits import BATCH_SEEDS, BATCH_SIZE
 from navtwin.emulator.imu import shared_truth
 from navtwin.emulator.scenario import Scenario, load_scenario, parse_scenario
 from navtwin.host.replay import emulator_settings
@@ -67,6 +67,11 @@ from .vary import Vary, label, overview, variant
 
 #: Scenario seconds a task holds at least (seeds chunked): 0.2-0.7 s of work here.
 MIN_TASK_VIRTUAL_S = 10.0
+#: A batch task's memory a seed per second of scenario: office's 70 s took 3.9 MB a seed (the
+#: task's peak RSS at 256 and at 512 seeds: 1.19 and 2.18 GB); this leaves room above that.
+BATCH_BYTES_PER_SEED_S = 64_000
+#: The share of a worker's memory its batch may take by default (Dask pauses a worker at 80 %).
+BATCH_MEMORY_SHARE = 0.5
 #: Seconds to wait for a named scheduler before refusing it.
 CONNECT_TIMEOUT_S = 10.0
 #: While tasks are out, the scheduler is asked this often whether it is there and has
@@ -227,6 +232,35 @@ def chunk_seeds(seeds: list[int], scenario_s: float, engine: str = "bytes",
     return [seeds[a:b] for a, b in zip(cuts[:-1], cuts[1:])]
 
 
+def batch_size_for(memory_bytes: float, scenario_s: float) -> int:
+    """The seeds a batch task holds by default: BATCH_SIZE, fewer where a worker's
+    *memory_bytes* would not hold them within BATCH_MEMORY_SHARE at BATCH_BYTES_PER_SEED_S
+    (at least one)."""
+    fits = int(memory_bytes * BATCH_MEMORY_SHARE / (BATCH_BYTES_PER_SEED_S * scenario_s))
+    return max(BATCH_SEEDS[0], min(BATCH_SIZE, fits))
+
+
+def machine_memory() -> int:
+    """The memory this machine gives our processes: its physical memory, or its cgroup's
+    limit where that is lower (v2 or v1), as Dask reckons a LocalCluster's."""
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit():  # "max": none
+            total = min(total, int(text))
+    return total
+
+
+def worker_memory(limit: float | None, workers: int) -> float:
+    """A worker's memory: its cluster's *limit* (the smallest of its workers', lab.sweep's
+    ``_workers``); where none is known (none set, a cluster still to be made, a serial run:
+    *workers* 1), this machine's memory shared among *workers*."""
+    return limit or machine_memory() / max(1, workers)
+
+
 @dataclass
 class Result:
     """A sweep's rows (requested cells, seed then filter order), what it computed, its output."""
@@ -351,12 +385,13 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         *, duration: float | None = None, out: str | Path | None = None,
         client: Client | None = None, serial: bool = False, vary: Vary | None = None,
         progress: Callable[[int, int], None] | None = None, engine: str = "batch",
-        batch_size: int = BATCH_SIZE) -> Result:
+        batch_size: int | None = None) -> Result:
     """Sweep *scenario* over *seeds* (and, with *vary*, each of its values: lab.vary): in this
     process if *serial*, else on *client* (a new LocalCluster if None). Rows stream into
     *out*/part-NNNN.parquet when *out* is given, and only the cells *out* lacks are computed.
     *engine*: "batch" (lab.batch: tasks of up to *batch_size* seeds whose tracks step
-    together) or "bytes" (each seed's in-memory run); their cells agree to 1e-9.
+    together; None: :func:`batch_size_for` a worker's memory) or "bytes" (each seed's
+    in-memory run); their cells agree to 1e-9.
     *progress(done, total)* counts (value, seed) runs."""
     if engine not in ENGINES:
         raise SweepError(f"engine {engine!r}: use one of {', '.join(ENGINES)}")
@@ -379,10 +414,12 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         for r in old:  # a later part's cell replaces an earlier (failed) one
             done[(r["variant"], r["seed"], r["filter"])] = r
     wanted = [(v, s, f) for v in variants for s in seeds for f in filters]
-    workers = 1 if serial else _workers(client)
+    workers, limit = (1, None) if serial else _workers(client)
+    memory = worker_memory(limit, workers)
     tasks = [(v, chunk) for v, vsc in variants.items() for chunk in chunk_seeds(
         [s for s in seeds if any(done.get((v, s, f), {}).get("status") != "ok" for f in filters)],
-        duration or vsc.duration_s, engine, workers, batch_size)]
+        duration or vsc.duration_s, engine, workers,
+        batch_size or batch_size_for(memory, duration or vsc.duration_s))]
     texts, cells = {v: vsc.to_toml() for v, vsc in variants.items()}, schema(sc)
     writer = part = None
     if out is not None and tasks:
@@ -427,15 +464,21 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
     return Result(rows, filters, meta, len(tasks), out, part)
 
 
-def _workers(client: Client | None) -> int:
-    """The workers a sweep's batches are shared among: the cluster's (a LocalCluster's to be,
-    the cores), 1 when its scheduler does not answer (the watch then says so)."""
+def _workers(client: Client | None) -> tuple[int, float | None]:
+    """The workers a sweep's batches are shared among, and the smallest of their memory limits
+    (None: not known, or not set on some): the cluster's (a LocalCluster's to be: the cores,
+    its limits not known yet); 1 and None when its scheduler does not answer (the watch then
+    says so). The limits are asked for once it has answered: a scheduler that is gone
+    would hold the question for Dask's reconnect timeout."""
     if client is None:
-        return os.cpu_count() or 1
+        return os.cpu_count() or 1, None
     try:
-        return max(1, len(client.client.ncores(callback_timeout=WATCH_S)))
+        workers = max(1, len(client.client.ncores(callback_timeout=WATCH_S)))
+        limits = [w.get("memory_limit") or 0 for w in
+                  client.client.scheduler_info().get("workers", {}).values()]
     except (OSError, TimeoutError, RuntimeError):
-        return 1
+        return 1, None
+    return workers, min(limits) if limits and all(limits) else None
 
 
 def _on_dask(client: Client, tasks, texts, name, filters, duration, engine, take) -> None:

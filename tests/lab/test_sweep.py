@@ -35,6 +35,11 @@ def test_two_workers_give_the_serial_table_bit_for_bit(tmp_path):
         assert set(client.client.run(os.getenv, "MALLOC_TRIM_THRESHOLD_").values()) == {ours}
         spread = sweep.run("office", range(1, 5), duration=SHORT, client=client,
                            out=tmp_path / "dask")
+        # the default batch reckons with a worker's memory: a LocalCluster's share of it
+        limits = {w["memory_limit"] for w in client.client.scheduler_info()["workers"].values()}
+        assert sweep._workers(client) == (2, min(limits)) and min(limits) > 0
+        # and our reckoning of the machine's memory is Dask's (within a page of rounding)
+        assert sweep.worker_memory(None, 2) == pytest.approx(min(limits), abs=4096)
     assert serial.tasks == 1 and spread.tasks == 2  # one batch, or one per worker
     assert all(r["status"] == "ok" for r in serial.rows)
     assert spread.rows == serial.rows  # every cell, float for float
@@ -352,6 +357,19 @@ def test_the_sweep_rate_benchmark_reads_its_workers_cpu_and_projects_the_goal():
     assert r["workers_cpu_s_per_seed"] > 0 and 0 <= r["workers_system_share"] < 1
     minutes = 10_000 / r["cluster_seeds_per_s"] / 60
     assert r["minutes_for_10000_seeds"] == pytest.approx(minutes, rel=0.01)
+
+
+def test_the_default_batch_fits_in_half_a_workers_memory():
+    """BATCH_SIZE where a worker's memory holds it, fewer in proportion where it does not
+    (longer scenarios hold more a seed), and never none."""
+    per_seed = sweep.BATCH_BYTES_PER_SEED_S * 70.0  # a seed of office
+    ample = 4 * sweep.BATCH_SIZE * per_seed
+    assert sweep.batch_size_for(ample, 70.0) == sweep.BATCH_SIZE
+    assert sweep.batch_size_for(200 * per_seed, 70.0) == 100  # half of it
+    assert sweep.batch_size_for(200 * per_seed, 140.0) == 50
+    assert sweep.batch_size_for(1.0, 70.0) == 1
+    # serial, or a cluster still to be made: this machine's memory, shared by the workers
+    assert sweep.worker_memory(None, 4) == pytest.approx(sweep.worker_memory(None, 1) / 4)
 
 
 @pytest.mark.parametrize("n, workers, batch", [(10_000, 2, 256), (513, 2, 256), (4, 2, 256),
