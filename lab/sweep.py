@@ -242,7 +242,8 @@ def batch_size_for(memory_bytes: float, scenario_s: float) -> int:
 
 def machine_memory() -> int:
     """The memory this machine gives our processes: its physical memory, or its cgroup's
-    limit where that is lower (v2 or v1), as Dask reckons a LocalCluster's."""
+    hard limit where that is lower (v2 or v1; a LocalCluster's share of it is Dask's
+    reckoning too on a machine without soft limits or RLIMIT_RSS)."""
     total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
         try:
