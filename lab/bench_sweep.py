@@ -9,7 +9,10 @@ each followed by the same scoring (lab.sweep.cells); CPU time of this process, a
 (the filters' matrices are too small for a BLAS to thread). The batch engine's CPU is split
 into its halves, so the figure says where the time goes. The cells of the seeds both ran are
 compared (the largest relative difference of any figure), and 10 000 seeds are projected onto
-this machine's cores (a sweep's workers scale: ``navtwin bench host-replays``).
+this machine's cores (a sweep's workers scale: ``navtwin bench host-replays``). Beside them:
+the batch's peak memory a seed per second of scenario (what lab.sweep.batch_size_for
+reckons with), and the sensor model's own cost a seed (:func:`sensors_floor`) with the ratio
+the batch engine would reach were its records only that (``ratio_at_most``).
 
 Goals (issue 23): the batch engine at least 20x the byte engine's seeds per CPU-second, and
 10 000 office seeds with all eight tracks within 15 minutes on this 2-core machine.
@@ -49,9 +52,15 @@ class SweepEngines:
                                   "as seeds)", between(*BATCH_SEEDS))
 
 
-def _rss() -> int:
+def _peak() -> int:
     """This process's peak resident memory so far, bytes."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def _resident() -> int:
+    """This process's resident memory now, bytes."""
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
 def _cpu(fn):
@@ -98,12 +107,12 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
     # engine computing it afresh
     with shared_truth():
         byte_rows, byte_s = _cpu(by_bytes)
-    rss = _rss()  # the byte engine's seeds, one at a time, hold little
+    held = _resident()
     with shared_truth():
         outcome, batch_s = _cpu(lambda: batch.run(sc, numbers, filters=filters, duration=duration))
         # the batch's peak over what the process held before it, a seed per second of
         # scenario (lab.sweep.BATCH_BYTES_PER_SEED_S, which the default batch reckons with)
-        per_seed_s = (_rss() - rss) / batch_seeds / (duration or sc.duration_s)
+        per_seed_s = (_peak() - held) / batch_seeds / (duration or sc.duration_s)
         batch_rows, score_s = _cpu(lambda: [r for s, e in zip(numbers, outcome.estimates)
                                             for r in sweep.cells(sc, s, filters, e)])
     batch_s += score_s

@@ -67,7 +67,7 @@ from .vary import Vary, label, overview, variant
 
 #: Scenario seconds a task holds at least (seeds chunked): 0.2-0.7 s of work here.
 MIN_TASK_VIRTUAL_S = 10.0
-#: A batch task's memory a seed per second of scenario: office's, all eight tracks, is 56 kB
+#: A batch task's memory a seed per second of scenario: office's, all eight tracks, is 56-57 kB
 #: (``navtwin bench sweep``'s batch_peak_bytes_per_seed_s); this leaves room above that.
 BATCH_BYTES_PER_SEED_S = 64_000
 #: The share of a worker's memory its batch may take by default (Dask pauses a worker at 80 %).
