@@ -125,13 +125,15 @@ def _overlaps(ranges: list[tuple[int, int]], starts: list[int], lo: int, hi: int
     """Whether [lo, hi) meets a range of *ranges* (sorted by start). A removal is a point
     (p, p): it meets [lo, hi) when lo < p < hi, and with *ends* also at p == lo or p == hi
     (bytes removed at either end of a rejected run are its cause: a frame that lost its
-    first or its last byte)."""
+    first or its last byte). With *ends* a range that starts at hi meets it too: a changed
+    byte that cut the run short (a flip that made a start delimiter inside the frame ends
+    the frame before it, so the rejected run stops just short of the byte that was hit)."""
     i = bisect.bisect_right(starts, hi)
     for a, b in reversed(ranges[max(0, i - 64):i]):  # ranges are short and sorted
         if a == b:
             if lo < a < hi or (ends and a in (lo, hi)):
                 return True
-        elif a < hi and b > lo:
+        elif (a < hi and b > lo) or (ends and a == hi):
             return True
     return False
 

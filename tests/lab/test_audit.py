@@ -240,6 +240,26 @@ def _flip(data: bytes, entries: list, at: int, mask: int) -> bytes:
     return bytes(out)
 
 
+def test_a_flip_that_makes_a_start_delimiter_excuses_the_frame_it_cut_short():
+    """In API mode 2 a raw 0x7E starts a frame wherever it is: a flip that turns a frame's
+    last byte into one (0xFE -> 0x7E) ends the frame just before that byte, so the host
+    rejects a run that stops short of the byte the ledger names. The frame was touched all
+    the same (a live run under load once failed the audit on this: the tutorial's step 5)."""
+    from navtwin.protocols import xbee
+
+    body = bytes([0x90]) + bytes(range(1, 30))
+    # the payload byte that makes the checksum 0xFE, so the frame ends in a byte to flip
+    body += bytes([(0xFF - 0xFE - sum(body)) % 256])
+    frame = xbee.wrap(body, escaped=True)
+    assert frame[-1] == 0xFE and b"\x7e" not in frame[1:]
+    emu = frame * 20  # the flip far from the stream's ends (a run there is excused anyway)
+    entries: list = []
+    emu = _flip(emu, entries, 10 * len(frame) - 1, 0x80)  # the tenth frame's checksum
+    r = audit_mod.audit_port("xbee", emu, [emu], entries, True)
+    assert r.ok, r.problems
+    assert r.accepted == 19 and r.rejected_bytes >= len(frame) - 1
+
+
 def test_bit_flips_that_cancel_in_the_checksum_are_counted_undetectable():
     from navtwin.protocols import xbee
 
