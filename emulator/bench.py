@@ -359,42 +359,41 @@ def speed(scenarios: list[str], repeat: int = 3) -> dict:
     from .scenario import load_scenario
     from .world import World
 
-    def world(sc):  # built, then what is timed
-        w = World(sc)
-        return lambda: (w.advance(sc.duration_ns), w.air(sc.duration_ns))
-
-    def sensors(sc):
-        imus = [v.imu for v in World(sc).vehicles]
-        return lambda: [imu.generate(0, sc.duration_ns) for imu in imus]
+    def timed(make, sc) -> dict:
+        """The median CPU of *repeat* runs, each made by ``make()`` (not timed) and run."""
+        times = []
+        for _ in range(repeat):
+            go = make()
+            t = time.process_time()
+            go()
+            times.append(time.process_time() - t)
+        cpu = float(np.median(times))
+        return {"cpu_s": cpu, "x_real_time_per_cpu_s": sc.duration_s / cpu, "cpu_s_runs": times}
 
     rows = []
     for name in scenarios:
         sc = load_scenario(name)
         budget = sc.duration_s / GOAL_X_REAL_TIME
         row = {"scenario": name, "virtual_s": sc.duration_s, "goal_cpu_s": budget}
-        for label, record in (("bare", False), ("record", True)):
-            times = []
-            for _ in range(repeat):
-                with tempfile.TemporaryDirectory(prefix="navtwin-speed-") as tmp:
-                    emu = Emulation(sc, None, speed=None, ports=False,
-                                    record=Path(tmp) / "rec" if record else None)
-                    t = time.process_time()
-                    emu.run()
-                    emu.close()
-                    times.append(time.process_time() - t)
-            cpu = float(np.median(times))
-            row[label] = {"cpu_s": cpu, "x_real_time_per_cpu_s": sc.duration_s / cpu,
-                          "cpu_s_runs": times}
-        for label, part in (("world", world), ("sensors", sensors)):
-            times = []
-            for _ in range(repeat):
-                go = part(sc)
-                t = time.process_time()
-                go()
-                times.append(time.process_time() - t)
-            cpu = float(np.median(times))
-            row[label] = {"cpu_s": cpu, "x_real_time_per_cpu_s": sc.duration_s / cpu,
-                          "share_of_goal": cpu / budget, "cpu_s_runs": times}
+        with tempfile.TemporaryDirectory(prefix="navtwin-speed-") as tmp:
+            def loop(record: bool):  # each recording replaces the one before
+                emu = Emulation(sc, None, speed=None, ports=False,
+                                record=Path(tmp) / "rec" if record else None)
+                return lambda: (emu.run(), emu.close())
+
+            row["bare"], row["record"] = timed(lambda: loop(False), sc), timed(lambda: loop(True), sc)
+
+        def world():
+            w = World(sc)
+            return lambda: (w.advance(sc.duration_ns), w.air(sc.duration_ns))
+
+        def sensors():
+            imus = [v.imu for v in World(sc).vehicles]
+            return lambda: [imu.generate(0, sc.duration_ns) for imu in imus]
+
+        for label, make in (("world", world), ("sensors", sensors)):
+            row[label] = timed(make, sc)
+            row[label]["share_of_goal"] = row[label]["cpu_s"] / budget
         rows.append(row)
     return {"benchmark": "speed", "repeat": repeat, "goal_x_real_time": GOAL_X_REAL_TIME,
             "rows": rows}

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import os
-import resource
 import time
 from dataclasses import dataclass
 
@@ -52,15 +51,11 @@ class SweepEngines:
                                   "as seeds)", between(*BATCH_SEEDS))
 
 
-def _peak() -> int:
-    """This process's peak resident memory so far, bytes."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-
-
-def _resident() -> int:
-    """This process's resident memory now, bytes."""
-    with open("/proc/self/statm") as f:
-        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+def _peak_from_now() -> None:
+    """Start this process's peak resident set (VmHWM) afresh from what it holds now
+    (Linux's clear_refs), so a later peak is the work's since, not the byte engine's."""
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
 
 
 def _cpu(fn):
@@ -91,10 +86,11 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
     1..*batch_seeds* (default: a serial sweep's batch on this machine; module doc)."""
     from . import batch, sweep
     from .run import run_in_memory
+    from .soak import rss_kb
 
     sc = load_scenario(scenario)
     filters = tuple(filters or sweep.default_filters(sc))
-    batch_seeds = batch_seeds or sweep.batch_size_for(sweep.worker_memory(None, 1),
+    batch_seeds = batch_seeds or sweep.batch_size_for(sweep.machine_memory(),
                                                       duration or sc.duration_s)
     numbers = list(range(1, batch_seeds + 1))
     def by_bytes():
@@ -107,12 +103,14 @@ def engines(scenario: str = "office", seeds: int = 32, filters=None,
     # engine computing it afresh
     with shared_truth():
         byte_rows, byte_s = _cpu(by_bytes)
-    held = _resident()
+    held = rss_kb(os.getpid())
+    _peak_from_now()
     with shared_truth():
         outcome, batch_s = _cpu(lambda: batch.run(sc, numbers, filters=filters, duration=duration))
         # the batch's peak over what the process held before it, a seed per second of
         # scenario (lab.sweep.BATCH_BYTES_PER_SEED_S, which the default batch reckons with)
-        per_seed_s = (_peak() - held) / batch_seeds / (duration or sc.duration_s)
+        per_seed_s = (rss_kb(os.getpid(), "VmHWM") - held) * 1024 / batch_seeds / (
+            duration or sc.duration_s)
         batch_rows, score_s = _cpu(lambda: [r for s, e in zip(numbers, outcome.estimates)
                                             for r in sweep.cells(sc, s, filters, e)])
     batch_s += score_s

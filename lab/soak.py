@@ -124,10 +124,11 @@ def _scenario(path: Path, seconds: float, faults: bool = False) -> Path:
     return path
 
 
-def _rss_kb(pid: int) -> int | None:
+def rss_kb(pid: int, field: str = "VmRSS") -> int | None:
+    """Process *pid*'s resident set now (VmRSS) or its peak (VmHWM), kB (None: it is gone)."""
     try:
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
+            if line.startswith(field + ":"):
                 return int(line.split()[1])
     except OSError:
         return None
@@ -239,7 +240,7 @@ def soak(seconds: float = 600.0, reader_period_s: float = 4.0, seed: int = 1,
                 say(f"soak: {el:.0f} s: emulator killed, restarting on {links_dir}")
                 second, second_ready = start_emulator("emulator-2")
             emu = second or first
-            rss.append((el, _rss_kb(host.pid), _rss_kb(emu.process.pid)))
+            rss.append((el, rss_kb(host.pid), rss_kb(emu.process.pid)))
             if int(el) % 30 == 0:
                 say(f"soak: {el:.0f} / {seconds:g} s, host RSS {rss[-1][1]} kB")
             time.sleep(1.0)
