@@ -415,12 +415,16 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
         for r in old:  # a later part's cell replaces an earlier (failed) one
             done[(r["variant"], r["seed"], r["filter"])] = r
     wanted = [(v, s, f) for v in variants for s in seeds for f in filters]
-    workers, limit = (1, None) if serial else _workers(client)
-    memory = worker_memory(limit, workers)
+    sized = engine == "batch" and batch_size is None  # a batch size by the workers' memory
+    workers, limit = (1, None) if serial else _workers(client, sized)
+    memory = worker_memory(limit, workers) if sized else None
+
+    def size(scenario_s: float) -> int:
+        return batch_size_for(memory, scenario_s) if sized else batch_size or BATCH_SIZE
+
     tasks = [(v, chunk) for v, vsc in variants.items() for chunk in chunk_seeds(
         [s for s in seeds if any(done.get((v, s, f), {}).get("status") != "ok" for f in filters)],
-        duration or vsc.duration_s, engine, workers,
-        batch_size or batch_size_for(memory, duration or vsc.duration_s))]
+        duration or vsc.duration_s, engine, workers, size(duration or vsc.duration_s))]
     texts, cells = {v: vsc.to_toml() for v, vsc in variants.items()}, schema(sc)
     writer = part = None
     if out is not None and tasks:
@@ -465,18 +469,19 @@ def run(scenario: str | Path | Scenario, seeds: Iterable[int], filters: Iterable
     return Result(rows, filters, meta, len(tasks), out, part)
 
 
-def _workers(client: Client | None) -> tuple[int, float | None]:
-    """The workers a sweep's batches are shared among, and the smallest of their memory limits
-    (None: not known, or not set on some): the cluster's (a LocalCluster's to be: the cores,
-    its limits not known yet); 1 and None when its scheduler does not answer (the watch then
-    says so). The limits are asked for once it has answered: a scheduler that is gone
-    would hold the question for Dask's reconnect timeout."""
+def _workers(client: Client | None, memory: bool = True) -> tuple[int, float | None]:
+    """The workers a sweep's batches are shared among, and, if *memory* (a default batch size
+    is wanted), the smallest of their memory limits (None: not asked, not known, or not set
+    on some): the cluster's (a LocalCluster's to be: the cores, its limits not known yet); 1
+    and None when its scheduler does not answer (the watch then says so). The limits are
+    asked for once it has answered: a scheduler that is gone would hold the question for
+    Dask's reconnect timeout."""
     if client is None:
         return os.cpu_count() or 1, None
     try:
         workers = max(1, len(client.client.ncores(callback_timeout=WATCH_S)))
         limits = [w.get("memory_limit") or 0 for w in
-                  client.client.scheduler_info().get("workers", {}).values()]
+                  client.client.scheduler_info().get("workers", {}).values()] if memory else []
     except (OSError, TimeoutError, RuntimeError):
         return 1, None
     return workers, min(limits) if limits and all(limits) else None
